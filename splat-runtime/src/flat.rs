@@ -1,0 +1,147 @@
+//! Flattening of method data into 32-bit words, the layout shared by GPU buffers, SIMD lanes
+//! and the generated code. Floats are stored as is; `bool` and integers as their bit patterns.
+
+use glam::{Mat2, Mat3, Quat, Vec2, Vec3, Vec4};
+
+/// A value with a fixed flattened size, readable from and writable to `f32` words.
+pub trait Flat: Copy + Default + Send + Sync + 'static {
+    /// Number of 32-bit words.
+    const LEN: usize;
+    /// Writes `Self::LEN` words to the front of `out`.
+    fn write_words(&self, out: &mut [f32]);
+    /// Reads `Self::LEN` words from the front of `words`.
+    fn read_words(words: &[f32]) -> Self;
+}
+
+impl Flat for f32 {
+    const LEN: usize = 1;
+    fn write_words(&self, out: &mut [f32]) {
+        out[0] = *self;
+    }
+    fn read_words(words: &[f32]) -> Self {
+        words[0]
+    }
+}
+
+impl Flat for u32 {
+    const LEN: usize = 1;
+    fn write_words(&self, out: &mut [f32]) {
+        out[0] = f32::from_bits(*self);
+    }
+    fn read_words(words: &[f32]) -> Self {
+        words[0].to_bits()
+    }
+}
+
+impl Flat for i32 {
+    const LEN: usize = 1;
+    fn write_words(&self, out: &mut [f32]) {
+        out[0] = f32::from_bits(*self as u32);
+    }
+    fn read_words(words: &[f32]) -> Self {
+        words[0].to_bits() as i32
+    }
+}
+
+impl Flat for bool {
+    const LEN: usize = 1;
+    fn write_words(&self, out: &mut [f32]) {
+        out[0] = f32::from_bits(*self as u32);
+    }
+    fn read_words(words: &[f32]) -> Self {
+        words[0].to_bits() != 0
+    }
+}
+
+macro_rules! flat_via_array {
+    ($($t:ty => $n:literal, $to:ident, $from:ident;)*) => {$(
+        impl Flat for $t {
+            const LEN: usize = $n;
+            fn write_words(&self, out: &mut [f32]) {
+                out[..$n].copy_from_slice(&self.$to());
+            }
+            fn read_words(words: &[f32]) -> Self {
+                let mut a = [0.0; $n];
+                a.copy_from_slice(&words[..$n]);
+                <$t>::$from(&a)
+            }
+        }
+    )*};
+}
+
+flat_via_array! {
+    Vec2 => 2, to_array, from_array_ref;
+    Vec3 => 3, to_array, from_array_ref;
+    Vec4 => 4, to_array, from_array_ref;
+    Quat => 4, to_array, from_array_ref;
+    Mat2 => 4, to_cols_array, from_cols_array;
+    Mat3 => 9, to_cols_array, from_cols_array;
+}
+
+/// Adapters so `flat_via_array!` can call every type the same way.
+trait FromArrayRef<const N: usize> {
+    fn from_array_ref(a: &[f32; N]) -> Self;
+}
+impl FromArrayRef<2> for Vec2 {
+    fn from_array_ref(a: &[f32; 2]) -> Self {
+        Vec2::from_array(*a)
+    }
+}
+impl FromArrayRef<3> for Vec3 {
+    fn from_array_ref(a: &[f32; 3]) -> Self {
+        Vec3::from_array(*a)
+    }
+}
+impl FromArrayRef<4> for Vec4 {
+    fn from_array_ref(a: &[f32; 4]) -> Self {
+        Vec4::from_array(*a)
+    }
+}
+impl FromArrayRef<4> for Quat {
+    fn from_array_ref(a: &[f32; 4]) -> Self {
+        Quat::from_array(*a)
+    }
+}
+
+impl<T: Flat, const N: usize> Flat for [T; N]
+where
+    [T; N]: Default,
+{
+    const LEN: usize = T::LEN * N;
+    fn write_words(&self, out: &mut [f32]) {
+        for (i, v) in self.iter().enumerate() {
+            v.write_words(&mut out[i * T::LEN..]);
+        }
+    }
+    fn read_words(words: &[f32]) -> Self {
+        let mut a = <[T; N]>::default();
+        for (i, v) in a.iter_mut().enumerate() {
+            *v = T::read_words(&words[i * T::LEN..]);
+        }
+        a
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn round_trip<T: Flat + PartialEq + std::fmt::Debug>(v: T) {
+        let mut words = vec![0.0; T::LEN];
+        v.write_words(&mut words);
+        assert_eq!(T::read_words(&words), v);
+    }
+
+    #[test]
+    fn every_field_type_round_trips() {
+        round_trip(1.5f32);
+        round_trip(7u32);
+        round_trip(-3i32);
+        round_trip(true);
+        round_trip(Vec3::new(1.0, 2.0, 3.0));
+        round_trip(Quat::from_xyzw(0.1, 0.2, 0.3, 0.9));
+        round_trip(Mat3::from_cols_array(&[1., 2., 3., 4., 5., 6., 7., 8., 9.]));
+        round_trip([Vec2::new(1.0, 2.0), Vec2::new(3.0, 4.0)]);
+        assert_eq!(<[Vec3; 16]>::LEN, 48);
+    }
+}

@@ -1,0 +1,24 @@
+//! splat-runtime: the shared pipeline every `#[splat_method]` method plugs into, and the
+//! contract ([`SplatMethod`]) between generated code and that pipeline.
+//!
+//! Code map:
+//! - [`method`]: the contract a generated method implements.
+//! - [`types`]: built-in values crossing that contract (camera, projected primitive,
+//!   contribution of a pair, tile bounds).
+//! - [`flat`]: flattening of method data to 32-bit words (GPU buffers, SIMD lanes).
+//! - [`lanes`]: eight-lane SIMD value types used by the generated lane form of `evaluate`.
+//! - [`math`]: branch-free `exp` / `ln` shared by the scalar and lane code paths.
+//! - [`prelude`]: what a method module imports.
+
+pub mod flat;
+pub mod lanes;
+pub mod math;
+pub mod method;
+pub mod prelude;
+pub mod types;
+
+pub use flat::Flat;
+pub use glam;
+pub use lanes::{F32x8, I32x8, LANES, M32x8, U32x8};
+pub use method::{GeneratedSource, SplatMethod};
+pub use types::{Camera, Contribution, ContributionLanes, Projected, Tile};
