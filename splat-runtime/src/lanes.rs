@@ -103,8 +103,8 @@ macro_rules! lane_compare {
 
 lane_arith!(F32x8, f32, Add add +, Sub sub -, Mul mul *, Div div /, Rem rem %);
 lane_compare!(F32x8);
-lane_arith!(U32x8, u32, BitAnd bitand &, BitOr bitor |, BitXor bitxor ^, Rem rem %, Div div /);
-lane_arith!(I32x8, i32, BitAnd bitand &, BitOr bitor |, BitXor bitxor ^, Rem rem %, Div div /);
+lane_arith!(U32x8, u32, BitAnd bitand &, BitOr bitor |, BitXor bitxor ^);
+lane_arith!(I32x8, i32, BitAnd bitand &, BitOr bitor |, BitXor bitxor ^);
 lane_compare!(U32x8);
 lane_compare!(I32x8);
 
@@ -126,15 +126,26 @@ macro_rules! lane_wrapping {
             #[inline(always)]
             fn mul(self, rhs: $lanes) -> $lanes { $lanes(zip(self.0, rhs.0, <$scalar>::wrapping_mul)) }
         }
-        impl Shl<u32> for $lanes {
+        /// Division by zero gives 0, like the generated scalar code.
+        impl Div for $lanes {
             type Output = $lanes;
             #[inline(always)]
-            fn shl(self, rhs: u32) -> $lanes { $lanes(map(self.0, |a| a.wrapping_shl(rhs))) }
+            fn div(self, rhs: $lanes) -> $lanes { $lanes(zip(self.0, rhs.0, |a, b| a.checked_div(b).unwrap_or(0))) }
         }
-        impl Shr<u32> for $lanes {
+        impl Rem for $lanes {
             type Output = $lanes;
             #[inline(always)]
-            fn shr(self, rhs: u32) -> $lanes { $lanes(map(self.0, |a| a.wrapping_shr(rhs))) }
+            fn rem(self, rhs: $lanes) -> $lanes { $lanes(zip(self.0, rhs.0, |a, b| a.checked_rem(b).unwrap_or(0))) }
+        }
+        impl Shl for $lanes {
+            type Output = $lanes;
+            #[inline(always)]
+            fn shl(self, rhs: $lanes) -> $lanes { $lanes(zip(self.0, rhs.0, |a, b| a.wrapping_shl(b as u32))) }
+        }
+        impl Shr for $lanes {
+            type Output = $lanes;
+            #[inline(always)]
+            fn shr(self, rhs: $lanes) -> $lanes { $lanes(zip(self.0, rhs.0, |a, b| a.wrapping_shr(b as u32))) }
         }
         impl $lanes {
             #[inline(always)]

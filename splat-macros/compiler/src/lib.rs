@@ -1,0 +1,202 @@
+//! The compiler behind `#[splat_method]` and `#[splat_functions]`.
+//!
+//! Pipeline (each stage a module, each unit-testable without going through a proc-macro):
+//!
+//! ```text
+//! syn::ItemMod --model--> Module (structs, consts, fns, roles)
+//!              --lower--> ir::Function per kernel (typed, scalar SSA, structured ifs,
+//!                         loops unrolled, helpers inlined)
+//!              --ad-----> adjoint ir::Function (recompute primal + reverse sweep)
+//!              --opt----> dead code removed
+//!              --emit---> Rust: typed f32 fns, flat f64 twin, flat 8-lane SIMD form,
+//!                         and for methods the `SplatMethod` impl
+//! ```
+//!
+//! The supported subset, the intrinsics and their derivative rules are listed in
+//! `splat-macros/README.md`.
+
+pub mod ad;
+pub mod diag;
+pub mod emit;
+pub mod ir;
+pub mod lower;
+pub mod model;
+pub mod opt;
+pub mod types;
+
+use diag::Diag;
+use emit::api::Kernel;
+use emit::body::Flavor;
+use model::Module;
+use proc_macro2::TokenStream;
+use quote::quote;
+
+/// What the attribute was.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    /// `#[splat_method]`: the four-function method interface, implements `SplatMethod`.
+    Method,
+    /// `#[splat_functions]`: every function is a kernel (forward, adjoint, twin, lanes).
+    Functions,
+}
+
+/// The method roles, in the order the runtime calls them.
+pub const METHOD_FNS: &[&str] = &["project", "tile_cull", "pixel_info", "evaluate"];
+
+/// The compiled IR of a module, for tests and tools.
+pub struct Compiled {
+    pub kernels: Vec<(ir::Function, Option<ir::Function>)>,
+}
+
+/// Expands an annotated module; errors become `compile_error!`s at their spans.
+pub fn expand(kind: Kind, attr: TokenStream, item: TokenStream) -> TokenStream {
+    let diag = Diag::default();
+    if !attr.is_empty() {
+        diag.error_at(&attr, "this attribute takes no arguments");
+    }
+    let out = match syn::parse2::<syn::ItemMod>(item) {
+        Ok(m) => expand_module(kind, m, &diag),
+        Err(e) => return e.to_compile_error(),
+    };
+    match diag.into_compile_errors() {
+        Some(errors) => errors,
+        None => out.unwrap_or_default(),
+    }
+}
+
+/// Compiles a module to IR only (no Rust), reporting errors as strings.
+pub fn compile_ir(kind: Kind, item: syn::ItemMod) -> Result<Compiled, Vec<String>> {
+    let diag = Diag::default();
+    let r = Module::parse(item, &diag).and_then(|m| {
+        let custom = custom_adjoints(&m, &diag)?;
+        let kernels = build_kernels(kind, &m, &custom, &diag)?;
+        Some(Compiled { kernels: kernels.into_iter().map(|k| (k.primal, k.adjoint)).collect() })
+    });
+    match r {
+        Some(c) if !diag.has_errors() => Ok(c),
+        _ => Err(diag.messages()),
+    }
+}
+
+/// Helpers with `#[adjoint(f)]`: their names (the `callee` index of `Stmt::Call`) and the
+/// lowered user adjoints.
+struct Custom {
+    names: Vec<String>,
+    adjoints: Vec<ir::Function>,
+    adjoint_fn_names: Vec<String>,
+}
+
+fn custom_adjoints(m: &Module, diag: &Diag) -> Option<Custom> {
+    let mut c = Custom { names: vec![], adjoints: vec![], adjoint_fn_names: vec![] };
+    let helpers: Vec<&model::FnDef> = m.fns.iter().filter(|f| f.adjoint.is_some()).collect();
+    c.names = helpers.iter().map(|f| f.name.clone()).collect();
+    for h in helpers {
+        let adj_ident = h.adjoint.as_ref().unwrap();
+        let Some(adj) = m.find_fn(&adj_ident.to_string()) else {
+            diag.error_at(adj_ident, format!("cannot find the adjoint function `{adj_ident}` in this module"));
+            continue;
+        };
+        let mut want: Vec<types::Ty> = h.params.iter().map(|p| p.ty.clone()).collect();
+        want.push(h.ret.clone());
+        let got: Vec<types::Ty> = adj.params.iter().map(|p| p.ty.clone()).collect();
+        let cot: Vec<types::Ty> = h.params.iter().map(|p| p.ty.clone()).collect();
+        let want_ret = if cot.len() == 1 { cot[0].clone() } else { types::Ty::Tuple(cot) };
+        if got != want || adj.ret != want_ret {
+            let shown: Vec<String> = want.iter().map(|t| t.to_string()).collect();
+            diag.error_at(
+                &adj.item.sig.ident,
+                format!(
+                    "the adjoint of `{}` must have the signature fn({}) -> {}: the helper's parameters, then the cotangent of its result; it returns the cotangents of the parameters",
+                    h.name,
+                    shown.join(", "),
+                    want_ret
+                ),
+            );
+            continue;
+        }
+        c.adjoint_fn_names.push(adj.name.clone());
+        let lowered = lower::lower_fn(m, diag, adj, &[])?;
+        c.adjoints.push(lowered.func);
+    }
+    (!diag.has_errors()).then_some(c)
+}
+
+fn build_kernels<'m>(kind: Kind, m: &'m Module, custom: &Custom, diag: &Diag) -> Option<Vec<Kernel<'m>>> {
+    let defs: Vec<&model::FnDef> = match kind {
+        Kind::Method => m.fns.iter().filter(|f| METHOD_FNS.contains(&f.name.as_str())).collect(),
+        Kind::Functions => m.fns.iter().filter(|f| !custom.adjoint_fn_names.contains(&f.name)).collect(),
+    };
+    let mut kernels = vec![];
+    for def in defs {
+        let Some(l) = lower::lower_fn(m, diag, def, &custom.names) else { continue };
+        let mut primal = l.func;
+        let has_float_in = primal.params.iter().any(|p| primal.ty(*p) == ir::Scalar::F32);
+        let out_names: Vec<String> = l
+            .ret
+            .slot_names("d_out")
+            .into_iter()
+            .zip(l.ret.slots())
+            .filter(|(_, s)| *s == ir::Scalar::F32)
+            .map(|(n, _)| n)
+            .collect();
+        let adjoint = (has_float_in && !out_names.is_empty()).then(|| {
+            let mut g = ad::adjoint(&primal, &custom.adjoints, &out_names);
+            opt::dce(&mut g);
+            g
+        });
+        opt::dce(&mut primal);
+        kernels.push(Kernel { def, primal, adjoint, ret: l.ret });
+    }
+    (!diag.has_errors()).then_some(kernels)
+}
+
+fn expand_module(kind: Kind, item: syn::ItemMod, diag: &Diag) -> Option<TokenStream> {
+    let m = Module::parse(item, diag)?;
+    let custom = custom_adjoints(&m, diag)?;
+    let kernels = build_kernels(kind, &m, &custom, diag)?;
+    let lanes_for = |k: &Kernel| kind == Kind::Functions || k.def.name == "evaluate";
+    let mut items = TokenStream::new();
+    items.extend(m.uses.iter().map(|u| quote!(#[allow(unused_imports)] #u)));
+    items.extend(emit::structs(&m));
+    for c in m.consts.keys() {
+        // Re-emit constants as written: users may refer to them outside the kernels.
+        if let Some(item) = const_item(&m, c) {
+            items.extend(item);
+        }
+    }
+    let mut twin = TokenStream::new();
+    let mut lanes = TokenStream::new();
+    for k in &kernels {
+        items.extend(k.forward());
+        items.extend(k.adjoint_fn());
+        twin.extend(k.flat(Flavor::F64));
+        if lanes_for(k) {
+            lanes.extend(k.flat(Flavor::Lanes));
+        }
+    }
+    items.extend(quote! {
+        /// The f64 twin of every kernel, in flat form, for finite-difference tests.
+        pub mod twin { #twin }
+        /// The eight-lane SIMD form of the kernels, in flat form.
+        pub mod lanes { #lanes }
+    });
+    if kind == Kind::Method {
+        items.extend(emit::method::method_impl(&m.name.to_string(), &kernels, diag)?);
+    }
+    let source = emit::pretty(&items);
+    let (attrs, vis, name) = (&m.attrs, &m.vis, &m.name);
+    Some(quote! {
+        #(#attrs)*
+        #vis mod #name {
+            #items
+            /// The Rust this module's attribute generated, pretty-printed.
+            pub const GENERATED_RUST: &str = #source;
+        }
+    })
+}
+
+fn const_item(m: &Module, name: &str) -> Option<TokenStream> {
+    let c = m.consts.get(name)?;
+    let (ident, ty, expr) = (syn::Ident::new(name, proc_macro2::Span::call_site()), c.ty.rust(), &c.expr);
+    Some(quote!(#[allow(dead_code)] pub const #ident: #ty = #expr;))
+}

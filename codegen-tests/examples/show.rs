@@ -1,0 +1,1 @@
+fn main() { print!("{}", codegen_tests::corpus::basic::GENERATED_RUST); }

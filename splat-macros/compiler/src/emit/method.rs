@@ -1,0 +1,246 @@
+//! The `SplatMethod` implementation of a `#[splat_method]` module: the glue between the
+//! user's four functions and the runtime's contract.
+
+use super::api::{Kernel, pack, slot_access};
+use crate::diag::Diag;
+use crate::ir::Scalar;
+use crate::model::FnDef;
+use crate::types::{Ty, builtin_struct};
+use proc_macro2::TokenStream;
+use quote::quote;
+
+fn struct_field(ty: &Ty, name: &str) -> Option<Ty> {
+    match ty {
+        Ty::Struct(s) => s.fields.iter().find(|(f, _)| f == name).map(|(_, t)| t.clone()),
+        _ => None,
+    }
+}
+
+fn builtin(name: &str) -> Ty {
+    builtin_struct(name, &[]).expect("builtin").expect("no args")
+}
+
+/// Checks that `def` has the parameter types `want` (by position) and returns `Err` after
+/// reporting otherwise.
+fn check_params(def: &FnDef, want: &[(&str, Option<&Ty>)], diag: &Diag) -> Result<(), ()> {
+    if def.params.len() != want.len() {
+        let names: Vec<&str> = want.iter().map(|w| w.0).collect();
+        diag.error_at(
+            &def.item.sig.ident,
+            format!("`{}` must take {} parameter(s): {}", def.name, want.len(), names.join(", ")),
+        );
+        return Err(());
+    }
+    for (p, (what, ty)) in def.params.iter().zip(want) {
+        if let Some(t) = ty
+            && p.ty != **t
+        {
+            diag.error_at(&p.ident, format!("{what} of `{}` must be `{t}`, found `{}`", def.name, p.ty));
+            return Err(());
+        }
+    }
+    Ok(())
+}
+
+fn call_args(def: &FnDef, names: &[TokenStream]) -> Vec<TokenStream> {
+    def.params
+        .iter()
+        .zip(names)
+        .map(|(p, n)| if p.by_ref { quote!(#n) } else { quote!(*#n) })
+        .collect()
+}
+
+pub fn method_impl(module_name: &str, kernels: &[Kernel], diag: &Diag) -> Option<TokenStream> {
+    let find = |n: &str| kernels.iter().find(|k| k.def.name == n);
+    let Some(project) = find("project") else {
+        diag.error(proc_macro2::Span::call_site(), "a #[splat_method] module needs `fn project`");
+        return None;
+    };
+    let Some(evaluate) = find("evaluate") else {
+        diag.error(proc_macro2::Span::call_site(), "a #[splat_method] module needs `fn evaluate`");
+        return None;
+    };
+    let tile_cull = find("tile_cull");
+    let pixel_info = find("pixel_info");
+    let camera = builtin("Camera");
+    check_params(project.def, &[("the parameters", None), ("the camera", Some(&camera))], diag).ok()?;
+    let params_ty = project.def.params[0].ty.clone();
+    let (Some(cull_ty), Some(shade_ty)) = (struct_field(&project.ret, "cull"), struct_field(&project.ret, "shade"))
+    else {
+        diag.error_at(&project.def.item.sig.output, "`project` must return `Projected<Cull, Shade>`");
+        return None;
+    };
+    check_params(evaluate.def, &[("the pixel data", None), ("the shade data", Some(&shade_ty))], diag).ok()?;
+    let pixel_ty = evaluate.def.params[0].ty.clone();
+    let Some(color_ty) = struct_field(&evaluate.ret, "color") else {
+        diag.error_at(&evaluate.def.item.sig.output, "`evaluate` must return `Contribution<Color>`");
+        return None;
+    };
+    if !pixel_ty.all_float() || !color_ty.all_float() {
+        diag.error_at(
+            &evaluate.def.item.sig.ident,
+            "the pixel data and the color of `evaluate` must be made of f32 only (they become SIMD lanes)",
+        );
+        return None;
+    }
+    if let Some(tc) = tile_cull {
+        check_params(tc.def, &[("the tile", Some(&builtin("Tile"))), ("the cull data", Some(&cull_ty))], diag)
+            .ok()?;
+        if tc.ret != Ty::Bool {
+            diag.error_at(&tc.def.item.sig.output, "`tile_cull` must return `bool`");
+            return None;
+        }
+    }
+    if let Some(pi) = pixel_info {
+        check_params(pi.def, &[("the pixel centre", Some(&Ty::Vec(2))), ("the camera", Some(&camera))], diag)
+            .ok()?;
+        if pi.ret != pixel_ty {
+            diag.error_at(&pi.def.item.sig.output, format!("`pixel_info` must return `{pixel_ty}`"));
+            return None;
+        }
+    } else if pixel_ty != Ty::Vec(2) {
+        diag.error_at(
+            &evaluate.def.params[0].ident,
+            "without `pixel_info`, the pixel data of `evaluate` is the pixel centre: `Vec2`",
+        );
+        return None;
+    }
+
+    let (p_t, c_t, s_t, px_t, col_t) =
+        (params_ty.rust(), cull_ty.rust(), shade_ty.rust(), pixel_ty.rust(), color_ty.rust());
+    let np = pixel_ty.len();
+    let nc = color_ty.len();
+    let f32x8 = quote!(::splat_runtime::F32x8);
+    let u32x8 = quote!(::splat_runtime::U32x8);
+    let rt = quote!(::splat_runtime);
+
+    let project_call = call_args(project.def, &[quote!(params), quote!(camera)]);
+    let project_adjoint = if project.adjoint.is_some() {
+        quote! { project_adjoint(#(#project_call,)* *d_out) }
+    } else {
+        quote! { (<#p_t as ::core::default::Default>::default(), <#rt::Camera as ::core::default::Default>::default()) }
+    };
+    let tile_cull_body = match tile_cull {
+        Some(tc) => {
+            let a = call_args(tc.def, &[quote!(tile), quote!(cull)]);
+            quote!(tile_cull(#(#a),*))
+        }
+        None => quote!(true),
+    };
+    let pixel_info_body = match pixel_info {
+        Some(pi) => {
+            let a = call_args(pi.def, &[quote!(pixel), quote!(camera)]);
+            quote!(pixel_info(#(#a),*))
+        }
+        None => quote!(pixel),
+    };
+    let eval_call = call_args(evaluate.def, &[quote!(pixel), quote!(shade)]);
+
+    // Lane wrappers: pixel slots come from the lanes, shade slots are broadcast.
+    let shade_slots = shade_ty.slots();
+    let shade_access = slot_access(&shade_ty, quote!(shade));
+    let mut lane_in: Vec<TokenStream> = (0..np).map(|i| quote!(pixel[#i])).collect();
+    let mut lane_int = vec![];
+    for (s, a) in shade_slots.iter().zip(&shade_access) {
+        match s {
+            Scalar::F32 => lane_in.push(quote!(#f32x8::splat(#a))),
+            _ => lane_int.push(quote!(#u32x8::splat(#a as u32))),
+        }
+    }
+    let color_lanes: Vec<TokenStream> = (1..=nc).map(|i| quote!(__out[#i])).collect();
+    let d_color: Vec<TokenStream> = (0..nc).map(|i| quote!(d_out.color[#i])).collect();
+    let mut bar_index = np;
+    let mut shade_bars = shade_slots
+        .iter()
+        .map(|s| match s {
+            Scalar::F32 => {
+                bar_index += 1;
+                let k = bar_index - 1;
+                quote!(__bars[#k].masked_sum(active))
+            }
+            Scalar::Bool => quote!(false),
+            Scalar::U32 => quote!(0u32),
+            Scalar::I32 => quote!(0i32),
+        })
+        .collect::<Vec<_>>()
+        .into_iter();
+    let shade_from_bars = pack(&shade_ty, &mut shade_bars);
+    let eval_adjoint = if evaluate.adjoint.is_some() {
+        quote! { evaluate_adjoint(#(#eval_call,)* *d_out).1 }
+    } else {
+        quote! { <#s_t as ::core::default::Default>::default() }
+    };
+    let lanes_adjoint = if evaluate.adjoint.is_some() {
+        quote! {
+            let __d = [d_out.alpha, #(#d_color),*];
+            let __bars = lanes::evaluate_adjoint(&__in, &__int, &__d);
+            #shade_from_bars
+        }
+    } else {
+        quote! { <#s_t as ::core::default::Default>::default() }
+    };
+    let (has_tc, has_pi) = (tile_cull.is_some(), pixel_info.is_some());
+    Some(quote! {
+        /// The method as the runtime sees it.
+        #[derive(Clone, Copy, Debug, Default)]
+        pub struct Method;
+
+        #[allow(unused_variables, clippy::all)]
+        impl #rt::SplatMethod for Method {
+            const NAME: &'static str = #module_name;
+            const HAS_TILE_CULL: bool = #has_tc;
+            const HAS_PIXEL_INFO: bool = #has_pi;
+            const SOURCE: #rt::GeneratedSource = #rt::GeneratedSource { rust: GENERATED_RUST };
+            type Params = #p_t;
+            type Cull = #c_t;
+            type Shade = #s_t;
+            type Pixel = #px_t;
+            type Color = #col_t;
+            type PixelLanes = [#f32x8; #np];
+            type ColorLanes = [#f32x8; #nc];
+
+            #[inline]
+            fn project(params: &#p_t, camera: &#rt::Camera) -> #rt::Projected<#c_t, #s_t> {
+                project(#(#project_call),*)
+            }
+            #[inline]
+            fn project_adjoint(params: &#p_t, camera: &#rt::Camera, d_out: &#rt::Projected<#c_t, #s_t>) -> (#p_t, #rt::Camera) {
+                #project_adjoint
+            }
+            #[inline]
+            fn tile_cull(tile: &#rt::Tile, cull: &#c_t) -> bool {
+                #tile_cull_body
+            }
+            #[inline]
+            fn pixel_info(pixel: #rt::glam::Vec2, camera: &#rt::Camera) -> #px_t {
+                #pixel_info_body
+            }
+            #[inline]
+            fn evaluate(pixel: &#px_t, shade: &#s_t) -> #rt::Contribution<#col_t> {
+                evaluate(#(#eval_call),*)
+            }
+            #[inline]
+            fn evaluate_adjoint(pixel: &#px_t, shade: &#s_t, d_out: &#rt::Contribution<#col_t>) -> #s_t {
+                #eval_adjoint
+            }
+            #[inline(always)]
+            fn evaluate_lanes(pixel: &[#f32x8; #np], shade: &#s_t) -> #rt::ContributionLanes<[#f32x8; #nc]> {
+                let __in = [#(#lane_in),*];
+                let __int = [#(#lane_int),*];
+                let (__out, __outi) = lanes::evaluate(&__in, &__int);
+                #rt::ContributionLanes { alpha: __out[0], color: [#(#color_lanes),*], valid: __outi[0].to_mask() }
+            }
+            #[inline(always)]
+            fn evaluate_adjoint_lanes(
+                pixel: &[#f32x8; #np],
+                shade: &#s_t,
+                d_out: &#rt::ContributionLanes<[#f32x8; #nc]>,
+                active: #rt::M32x8,
+            ) -> #s_t {
+                let __in = [#(#lane_in),*];
+                let __int = [#(#lane_int),*];
+                #lanes_adjoint
+            }
+        }
+    })
+}

@@ -1,0 +1,274 @@
+//! The compiler's IR: typed scalar SSA with structured control flow.
+//!
+//! Invariants (every pass relies on them, the lowering establishes them):
+//! - Every value is a scalar of type [`Scalar`]; vectors, matrices, arrays and structs of the
+//!   source are flattened into their components by the lowering, so AD and the emitters only
+//!   ever see scalar operations.
+//! - Every [`Var`] is defined exactly once: as a parameter of its [`Function`], by a
+//!   [`Stmt::Let`], or as an output of a [`Stmt::If`] / [`Stmt::Call`].
+//! - A block may use any variable defined before it in an enclosing block (dominance); values
+//!   leave a block only through its `yields`, which become the outputs of the enclosing `If`
+//!   (or the results of the function for its body).
+//! - There are no loops: constant-trip-count loops are unrolled by the lowering, so the adjoint
+//!   is straight-line code plus branches and needs no tape.
+//! - Operations are pure; the only side effect of a function is its results.
+
+use std::collections::HashMap;
+
+/// An SSA value, an index into [`Function::vars`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct Var(pub u32);
+
+/// The scalar types of the IR.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Scalar {
+    F32,
+    Bool,
+    U32,
+    I32,
+}
+
+/// A constant; floats are kept in f64 so the f64 twin gets the source literal's full precision.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Const {
+    F(f64),
+    B(bool),
+    U(u32),
+    I(i32),
+}
+
+impl Const {
+    pub fn ty(self) -> Scalar {
+        match self {
+            Const::F(_) => Scalar::F32,
+            Const::B(_) => Scalar::Bool,
+            Const::U(_) => Scalar::U32,
+            Const::I(_) => Scalar::I32,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Unary {
+    Neg,
+    Not,
+    Exp,
+    Ln,
+    Ln1p,
+    Sqrt,
+    Rsqrt,
+    Recip,
+    Abs,
+    Sin,
+    Cos,
+    Tan,
+    Asin,
+    Acos,
+    Atan,
+    Tanh,
+    Floor,
+    Ceil,
+    Round,
+    Trunc,
+    Fract,
+    Signum,
+    /// Identity whose derivative is zero (`no_diff`).
+    NoDiff,
+    /// Numeric conversion to the given scalar type (`as`).
+    Cast(Scalar),
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Binary {
+    Add,
+    Sub,
+    Mul,
+    Div,
+    Rem,
+    Min,
+    Max,
+    Atan2,
+    Powf,
+    And,
+    Or,
+    Xor,
+    Shl,
+    Shr,
+    Lt,
+    Le,
+    Gt,
+    Ge,
+    Eq,
+    Ne,
+}
+
+impl Binary {
+    pub fn is_comparison(self) -> bool {
+        matches!(self, Binary::Lt | Binary::Le | Binary::Gt | Binary::Ge | Binary::Eq | Binary::Ne)
+    }
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub enum Op {
+    Const(Const),
+    Unary(Unary, Var),
+    Binary(Binary, Var, Var),
+    /// `if c { a } else { b }` with both operands already computed.
+    Select(Var, Var, Var),
+}
+
+impl Op {
+    pub fn operands(&self) -> Vec<Var> {
+        match *self {
+            Op::Const(_) => vec![],
+            Op::Unary(_, a) => vec![a],
+            Op::Binary(_, a, b) => vec![a, b],
+            Op::Select(c, a, b) => vec![c, a, b],
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
+pub enum Stmt {
+    Let { var: Var, op: Op },
+    If { cond: Var, then_block: Block, else_block: Block, outs: Vec<Var> },
+    /// A call to a helper with a user-written adjoint; `body` is the helper inlined (what the
+    /// forward computes), `callee` names the helper for the adjoint rule.
+    Call { callee: usize, args: Vec<Var>, outs: Vec<Var>, body: Block },
+}
+
+#[derive(Clone, Debug, Default)]
+pub struct Block {
+    pub stmts: Vec<Stmt>,
+    pub yields: Vec<Var>,
+}
+
+#[derive(Clone, Debug)]
+pub struct VarInfo {
+    pub ty: Scalar,
+    /// Readable name hint for the emitters (made unique there).
+    pub name: String,
+}
+
+#[derive(Clone, Debug)]
+pub struct Function {
+    pub name: String,
+    pub vars: Vec<VarInfo>,
+    pub params: Vec<Var>,
+    /// `body.yields` are the results.
+    pub body: Block,
+}
+
+impl Function {
+    pub fn new(name: impl Into<String>) -> Self {
+        Function { name: name.into(), vars: vec![], params: vec![], body: Block::default() }
+    }
+
+    pub fn new_var(&mut self, ty: Scalar, name: impl Into<String>) -> Var {
+        self.vars.push(VarInfo { ty, name: name.into() });
+        Var(self.vars.len() as u32 - 1)
+    }
+
+    pub fn ty(&self, v: Var) -> Scalar {
+        self.vars[v.0 as usize].ty
+    }
+
+    pub fn name(&self, v: Var) -> &str {
+        &self.vars[v.0 as usize].name
+    }
+
+    pub fn results(&self) -> &[Var] {
+        &self.body.yields
+    }
+
+    /// Copies `block` with every variable it defines renamed to a fresh one; uses of variables
+    /// defined outside it are kept. `remap` receives the renaming.
+    pub fn clone_fresh(&mut self, block: &Block, remap: &mut HashMap<Var, Var>) -> Block {
+        let stmts = block.stmts.iter().map(|s| self.clone_stmt_fresh(s, remap)).collect();
+        let yields = block.yields.iter().map(|v| *remap.get(v).unwrap_or(v)).collect();
+        Block { stmts, yields }
+    }
+
+    fn clone_stmt_fresh(&mut self, stmt: &Stmt, remap: &mut HashMap<Var, Var>) -> Stmt {
+        let map = |remap: &HashMap<Var, Var>, v: &Var| *remap.get(v).unwrap_or(v);
+        let fresh = |f: &mut Self, remap: &mut HashMap<Var, Var>, v: Var| {
+            let info = f.vars[v.0 as usize].clone();
+            let n = f.new_var(info.ty, info.name);
+            remap.insert(v, n);
+            n
+        };
+        match stmt {
+            Stmt::Let { var, op } => {
+                let op = match *op {
+                    Op::Const(c) => Op::Const(c),
+                    Op::Unary(u, a) => Op::Unary(u, map(remap, &a)),
+                    Op::Binary(b, x, y) => Op::Binary(b, map(remap, &x), map(remap, &y)),
+                    Op::Select(c, x, y) => Op::Select(map(remap, &c), map(remap, &x), map(remap, &y)),
+                };
+                Stmt::Let { var: fresh(self, remap, *var), op }
+            }
+            Stmt::If { cond, then_block, else_block, outs } => {
+                let cond = map(remap, cond);
+                let then_block = self.clone_fresh(then_block, remap);
+                let else_block = self.clone_fresh(else_block, remap);
+                let outs = outs.iter().map(|&o| fresh(self, remap, o)).collect();
+                Stmt::If { cond, then_block, else_block, outs }
+            }
+            Stmt::Call { callee, args, outs, body } => {
+                let args = args.iter().map(|a| map(remap, a)).collect();
+                let body = self.clone_fresh(body, remap);
+                let outs = outs.iter().map(|&o| fresh(self, remap, o)).collect();
+                Stmt::Call { callee: *callee, args, outs, body }
+            }
+        }
+    }
+}
+
+/// A readable dump of a function, for tests and debugging.
+impl std::fmt::Display for Function {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let v = |x: &Var| format!("%{}", x.0);
+        let params: Vec<String> =
+            self.params.iter().map(|p| format!("{}: {:?}", v(p), self.ty(*p))).collect();
+        writeln!(f, "fn {}({}) {{", self.name, params.join(", "))?;
+        fn block(
+            func: &Function,
+            b: &Block,
+            depth: usize,
+            f: &mut std::fmt::Formatter<'_>,
+        ) -> std::fmt::Result {
+            let pad = "  ".repeat(depth);
+            let v = |x: &Var| format!("%{}", x.0);
+            for s in &b.stmts {
+                match s {
+                    Stmt::Let { var, op } => {
+                        let rhs = match op {
+                            Op::Const(c) => format!("{c:?}"),
+                            Op::Unary(u, a) => format!("{u:?} {}", v(a)),
+                            Op::Binary(o, a, b) => format!("{o:?} {} {}", v(a), v(b)),
+                            Op::Select(c, a, b) => format!("select {} {} {}", v(c), v(a), v(b)),
+                        };
+                        writeln!(f, "{pad}{}: {:?} = {rhs}", v(var), func.ty(*var))?;
+                    }
+                    Stmt::If { cond, then_block, else_block, outs } => {
+                        let outs: Vec<String> = outs.iter().map(v).collect();
+                        writeln!(f, "{pad}[{}] = if {} {{", outs.join(", "), v(cond))?;
+                        block(func, then_block, depth + 1, f)?;
+                        writeln!(f, "{pad}}} else {{")?;
+                        block(func, else_block, depth + 1, f)?;
+                        writeln!(f, "{pad}}}")?;
+                    }
+                    Stmt::Call { callee, args, outs, .. } => {
+                        let outs: Vec<String> = outs.iter().map(v).collect();
+                        let args: Vec<String> = args.iter().map(v).collect();
+                        writeln!(f, "{pad}[{}] = call #{callee}({})", outs.join(", "), args.join(", "))?;
+                    }
+                }
+            }
+            let ys: Vec<String> = b.yields.iter().map(v).collect();
+            writeln!(f, "{pad}yield {}", ys.join(", "))
+        }
+        block(self, &self.body, 1, f)?;
+        writeln!(f, "}}")
+    }
+}

@@ -1,0 +1,692 @@
+//! Lowering: type-checks one function of the accepted subset and translates it into the scalar
+//! SSA IR, flattening every vector, matrix, array and struct into scalars, inlining helpers and
+//! unrolling constant loops. Errors go to [`Diag`] with the span of the offending code.
+//!
+//! - `mod.rs`: the lowerer's state, the IR builder (with integer constant folding and activity
+//!   tracking), statements, places and control flow.
+//! - `expr.rs`: expressions (operators, literals, paths, casts, struct literals).
+//! - `intrinsics.rs`: method calls on glam types and the free intrinsic functions.
+
+mod expr;
+mod intrinsics;
+
+use crate::diag::Diag;
+use crate::ir::{Binary, Block, Const, Function, Op, Scalar, Stmt, Unary, Var};
+use crate::model::{FnDef, Module};
+use crate::types::Ty;
+use proc_macro2::Span;
+use std::collections::{HashMap, HashSet};
+use syn::spanned::Spanned;
+
+/// A typed source-level value: its type and the IR scalars it flattens to.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Val {
+    pub ty: Ty,
+    pub comps: Vec<Var>,
+}
+
+impl Val {
+    fn unit() -> Val {
+        Val { ty: Ty::Tuple(vec![]), comps: vec![] }
+    }
+    fn error() -> Val {
+        Val { ty: Ty::Error, comps: vec![] }
+    }
+}
+
+/// Failure of a lowering step; the error is already recorded in [`Diag`].
+pub struct Failed;
+pub type R<T> = Result<T, Failed>;
+
+#[derive(Clone)]
+struct Binding {
+    val: Val,
+    mutable: bool,
+}
+
+/// A lowered function with its source-level signature.
+pub struct Lowered {
+    pub func: Function,
+    pub params: Vec<(String, Ty)>,
+    pub ret: Ty,
+}
+
+/// Most iterations all unrolled loops of one function may have together.
+const UNROLL_LIMIT: usize = 4096;
+
+pub struct Lowerer<'m> {
+    module: &'m Module,
+    diag: &'m Diag,
+    f: Function,
+    consts: HashMap<Var, Const>,
+    active: HashSet<Var>,
+    scopes: Vec<HashMap<String, Binding>>,
+    stmts: Vec<Stmt>,
+    call_stack: Vec<String>,
+    unrolled: usize,
+    /// Helpers with a user-written adjoint; the index is the `callee` of [`Stmt::Call`].
+    custom: &'m [String],
+}
+
+/// Lowers one function of `module`. Returns `None` if it had errors (recorded in `diag`).
+pub fn lower_fn(module: &Module, diag: &Diag, def: &FnDef, custom: &[String]) -> Option<Lowered> {
+    let mut l = Lowerer {
+        module,
+        diag,
+        f: Function::new(def.name.clone()),
+        consts: HashMap::new(),
+        active: HashSet::new(),
+        scopes: vec![HashMap::new()],
+        stmts: vec![],
+        call_stack: vec![def.name.clone()],
+        unrolled: 0,
+        custom,
+    };
+    let mut params = vec![];
+    for p in &def.params {
+        let names = p.ty.slot_names(&p.name);
+        let comps: Vec<Var> = p
+            .ty
+            .slots()
+            .into_iter()
+            .zip(names)
+            .map(|(s, n)| {
+                let v = l.f.new_var(s, n);
+                if s == Scalar::F32 {
+                    l.active.insert(v);
+                }
+                v
+            })
+            .collect();
+        l.f.params.extend(&comps);
+        l.bind(&p.name, Val { ty: p.ty.clone(), comps }, false);
+        params.push((p.name.clone(), p.ty.clone()));
+    }
+    let errors_before = diag.has_errors();
+    let body = l.block(&def.item.block);
+    if let Ok(v) = body {
+        let span = def.item.block.stmts.last().map(|s| s.span()).unwrap_or(def.item.sig.ident.span());
+        if l.check_ty(&v, &def.ret, span, "the function's result").is_ok() {
+            l.f.body = Block { stmts: std::mem::take(&mut l.stmts), yields: v.comps };
+            if !diag.has_errors() || errors_before {
+                return (!diag.has_errors()).then(|| Lowered { func: l.f, params, ret: def.ret.clone() });
+            }
+        }
+    }
+    None
+}
+
+impl<'m> Lowerer<'m> {
+    // ---- the IR builder ----------------------------------------------------------------------
+
+    fn err<T>(&self, span: Span, msg: impl std::fmt::Display) -> R<T> {
+        self.diag.error(span, msg);
+        Err(Failed)
+    }
+
+    fn konst(&mut self, c: Const) -> Var {
+        let name = match c {
+            Const::F(_) => "c",
+            _ => "k",
+        };
+        let v = self.f.new_var(c.ty(), name);
+        self.consts.insert(v, c);
+        self.stmts.push(Stmt::Let { var: v, op: Op::Const(c) });
+        v
+    }
+
+    fn fconst(&mut self, x: f64) -> Var {
+        self.konst(Const::F(x))
+    }
+
+    fn const_of(&self, v: Var) -> Option<Const> {
+        self.consts.get(&v).copied()
+    }
+
+    fn is_active(&self, v: Var) -> bool {
+        self.active.contains(&v)
+    }
+
+    /// Appends `op` (folding integer and boolean constants) and returns its value.
+    fn emit(&mut self, op: Op) -> Var {
+        if let Some(v) = self.fold(&op) {
+            return v;
+        }
+        let ty = match &op {
+            Op::Const(c) => c.ty(),
+            Op::Unary(Unary::Cast(t), _) => *t,
+            Op::Unary(_, a) => self.f.ty(*a),
+            Op::Binary(b, _, _) if b.is_comparison() => Scalar::Bool,
+            Op::Binary(_, a, _) => self.f.ty(*a),
+            Op::Select(_, a, _) => self.f.ty(*a),
+        };
+        let v = self.f.new_var(ty, "t");
+        let no_diff = matches!(op, Op::Unary(Unary::NoDiff, _));
+        if ty == Scalar::F32 && !no_diff && op.operands().iter().any(|o| self.is_active(*o)) {
+            self.active.insert(v);
+        }
+        self.stmts.push(Stmt::Let { var: v, op });
+        v
+    }
+
+    fn fold(&mut self, op: &Op) -> Option<Var> {
+        use Const::*;
+        match *op {
+            Op::Select(c, a, b) => match self.const_of(c)? {
+                B(true) => Some(a),
+                B(false) => Some(b),
+                _ => None,
+            },
+            Op::Unary(u, a) => {
+                let c = self.const_of(a)?;
+                let r = match (u, c) {
+                    (Unary::Neg, I(x)) => I(x.wrapping_neg()),
+                    (Unary::Not, B(x)) => B(!x),
+                    (Unary::Not, U(x)) => U(!x),
+                    (Unary::Not, I(x)) => I(!x),
+                    (Unary::Cast(Scalar::F32), U(x)) => F(x as f64),
+                    (Unary::Cast(Scalar::F32), I(x)) => F(x as f64),
+                    (Unary::Cast(Scalar::U32), U(x)) => U(x),
+                    (Unary::Cast(Scalar::U32), I(x)) => U(x as u32),
+                    (Unary::Cast(Scalar::U32), B(x)) => U(x as u32),
+                    (Unary::Cast(Scalar::I32), U(x)) => I(x as i32),
+                    (Unary::Cast(Scalar::I32), I(x)) => I(x),
+                    (Unary::Cast(Scalar::I32), B(x)) => I(x as i32),
+                    _ => return None,
+                };
+                Some(self.konst(r))
+            }
+            Op::Binary(op, a, b) => {
+                let (x, y) = (self.const_of(a)?, self.const_of(b)?);
+                let r = match (x, y) {
+                    (U(x), U(y)) => match op {
+                        Binary::Add => U(x.wrapping_add(y)),
+                        Binary::Sub => U(x.wrapping_sub(y)),
+                        Binary::Mul => U(x.wrapping_mul(y)),
+                        Binary::Div => U(x.checked_div(y).unwrap_or(0)),
+                        Binary::Rem => U(x.checked_rem(y).unwrap_or(0)),
+                        Binary::Min => U(x.min(y)),
+                        Binary::Max => U(x.max(y)),
+                        Binary::And => U(x & y),
+                        Binary::Or => U(x | y),
+                        Binary::Xor => U(x ^ y),
+                        Binary::Shl => U(x.wrapping_shl(y)),
+                        Binary::Shr => U(x.wrapping_shr(y)),
+                        Binary::Lt => B(x < y),
+                        Binary::Le => B(x <= y),
+                        Binary::Gt => B(x > y),
+                        Binary::Ge => B(x >= y),
+                        Binary::Eq => B(x == y),
+                        Binary::Ne => B(x != y),
+                        _ => return None,
+                    },
+                    (I(x), I(y)) => match op {
+                        Binary::Add => I(x.wrapping_add(y)),
+                        Binary::Sub => I(x.wrapping_sub(y)),
+                        Binary::Mul => I(x.wrapping_mul(y)),
+                        Binary::Div => I(x.checked_div(y).unwrap_or(0)),
+                        Binary::Rem => I(x.checked_rem(y).unwrap_or(0)),
+                        Binary::Min => I(x.min(y)),
+                        Binary::Max => I(x.max(y)),
+                        Binary::And => I(x & y),
+                        Binary::Or => I(x | y),
+                        Binary::Xor => I(x ^ y),
+                        Binary::Shl => I(x.wrapping_shl(y as u32)),
+                        Binary::Shr => I(x.wrapping_shr(y as u32)),
+                        Binary::Lt => B(x < y),
+                        Binary::Le => B(x <= y),
+                        Binary::Gt => B(x > y),
+                        Binary::Ge => B(x >= y),
+                        Binary::Eq => B(x == y),
+                        Binary::Ne => B(x != y),
+                        _ => return None,
+                    },
+                    (B(x), B(y)) => match op {
+                        Binary::And => B(x & y),
+                        Binary::Or => B(x | y),
+                        Binary::Xor | Binary::Ne => B(x ^ y),
+                        Binary::Eq => B(x == y),
+                        _ => return None,
+                    },
+                    _ => return None,
+                };
+                Some(self.konst(r))
+            }
+            Op::Const(_) => None,
+        }
+    }
+
+    fn un(&mut self, op: Unary, a: Var) -> Var {
+        self.emit(Op::Unary(op, a))
+    }
+
+    fn bin(&mut self, op: Binary, a: Var, b: Var) -> Var {
+        self.emit(Op::Binary(op, a, b))
+    }
+
+    fn select(&mut self, c: Var, a: Var, b: Var) -> Var {
+        self.emit(Op::Select(c, a, b))
+    }
+
+    /// Builds `if cond { then() } else { els() }` as a structured branch whose blocks are only
+    /// differentiated on the side taken, so an overflow on the other side cannot leak a NaN.
+    fn branch(
+        &mut self,
+        cond: Var,
+        then: impl FnOnce(&mut Self) -> R<Val>,
+        els: impl FnOnce(&mut Self) -> R<Val>,
+        span: Span,
+    ) -> R<Val> {
+        let outer = std::mem::take(&mut self.stmts);
+        let a = then(self);
+        let then_stmts = std::mem::take(&mut self.stmts);
+        let b = els(self);
+        let else_stmts = std::mem::replace(&mut self.stmts, outer);
+        let (a, b) = (a?, b?);
+        if a.ty != b.ty {
+            return self.err(span, format!("the two values have different types: `{}` and `{}`", a.ty, b.ty));
+        }
+        let outs = self.join_branches(
+            cond,
+            Block { stmts: then_stmts, yields: a.comps },
+            Block { stmts: else_stmts, yields: b.comps },
+        );
+        Ok(Val { ty: a.ty, comps: outs })
+    }
+
+    fn join_branches(&mut self, cond: Var, then_block: Block, else_block: Block) -> Vec<Var> {
+        let outs: Vec<Var> = then_block
+            .yields
+            .iter()
+            .zip(&else_block.yields)
+            .map(|(a, b)| {
+                let v = self.f.new_var(self.f.ty(*a), self.f.name(*a).to_string());
+                if self.is_active(*a) || self.is_active(*b) {
+                    self.active.insert(v);
+                }
+                v
+            })
+            .collect();
+        self.stmts.push(Stmt::If { cond, then_block, else_block, outs: outs.clone() });
+        outs
+    }
+
+    // ---- scopes ------------------------------------------------------------------------------
+
+    fn bind(&mut self, name: &str, val: Val, mutable: bool) {
+        // Give temporaries the readable name of the binding they end up in.
+        let names = val.ty.slot_names(name);
+        for (v, n) in val.comps.iter().zip(names) {
+            let info = &mut self.f.vars[v.0 as usize];
+            if info.name == "t" {
+                info.name = n;
+            }
+        }
+        self.scopes.last_mut().expect("a scope").insert(name.to_string(), Binding { val, mutable });
+    }
+
+    fn lookup(&self, name: &str) -> Option<&Binding> {
+        self.scopes.iter().rev().find_map(|s| s.get(name))
+    }
+
+    fn lookup_mut(&mut self, name: &str) -> Option<&mut Binding> {
+        self.scopes.iter_mut().rev().find_map(|s| s.get_mut(name))
+    }
+
+    pub(crate) fn check_ty(&self, v: &Val, want: &Ty, span: Span, what: &str) -> R<()> {
+        if v.ty == *want || v.ty == Ty::Error || *want == Ty::Error {
+            return Ok(());
+        }
+        self.err(span, format!("mismatched types: {what} is expected to be `{want}`, found `{}`", v.ty))
+    }
+
+    // ---- blocks and statements ---------------------------------------------------------------
+
+    fn block(&mut self, b: &syn::Block) -> R<Val> {
+        self.scopes.push(HashMap::new());
+        let r = self.stmts_of(&b.stmts);
+        self.scopes.pop();
+        r
+    }
+
+    fn stmts_of(&mut self, stmts: &[syn::Stmt]) -> R<Val> {
+        let mut failed = false;
+        let mut last = Val::unit();
+        for (i, s) in stmts.iter().enumerate() {
+            let is_last = i + 1 == stmts.len();
+            let r = match s {
+                syn::Stmt::Local(local) => self.local(local).map(|_| Val::unit()),
+                syn::Stmt::Expr(e, semi) => {
+                    let r = self.expr(e);
+                    match (r, semi) {
+                        (Ok(v), None) if is_last => Ok(v),
+                        (Ok(v), None) if v.ty != Ty::Tuple(vec![]) && v.ty != Ty::Error => self.err(
+                            e.span(),
+                            "a value in the middle of a block is discarded: add `;` or bind it with `let`",
+                        ),
+                        (Ok(_), _) => Ok(Val::unit()),
+                        (Err(f), _) => Err(f),
+                    }
+                }
+                syn::Stmt::Item(it) => {
+                    self.err(it.span(), "items inside functions are not supported: declare them in the module")
+                }
+                syn::Stmt::Macro(m) => self.err(
+                    m.span(),
+                    format!(
+                        "macro `{}!` is not supported inside a kernel: kernels compile to GPU code and \
+                         SIMD lanes; debug with the generated f64 twin instead",
+                        m.mac.path.segments.last().map(|s| s.ident.to_string()).unwrap_or_default()
+                    ),
+                ),
+            };
+            match r {
+                Ok(v) if is_last => last = v,
+                Ok(_) => {}
+                Err(_) => failed = true,
+            }
+        }
+        if failed { Err(Failed) } else { Ok(last) }
+    }
+
+    fn local(&mut self, local: &syn::Local) -> R<()> {
+        let Some(init) = &local.init else {
+            return self.err(
+                local.span(),
+                "`let` without a value is not supported: give it a value, or use if/else as an expression",
+            );
+        };
+        if let Some((_, e)) = &init.diverge {
+            return self.err(e.span(), "`let ... else` is not supported");
+        }
+        let (pat, ty) = match &local.pat {
+            syn::Pat::Type(pt) => (&*pt.pat, Some(&*pt.ty)),
+            p => (p, None),
+        };
+        let val = match self.expr(&init.expr) {
+            Ok(v) => v,
+            Err(f) => {
+                self.bind_pattern_poisoned(pat);
+                return Err(f);
+            }
+        };
+        if let Some(t) = ty {
+            let want = self.resolve_type(t)?;
+            self.check_ty(&val, &want, init.expr.span(), "the value")?;
+        }
+        self.bind_pattern(pat, val)
+    }
+
+    fn bind_pattern(&mut self, pat: &syn::Pat, val: Val) -> R<()> {
+        match pat {
+            syn::Pat::Ident(pi) if pi.by_ref.is_none() && pi.subpat.is_none() => {
+                self.bind(&pi.ident.to_string(), val, pi.mutability.is_some());
+                Ok(())
+            }
+            syn::Pat::Wild(_) => Ok(()),
+            syn::Pat::Tuple(pt) => {
+                let Ty::Tuple(tys) = &val.ty else {
+                    return self.err(pat.span(), format!("expected a tuple to destructure, found `{}`", val.ty));
+                };
+                if tys.len() != pt.elems.len() {
+                    return self.err(pat.span(), format!("the tuple has {} elements", tys.len()));
+                }
+                let mut at = 0;
+                for (p, t) in pt.elems.iter().zip(tys.clone()) {
+                    let n = t.len();
+                    self.bind_pattern(p, Val { ty: t, comps: val.comps[at..at + n].to_vec() })?;
+                    at += n;
+                }
+                Ok(())
+            }
+            _ => self.err(pat.span(), "only names, `_` and tuples of them are supported in `let`"),
+        }
+    }
+
+    fn bind_pattern_poisoned(&mut self, pat: &syn::Pat) {
+        if let syn::Pat::Ident(pi) = pat {
+            self.bind(&pi.ident.to_string(), Val::error(), true);
+        }
+    }
+
+    pub(crate) fn resolve_type(&self, t: &syn::Type) -> R<Ty> {
+        match self.module.resolve_type(t) {
+            Ok(t) => Ok(t),
+            Err(msg) => self.err(t.span(), msg),
+        }
+    }
+
+    // ---- places (targets of assignment) ------------------------------------------------------
+
+    /// The root variable of a place and the range of its components the place covers.
+    fn place(&mut self, e: &syn::Expr) -> R<(String, Ty, std::ops::Range<usize>)> {
+        match e {
+            syn::Expr::Path(p) if p.path.get_ident().is_some() => {
+                let name = p.path.get_ident().unwrap().to_string();
+                let Some(b) = self.lookup(&name) else {
+                    return self.err(e.span(), format!("cannot find variable `{name}`"));
+                };
+                if !b.mutable {
+                    return self.err(
+                        e.span(),
+                        format!("cannot assign to immutable variable `{name}`: declare it with `let mut {name}`"),
+                    );
+                }
+                let n = b.val.comps.len();
+                Ok((name, b.val.ty.clone(), 0..n))
+            }
+            syn::Expr::Paren(p) => self.place(&p.expr),
+            syn::Expr::Field(f) => {
+                let (root, ty, range) = self.place(&f.base)?;
+                let member = match &f.member {
+                    syn::Member::Named(id) => id.to_string(),
+                    syn::Member::Unnamed(i) => i.index.to_string(),
+                };
+                match expr::member_range(&ty, &member) {
+                    Some((t, r)) => Ok((root, t, range.start + r.start..range.start + r.end)),
+                    None => self.err(f.member.span(), format!("no field `{member}` on type `{ty}`")),
+                }
+            }
+            syn::Expr::Index(ix) => {
+                let (root, ty, range) = self.place(&ix.expr)?;
+                let i = self.const_index(&ix.index)?;
+                match expr::index_range(&ty, i) {
+                    Some((t, r)) => Ok((root, t, range.start + r.start..range.start + r.end)),
+                    None => self.err(ix.span(), format!("index {i} out of bounds for `{ty}`")),
+                }
+            }
+            _ => self.err(e.span(), "this is not assignable: assign to a variable, its fields or elements"),
+        }
+    }
+
+    fn assign(&mut self, target: &syn::Expr, val: Val) -> R<()> {
+        let (root, ty, range) = self.place(target)?;
+        self.check_ty(&val, &ty, target.span(), "the assigned value")?;
+        let names = ty.slot_names(&root);
+        for (v, n) in val.comps.iter().zip(names) {
+            let info = &mut self.f.vars[v.0 as usize];
+            if info.name == "t" {
+                info.name = n;
+            }
+        }
+        let b = self.lookup_mut(&root).expect("place resolved");
+        b.val.comps.splice(range, val.comps);
+        Ok(())
+    }
+
+    /// Evaluates an expression that must be a compile-time integer (index, loop bound).
+    fn const_index(&mut self, e: &syn::Expr) -> R<usize> {
+        let v = self.expr(e)?;
+        match (&v.ty, v.comps.first().and_then(|c| self.const_of(*c))) {
+            (Ty::Index | Ty::U32 | Ty::I32, Some(Const::U(x))) => Ok(x as usize),
+            (Ty::Index | Ty::U32 | Ty::I32, Some(Const::I(x))) if x >= 0 => Ok(x as usize),
+            _ => self.err(
+                e.span(),
+                "this index must be known at compile time (a literal, a constant or a loop counter)",
+            ),
+        }
+    }
+
+    // ---- control flow ------------------------------------------------------------------------
+
+    fn if_expr(&mut self, e: &syn::ExprIf) -> R<Val> {
+        let c = self.expr(&e.cond)?;
+        self.check_ty(&c, &Ty::Bool, e.cond.span(), "an `if` condition")?;
+        let cond = c.comps[0];
+        // A condition known at compile time (e.g. on a loop counter) keeps only one side.
+        if let Some(Const::B(k)) = self.const_of(cond) {
+            return match (k, &e.else_branch) {
+                (true, _) => self.block(&e.then_branch),
+                (false, Some((_, els))) => self.expr(els),
+                (false, None) => Ok(Val::unit()),
+            };
+        }
+        let snapshot = self.scopes.clone();
+        let outer = std::mem::take(&mut self.stmts);
+        let then_val = self.block(&e.then_branch);
+        let then_stmts = std::mem::take(&mut self.stmts);
+        let then_scopes = std::mem::replace(&mut self.scopes, snapshot.clone());
+        let else_val = match &e.else_branch {
+            Some((_, els)) => self.expr(els),
+            None => Ok(Val::unit()),
+        };
+        let else_stmts = std::mem::replace(&mut self.stmts, outer);
+        let else_scopes = std::mem::replace(&mut self.scopes, snapshot.clone());
+        let (then_val, else_val) = (then_val?, else_val?);
+        if e.else_branch.is_none() && then_val.ty != Ty::Tuple(vec![]) {
+            return self.err(
+                e.then_branch.span(),
+                "an `if` without `else` cannot produce a value: add an `else` branch",
+            );
+        }
+        if then_val.ty != else_val.ty && then_val.ty != Ty::Error && else_val.ty != Ty::Error {
+            return self.err(
+                e.span(),
+                format!("`if` and `else` have different types: `{}` and `{}`", then_val.ty, else_val.ty),
+            );
+        }
+        // Variables assigned in either branch leave it as outputs of the branch.
+        let mut changed = vec![];
+        for (depth, scope) in snapshot.iter().enumerate() {
+            for (name, b) in scope {
+                let t = &then_scopes[depth][name].val;
+                let el = &else_scopes[depth][name].val;
+                if t.comps != b.val.comps || el.comps != b.val.comps {
+                    changed.push((depth, name.clone(), t.comps.clone(), el.comps.clone()));
+                }
+            }
+        }
+        changed.sort_by(|a, b| (a.0, &a.1).cmp(&(b.0, &b.1)));
+        let mut ty_ = then_val.comps.clone();
+        let mut ey = else_val.comps.clone();
+        for (_, _, t, el) in &changed {
+            ty_.extend(t);
+            ey.extend(el);
+        }
+        let outs = self.join_branches(
+            cond,
+            Block { stmts: then_stmts, yields: ty_ },
+            Block { stmts: else_stmts, yields: ey },
+        );
+        let n = then_val.comps.len();
+        let mut at = n;
+        for (depth, name, t, _) in &changed {
+            let k = t.len();
+            self.scopes[*depth].get_mut(name).expect("snapshot binding").val.comps = outs[at..at + k].to_vec();
+            at += k;
+        }
+        Ok(Val { ty: then_val.ty, comps: outs[..n].to_vec() })
+    }
+
+    fn for_loop(&mut self, f: &syn::ExprForLoop) -> R<Val> {
+        let (lo, hi) = match &*f.expr {
+            syn::Expr::Range(r) => {
+                let lo = match &r.start {
+                    Some(s) => self.const_index(s)?,
+                    None => 0,
+                };
+                let Some(end) = &r.end else {
+                    return self.err(r.span(), "loops need an upper bound: `for i in 0..N`");
+                };
+                let hi = self.const_index(end).map_err(|f| {
+                    self.diag.error(end.span(), "loop bounds must be compile-time constants (`for i in 0..N`)");
+                    f
+                })?;
+                match r.limits {
+                    syn::RangeLimits::HalfOpen(_) => (lo, hi),
+                    syn::RangeLimits::Closed(_) => (lo, hi + 1),
+                }
+            }
+            other => {
+                return self.err(other.span(), "only `for i in A..B` with constant A and B is supported");
+            }
+        };
+        self.unrolled += hi.saturating_sub(lo);
+        if self.unrolled > UNROLL_LIMIT {
+            return self.err(
+                f.span(),
+                format!("loops are unrolled, and this function's loops exceed {UNROLL_LIMIT} iterations in total"),
+            );
+        }
+        for i in lo..hi {
+            self.scopes.push(HashMap::new());
+            let k = self.konst(Const::U(i as u32));
+            let iv = Val { ty: Ty::Index, comps: vec![k] };
+            self.bind_pattern(&f.pat, iv)?;
+            let body = self.block(&f.body);
+            self.scopes.pop();
+            let body = body?;
+            if body.ty != Ty::Tuple(vec![]) {
+                return self.err(f.body.span(), "a loop body cannot produce a value: end it with `;`");
+            }
+        }
+        Ok(Val::unit())
+    }
+
+    /// Inlines a call to a helper of the module; a helper with `#[adjoint(..)]` becomes a
+    /// [`Stmt::Call`] so that AD uses the user's adjoint instead of differentiating the body.
+    fn call_helper(&mut self, def: &'m FnDef, args: Vec<Val>, span: Span) -> R<Val> {
+        if self.call_stack.contains(&def.name) {
+            return self.err(span, format!("recursive call to `{}` is not supported", def.name));
+        }
+        if args.len() != def.params.len() {
+            return self.err(
+                span,
+                format!("`{}` takes {} argument(s), found {}", def.name, def.params.len(), args.len()),
+            );
+        }
+        for (a, p) in args.iter().zip(&def.params) {
+            self.check_ty(a, &p.ty, span, &format!("argument `{}`", p.name))?;
+        }
+        let saved_scopes = std::mem::replace(&mut self.scopes, vec![HashMap::new()]);
+        for (a, p) in args.iter().zip(&def.params) {
+            self.scopes[0].insert(p.name.clone(), Binding { val: a.clone(), mutable: false });
+        }
+        self.call_stack.push(def.name.clone());
+        let custom = self.custom.iter().position(|c| *c == def.name);
+        let outer = custom.map(|_| std::mem::take(&mut self.stmts));
+        let r = self.block(&def.item.block);
+        self.call_stack.pop();
+        self.scopes = saved_scopes;
+        let v = r?;
+        self.check_ty(&v, &def.ret, span, &format!("the result of `{}`", def.name))?;
+        let (Some(callee), Some(outer)) = (custom, outer) else {
+            return Ok(v);
+        };
+        let body = Block { stmts: std::mem::replace(&mut self.stmts, outer), yields: v.comps.clone() };
+        let outs: Vec<Var> = v
+            .comps
+            .iter()
+            .map(|c| {
+                let o = self.f.new_var(self.f.ty(*c), format!("{}_out", def.name));
+                if self.is_active(*c) {
+                    self.active.insert(o);
+                }
+                o
+            })
+            .collect();
+        let args = args.iter().flat_map(|a| a.comps.iter().copied()).collect();
+        self.stmts.push(Stmt::Call { callee, args, outs: outs.clone(), body });
+        Ok(Val { ty: v.ty, comps: outs })
+    }
+}
