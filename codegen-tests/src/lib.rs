@@ -1,1 +1,11 @@
+//! Tests of what `#[splat_method]` / `#[splat_functions]` generate.
+//!
+//! - [`corpus`]: annotated functions covering every operator, intrinsic and control-flow form.
+//! - [`check`]: the gradient checks (central finite differences of the f64 twin, and the
+//!   dot-product identity) and the lane-vs-scalar comparison, generic over any kernel's flat
+//!   form.
+//! - [`tiny_method`]: a small complete method, snapshot-tested and checked against the trait.
+
+pub mod check;
 pub mod corpus;
+pub mod tiny_method;

@@ -166,12 +166,16 @@ fn expand_module(kind: Kind, item: syn::ItemMod, diag: &Diag) -> Option<TokenStr
     }
     let mut twin = TokenStream::new();
     let mut lanes = TokenStream::new();
+    let mut scalar = TokenStream::new();
     for k in &kernels {
         items.extend(k.forward());
         items.extend(k.adjoint_fn());
         twin.extend(k.flat(Flavor::F64));
         if lanes_for(k) {
             lanes.extend(k.flat(Flavor::Lanes));
+        }
+        if kind == Kind::Functions {
+            scalar.extend(k.flat(Flavor::F32));
         }
     }
     items.extend(quote! {
@@ -180,6 +184,12 @@ fn expand_module(kind: Kind, item: syn::ItemMod, diag: &Diag) -> Option<TokenStr
         /// The eight-lane SIMD form of the kernels, in flat form.
         pub mod lanes { #lanes }
     });
+    if kind == Kind::Functions {
+        items.extend(quote! {
+            /// The f32 kernels in the flat form of `lanes`, to compare the two lane by lane.
+            pub mod scalar { #scalar }
+        });
+    }
     if kind == Kind::Method {
         items.extend(emit::method::method_impl(&m.name.to_string(), &kernels, diag)?);
     }
