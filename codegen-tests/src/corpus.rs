@@ -332,3 +332,64 @@ pub mod structured {
         x * no_diff(x * y) + (no_diff(x) as u32) as f32
     }
 }
+
+/// Functions evaluated exactly at their non-differentiable or singular points by
+/// `tests/kinks.rs`; each gradient there follows a documented rule and is finite.
+#[splat_functions]
+pub mod kinks {
+    use splat_runtime::prelude::*;
+
+    pub fn sqrt_of(x: f32) -> f32 {
+        x.sqrt()
+    }
+    pub fn rsqrt_of(x: f32) -> f32 {
+        rsqrt(x)
+    }
+    pub fn ln_of(x: f32) -> f32 {
+        x.ln()
+    }
+    pub fn recip_of(x: f32) -> f32 {
+        x.recip()
+    }
+    pub fn asin_of(x: f32) -> f32 {
+        x.asin()
+    }
+    pub fn atan2_of(y: f32, x: f32) -> f32 {
+        y.atan2(x)
+    }
+    pub fn length_of(v: Vec3) -> f32 {
+        v.length()
+    }
+    pub fn normalize_of(v: Vec3) -> Vec3 {
+        v.normalize()
+    }
+    pub fn max_of(x: f32, y: f32) -> f32 {
+        x.max(y)
+    }
+    pub fn min_of(x: f32, y: f32) -> f32 {
+        x.min(y)
+    }
+    pub fn clamp_of(x: f32) -> f32 {
+        x.clamp(0.0, 1.0)
+    }
+    pub fn abs_of(x: f32) -> f32 {
+        x.abs()
+    }
+    /// The division only happens on the side taken.
+    pub fn lazy_div(x: f32, y: f32) -> f32 {
+        select(y != 0.0, x / y, 0.0)
+    }
+    /// The division happens before the select (an infinite value is computed and discarded).
+    pub fn eager_div(x: f32, y: f32) -> f32 {
+        let q = x / y;
+        select(y != 0.0, q, 0.0)
+    }
+    /// The untaken side is NaN (ln of a negative number).
+    pub fn nan_branch(x: f32) -> f32 {
+        if x > 0.0 { x.ln() * 2.0 } else { 0.5 * x }
+    }
+    /// The untaken side overflows to infinity.
+    pub fn inf_branch(x: f32) -> f32 {
+        select(x < 40.0, (x * 3.0).exp(), x)
+    }
+}

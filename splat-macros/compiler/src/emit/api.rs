@@ -48,6 +48,7 @@ fn push_access(ty: &Ty, base: TokenStream, out: &mut Vec<TokenStream>) {
         }
         Ty::Array(t, n) => {
             for i in 0..*n {
+                let i = Literal::usize_unsuffixed(i);
                 push_access(t, quote!(#base[#i]), out);
             }
         }
@@ -279,12 +280,12 @@ impl Kernel<'_> {
                 let e = match f.ty(*v) {
                     Scalar::F32 => {
                         fi += 1;
-                        let k = fi - 1;
+                        let k = Literal::usize_unsuffixed(fi - 1);
                         quote!(#arr[#k])
                     }
                     s => {
                         ii += 1;
-                        let k = ii - 1;
+                        let k = Literal::usize_unsuffixed(ii - 1);
                         match (s, flavor) {
                             (Scalar::Bool, Flavor::Lanes) => quote!(#int_arr[#k].to_mask()),
                             (Scalar::I32, Flavor::Lanes) => quote!(#int_arr[#k].to_i32()),

@@ -6,7 +6,7 @@ use crate::diag::Diag;
 use crate::ir::Scalar;
 use crate::model::FnDef;
 use crate::types::{Ty, builtin_struct};
-use proc_macro2::TokenStream;
+use proc_macro2::{Literal, TokenStream};
 use quote::quote;
 
 fn struct_field(ty: &Ty, name: &str) -> Option<Ty> {
@@ -108,8 +108,7 @@ pub fn method_impl(module_name: &str, kernels: &[Kernel], diag: &Diag) -> Option
 
     let (p_t, c_t, s_t, px_t, col_t) =
         (params_ty.rust(), cull_ty.rust(), shade_ty.rust(), pixel_ty.rust(), color_ty.rust());
-    let np = pixel_ty.len();
-    let nc = color_ty.len();
+    let (np, nc) = (pixel_ty.len(), color_ty.len());
     let f32x8 = quote!(::splat_runtime::F32x8);
     let u32x8 = quote!(::splat_runtime::U32x8);
     let rt = quote!(::splat_runtime);
@@ -139,7 +138,8 @@ pub fn method_impl(module_name: &str, kernels: &[Kernel], diag: &Diag) -> Option
     // Lane wrappers: pixel slots come from the lanes, shade slots are broadcast.
     let shade_slots = shade_ty.slots();
     let shade_access = slot_access(&shade_ty, quote!(shade));
-    let mut lane_in: Vec<TokenStream> = (0..np).map(|i| quote!(pixel[#i])).collect();
+    let idx = Literal::usize_unsuffixed;
+    let mut lane_in: Vec<TokenStream> = (0..np).map(|i| { let i = idx(i); quote!(pixel[#i]) }).collect();
     let mut lane_int = vec![];
     for (s, a) in shade_slots.iter().zip(&shade_access) {
         match s {
@@ -147,15 +147,15 @@ pub fn method_impl(module_name: &str, kernels: &[Kernel], diag: &Diag) -> Option
             _ => lane_int.push(quote!(#u32x8::splat(#a as u32))),
         }
     }
-    let color_lanes: Vec<TokenStream> = (1..=nc).map(|i| quote!(__out[#i])).collect();
-    let d_color: Vec<TokenStream> = (0..nc).map(|i| quote!(d_out.color[#i])).collect();
+    let color_lanes: Vec<TokenStream> = (1..=nc).map(|i| { let i = idx(i); quote!(__out[#i]) }).collect();
+    let d_color: Vec<TokenStream> = (0..nc).map(|i| { let i = idx(i); quote!(d_out.color[#i]) }).collect();
     let mut bar_index = np;
     let mut shade_bars = shade_slots
         .iter()
         .map(|s| match s {
             Scalar::F32 => {
                 bar_index += 1;
-                let k = bar_index - 1;
+                let k = idx(bar_index - 1);
                 quote!(__bars[#k].masked_sum(active))
             }
             Scalar::Bool => quote!(false),
@@ -180,6 +180,7 @@ pub fn method_impl(module_name: &str, kernels: &[Kernel], diag: &Diag) -> Option
         quote! { <#s_t as ::core::default::Default>::default() }
     };
     let (has_tc, has_pi) = (tile_cull.is_some(), pixel_info.is_some());
+    let (np, nc) = (idx(np), idx(nc));
     Some(quote! {
         /// The method as the runtime sees it.
         #[derive(Clone, Copy, Debug, Default)]

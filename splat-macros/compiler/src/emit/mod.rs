@@ -29,16 +29,18 @@ pub fn structs(module: &Module) -> TokenStream {
         for (name, ty) in &s.ty.fields {
             let f = syn::Ident::new(name, proc_macro2::Span::call_site());
             let t = ty.rust();
-            writes.push(quote!(::splat_runtime::Flat::write_words(&self.#f, &mut out[#at..]);));
-            reads.push(quote!(#f: <#t as ::splat_runtime::Flat>::read_words(&words[#at..])));
+            let at_lit = proc_macro2::Literal::usize_unsuffixed(at);
+            writes.push(quote!(::splat_runtime::Flat::write_words(&self.#f, &mut out[#at_lit..]);));
+            reads.push(quote!(#f: <#t as ::splat_runtime::Flat>::read_words(&words[#at_lit..])));
             at += flat_len(ty);
         }
+        let len = proc_macro2::Literal::usize_unsuffixed(at);
         out.extend(quote! {
             #[derive(Clone, Copy, Debug, Default, PartialEq)]
             #item
 
             impl ::splat_runtime::Flat for #ident {
-                const LEN: usize = #at;
+                const LEN: usize = #len;
                 fn write_words(&self, out: &mut [f32]) {
                     #(#writes)*
                 }

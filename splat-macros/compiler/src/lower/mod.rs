@@ -180,6 +180,8 @@ impl<'m> Lowerer<'m> {
             Op::Unary(u, a) => {
                 let c = self.const_of(a)?;
                 let r = match (u, c) {
+                    // Negation is exact, so folding it cannot change the f32 result.
+                    (Unary::Neg, F(x)) => F(-x),
                     (Unary::Neg, I(x)) => I(x.wrapping_neg()),
                     (Unary::Not, B(x)) => B(!x),
                     (Unary::Not, U(x)) => U(!x),

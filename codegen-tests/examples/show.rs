@@ -1,1 +1,0 @@
-fn main() { print!("{}", codegen_tests::corpus::basic::GENERATED_RUST); }
