@@ -191,7 +191,7 @@ fn expand_module(kind: Kind, item: syn::ItemMod, diag: &Diag) -> Option<TokenStr
         });
     }
     if kind == Kind::Method {
-        items.extend(emit::method::method_impl(&m.name.to_string(), &kernels, diag)?);
+        items.extend(emit::method::method_impl(&m.name, &kernels, diag)?);
     }
     let source = emit::pretty(&items);
     let (attrs, vis, name) = (&m.attrs, &m.vis, &m.name);

@@ -50,14 +50,21 @@ fn call_args(def: &FnDef, names: &[TokenStream]) -> Vec<TokenStream> {
         .collect()
 }
 
-pub fn method_impl(module_name: &str, kernels: &[Kernel], diag: &Diag) -> Option<TokenStream> {
+pub fn method_impl(module: &syn::Ident, kernels: &[Kernel], diag: &Diag) -> Option<TokenStream> {
+    let module_name = module.to_string();
     let find = |n: &str| kernels.iter().find(|k| k.def.name == n);
+    let missing = |what: &str| {
+        diag.error_at(
+            module,
+            format!("a #[splat_method] module needs `fn {what}` (see splat_runtime::SplatMethod for the signature)"),
+        )
+    };
     let Some(project) = find("project") else {
-        diag.error(proc_macro2::Span::call_site(), "a #[splat_method] module needs `fn project`");
+        missing("project");
         return None;
     };
     let Some(evaluate) = find("evaluate") else {
-        diag.error(proc_macro2::Span::call_site(), "a #[splat_method] module needs `fn evaluate`");
+        missing("evaluate");
         return None;
     };
     let tile_cull = find("tile_cull");

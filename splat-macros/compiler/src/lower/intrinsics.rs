@@ -353,6 +353,12 @@ impl Lowerer<'_> {
         let span = p.span();
         if segs.len() == 1 {
             let name = segs[0].as_str();
+            if let Some(b) = self.lookup(name) {
+                if b.val.ty == Ty::Error {
+                    return Err(Failed);
+                }
+                return self.err(span, format!("`{name}` is a value, not a function"));
+            }
             if let Some(def) = self.module.find_fn(name) {
                 let args = self.args_of(&c.args)?;
                 return self.call_helper(def, args, span);

@@ -518,14 +518,16 @@ impl<'m> Lowerer<'m> {
 
     /// Evaluates an expression that must be a compile-time integer (index, loop bound).
     fn const_index(&mut self, e: &syn::Expr) -> R<usize> {
+        self.const_int(e, "this index must be known at compile time (a literal, a constant or a loop counter)")
+    }
+
+    /// Evaluates an expression that must be a non-negative compile-time integer.
+    fn const_int(&mut self, e: &syn::Expr, msg: &str) -> R<usize> {
         let v = self.expr(e)?;
         match (&v.ty, v.comps.first().and_then(|c| self.const_of(*c))) {
             (Ty::Index | Ty::U32 | Ty::I32, Some(Const::U(x))) => Ok(x as usize),
             (Ty::Index | Ty::U32 | Ty::I32, Some(Const::I(x))) if x >= 0 => Ok(x as usize),
-            _ => self.err(
-                e.span(),
-                "this index must be known at compile time (a literal, a constant or a loop counter)",
-            ),
+            _ => self.err(e.span(), msg),
         }
     }
 
@@ -603,17 +605,16 @@ impl<'m> Lowerer<'m> {
     fn for_loop(&mut self, f: &syn::ExprForLoop) -> R<Val> {
         let (lo, hi) = match &*f.expr {
             syn::Expr::Range(r) => {
+                const BOUNDS: &str =
+                    "loop bounds must be compile-time constants (`for i in 0..N`): loops are unrolled";
                 let lo = match &r.start {
-                    Some(s) => self.const_index(s)?,
+                    Some(s) => self.const_int(s, BOUNDS)?,
                     None => 0,
                 };
                 let Some(end) = &r.end else {
                     return self.err(r.span(), "loops need an upper bound: `for i in 0..N`");
                 };
-                let hi = self.const_index(end).map_err(|f| {
-                    self.diag.error(end.span(), "loop bounds must be compile-time constants (`for i in 0..N`)");
-                    f
-                })?;
+                let hi = self.const_int(end, BOUNDS)?;
                 match r.limits {
                     syn::RangeLimits::HalfOpen(_) => (lo, hi),
                     syn::RangeLimits::Closed(_) => (lo, hi + 1),

@@ -1,0 +1,14 @@
+use splat_macros::splat_functions;
+
+#[splat_functions]
+mod m {
+    use splat_runtime::prelude::*;
+
+    pub fn f(x: f32) -> f32 {
+        let y = x;
+        y = y * 2.0;
+        y
+    }
+}
+
+fn main() {}

@@ -1,0 +1,13 @@
+use splat_macros::splat_functions;
+
+#[splat_functions]
+mod m {
+    use splat_runtime::prelude::*;
+
+    pub fn f(x: f32) -> f32 {
+        let y = if x > 0.0 { x };
+        y
+    }
+}
+
+fn main() {}
