@@ -267,6 +267,8 @@ impl F32x8 {
     /// Sum of the lanes whose mask is set, added in lane order.
     #[inline(always)]
     pub fn masked_sum(self, m: M32x8) -> f32 {
+        // Sequential on purpose: measured faster than a blend + pairwise tree in the lanes
+        // bench (the branches are predictable), and the order matches a scalar loop.
         let mut s = 0.0;
         for i in 0..LANES {
             if m.0[i] != 0 {

@@ -272,6 +272,8 @@ impl Kernel<'_> {
         let reserved = vec!["__in".to_string(), "__int".into(), "__d".into()];
         let allow: TokenStream = ALLOW.parse().unwrap();
         let name = self.name();
+        // Lane code must inline into callers compiled with wider vector features.
+        let inline = if flavor == Flavor::Lanes { quote!(#[inline(always)]) } else { quote!(#[inline]) };
         let read = |em: &mut BodyEmitter, vars: &[Var], f: &Function, arr: TokenStream, int_arr: TokenStream| {
             let (mut fi, mut ii) = (0usize, 0usize);
             let mut out = TokenStream::new();
@@ -322,7 +324,7 @@ impl Kernel<'_> {
         let fwd_doc = format!(" Flat form of [`super::{name}`].");
         let mut out = quote! {
             #[doc = #fwd_doc]
-            #[inline]
+            #inline
             #allow
             pub fn #name(__in: &[#float_t; #nf_l], __int: &[#int_t; #ni_l]) -> ([#float_t; #mf], [#int_t; #mi]) {
                 #prologue
@@ -342,7 +344,7 @@ impl Kernel<'_> {
             let doc = format!(" Flat form of [`super::{name}_adjoint`]: the cotangents of the float inputs.");
             out.extend(quote! {
                 #[doc = #doc]
-                #[inline]
+                #inline
                 #allow
                 pub fn #adj(__in: &[#float_t; #nf_l], __int: &[#int_t; #ni_l], __d: &[#float_t; #mf]) -> [#float_t; #nf_l] {
                     #prologue
