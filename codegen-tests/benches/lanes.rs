@@ -30,13 +30,23 @@ fn scene() -> Scene {
             color: Vec3::new(rng.f32(), rng.f32(), rng.f32()),
         })
         .collect();
-    let pixels: Vec<Vec2> =
-        (0..TILE * TILE).map(|i| Vec2::new((i % TILE) as f32 + 0.5, (i / TILE) as f32 + 0.5)).collect();
+    let pixels: Vec<Vec2> = (0..TILE * TILE)
+        .map(|i| Vec2::new((i % TILE) as f32 + 0.5, (i / TILE) as f32 + 0.5))
+        .collect();
     let lanes = pixels
         .chunks(8)
-        .map(|c| [F32x8(std::array::from_fn(|l| c[l].x)), F32x8(std::array::from_fn(|l| c[l].y))])
+        .map(|c| {
+            [
+                F32x8(std::array::from_fn(|l| c[l].x)),
+                F32x8(std::array::from_fn(|l| c[l].y)),
+            ]
+        })
         .collect();
-    Scene { shades, pixels, lanes }
+    Scene {
+        shades,
+        pixels,
+        lanes,
+    }
 }
 
 fn scalar_forward(s: &Scene) -> f32 {
@@ -73,7 +83,11 @@ fn lanes_forward_avx2(s: &Scene) -> f32 {
 }
 
 fn scalar_adjoint(s: &Scene) -> f32 {
-    let d = Contribution { alpha: 0.3, color: Vec3::new(0.1, 0.2, 0.3), valid: true };
+    let d = Contribution {
+        alpha: 0.3,
+        color: Vec3::new(0.1, 0.2, 0.3),
+        valid: true,
+    };
     let mut acc = 0.0;
     for shade in &s.shades {
         for p in &s.pixels {
@@ -125,16 +139,25 @@ fn time(s: &Scene, f: &dyn Fn(&Scene) -> f32) -> f64 {
 
 fn main() {
     let s = scene();
-    let avx2 = cfg!(target_arch = "x86_64") && std::arch::is_x86_feature_detected!("avx2")
+    let avx2 = cfg!(target_arch = "x86_64")
+        && std::arch::is_x86_feature_detected!("avx2")
         && std::arch::is_x86_feature_detected!("fma");
-    println!("evaluate of `tiny` (isotropic Gaussian), {PRIMS} primitives x {}x{} pixels", TILE, TILE);
+    println!(
+        "evaluate of `tiny` (isotropic Gaussian), {PRIMS} primitives x {}x{} pixels",
+        TILE, TILE
+    );
     println!("{:<28} {:>12} {:>10}", "form", "ns / pair", "speed-up");
     for (label, scalar, lanes, lanes_avx2) in [
-        ("forward", scalar_forward as fn(&Scene) -> f32, lanes_forward as fn(&Scene) -> f32, {
-            #[cfg(target_arch = "x86_64")]
-            let f: fn(&Scene) -> f32 = |s| unsafe { lanes_forward_avx2(s) };
-            f
-        }),
+        (
+            "forward",
+            scalar_forward as fn(&Scene) -> f32,
+            lanes_forward as fn(&Scene) -> f32,
+            {
+                #[cfg(target_arch = "x86_64")]
+                let f: fn(&Scene) -> f32 = |s| unsafe { lanes_forward_avx2(s) };
+                f
+            },
+        ),
         ("adjoint", scalar_adjoint, lanes_adjoint, {
             #[cfg(target_arch = "x86_64")]
             let f: fn(&Scene) -> f32 = |s| unsafe { lanes_adjoint_avx2(s) };
@@ -142,12 +165,27 @@ fn main() {
         }),
     ] {
         let base = time(&s, &scalar);
-        println!("{:<28} {:>12.3} {:>10}", format!("{label}, scalar"), base, "1.00x");
+        println!(
+            "{:<28} {:>12.3} {:>10}",
+            format!("{label}, scalar"),
+            base,
+            "1.00x"
+        );
         let l = time(&s, &lanes);
-        println!("{:<28} {:>12.3} {:>9.2}x", format!("{label}, 8 lanes (baseline)"), l, base / l);
+        println!(
+            "{:<28} {:>12.3} {:>9.2}x",
+            format!("{label}, 8 lanes (baseline)"),
+            l,
+            base / l
+        );
         if avx2 {
             let a = time(&s, &lanes_avx2);
-            println!("{:<28} {:>12.3} {:>9.2}x", format!("{label}, 8 lanes (avx2+fma)"), a, base / a);
+            println!(
+                "{:<28} {:>12.3} {:>9.2}x",
+                format!("{label}, 8 lanes (avx2+fma)"),
+                a,
+                base / a
+            );
         }
     }
 }

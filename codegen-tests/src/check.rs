@@ -60,7 +60,10 @@ pub fn gradient<const NF: usize, const NI: usize, const MF: usize, const MI: usi
     trials: usize,
 ) -> GradientReport {
     let mut rng = fastrand::Rng::with_seed(seed);
-    let mut report = GradientReport { trials, ..Default::default() };
+    let mut report = GradientReport {
+        trials,
+        ..Default::default()
+    };
     for _ in 0..trials {
         let (x, ints) = sample(&mut rng);
         // Full Jacobian: columns by finite differences, rows by the adjoint.
@@ -118,16 +121,24 @@ pub fn lanes_vs_scalar<const NF: usize, const NI: usize, const MF: usize, const 
     let mut diffs = 0;
     for (l, (xf, xi)) in inputs.iter().enumerate() {
         let (sf, si) = scalar(xf, xi);
-        diffs += (0..MF).filter(|&j| !same_bits(sf[j], of[j].lane(l))).count();
+        diffs += (0..MF)
+            .filter(|&j| !same_bits(sf[j], of[j].lane(l)))
+            .count();
         diffs += (0..MI).filter(|&j| si[j] != oi[j].lane(l)).count();
     }
     diffs
 }
 
+/// Flat f32 adjoint / lane adjoint.
+pub type ScalarAdjointFn<const NF: usize, const NI: usize, const MF: usize> =
+    fn(&[f32; NF], &[u32; NI], &[f32; MF]) -> [f32; NF];
+pub type LaneAdjointFn<const NF: usize, const NI: usize, const MF: usize> =
+    fn(&[F32x8; NF], &[U32x8; NI], &[F32x8; MF]) -> [F32x8; NF];
+
 /// Same for adjoints: every input cotangent must match bit for bit.
 pub fn adjoint_lanes_vs_scalar<const NF: usize, const NI: usize, const MF: usize>(
-    scalar: fn(&[f32; NF], &[u32; NI], &[f32; MF]) -> [f32; NF],
-    lanes: fn(&[F32x8; NF], &[U32x8; NI], &[F32x8; MF]) -> [F32x8; NF],
+    scalar: ScalarAdjointFn<NF, NI, MF>,
+    lanes: LaneAdjointFn<NF, NI, MF>,
     inputs: &[([f32; NF], [u32; NI], [f32; MF]); LANES],
 ) -> usize {
     let lf: [F32x8; NF] = std::array::from_fn(|i| F32x8(std::array::from_fn(|l| inputs[l].0[i])));

@@ -51,7 +51,9 @@ pub mod scalars {
     /// sigmoid, log2, log10, unit conversions, constants.
     pub fn misc(x: f32, y: f32) -> f32 {
         let s = sigmoid(x) * sigmoid(-3.0 * y);
-        s + x.log2() * y.log10() + x.to_radians() + y.to_degrees() * core::f32::consts::PI
+        s + x.log2() * y.log10()
+            + x.to_radians()
+            + y.to_degrees() * core::f32::consts::PI
             + f32::EPSILON * std::f32::consts::E
     }
 

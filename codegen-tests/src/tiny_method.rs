@@ -55,6 +55,10 @@ pub mod tiny {
     pub fn evaluate(px: Vec2, s: &Shade) -> Contribution<Vec3> {
         let d = px - s.center;
         let alpha = (s.opacity * (-0.5 * d.dot(d) * s.inv_sigma2).exp()).min(0.99);
-        Contribution { alpha, color: s.color, valid: alpha >= 1.0 / 255.0 }
+        Contribution {
+            alpha,
+            color: s.color,
+            valid: alpha >= 1.0 / 255.0,
+        }
     }
 }

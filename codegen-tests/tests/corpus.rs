@@ -2,7 +2,9 @@
 //! and the dot-product identity (relative error <= 1e-6, seeded random inputs away from
 //! kinks), and the lane form against the scalar form, bit for bit, forward and adjoint.
 
-use codegen_tests::check::{GradientReport, adjoint_lanes_vs_scalar, gradient, lanes_vs_scalar, uniform};
+use codegen_tests::check::{
+    GradientReport, adjoint_lanes_vs_scalar, gradient, lanes_vs_scalar, uniform,
+};
 use codegen_tests::corpus::*;
 use fastrand::Rng;
 
@@ -11,8 +13,14 @@ const TRIALS: usize = 20;
 const TOL: f64 = 1e-6;
 
 fn assert_report(name: &str, r: GradientReport) {
-    println!("{name}: jacobian {:.2e}, dot product {:.2e} over {} inputs", r.jacobian, r.dot_product, r.trials);
-    assert!(r.jacobian <= TOL, "{name}: adjoint vs finite differences {r:?}");
+    println!(
+        "{name}: jacobian {:.2e}, dot product {:.2e} over {} inputs",
+        r.jacobian, r.dot_product, r.trials
+    );
+    assert!(
+        r.jacobian <= TOL,
+        "{name}: adjoint vs finite differences {r:?}"
+    );
     assert!(r.dot_product <= TOL, "{name}: dot-product identity {r:?}");
 }
 
@@ -66,7 +74,12 @@ fn plain<const N: usize>(lo: f64, hi: f64) -> impl Fn(&mut Rng) -> ([f64; N], [u
 
 /// Values of magnitude in [lo, hi] with a random sign.
 fn signed<const N: usize>(lo: f64, hi: f64) -> impl Fn(&mut Rng) -> ([f64; N], [u32; 0]) {
-    move |r| (std::array::from_fn(|_| (lo + (hi - lo) * r.f64()) * if r.bool() { 1.0 } else { -1.0 }), [])
+    move |r| {
+        (
+            std::array::from_fn(|_| (lo + (hi - lo) * r.f64()) * if r.bool() { 1.0 } else { -1.0 }),
+            [],
+        )
+    }
 }
 
 fn mat2_inputs(r: &mut Rng) -> ([f64; 5], [u32; 0]) {

@@ -3,14 +3,16 @@
 //! functions and the lane form alike.
 
 use codegen_tests::corpus::kinks::{self, lanes, twin};
-use splat_runtime::glam::Vec3;
 use splat_runtime::F32x8;
+use splat_runtime::glam::Vec3;
 
-fn twin1(adj: fn(&[f64; 1], &[u32; 0], &[f64; 1]) -> [f64; 1], x: f64) -> f64 {
+use codegen_tests::check::TwinAdjointFn;
+
+fn twin1(adj: TwinAdjointFn<1, 0, 1>, x: f64) -> f64 {
     adj(&[x], &[], &[1.0])[0]
 }
 
-fn twin2(adj: fn(&[f64; 2], &[u32; 0], &[f64; 1]) -> [f64; 2], x: f64, y: f64) -> [f64; 2] {
+fn twin2(adj: TwinAdjointFn<2, 0, 1>, x: f64, y: f64) -> [f64; 2] {
     adj(&[x, y], &[], &[1.0])
 }
 
@@ -30,7 +32,10 @@ fn singular_points_have_zero_gradient() {
 #[test]
 fn normalize_of_zero_is_zero_with_zero_gradient() {
     assert_eq!(kinks::normalize_of(Vec3::ZERO), Vec3::ZERO);
-    assert_eq!(kinks::normalize_of_adjoint(Vec3::ZERO, Vec3::ONE), Vec3::ZERO);
+    assert_eq!(
+        kinks::normalize_of_adjoint(Vec3::ZERO, Vec3::ONE),
+        Vec3::ZERO
+    );
     let d = twin::normalize_of_adjoint(&[0.0; 3], &[], &[1.0, -2.0, 3.0]);
     assert_eq!(d, [0.0; 3]);
 }
@@ -77,6 +82,9 @@ fn lanes_do_not_leak_nan_from_the_side_other_lanes_take() {
     let y = F32x8([0.0, 1.0, 0.0, 2.0, 0.0, -1.0, 0.0, 4.0]);
     let d = lanes::lazy_div_adjoint(&[F32x8::splat(1.0), y], &[], &[F32x8::splat(1.0)]);
     for l in 0..8 {
-        assert!(d[0].lane(l).is_finite() && d[1].lane(l).is_finite(), "lane {l}");
+        assert!(
+            d[0].lane(l).is_finite() && d[1].lane(l).is_finite(),
+            "lane {l}"
+        );
     }
 }

@@ -29,8 +29,8 @@ fn evaluate_lanes_equals_evaluate_bit_for_bit() {
         let shade = random_shade(&mut rng);
         let (px, lanes) = random_pixels(&mut rng);
         let out = Method::evaluate_lanes(&lanes, &shade);
-        for l in 0..LANES {
-            let s = Method::evaluate(&px[l], &shade);
+        for (l, p) in px.iter().enumerate() {
+            let s = Method::evaluate(p, &shade);
             assert_eq!(s.alpha.to_bits(), out.alpha.lane(l).to_bits());
             for c in 0..3 {
                 assert_eq!(s.color[c].to_bits(), out.color[c].lane(l).to_bits());
@@ -64,7 +64,15 @@ fn evaluate_adjoint_lanes_sums_the_active_lanes() {
                 continue;
             }
             let g = Method::evaluate_adjoint(&px[l], &shade, &d[l]);
-            let flat = [g.center.x, g.center.y, g.inv_sigma2, g.opacity, g.color.x, g.color.y, g.color.z];
+            let flat = [
+                g.center.x,
+                g.center.y,
+                g.inv_sigma2,
+                g.opacity,
+                g.color.x,
+                g.color.y,
+                g.color.z,
+            ];
             for (w, v) in want.iter_mut().zip(flat) {
                 *w += v;
             }
@@ -96,15 +104,24 @@ fn project_gradient_matches_finite_differences_including_the_camera() {
         x[21] = 100.0 + 50.0 * r.f64();
         (x, [])
     };
-    let report = gradient(tiny::twin::project, tiny::twin::project_adjoint, sample, 11, 20);
+    let report = gradient(
+        tiny::twin::project,
+        tiny::twin::project_adjoint,
+        sample,
+        11,
+        20,
+    );
     println!("{report:?}");
-    assert!(report.jacobian <= 1e-6 && report.dot_product <= 1e-6, "{report:?}");
+    assert!(
+        report.jacobian <= 1e-6 && report.dot_product <= 1e-6,
+        "{report:?}"
+    );
 }
 
 #[test]
 fn method_reports_its_shape() {
     assert_eq!(Method::NAME, "tiny");
-    assert!(Method::HAS_TILE_CULL && !Method::HAS_PIXEL_INFO);
+    const { assert!(Method::HAS_TILE_CULL && !Method::HAS_PIXEL_INFO) };
     assert_eq!(<Shade as splat_runtime::Flat>::LEN, 7);
     assert!(Method::SOURCE.rust.contains("pub fn evaluate_adjoint"));
 }

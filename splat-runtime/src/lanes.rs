@@ -86,17 +86,29 @@ macro_rules! lane_compare {
     ($lanes:ident) => {
         impl $lanes {
             #[inline(always)]
-            pub fn lt(self, rhs: Self) -> M32x8 { M32x8(zip(self.0, rhs.0, |a, b| mask(a < b))) }
+            pub fn lt(self, rhs: Self) -> M32x8 {
+                M32x8(zip(self.0, rhs.0, |a, b| mask(a < b)))
+            }
             #[inline(always)]
-            pub fn le(self, rhs: Self) -> M32x8 { M32x8(zip(self.0, rhs.0, |a, b| mask(a <= b))) }
+            pub fn le(self, rhs: Self) -> M32x8 {
+                M32x8(zip(self.0, rhs.0, |a, b| mask(a <= b)))
+            }
             #[inline(always)]
-            pub fn gt(self, rhs: Self) -> M32x8 { M32x8(zip(self.0, rhs.0, |a, b| mask(a > b))) }
+            pub fn gt(self, rhs: Self) -> M32x8 {
+                M32x8(zip(self.0, rhs.0, |a, b| mask(a > b)))
+            }
             #[inline(always)]
-            pub fn ge(self, rhs: Self) -> M32x8 { M32x8(zip(self.0, rhs.0, |a, b| mask(a >= b))) }
+            pub fn ge(self, rhs: Self) -> M32x8 {
+                M32x8(zip(self.0, rhs.0, |a, b| mask(a >= b)))
+            }
             #[inline(always)]
-            pub fn eq(self, rhs: Self) -> M32x8 { M32x8(zip(self.0, rhs.0, |a, b| mask(a == b))) }
+            pub fn eq(self, rhs: Self) -> M32x8 {
+                M32x8(zip(self.0, rhs.0, |a, b| mask(a == b)))
+            }
             #[inline(always)]
-            pub fn ne(self, rhs: Self) -> M32x8 { M32x8(zip(self.0, rhs.0, |a, b| mask(a != b))) }
+            pub fn ne(self, rhs: Self) -> M32x8 {
+                M32x8(zip(self.0, rhs.0, |a, b| mask(a != b)))
+            }
         }
     };
 }
@@ -114,51 +126,75 @@ macro_rules! lane_wrapping {
         impl Add for $lanes {
             type Output = $lanes;
             #[inline(always)]
-            fn add(self, rhs: $lanes) -> $lanes { $lanes(zip(self.0, rhs.0, <$scalar>::wrapping_add)) }
+            fn add(self, rhs: $lanes) -> $lanes {
+                $lanes(zip(self.0, rhs.0, <$scalar>::wrapping_add))
+            }
         }
         impl Sub for $lanes {
             type Output = $lanes;
             #[inline(always)]
-            fn sub(self, rhs: $lanes) -> $lanes { $lanes(zip(self.0, rhs.0, <$scalar>::wrapping_sub)) }
+            fn sub(self, rhs: $lanes) -> $lanes {
+                $lanes(zip(self.0, rhs.0, <$scalar>::wrapping_sub))
+            }
         }
         impl Mul for $lanes {
             type Output = $lanes;
             #[inline(always)]
-            fn mul(self, rhs: $lanes) -> $lanes { $lanes(zip(self.0, rhs.0, <$scalar>::wrapping_mul)) }
+            fn mul(self, rhs: $lanes) -> $lanes {
+                $lanes(zip(self.0, rhs.0, <$scalar>::wrapping_mul))
+            }
         }
         /// Division by zero gives 0, like the generated scalar code.
         impl Div for $lanes {
             type Output = $lanes;
             #[inline(always)]
-            fn div(self, rhs: $lanes) -> $lanes { $lanes(zip(self.0, rhs.0, |a, b| a.checked_div(b).unwrap_or(0))) }
+            fn div(self, rhs: $lanes) -> $lanes {
+                $lanes(zip(self.0, rhs.0, |a, b| a.checked_div(b).unwrap_or(0)))
+            }
         }
         impl Rem for $lanes {
             type Output = $lanes;
             #[inline(always)]
-            fn rem(self, rhs: $lanes) -> $lanes { $lanes(zip(self.0, rhs.0, |a, b| a.checked_rem(b).unwrap_or(0))) }
+            fn rem(self, rhs: $lanes) -> $lanes {
+                $lanes(zip(self.0, rhs.0, |a, b| a.checked_rem(b).unwrap_or(0)))
+            }
         }
         impl Shl for $lanes {
             type Output = $lanes;
             #[inline(always)]
-            fn shl(self, rhs: $lanes) -> $lanes { $lanes(zip(self.0, rhs.0, |a, b| a.wrapping_shl(b as u32))) }
+            fn shl(self, rhs: $lanes) -> $lanes {
+                $lanes(zip(self.0, rhs.0, |a, b| a.wrapping_shl(b as u32)))
+            }
         }
         impl Shr for $lanes {
             type Output = $lanes;
             #[inline(always)]
-            fn shr(self, rhs: $lanes) -> $lanes { $lanes(zip(self.0, rhs.0, |a, b| a.wrapping_shr(b as u32))) }
+            fn shr(self, rhs: $lanes) -> $lanes {
+                $lanes(zip(self.0, rhs.0, |a, b| a.wrapping_shr(b as u32)))
+            }
         }
         impl $lanes {
             #[inline(always)]
-            pub fn splat(v: $scalar) -> Self { Self([v; LANES]) }
+            pub fn splat(v: $scalar) -> Self {
+                Self([v; LANES])
+            }
             #[inline(always)]
-            pub fn to_f32(self) -> F32x8 { F32x8(map(self.0, |a| a as f32)) }
+            pub fn to_f32(self) -> F32x8 {
+                F32x8(map(self.0, |a| a as f32))
+            }
             #[inline(always)]
-            pub fn min(self, rhs: Self) -> Self { Self(zip(self.0, rhs.0, |a, b| a.min(b))) }
+            pub fn min(self, rhs: Self) -> Self {
+                Self(zip(self.0, rhs.0, |a, b| a.min(b)))
+            }
             #[inline(always)]
-            pub fn max(self, rhs: Self) -> Self { Self(zip(self.0, rhs.0, |a, b| a.max(b))) }
+            pub fn max(self, rhs: Self) -> Self {
+                Self(zip(self.0, rhs.0, |a, b| a.max(b)))
+            }
             /// Lane `i` of the result is lane `i` of `self`.
             #[inline(always)]
-            pub fn lane(self, i: usize) -> $scalar { self.0[i] }
+            pub fn lane(self, i: usize) -> $scalar {
+                self.0[i]
+            }
         }
     };
 }
@@ -293,15 +329,15 @@ impl M32x8 {
     /// value, so a NaN there cannot leak.
     #[inline(always)]
     pub fn select_f32(self, a: F32x8, b: F32x8) -> F32x8 {
-        let mut out = [0.0; LANES];
-        for i in 0..LANES {
-            out[i] = f32::from_bits((self.0[i] & a.0[i].to_bits()) | (!self.0[i] & b.0[i].to_bits()));
-        }
-        F32x8(out)
+        let blend =
+            |m: u32, (a, b): (f32, f32)| f32::from_bits((m & a.to_bits()) | (!m & b.to_bits()));
+        F32x8(zip(self.0, zip(a.0, b.0, |a, b| (a, b)), blend))
     }
     #[inline(always)]
     pub fn select_u32(self, a: U32x8, b: U32x8) -> U32x8 {
-        U32x8(zip(self.0, zip(a.0, b.0, |a, b| (a, b)), |m, (a, b)| (m & a) | (!m & b)))
+        U32x8(zip(self.0, zip(a.0, b.0, |a, b| (a, b)), |m, (a, b)| {
+            (m & a) | (!m & b)
+        }))
     }
     #[inline(always)]
     pub fn select_i32(self, a: I32x8, b: I32x8) -> I32x8 {
@@ -309,7 +345,9 @@ impl M32x8 {
     }
     #[inline(always)]
     pub fn select_mask(self, a: M32x8, b: M32x8) -> M32x8 {
-        M32x8(zip(self.0, zip(a.0, b.0, |a, b| (a, b)), |m, (a, b)| (m & a) | (!m & b)))
+        M32x8(zip(self.0, zip(a.0, b.0, |a, b| (a, b)), |m, (a, b)| {
+            (m & a) | (!m & b)
+        }))
     }
     #[inline(always)]
     pub fn eq(self, rhs: Self) -> M32x8 {
@@ -401,6 +439,6 @@ mod tests {
         assert_eq!(m.to_u32().0, [1, 1, 1, 0, 0, 0, 0, 0]);
         assert!(m.any() && !m.all());
         assert_eq!(a.masked_sum(m), 3.0);
-        assert_eq!((!m).eq(m).any(), false);
+        assert!(!(!m).eq(m).any());
     }
 }

@@ -18,14 +18,26 @@ use std::collections::{BTreeMap, HashMap, HashSet};
 /// (named by `out_names`); results are the cotangents of `f`'s `f32` parameter slots.
 /// `custom[i]` is the user-written adjoint of the helper called by `Stmt::Call { callee: i }`.
 pub fn adjoint(f: &Function, custom: &[Function], out_names: &[String]) -> Function {
-    let mut ad = Ad { g: f.clone(), custom, consts: HashSet::new() };
+    let mut ad = Ad {
+        g: f.clone(),
+        custom,
+        consts: HashSet::new(),
+    };
     ad.g.name = format!("{}_adjoint", f.name);
     collect_consts(&f.body, &mut ad.consts);
     let mut rev = vec![];
     let mut adj = HashMap::new();
-    let float_results: Vec<Var> = f.results().iter().copied().filter(|r| f.ty(*r) == Scalar::F32).collect();
+    let float_results: Vec<Var> = f
+        .results()
+        .iter()
+        .copied()
+        .filter(|r| f.ty(*r) == Scalar::F32)
+        .collect();
     for (k, r) in float_results.iter().enumerate() {
-        let name = out_names.get(k).cloned().unwrap_or_else(|| format!("d_out_{k}"));
+        let name = out_names
+            .get(k)
+            .cloned()
+            .unwrap_or_else(|| format!("d_out_{k}"));
         let bar = ad.g.new_var(Scalar::F32, name);
         ad.g.params.push(bar);
         ad.acc(&mut adj, *r, bar, &mut rev);
@@ -56,11 +68,18 @@ struct Ad<'a> {
 fn collect_consts(b: &Block, out: &mut HashSet<Var>) {
     for s in &b.stmts {
         match s {
-            Stmt::Let { var, op: Op::Const(_) } => {
+            Stmt::Let {
+                var,
+                op: Op::Const(_),
+            } => {
                 out.insert(*var);
             }
             Stmt::Let { .. } => {}
-            Stmt::If { then_block, else_block, .. } => {
+            Stmt::If {
+                then_block,
+                else_block,
+                ..
+            } => {
                 collect_consts(then_block, out);
                 collect_consts(else_block, out);
             }
@@ -75,7 +94,12 @@ fn defined_in(b: &Block, out: &mut HashSet<Var>) {
             Stmt::Let { var, .. } => {
                 out.insert(*var);
             }
-            Stmt::If { then_block, else_block, outs, .. } => {
+            Stmt::If {
+                then_block,
+                else_block,
+                outs,
+                ..
+            } => {
                 out.extend(outs);
                 defined_in(then_block, out);
                 defined_in(else_block, out);
@@ -132,9 +156,20 @@ impl Ad<'_> {
     }
 
     /// `select(cond, value, 0)`, or `select(cond, 0, value)` when `zero_if_true`.
-    fn guard(&mut self, out: &mut Vec<Stmt>, cond: Var, value: Var, zero_if_true: bool, name: &str) -> Var {
+    fn guard(
+        &mut self,
+        out: &mut Vec<Stmt>,
+        cond: Var,
+        value: Var,
+        zero_if_true: bool,
+        name: &str,
+    ) -> Var {
         let z = self.zero(out);
-        let op = if zero_if_true { Op::Select(cond, z, value) } else { Op::Select(cond, value, z) };
+        let op = if zero_if_true {
+            Op::Select(cond, z, value)
+        } else {
+            Op::Select(cond, value, z)
+        };
         self.emit(out, op, name)
     }
 
@@ -146,9 +181,17 @@ impl Ad<'_> {
                         self.rule(*var, op, g, adj, out);
                     }
                 }
-                Stmt::If { cond, then_block, else_block, outs } => {
-                    let seeds: Vec<(usize, Var)> =
-                        outs.iter().enumerate().filter_map(|(k, o)| adj.get(o).map(|g| (k, *g))).collect();
+                Stmt::If {
+                    cond,
+                    then_block,
+                    else_block,
+                    outs,
+                } => {
+                    let seeds: Vec<(usize, Var)> = outs
+                        .iter()
+                        .enumerate()
+                        .filter_map(|(k, o)| adj.get(o).map(|g| (k, *g)))
+                        .collect();
                     if seeds.is_empty() {
                         continue;
                     }
@@ -158,10 +201,16 @@ impl Ad<'_> {
                     let mut keys: BTreeMap<Var, ()> = BTreeMap::new();
                     keys.extend(then_c.keys().map(|k| (*k, ())));
                     keys.extend(else_c.keys().map(|k| (*k, ())));
-                    let (mut tb, mut eb) = (Block { stmts: then_stmts, yields: vec![] }, Block {
-                        stmts: else_stmts,
-                        yields: vec![],
-                    });
+                    let (mut tb, mut eb) = (
+                        Block {
+                            stmts: then_stmts,
+                            yields: vec![],
+                        },
+                        Block {
+                            stmts: else_stmts,
+                            yields: vec![],
+                        },
+                    );
                     let mut new_outs = vec![];
                     for k in keys.keys() {
                         let ty_ = match then_c.get(k) {
@@ -177,12 +226,19 @@ impl Ad<'_> {
                         let name = self.d_name(*k);
                         new_outs.push(self.g.new_var(Scalar::F32, name));
                     }
-                    out.push(Stmt::If { cond: *cond, then_block: tb, else_block: eb, outs: new_outs.clone() });
+                    out.push(Stmt::If {
+                        cond: *cond,
+                        then_block: tb,
+                        else_block: eb,
+                        outs: new_outs.clone(),
+                    });
                     for (k, o) in keys.keys().zip(new_outs) {
                         self.acc(adj, *k, o, out);
                     }
                 }
-                Stmt::Call { callee, args, outs, .. } => {
+                Stmt::Call {
+                    callee, args, outs, ..
+                } => {
                     if !outs.iter().any(|o| adj.contains_key(o)) {
                         continue;
                     }
@@ -227,7 +283,11 @@ impl Ad<'_> {
     /// The reverse of one side of a branch: its primal recomputed (fresh names), the seeds
     /// added to the adjoints of its yields, and the sweep. Returns the statements and the
     /// contributions to values defined outside the block.
-    fn reverse_branch(&mut self, block: &Block, seeds: &[(usize, Var)]) -> (Vec<Stmt>, HashMap<Var, Var>) {
+    fn reverse_branch(
+        &mut self,
+        block: &Block,
+        seeds: &[(usize, Var)],
+    ) -> (Vec<Stmt>, HashMap<Var, Var>) {
         let mut remap = HashMap::new();
         let fresh = self.g.clone_fresh(block, &mut remap);
         let mut inner = HashSet::new();
@@ -240,7 +300,10 @@ impl Ad<'_> {
         }
         self.reverse(&fresh.stmts, &mut local, &mut rev);
         stmts.extend(rev);
-        let contribs = local.into_iter().filter(|(v, _)| !inner.contains(v)).collect();
+        let contribs = local
+            .into_iter()
+            .filter(|(v, _)| !inner.contains(v))
+            .collect();
         (stmts, contribs)
     }
 
@@ -255,7 +318,14 @@ impl Ad<'_> {
                 let mut e = |s: &mut Self, op: Op| s.emit(out, op, &n);
                 let c = match u {
                     U::Neg => Some(e(self, Op::Unary(U::Neg, g))),
-                    U::NoDiff | U::Floor | U::Ceil | U::Round | U::Trunc | U::Signum | U::Cast(_) | U::Not => None,
+                    U::NoDiff
+                    | U::Floor
+                    | U::Ceil
+                    | U::Round
+                    | U::Trunc
+                    | U::Signum
+                    | U::Cast(_)
+                    | U::Not => None,
                     U::Fract => Some(g),
                     U::Exp => Some(e(self, Op::Binary(B::Mul, g, r))),
                     U::Ln => {
@@ -339,7 +409,11 @@ impl Ad<'_> {
                         let inside = self.emit(out, Op::Binary(B::Gt, t, z), "inside");
                         let s = self.emit(out, Op::Unary(U::Sqrt, t), "s");
                         let d = self.emit(out, Op::Binary(B::Div, g, s), &n);
-                        let d = if u == U::Acos { self.emit(out, Op::Unary(U::Neg, d), &n) } else { d };
+                        let d = if u == U::Acos {
+                            self.emit(out, Op::Unary(U::Neg, d), &n)
+                        } else {
+                            d
+                        };
                         Some(self.guard(out, inside, d, false, &n))
                     }
                 };
@@ -459,13 +533,23 @@ fn shift_block(b: &Block, base: u32, params: &HashMap<Var, Var>) -> Block {
                     Op::Select(c, a, d) => Op::Select(m(&c), m(&a), m(&d)),
                 },
             },
-            Stmt::If { cond, then_block, else_block, outs } => Stmt::If {
+            Stmt::If {
+                cond,
+                then_block,
+                else_block,
+                outs,
+            } => Stmt::If {
                 cond: m(cond),
                 then_block: shift_block(then_block, base, params),
                 else_block: shift_block(else_block, base, params),
                 outs: outs.iter().map(m).collect(),
             },
-            Stmt::Call { callee, args, outs, body } => Stmt::Call {
+            Stmt::Call {
+                callee,
+                args,
+                outs,
+                body,
+            } => Stmt::Call {
                 callee: *callee,
                 args: args.iter().map(m).collect(),
                 outs: outs.iter().map(m).collect(),
@@ -473,5 +557,8 @@ fn shift_block(b: &Block, base: u32, params: &HashMap<Var, Var>) -> Block {
             },
         })
         .collect();
-    Block { stmts, yields: b.yields.iter().map(m).collect() }
+    Block {
+        stmts,
+        yields: b.yields.iter().map(m).collect(),
+    }
 }

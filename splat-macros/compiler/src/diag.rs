@@ -15,7 +15,9 @@ impl Diag {
     }
 
     pub fn error_at(&self, node: &impl quote::ToTokens, msg: impl std::fmt::Display) {
-        self.errors.borrow_mut().push(syn::Error::new_spanned(node, msg));
+        self.errors
+            .borrow_mut()
+            .push(syn::Error::new_spanned(node, msg));
     }
 
     pub fn has_errors(&self) -> bool {

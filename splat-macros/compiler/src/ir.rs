@@ -104,7 +104,10 @@ pub enum Binary {
 
 impl Binary {
     pub fn is_comparison(self) -> bool {
-        matches!(self, Binary::Lt | Binary::Le | Binary::Gt | Binary::Ge | Binary::Eq | Binary::Ne)
+        matches!(
+            self,
+            Binary::Lt | Binary::Le | Binary::Gt | Binary::Ge | Binary::Eq | Binary::Ne
+        )
     }
 }
 
@@ -130,11 +133,24 @@ impl Op {
 
 #[derive(Clone, Debug)]
 pub enum Stmt {
-    Let { var: Var, op: Op },
-    If { cond: Var, then_block: Block, else_block: Block, outs: Vec<Var> },
+    Let {
+        var: Var,
+        op: Op,
+    },
+    If {
+        cond: Var,
+        then_block: Block,
+        else_block: Block,
+        outs: Vec<Var>,
+    },
     /// A call to a helper with a user-written adjoint; `body` is the helper inlined (what the
     /// forward computes), `callee` names the helper for the adjoint rule.
-    Call { callee: usize, args: Vec<Var>, outs: Vec<Var>, body: Block },
+    Call {
+        callee: usize,
+        args: Vec<Var>,
+        outs: Vec<Var>,
+        body: Block,
+    },
 }
 
 #[derive(Clone, Debug, Default)]
@@ -161,11 +177,19 @@ pub struct Function {
 
 impl Function {
     pub fn new(name: impl Into<String>) -> Self {
-        Function { name: name.into(), vars: vec![], params: vec![], body: Block::default() }
+        Function {
+            name: name.into(),
+            vars: vec![],
+            params: vec![],
+            body: Block::default(),
+        }
     }
 
     pub fn new_var(&mut self, ty: Scalar, name: impl Into<String>) -> Var {
-        self.vars.push(VarInfo { ty, name: name.into() });
+        self.vars.push(VarInfo {
+            ty,
+            name: name.into(),
+        });
         Var(self.vars.len() as u32 - 1)
     }
 
@@ -184,8 +208,16 @@ impl Function {
     /// Copies `block` with every variable it defines renamed to a fresh one; uses of variables
     /// defined outside it are kept. `remap` receives the renaming.
     pub fn clone_fresh(&mut self, block: &Block, remap: &mut HashMap<Var, Var>) -> Block {
-        let stmts = block.stmts.iter().map(|s| self.clone_stmt_fresh(s, remap)).collect();
-        let yields = block.yields.iter().map(|v| *remap.get(v).unwrap_or(v)).collect();
+        let stmts = block
+            .stmts
+            .iter()
+            .map(|s| self.clone_stmt_fresh(s, remap))
+            .collect();
+        let yields = block
+            .yields
+            .iter()
+            .map(|v| *remap.get(v).unwrap_or(v))
+            .collect();
         Block { stmts, yields }
     }
 
@@ -203,22 +235,47 @@ impl Function {
                     Op::Const(c) => Op::Const(c),
                     Op::Unary(u, a) => Op::Unary(u, map(remap, &a)),
                     Op::Binary(b, x, y) => Op::Binary(b, map(remap, &x), map(remap, &y)),
-                    Op::Select(c, x, y) => Op::Select(map(remap, &c), map(remap, &x), map(remap, &y)),
+                    Op::Select(c, x, y) => {
+                        Op::Select(map(remap, &c), map(remap, &x), map(remap, &y))
+                    }
                 };
-                Stmt::Let { var: fresh(self, remap, *var), op }
+                Stmt::Let {
+                    var: fresh(self, remap, *var),
+                    op,
+                }
             }
-            Stmt::If { cond, then_block, else_block, outs } => {
+            Stmt::If {
+                cond,
+                then_block,
+                else_block,
+                outs,
+            } => {
                 let cond = map(remap, cond);
                 let then_block = self.clone_fresh(then_block, remap);
                 let else_block = self.clone_fresh(else_block, remap);
                 let outs = outs.iter().map(|&o| fresh(self, remap, o)).collect();
-                Stmt::If { cond, then_block, else_block, outs }
+                Stmt::If {
+                    cond,
+                    then_block,
+                    else_block,
+                    outs,
+                }
             }
-            Stmt::Call { callee, args, outs, body } => {
+            Stmt::Call {
+                callee,
+                args,
+                outs,
+                body,
+            } => {
                 let args = args.iter().map(|a| map(remap, a)).collect();
                 let body = self.clone_fresh(body, remap);
                 let outs = outs.iter().map(|&o| fresh(self, remap, o)).collect();
-                Stmt::Call { callee: *callee, args, outs, body }
+                Stmt::Call {
+                    callee: *callee,
+                    args,
+                    outs,
+                    body,
+                }
             }
         }
     }
@@ -228,8 +285,11 @@ impl Function {
 impl std::fmt::Display for Function {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let v = |x: &Var| format!("%{}", x.0);
-        let params: Vec<String> =
-            self.params.iter().map(|p| format!("{}: {:?}", v(p), self.ty(*p))).collect();
+        let params: Vec<String> = self
+            .params
+            .iter()
+            .map(|p| format!("{}: {:?}", v(p), self.ty(*p)))
+            .collect();
         writeln!(f, "fn {}({}) {{", self.name, params.join(", "))?;
         fn block(
             func: &Function,
@@ -250,7 +310,12 @@ impl std::fmt::Display for Function {
                         };
                         writeln!(f, "{pad}{}: {:?} = {rhs}", v(var), func.ty(*var))?;
                     }
-                    Stmt::If { cond, then_block, else_block, outs } => {
+                    Stmt::If {
+                        cond,
+                        then_block,
+                        else_block,
+                        outs,
+                    } => {
                         let outs: Vec<String> = outs.iter().map(v).collect();
                         writeln!(f, "{pad}[{}] = if {} {{", outs.join(", "), v(cond))?;
                         block(func, then_block, depth + 1, f)?;
@@ -258,10 +323,17 @@ impl std::fmt::Display for Function {
                         block(func, else_block, depth + 1, f)?;
                         writeln!(f, "{pad}}}")?;
                     }
-                    Stmt::Call { callee, args, outs, .. } => {
+                    Stmt::Call {
+                        callee, args, outs, ..
+                    } => {
                         let outs: Vec<String> = outs.iter().map(v).collect();
                         let args: Vec<String> = args.iter().map(v).collect();
-                        writeln!(f, "{pad}[{}] = call #{callee}({})", outs.join(", "), args.join(", "))?;
+                        writeln!(
+                            f,
+                            "{pad}[{}] = call #{callee}({})",
+                            outs.join(", "),
+                            args.join(", ")
+                        )?;
                     }
                 }
             }

@@ -70,7 +70,9 @@ pub fn compile_ir(kind: Kind, item: syn::ItemMod) -> Result<Compiled, Vec<String
     let r = Module::parse(item, &diag).and_then(|m| {
         let custom = custom_adjoints(&m, &diag)?;
         let kernels = build_kernels(kind, &m, &custom, &diag)?;
-        Some(Compiled { kernels: kernels.into_iter().map(|k| (k.primal, k.adjoint)).collect() })
+        Some(Compiled {
+            kernels: kernels.into_iter().map(|k| (k.primal, k.adjoint)).collect(),
+        })
     });
     match r {
         Some(c) if !diag.has_errors() => Ok(c),
@@ -87,20 +89,31 @@ struct Custom {
 }
 
 fn custom_adjoints(m: &Module, diag: &Diag) -> Option<Custom> {
-    let mut c = Custom { names: vec![], adjoints: vec![], adjoint_fn_names: vec![] };
+    let mut c = Custom {
+        names: vec![],
+        adjoints: vec![],
+        adjoint_fn_names: vec![],
+    };
     let helpers: Vec<&model::FnDef> = m.fns.iter().filter(|f| f.adjoint.is_some()).collect();
     c.names = helpers.iter().map(|f| f.name.clone()).collect();
     for h in helpers {
         let adj_ident = h.adjoint.as_ref().unwrap();
         let Some(adj) = m.find_fn(&adj_ident.to_string()) else {
-            diag.error_at(adj_ident, format!("cannot find the adjoint function `{adj_ident}` in this module"));
+            diag.error_at(
+                adj_ident,
+                format!("cannot find the adjoint function `{adj_ident}` in this module"),
+            );
             continue;
         };
         let mut want: Vec<types::Ty> = h.params.iter().map(|p| p.ty.clone()).collect();
         want.push(h.ret.clone());
         let got: Vec<types::Ty> = adj.params.iter().map(|p| p.ty.clone()).collect();
         let cot: Vec<types::Ty> = h.params.iter().map(|p| p.ty.clone()).collect();
-        let want_ret = if cot.len() == 1 { cot[0].clone() } else { types::Ty::Tuple(cot) };
+        let want_ret = if cot.len() == 1 {
+            cot[0].clone()
+        } else {
+            types::Ty::Tuple(cot)
+        };
         if got != want || adj.ret != want_ret {
             let shown: Vec<String> = want.iter().map(|t| t.to_string()).collect();
             diag.error_at(
@@ -121,16 +134,34 @@ fn custom_adjoints(m: &Module, diag: &Diag) -> Option<Custom> {
     (!diag.has_errors()).then_some(c)
 }
 
-fn build_kernels<'m>(kind: Kind, m: &'m Module, custom: &Custom, diag: &Diag) -> Option<Vec<Kernel<'m>>> {
+fn build_kernels<'m>(
+    kind: Kind,
+    m: &'m Module,
+    custom: &Custom,
+    diag: &Diag,
+) -> Option<Vec<Kernel<'m>>> {
     let defs: Vec<&model::FnDef> = match kind {
-        Kind::Method => m.fns.iter().filter(|f| METHOD_FNS.contains(&f.name.as_str())).collect(),
-        Kind::Functions => m.fns.iter().filter(|f| !custom.adjoint_fn_names.contains(&f.name)).collect(),
+        Kind::Method => m
+            .fns
+            .iter()
+            .filter(|f| METHOD_FNS.contains(&f.name.as_str()))
+            .collect(),
+        Kind::Functions => m
+            .fns
+            .iter()
+            .filter(|f| !custom.adjoint_fn_names.contains(&f.name))
+            .collect(),
     };
     let mut kernels = vec![];
     for def in defs {
-        let Some(l) = lower::lower_fn(m, diag, def, &custom.names) else { continue };
+        let Some(l) = lower::lower_fn(m, diag, def, &custom.names) else {
+            continue;
+        };
         let mut primal = l.func;
-        let has_float_in = primal.params.iter().any(|p| primal.ty(*p) == ir::Scalar::F32);
+        let has_float_in = primal
+            .params
+            .iter()
+            .any(|p| primal.ty(*p) == ir::Scalar::F32);
         let out_names: Vec<String> = l
             .ret
             .slot_names("d_out")
@@ -145,7 +176,12 @@ fn build_kernels<'m>(kind: Kind, m: &'m Module, custom: &Custom, diag: &Diag) ->
             g
         });
         opt::dce(&mut primal);
-        kernels.push(Kernel { def, primal, adjoint, ret: l.ret });
+        kernels.push(Kernel {
+            def,
+            primal,
+            adjoint,
+            ret: l.ret,
+        });
     }
     (!diag.has_errors()).then_some(kernels)
 }
@@ -207,6 +243,13 @@ fn expand_module(kind: Kind, item: syn::ItemMod, diag: &Diag) -> Option<TokenStr
 
 fn const_item(m: &Module, name: &str) -> Option<TokenStream> {
     let c = m.consts.get(name)?;
-    let (ident, ty, expr) = (syn::Ident::new(name, proc_macro2::Span::call_site()), c.ty.rust(), &c.expr);
-    Some(quote!(#[allow(dead_code)] pub const #ident: #ty = #expr;))
+    let (ident, ty, expr) = (
+        syn::Ident::new(name, proc_macro2::Span::call_site()),
+        c.ty.rust(),
+        &c.expr,
+    );
+    Some(quote!(#[allow(dead_code, clippy::excessive_precision)] pub const #ident: #ty = #expr;))
 }
+
+#[cfg(test)]
+mod tests;

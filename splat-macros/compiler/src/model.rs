@@ -52,7 +52,11 @@ impl Module {
 
     /// Resolves a type written inside a function body against this module.
     pub fn resolve_type(&self, t: &syn::Type) -> Result<Ty, String> {
-        let mut resolver = Resolver { items: &[], done: HashMap::new(), consts: &self.const_items };
+        let mut resolver = Resolver {
+            items: &[],
+            done: HashMap::new(),
+            consts: &self.const_items,
+        };
         for s in &self.structs {
             resolver.done.insert(s.item.ident.to_string(), s.ty.clone());
         }
@@ -60,13 +64,19 @@ impl Module {
     }
 
     pub fn find_struct(&self, name: &str) -> Option<&Rc<StructTy>> {
-        self.structs.iter().find(|s| s.item.ident == name).map(|s| &s.ty)
+        self.structs
+            .iter()
+            .find(|s| s.item.ident == name)
+            .map(|s| &s.ty)
     }
 
     /// Parses an inline module. Errors are collected in `diag`; the model holds what parsed.
     pub fn parse(item: syn::ItemMod, diag: &Diag) -> Option<Module> {
         let Some((_, items)) = item.content else {
-            diag.error_at(&item, "the annotated module must be inline: `mod name { ... }`");
+            diag.error_at(
+                &item,
+                "the annotated module must be inline: `mod name { ... }`",
+            );
             return None;
         };
         let mut struct_items = vec![];
@@ -85,18 +95,31 @@ impl Module {
                 ),
             }
         }
-        let mut resolver = Resolver { items: &struct_items, done: HashMap::new(), consts: &const_items };
+        let mut resolver = Resolver {
+            items: &struct_items,
+            done: HashMap::new(),
+            consts: &const_items,
+        };
         let mut structs = vec![];
         for s in &struct_items {
             if let Some(ty) = resolver.resolve_struct(s, diag, &mut vec![]) {
-                structs.push(StructDef { item: s.clone(), ty });
+                structs.push(StructDef {
+                    item: s.clone(),
+                    ty,
+                });
             }
         }
         let mut consts = HashMap::new();
         for c in &const_items {
             match resolver.resolve(&c.ty) {
                 Ok(ty) => {
-                    consts.insert(c.ident.to_string(), ConstDef { ty, expr: (*c.expr).clone() });
+                    consts.insert(
+                        c.ident.to_string(),
+                        ConstDef {
+                            ty,
+                            expr: (*c.expr).clone(),
+                        },
+                    );
                 }
                 Err(msg) => diag.error_at(&c.ty, msg),
             }
@@ -124,7 +147,10 @@ fn parse_fn(mut item: syn::ItemFn, resolver: &mut Resolver, diag: &Diag) -> Opti
     let sig = &item.sig;
     let mut ok = true;
     if let Some(g) = sig.generics.params.first() {
-        diag.error_at(g, "generic functions are not supported: write the concrete types");
+        diag.error_at(
+            g,
+            "generic functions are not supported: write the concrete types",
+        );
         ok = false;
     }
     for (kw, span) in [
@@ -133,7 +159,10 @@ fn parse_fn(mut item: syn::ItemFn, resolver: &mut Resolver, diag: &Diag) -> Opti
         (sig.constness.is_some(), "const"),
     ] {
         if kw {
-            diag.error_at(&sig.fn_token, format!("`{span} fn` is not supported in a splat module"));
+            diag.error_at(
+                &sig.fn_token,
+                format!("`{span} fn` is not supported in a splat module"),
+            );
             ok = false;
         }
     }
@@ -141,7 +170,10 @@ fn parse_fn(mut item: syn::ItemFn, resolver: &mut Resolver, diag: &Diag) -> Opti
     for input in &sig.inputs {
         match input {
             syn::FnArg::Receiver(r) => {
-                diag.error_at(r, "methods with `self` are not supported: write a free function");
+                diag.error_at(
+                    r,
+                    "methods with `self` are not supported: write a free function",
+                );
                 ok = false;
             }
             syn::FnArg::Typed(pt) => {
@@ -217,7 +249,13 @@ fn parse_fn(mut item: syn::ItemFn, resolver: &mut Resolver, diag: &Diag) -> Opti
         }
     }
     item.attrs = kept;
-    ok.then(|| FnDef { name: item.sig.ident.to_string(), item, params, ret, adjoint })
+    ok.then(|| FnDef {
+        name: item.sig.ident.to_string(),
+        item,
+        params,
+        ret,
+        adjoint,
+    })
 }
 
 struct Resolver<'a> {
@@ -226,8 +264,7 @@ struct Resolver<'a> {
     consts: &'a [syn::ItemConst],
 }
 
-pub const SUPPORTED_TYPES: &str =
-    "f32, bool, u32, i32, Vec2, Vec3, Vec4, Mat2, Mat3, Quat, [T; N], tuples, and the module's structs";
+pub const SUPPORTED_TYPES: &str = "f32, bool, u32, i32, Vec2, Vec3, Vec4, Mat2, Mat3, Quat, [T; N], tuples, and the module's structs";
 
 impl Resolver<'_> {
     fn resolve_struct(
@@ -245,7 +282,10 @@ impl Resolver<'_> {
             return None;
         }
         if !s.generics.params.is_empty() {
-            diag.error_at(&s.generics, "generic structs are not supported in a splat module");
+            diag.error_at(
+                &s.generics,
+                "generic structs are not supported in a splat module",
+            );
             return None;
         }
         let syn::Fields::Named(fields) = &s.fields else {
@@ -272,7 +312,11 @@ impl Resolver<'_> {
             return None;
         }
         let ident = &s.ident;
-        let ty = Rc::new(StructTy { display: name.clone(), path: TokenStreamEq(quote!(#ident)), fields: out });
+        let ty = Rc::new(StructTy {
+            display: name.clone(),
+            path: TokenStreamEq(quote!(#ident)),
+            fields: out,
+        });
         self.done.insert(name, ty.clone());
         Some(ty)
     }
@@ -292,8 +336,11 @@ impl Resolver<'_> {
             syn::Type::Paren(p) => self.resolve_with_structs(&p.elem, diag, stack),
             syn::Type::Group(g) => self.resolve_with_structs(&g.elem, diag, stack),
             syn::Type::Tuple(tt) => {
-                let ts: Result<Vec<Ty>, String> =
-                    tt.elems.iter().map(|e| self.resolve_with_structs(e, diag, stack)).collect();
+                let ts: Result<Vec<Ty>, String> = tt
+                    .elems
+                    .iter()
+                    .map(|e| self.resolve_with_structs(e, diag, stack))
+                    .collect();
                 Ok(Ty::Tuple(ts?))
             }
             syn::Type::Array(a) => {
@@ -338,9 +385,11 @@ impl Resolver<'_> {
                     "Quat" => Some(Ty::Quat),
                     "usize" => Some(Ty::Index),
                     "f64" => {
-                        return Err("`f64` is not supported in kernels: write f32; the f64 twin \
+                        return Err(
+                            "`f64` is not supported in kernels: write f32; the f64 twin \
                                     of every function is generated for you"
-                            .into());
+                                .into(),
+                        );
                     }
                     _ => None,
                 };
@@ -362,7 +411,9 @@ impl Resolver<'_> {
                         .map(Ty::Struct)
                         .ok_or_else(|| format!("struct `{name}` has errors"));
                 }
-                Err(format!("type `{name}` is not supported; supported types: {SUPPORTED_TYPES}"))
+                Err(format!(
+                    "type `{name}` is not supported; supported types: {SUPPORTED_TYPES}"
+                ))
             }
             _ => Err(format!(
                 "this type is not supported; supported types: {SUPPORTED_TYPES}"
@@ -372,16 +423,19 @@ impl Resolver<'_> {
 
     fn const_len(&self, e: &syn::Expr) -> Result<usize, String> {
         match e {
-            syn::Expr::Lit(syn::ExprLit { lit: syn::Lit::Int(i), .. }) => {
-                i.base10_parse::<usize>().map_err(|e| e.to_string())
-            }
+            syn::Expr::Lit(syn::ExprLit {
+                lit: syn::Lit::Int(i),
+                ..
+            }) => i.base10_parse::<usize>().map_err(|e| e.to_string()),
             syn::Expr::Path(p) if p.path.get_ident().is_some() => {
                 let name = p.path.get_ident().unwrap();
                 let c = self
                     .consts
                     .iter()
                     .find(|c| &c.ident == name)
-                    .ok_or_else(|| format!("array length `{name}` is not a constant of this module"))?;
+                    .ok_or_else(|| {
+                        format!("array length `{name}` is not a constant of this module")
+                    })?;
                 self.const_len(&c.expr)
             }
             _ => Err("array lengths must be integer literals or constants of this module".into()),

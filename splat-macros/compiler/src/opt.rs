@@ -22,8 +22,15 @@ fn dce_block(b: &mut Block, live: &mut HashSet<Var>) {
                 }
                 k
             }
-            Stmt::If { cond, then_block, else_block, outs } => {
-                let used: Vec<usize> = (0..outs.len()).filter(|&i| live.contains(&outs[i])).collect();
+            Stmt::If {
+                cond,
+                then_block,
+                else_block,
+                outs,
+            } => {
+                let used: Vec<usize> = (0..outs.len())
+                    .filter(|&i| live.contains(&outs[i]))
+                    .collect();
                 if used.is_empty() {
                     false
                 } else {
@@ -37,7 +44,9 @@ fn dce_block(b: &mut Block, live: &mut HashSet<Var>) {
                 }
             }
             Stmt::Call { outs, body, .. } => {
-                let used: Vec<usize> = (0..outs.len()).filter(|&i| live.contains(&outs[i])).collect();
+                let used: Vec<usize> = (0..outs.len())
+                    .filter(|&i| live.contains(&outs[i]))
+                    .collect();
                 if used.is_empty() {
                     false
                 } else {

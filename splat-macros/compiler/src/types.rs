@@ -71,7 +71,7 @@ impl Ty {
         }
     }
 
-    pub fn len(&self) -> usize {
+    pub fn slot_count(&self) -> usize {
         self.slots().len()
     }
 
@@ -102,7 +102,13 @@ impl Ty {
     }
 
     fn push_names(&self, base: &str, out: &mut Vec<String>) {
-        let join = |a: &str, b: &str| if a.is_empty() { b.to_string() } else { format!("{a}_{b}") };
+        let join = |a: &str, b: &str| {
+            if a.is_empty() {
+                b.to_string()
+            } else {
+                format!("{a}_{b}")
+            }
+        };
         match self {
             Ty::Vec(_) | Ty::Quat => {
                 let n = if let Ty::Vec(n) = self { *n } else { 4 };
@@ -118,11 +124,19 @@ impl Ty {
                 }
             }
             Ty::Array(t, n) => (0..*n).for_each(|i| t.push_names(&join(base, &i.to_string()), out)),
-            Ty::Struct(s) => s.fields.iter().for_each(|(f, t)| t.push_names(&join(base, f), out)),
-            Ty::Tuple(ts) => {
-                ts.iter().enumerate().for_each(|(i, t)| t.push_names(&join(base, &i.to_string()), out))
-            }
-            _ => out.push(if base.is_empty() { "t".into() } else { base.into() }),
+            Ty::Struct(s) => s
+                .fields
+                .iter()
+                .for_each(|(f, t)| t.push_names(&join(base, f), out)),
+            Ty::Tuple(ts) => ts
+                .iter()
+                .enumerate()
+                .for_each(|(i, t)| t.push_names(&join(base, &i.to_string()), out)),
+            _ => out.push(if base.is_empty() {
+                "t".into()
+            } else {
+                base.into()
+            }),
         }
     }
 
@@ -207,14 +221,22 @@ pub fn builtin_struct(name: &str, args: &[Ty]) -> Option<Result<Ty, String>> {
             ],
         ),
         "Projected" => (2, vec![]),
-        "Contribution" if args.len() == 1 => {
-            (1, vec![("alpha", Ty::F32), ("color", args[0].clone()), ("valid", Ty::Bool)])
-        }
+        "Contribution" if args.len() == 1 => (
+            1,
+            vec![
+                ("alpha", Ty::F32),
+                ("color", args[0].clone()),
+                ("valid", Ty::Bool),
+            ],
+        ),
         "Contribution" => (1, vec![]),
         _ => return None,
     };
     if args.len() != params {
-        return Some(Err(format!("`{name}` takes {params} type argument(s), found {}", args.len())));
+        return Some(Err(format!(
+            "`{name}` takes {params} type argument(s), found {}",
+            args.len()
+        )));
     }
     let ident = proc_macro2::Ident::new(name, proc_macro2::Span::call_site());
     let (display, path) = if args.is_empty() {
@@ -222,8 +244,18 @@ pub fn builtin_struct(name: &str, args: &[Ty]) -> Option<Result<Ty, String>> {
     } else {
         let shown: Vec<String> = args.iter().map(|a| a.to_string()).collect();
         let rust = args.iter().map(Ty::rust);
-        (format!("{name}<{}>", shown.join(", ")), quote!(::splat_runtime::#ident<#(#rust),*>))
+        (
+            format!("{name}<{}>", shown.join(", ")),
+            quote!(::splat_runtime::#ident<#(#rust),*>),
+        )
     };
-    let fields = fields.into_iter().map(|(n, t)| (n.to_string(), t)).collect();
-    Some(Ok(Ty::Struct(Rc::new(StructTy { display, path: TokenStreamEq(path), fields }))))
+    let fields = fields
+        .into_iter()
+        .map(|(n, t)| (n.to_string(), t))
+        .collect();
+    Some(Ok(Ty::Struct(Rc::new(StructTy {
+        display,
+        path: TokenStreamEq(path),
+        fields,
+    }))))
 }

@@ -70,7 +70,8 @@ fn push_access(ty: &Ty, base: TokenStream, out: &mut Vec<TokenStream>) {
 
 /// Builds a value of type `ty` from slot expressions.
 pub fn pack(ty: &Ty, slots: &mut impl Iterator<Item = TokenStream>) -> TokenStream {
-    let mut take = |n: usize| -> Vec<TokenStream> { (0..n).map(|_| slots.next().expect("slot")).collect() };
+    let mut take =
+        |n: usize| -> Vec<TokenStream> { (0..n).map(|_| slots.next().expect("slot")).collect() };
     match ty {
         Ty::Vec(n) => {
             let t = ty.rust();
@@ -154,7 +155,11 @@ impl Kernel<'_> {
             .iter()
             .map(|p| {
                 let (id, t) = (&p.ident, p.ty.rust());
-                if p.by_ref { quote!(#id: &#t) } else { quote!(#id: #t) }
+                if p.by_ref {
+                    quote!(#id: &#t)
+                } else {
+                    quote!(#id: #t)
+                }
             })
             .collect()
     }
@@ -166,7 +171,8 @@ impl Kernel<'_> {
         for p in &self.def.params {
             let id = &p.ident;
             let access = slot_access(&p.ty, quote!(#id));
-            let scalar = p.ty.slots().len() == 1 && !matches!(p.ty, Ty::Array(..) | Ty::Struct(_) | Ty::Tuple(_));
+            let scalar = p.ty.slots().len() == 1
+                && !matches!(p.ty, Ty::Array(..) | Ty::Struct(_) | Ty::Tuple(_));
             for a in access {
                 let v = *vars.next().expect("param slot");
                 if scalar {
@@ -186,10 +192,20 @@ impl Kernel<'_> {
         let mut em = BodyEmitter::new(f, Flavor::F32, &self.reserved());
         let prologue = self.typed_prologue(&mut em, f);
         let body = em.block(&f.body);
-        let mut outs = f.results().iter().map(|r| em.val(*r)).collect::<Vec<_>>().into_iter();
+        let mut outs = f
+            .results()
+            .iter()
+            .map(|r| em.val(*r))
+            .collect::<Vec<_>>()
+            .into_iter();
         let result = pack(&self.ret, &mut outs);
         let (name, params, ret) = (self.name(), self.typed_params(), self.ret.rust());
-        let docs = self.def.item.attrs.iter().filter(|a| a.path().is_ident("doc"));
+        let docs = self
+            .def
+            .item
+            .attrs
+            .iter()
+            .filter(|a| a.path().is_ident("doc"));
         let allow: TokenStream = ALLOW.parse().unwrap();
         quote! {
             #(#docs)*
@@ -210,8 +226,10 @@ impl Kernel<'_> {
         let mut prologue = self.typed_prologue(&mut em, g);
         let n_primal = self.primal.params.len();
         let ret_slots = self.ret.slots();
-        let float_access =
-            slot_access(&self.ret, quote!(d_out)).into_iter().zip(&ret_slots).filter(|(_, s)| **s == Scalar::F32);
+        let float_access = slot_access(&self.ret, quote!(d_out))
+            .into_iter()
+            .zip(&ret_slots)
+            .filter(|(_, s)| **s == Scalar::F32);
         let scalar_ret = matches!(self.ret, Ty::F32);
         for (v, (a, _)) in g.params[n_primal..].iter().zip(float_access) {
             if scalar_ret {
@@ -222,17 +240,27 @@ impl Kernel<'_> {
             prologue.extend(quote!(let #x = #a;));
         }
         let body = em.block(&g.body);
-        let mut bars = g.results().iter().map(|r| em.val(*r)).collect::<Vec<_>>().into_iter();
+        let mut bars = g
+            .results()
+            .iter()
+            .map(|r| em.val(*r))
+            .collect::<Vec<_>>()
+            .into_iter();
         let mut cots = vec![];
         let mut cot_tys = vec![];
         for p in &self.def.params {
-            let mut slots = p
-                .ty
-                .slots()
-                .into_iter()
-                .map(|s| if s == Scalar::F32 { bars.next().expect("bar") } else { zero_of(s, Flavor::F32) })
-                .collect::<Vec<_>>()
-                .into_iter();
+            let mut slots =
+                p.ty.slots()
+                    .into_iter()
+                    .map(|s| {
+                        if s == Scalar::F32 {
+                            bars.next().expect("bar")
+                        } else {
+                            zero_of(s, Flavor::F32)
+                        }
+                    })
+                    .collect::<Vec<_>>()
+                    .into_iter();
             cots.push(pack(&p.ty, &mut slots));
             cot_tys.push(p.ty.rust());
         }
@@ -273,8 +301,16 @@ impl Kernel<'_> {
         let allow: TokenStream = ALLOW.parse().unwrap();
         let name = self.name();
         // Lane code must inline into callers compiled with wider vector features.
-        let inline = if flavor == Flavor::Lanes { quote!(#[inline(always)]) } else { quote!(#[inline]) };
-        let read = |em: &mut BodyEmitter, vars: &[Var], f: &Function, arr: TokenStream, int_arr: TokenStream| {
+        let inline = if flavor == Flavor::Lanes {
+            quote!(#[inline(always)])
+        } else {
+            quote!(#[inline])
+        };
+        let read = |em: &mut BodyEmitter,
+                    vars: &[Var],
+                    f: &Function,
+                    arr: TokenStream,
+                    int_arr: TokenStream| {
             let (mut fi, mut ii) = (0usize, 0usize);
             let mut out = TokenStream::new();
             for v in vars {
@@ -319,7 +355,10 @@ impl Kernel<'_> {
         let (prologue, nf, ni) = read(&mut em, &f.params, f, quote!(__in), quote!(__int));
         let body = em.block(&f.body);
         let (fl, it) = write(&mut em, f.results(), f);
-        let (mf, mi) = (Literal::usize_unsuffixed(fl.len()), Literal::usize_unsuffixed(it.len()));
+        let (mf, mi) = (
+            Literal::usize_unsuffixed(fl.len()),
+            Literal::usize_unsuffixed(it.len()),
+        );
         let (nf_l, ni_l) = (Literal::usize_unsuffixed(nf), Literal::usize_unsuffixed(ni));
         let fwd_doc = format!(" Flat form of [`super::{name}`].");
         let mut out = quote! {
@@ -335,13 +374,16 @@ impl Kernel<'_> {
         if let Some(g) = &self.adjoint {
             let mut em = BodyEmitter::new(g, flavor, &reserved);
             let n = f.params.len();
-            let (mut prologue, _, _) = read(&mut em, &g.params[..n], g, quote!(__in), quote!(__int));
+            let (mut prologue, _, _) =
+                read(&mut em, &g.params[..n], g, quote!(__in), quote!(__int));
             let (bars, _, _) = read(&mut em, &g.params[n..], g, quote!(__d), quote!(__int));
             prologue.extend(bars);
             let body = em.block(&g.body);
             let (fl, _) = write(&mut em, g.results(), g);
             let adj = format_ident!("{}_adjoint", name);
-            let doc = format!(" Flat form of [`super::{name}_adjoint`]: the cotangents of the float inputs.");
+            let doc = format!(
+                " Flat form of [`super::{name}_adjoint`]: the cotangents of the float inputs."
+            );
             out.extend(quote! {
                 #[doc = #doc]
                 #inline

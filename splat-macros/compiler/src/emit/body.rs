@@ -29,7 +29,13 @@ impl<'f> BodyEmitter<'f> {
     pub fn new(f: &'f Function, flavor: Flavor, reserved: &[String]) -> Self {
         let mut consts = HashMap::new();
         collect_consts(&f.body, &mut consts);
-        BodyEmitter { f, flavor, names: HashMap::new(), used: reserved.iter().cloned().collect(), consts }
+        BodyEmitter {
+            f,
+            flavor,
+            names: HashMap::new(),
+            used: reserved.iter().cloned().collect(),
+            consts,
+        }
     }
 
     /// Claims `name` for `v` (the scalar parameter named like its slot keeps that name).
@@ -62,7 +68,11 @@ impl<'f> BodyEmitter<'f> {
     fn scalar_lit(&self, c: Const) -> TokenStream {
         match c {
             Const::F(x) => {
-                let t = if self.flavor == Flavor::F64 { quote!(f64) } else { quote!(f32) };
+                let t = if self.flavor == Flavor::F64 {
+                    quote!(f64)
+                } else {
+                    quote!(f32)
+                };
                 if x.is_nan() {
                     quote!(#t::NAN)
                 } else if x == f64::INFINITY {
@@ -75,7 +85,11 @@ impl<'f> BodyEmitter<'f> {
                     } else {
                         Literal::f32_suffixed(x.abs() as f32)
                     };
-                    if x.is_sign_negative() { quote!((-#lit)) } else { quote!(#lit) }
+                    if x.is_sign_negative() {
+                        quote!((-#lit))
+                    } else {
+                        quote!(#lit)
+                    }
                 }
             }
             Const::B(b) => quote!(#b),
@@ -122,13 +136,20 @@ impl<'f> BodyEmitter<'f> {
 
     fn stmt(&mut self, s: &Stmt) -> TokenStream {
         match s {
-            Stmt::Let { op: Op::Const(_), .. } => TokenStream::new(),
+            Stmt::Let {
+                op: Op::Const(_), ..
+            } => TokenStream::new(),
             Stmt::Let { var, op } => {
                 let rhs = self.op(*var, op);
                 let id = self.ident(*var);
                 quote!(let #id = #rhs;)
             }
-            Stmt::If { cond, then_block, else_block, outs } => {
+            Stmt::If {
+                cond,
+                then_block,
+                else_block,
+                outs,
+            } => {
                 if self.flavor == Flavor::Lanes {
                     // Both sides run on all lanes; the condition's mask picks per lane.
                     let t = self.block(then_block);
@@ -186,7 +207,11 @@ impl<'f> BodyEmitter<'f> {
             Op::Unary(u, a) => {
                 let ty = self.f.ty(a);
                 let x = self.val(a);
-                let one = if self.flavor == Flavor::F64 { quote!(1.0f64) } else { quote!(1.0f32) };
+                let one = if self.flavor == Flavor::F64 {
+                    quote!(1.0f64)
+                } else {
+                    quote!(1.0f32)
+                };
                 let method = |m: &str| {
                     let m = format_ident!("{m}");
                     quote!(#x.#m())
@@ -208,7 +233,10 @@ impl<'f> BodyEmitter<'f> {
             Op::Binary(b, x, y) => {
                 let ty = self.f.ty(x);
                 let float = ty == Scalar::F32;
-                let arith = matches!(b, Binary::Add | Binary::Sub | Binary::Mul | Binary::Div | Binary::Rem);
+                let arith = matches!(
+                    b,
+                    Binary::Add | Binary::Sub | Binary::Mul | Binary::Div | Binary::Rem
+                );
                 let (xv, yv) = if float && arith && !(self.is_const(x) && self.is_const(y)) {
                     (self.arith(x), self.arith(y))
                 } else {
@@ -334,11 +362,18 @@ fn select_method(s: Scalar) -> Ident {
 fn collect_consts(b: &Block, out: &mut HashMap<Var, Const>) {
     for s in &b.stmts {
         match s {
-            Stmt::Let { var, op: Op::Const(c) } => {
+            Stmt::Let {
+                var,
+                op: Op::Const(c),
+            } => {
                 out.insert(*var, *c);
             }
             Stmt::Let { .. } => {}
-            Stmt::If { then_block, else_block, .. } => {
+            Stmt::If {
+                then_block,
+                else_block,
+                ..
+            } => {
                 collect_consts(then_block, out);
                 collect_consts(else_block, out);
             }
@@ -348,7 +383,16 @@ fn collect_consts(b: &Block, out: &mut HashMap<Var, Const>) {
 }
 
 fn sanitize(s: &str) -> String {
-    let mut out: String = s.chars().map(|c| if c.is_ascii_alphanumeric() || c == '_' { c } else { '_' }).collect();
+    let mut out: String = s
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
     if out.is_empty() || out.starts_with(|c: char| c.is_ascii_digit()) {
         out.insert(0, 'v');
     }
@@ -358,11 +402,57 @@ fn sanitize(s: &str) -> String {
 fn is_keyword(s: &str) -> bool {
     matches!(
         s,
-        "as" | "break" | "const" | "continue" | "crate" | "else" | "enum" | "extern" | "false" | "fn" | "for"
-            | "if" | "impl" | "in" | "let" | "loop" | "match" | "mod" | "move" | "mut" | "pub" | "ref"
-            | "return" | "self" | "Self" | "static" | "struct" | "super" | "trait" | "true" | "type"
-            | "unsafe" | "use" | "where" | "while" | "async" | "await" | "dyn" | "abstract" | "become"
-            | "box" | "do" | "final" | "macro" | "override" | "priv" | "typeof" | "unsized" | "virtual"
-            | "yield" | "try" | "gen" | "_"
+        "as" | "break"
+            | "const"
+            | "continue"
+            | "crate"
+            | "else"
+            | "enum"
+            | "extern"
+            | "false"
+            | "fn"
+            | "for"
+            | "if"
+            | "impl"
+            | "in"
+            | "let"
+            | "loop"
+            | "match"
+            | "mod"
+            | "move"
+            | "mut"
+            | "pub"
+            | "ref"
+            | "return"
+            | "self"
+            | "Self"
+            | "static"
+            | "struct"
+            | "super"
+            | "trait"
+            | "true"
+            | "type"
+            | "unsafe"
+            | "use"
+            | "where"
+            | "while"
+            | "async"
+            | "await"
+            | "dyn"
+            | "abstract"
+            | "become"
+            | "box"
+            | "do"
+            | "final"
+            | "macro"
+            | "override"
+            | "priv"
+            | "typeof"
+            | "unsized"
+            | "virtual"
+            | "yield"
+            | "try"
+            | "gen"
+            | "_"
     )
 }

@@ -11,13 +11,19 @@ use quote::quote;
 
 fn struct_field(ty: &Ty, name: &str) -> Option<Ty> {
     match ty {
-        Ty::Struct(s) => s.fields.iter().find(|(f, _)| f == name).map(|(_, t)| t.clone()),
+        Ty::Struct(s) => s
+            .fields
+            .iter()
+            .find(|(f, _)| f == name)
+            .map(|(_, t)| t.clone()),
         _ => None,
     }
 }
 
 fn builtin(name: &str) -> Ty {
-    builtin_struct(name, &[]).expect("builtin").expect("no args")
+    builtin_struct(name, &[])
+        .expect("builtin")
+        .expect("no args")
 }
 
 /// Checks that `def` has the parameter types `want` (by position) and returns `Err` after
@@ -27,7 +33,12 @@ fn check_params(def: &FnDef, want: &[(&str, Option<&Ty>)], diag: &Diag) -> Resul
         let names: Vec<&str> = want.iter().map(|w| w.0).collect();
         diag.error_at(
             &def.item.sig.ident,
-            format!("`{}` must take {} parameter(s): {}", def.name, want.len(), names.join(", ")),
+            format!(
+                "`{}` must take {} parameter(s): {}",
+                def.name,
+                want.len(),
+                names.join(", ")
+            ),
         );
         return Err(());
     }
@@ -35,7 +46,10 @@ fn check_params(def: &FnDef, want: &[(&str, Option<&Ty>)], diag: &Diag) -> Resul
         if let Some(t) = ty
             && p.ty != **t
         {
-            diag.error_at(&p.ident, format!("{what} of `{}` must be `{t}`, found `{}`", def.name, p.ty));
+            diag.error_at(
+                &p.ident,
+                format!("{what} of `{}` must be `{t}`, found `{}`", def.name, p.ty),
+            );
             return Err(());
         }
     }
@@ -70,17 +84,38 @@ pub fn method_impl(module: &syn::Ident, kernels: &[Kernel], diag: &Diag) -> Opti
     let tile_cull = find("tile_cull");
     let pixel_info = find("pixel_info");
     let camera = builtin("Camera");
-    check_params(project.def, &[("the parameters", None), ("the camera", Some(&camera))], diag).ok()?;
+    check_params(
+        project.def,
+        &[("the parameters", None), ("the camera", Some(&camera))],
+        diag,
+    )
+    .ok()?;
     let params_ty = project.def.params[0].ty.clone();
-    let (Some(cull_ty), Some(shade_ty)) = (struct_field(&project.ret, "cull"), struct_field(&project.ret, "shade"))
-    else {
-        diag.error_at(&project.def.item.sig.output, "`project` must return `Projected<Cull, Shade>`");
+    let (Some(cull_ty), Some(shade_ty)) = (
+        struct_field(&project.ret, "cull"),
+        struct_field(&project.ret, "shade"),
+    ) else {
+        diag.error_at(
+            &project.def.item.sig.output,
+            "`project` must return `Projected<Cull, Shade>`",
+        );
         return None;
     };
-    check_params(evaluate.def, &[("the pixel data", None), ("the shade data", Some(&shade_ty))], diag).ok()?;
+    check_params(
+        evaluate.def,
+        &[
+            ("the pixel data", None),
+            ("the shade data", Some(&shade_ty)),
+        ],
+        diag,
+    )
+    .ok()?;
     let pixel_ty = evaluate.def.params[0].ty.clone();
     let Some(color_ty) = struct_field(&evaluate.ret, "color") else {
-        diag.error_at(&evaluate.def.item.sig.output, "`evaluate` must return `Contribution<Color>`");
+        diag.error_at(
+            &evaluate.def.item.sig.output,
+            "`evaluate` must return `Contribution<Color>`",
+        );
         return None;
     };
     if !pixel_ty.all_float() || !color_ty.all_float() {
@@ -91,18 +126,35 @@ pub fn method_impl(module: &syn::Ident, kernels: &[Kernel], diag: &Diag) -> Opti
         return None;
     }
     if let Some(tc) = tile_cull {
-        check_params(tc.def, &[("the tile", Some(&builtin("Tile"))), ("the cull data", Some(&cull_ty))], diag)
-            .ok()?;
+        check_params(
+            tc.def,
+            &[
+                ("the tile", Some(&builtin("Tile"))),
+                ("the cull data", Some(&cull_ty)),
+            ],
+            diag,
+        )
+        .ok()?;
         if tc.ret != Ty::Bool {
             diag.error_at(&tc.def.item.sig.output, "`tile_cull` must return `bool`");
             return None;
         }
     }
     if let Some(pi) = pixel_info {
-        check_params(pi.def, &[("the pixel centre", Some(&Ty::Vec(2))), ("the camera", Some(&camera))], diag)
-            .ok()?;
+        check_params(
+            pi.def,
+            &[
+                ("the pixel centre", Some(&Ty::Vec(2))),
+                ("the camera", Some(&camera)),
+            ],
+            diag,
+        )
+        .ok()?;
         if pi.ret != pixel_ty {
-            diag.error_at(&pi.def.item.sig.output, format!("`pixel_info` must return `{pixel_ty}`"));
+            diag.error_at(
+                &pi.def.item.sig.output,
+                format!("`pixel_info` must return `{pixel_ty}`"),
+            );
             return None;
         }
     } else if pixel_ty != Ty::Vec(2) {
@@ -113,9 +165,14 @@ pub fn method_impl(module: &syn::Ident, kernels: &[Kernel], diag: &Diag) -> Opti
         return None;
     }
 
-    let (p_t, c_t, s_t, px_t, col_t) =
-        (params_ty.rust(), cull_ty.rust(), shade_ty.rust(), pixel_ty.rust(), color_ty.rust());
-    let (np, nc) = (pixel_ty.len(), color_ty.len());
+    let (p_t, c_t, s_t, px_t, col_t) = (
+        params_ty.rust(),
+        cull_ty.rust(),
+        shade_ty.rust(),
+        pixel_ty.rust(),
+        color_ty.rust(),
+    );
+    let (np, nc) = (pixel_ty.slot_count(), color_ty.slot_count());
     let f32x8 = quote!(::splat_runtime::F32x8);
     let u32x8 = quote!(::splat_runtime::U32x8);
     let rt = quote!(::splat_runtime);
@@ -146,7 +203,12 @@ pub fn method_impl(module: &syn::Ident, kernels: &[Kernel], diag: &Diag) -> Opti
     let shade_slots = shade_ty.slots();
     let shade_access = slot_access(&shade_ty, quote!(shade));
     let idx = Literal::usize_unsuffixed;
-    let mut lane_in: Vec<TokenStream> = (0..np).map(|i| { let i = idx(i); quote!(pixel[#i]) }).collect();
+    let mut lane_in: Vec<TokenStream> = (0..np)
+        .map(|i| {
+            let i = idx(i);
+            quote!(pixel[#i])
+        })
+        .collect();
     let mut lane_int = vec![];
     for (s, a) in shade_slots.iter().zip(&shade_access) {
         match s {
@@ -154,8 +216,18 @@ pub fn method_impl(module: &syn::Ident, kernels: &[Kernel], diag: &Diag) -> Opti
             _ => lane_int.push(quote!(#u32x8::splat(#a as u32))),
         }
     }
-    let color_lanes: Vec<TokenStream> = (1..=nc).map(|i| { let i = idx(i); quote!(__out[#i]) }).collect();
-    let d_color: Vec<TokenStream> = (0..nc).map(|i| { let i = idx(i); quote!(d_out.color[#i]) }).collect();
+    let color_lanes: Vec<TokenStream> = (1..=nc)
+        .map(|i| {
+            let i = idx(i);
+            quote!(__out[#i])
+        })
+        .collect();
+    let d_color: Vec<TokenStream> = (0..nc)
+        .map(|i| {
+            let i = idx(i);
+            quote!(d_out.color[#i])
+        })
+        .collect();
     let mut bar_index = np;
     let mut shade_bars = shade_slots
         .iter()

@@ -6,7 +6,6 @@ pub mod body;
 pub mod method;
 
 use crate::model::Module;
-use crate::types::Ty;
 use proc_macro2::TokenStream;
 use quote::quote;
 
@@ -32,7 +31,7 @@ pub fn structs(module: &Module) -> TokenStream {
             let at_lit = proc_macro2::Literal::usize_unsuffixed(at);
             writes.push(quote!(::splat_runtime::Flat::write_words(&self.#f, &mut out[#at_lit..]);));
             reads.push(quote!(#f: <#t as ::splat_runtime::Flat>::read_words(&words[#at_lit..])));
-            at += flat_len(ty);
+            at += ty.slot_count(); // one 32-bit word per slot
         }
         let len = proc_macro2::Literal::usize_unsuffixed(at);
         out.extend(quote! {
@@ -51,11 +50,6 @@ pub fn structs(module: &Module) -> TokenStream {
         });
     }
     out
-}
-
-/// Words a value takes in `Flat` layout: one per slot.
-fn flat_len(ty: &Ty) -> usize {
-    ty.len()
 }
 
 /// Pretty-prints generated items (what `cargo expand` would show), for `GENERATED_RUST`.

@@ -13,7 +13,7 @@ pub(super) fn member_range(ty: &Ty, member: &str) -> Option<(Ty, Range<usize>)> 
         Ty::Struct(s) => {
             let mut at = 0;
             for (name, t) in &s.fields {
-                let n = t.len();
+                let n = t.slot_count();
                 if name == member {
                     return Some((t.clone(), at..at + n));
                 }
@@ -23,18 +23,24 @@ pub(super) fn member_range(ty: &Ty, member: &str) -> Option<(Ty, Range<usize>)> 
         }
         Ty::Vec(_) | Ty::Quat => {
             let n = if let Ty::Vec(n) = ty { *n } else { 4 };
-            let i = ["x", "y", "z", "w"].iter().take(n).position(|c| *c == member)?;
+            let i = ["x", "y", "z", "w"]
+                .iter()
+                .take(n)
+                .position(|c| *c == member)?;
             Some((Ty::F32, i..i + 1))
         }
         Ty::Mat(n) => {
-            let i = ["x_axis", "y_axis", "z_axis"].iter().take(*n).position(|c| *c == member)?;
+            let i = ["x_axis", "y_axis", "z_axis"]
+                .iter()
+                .take(*n)
+                .position(|c| *c == member)?;
             Some((Ty::Vec(*n), i * n..(i + 1) * n))
         }
         Ty::Tuple(ts) => {
             let i: usize = member.parse().ok()?;
-            let at: usize = ts.iter().take(i).map(Ty::len).sum();
+            let at: usize = ts.iter().take(i).map(Ty::slot_count).sum();
             let t = ts.get(i)?;
-            Some((t.clone(), at..at + t.len()))
+            Some((t.clone(), at..at + t.slot_count()))
         }
         _ => None,
     }
@@ -44,7 +50,7 @@ pub(super) fn member_range(ty: &Ty, member: &str) -> Option<(Ty, Range<usize>)> 
 pub(super) fn index_range(ty: &Ty, i: usize) -> Option<(Ty, Range<usize>)> {
     match ty {
         Ty::Array(t, n) if i < *n => {
-            let k = t.len();
+            let k = t.slot_count();
             Some(((**t).clone(), i * k..(i + 1) * k))
         }
         Ty::Vec(n) if i < *n => Some((Ty::F32, i..i + 1)),
@@ -203,11 +209,17 @@ impl Lowerer<'_> {
         match l {
             syn::Lit::Float(f) => {
                 if f.suffix() == "f64" {
-                    return self.err(f.span(), "`f64` literals are not supported: write f32 (the f64 twin is generated)");
+                    return self.err(
+                        f.span(),
+                        "`f64` literals are not supported: write f32 (the f64 twin is generated)",
+                    );
                 }
                 let x: f64 = f.base10_digits().parse().map_err(|_| Failed)?;
                 let v = self.fconst(x);
-                Ok(Val { ty: Ty::F32, comps: vec![v] })
+                Ok(Val {
+                    ty: Ty::F32,
+                    comps: vec![v],
+                })
             }
             syn::Lit::Int(i) => {
                 let (ty, c) = match i.suffix() {
@@ -218,7 +230,10 @@ impl Lowerer<'_> {
                         let x: f64 = i.base10_digits().parse().map_err(|_| Failed)?;
                         (Ty::F32, Ok(Const::F(x)))
                     }
-                    other => return self.err(i.span(), format!("integer type `{other}` is not supported")),
+                    other => {
+                        return self
+                            .err(i.span(), format!("integer type `{other}` is not supported"));
+                    }
                 };
                 match c {
                     Ok(c) => {
@@ -230,25 +245,43 @@ impl Lowerer<'_> {
             }
             syn::Lit::Bool(b) => {
                 let v = self.konst(Const::B(b.value));
-                Ok(Val { ty: Ty::Bool, comps: vec![v] })
+                Ok(Val {
+                    ty: Ty::Bool,
+                    comps: vec![v],
+                })
             }
-            other => self.err(other.span(), "only numeric and boolean literals are supported"),
+            other => self.err(
+                other.span(),
+                "only numeric and boolean literals are supported",
+            ),
         }
     }
 
     fn path(&mut self, p: &syn::ExprPath) -> R<Val> {
-        let segs: Vec<String> = p.path.segments.iter().map(|s| s.ident.to_string()).collect();
+        let segs: Vec<String> = p
+            .path
+            .segments
+            .iter()
+            .map(|s| s.ident.to_string())
+            .collect();
         if segs.len() == 1 {
             let name = &segs[0];
             if let Some(b) = self.lookup(name) {
-                return if b.val.ty == Ty::Error { Err(Failed) } else { Ok(b.val.clone()) };
+                return if b.val.ty == Ty::Error {
+                    Err(Failed)
+                } else {
+                    Ok(b.val.clone())
+                };
             }
             if let Some(c) = self.module.consts.get(name) {
                 let (ty, expr) = (c.ty.clone(), c.expr.clone());
                 let v = self.expr(&expr)?;
                 return self.coerce(v, &ty, p.span(), &format!("constant `{name}`"));
             }
-            return self.err(p.span(), format!("cannot find `{name}` in this function or module"));
+            return self.err(
+                p.span(),
+                format!("cannot find `{name}` in this function or module"),
+            );
         }
         let tail: Vec<&str> = segs.iter().map(String::as_str).collect();
         let n = tail.len();
@@ -282,7 +315,10 @@ impl Lowerer<'_> {
             ("f32", "NEG_INFINITY") => fl(f64::NEG_INFINITY),
             ("u32", "MAX") => {
                 let v = self.konst(Const::U(u32::MAX));
-                return Some(Val { ty: Ty::U32, comps: vec![v] });
+                return Some(Val {
+                    ty: Ty::U32,
+                    comps: vec![v],
+                });
             }
             (v, c) if v.starts_with("Vec") => {
                 let n: usize = v[3..].parse().ok().filter(|n| (2..=4).contains(n))?;
@@ -316,12 +352,24 @@ impl Lowerer<'_> {
     }
 
     /// Converts integer literals (`Ty::Index`) to the expected integer type; checks the rest.
-    pub(super) fn coerce(&mut self, v: Val, want: &Ty, span: proc_macro2::Span, what: &str) -> R<Val> {
+    pub(super) fn coerce(
+        &mut self,
+        v: Val,
+        want: &Ty,
+        span: proc_macro2::Span,
+        what: &str,
+    ) -> R<Val> {
         match (&v.ty, want) {
-            (Ty::Index, Ty::U32) => Ok(Val { ty: Ty::U32, comps: v.comps }),
+            (Ty::Index, Ty::U32) => Ok(Val {
+                ty: Ty::U32,
+                comps: v.comps,
+            }),
             (Ty::Index, Ty::I32) => {
                 let c = self.un(Unary::Cast(Scalar::I32), v.comps[0]);
-                Ok(Val { ty: Ty::I32, comps: vec![c] })
+                Ok(Val {
+                    ty: Ty::I32,
+                    comps: vec![c],
+                })
             }
             _ => {
                 self.check_ty(&v, want, span, what)?;
@@ -335,17 +383,28 @@ impl Lowerer<'_> {
         match u.op {
             syn::UnOp::Deref(_) => Ok(v),
             syn::UnOp::Neg(_) => match v.ty {
-                Ty::F32 | Ty::Vec(_) | Ty::Mat(_) | Ty::Quat | Ty::I32 => Ok(self.map(&v, Unary::Neg)),
+                Ty::F32 | Ty::Vec(_) | Ty::Mat(_) | Ty::Quat | Ty::I32 => {
+                    Ok(self.map(&v, Unary::Neg))
+                }
                 Ty::Index => {
                     let c = self.un(Unary::Cast(Scalar::I32), v.comps[0]);
                     let n = self.un(Unary::Neg, c);
-                    Ok(Val { ty: Ty::I32, comps: vec![n] })
+                    Ok(Val {
+                        ty: Ty::I32,
+                        comps: vec![n],
+                    })
                 }
-                _ => self.err(u.span(), format!("cannot negate a value of type `{}`", v.ty)),
+                _ => self.err(
+                    u.span(),
+                    format!("cannot negate a value of type `{}`", v.ty),
+                ),
             },
             syn::UnOp::Not(_) => match v.ty {
                 Ty::Bool | Ty::U32 | Ty::I32 => Ok(self.map(&v, Unary::Not)),
-                _ => self.err(u.span(), format!("cannot apply `!` to a value of type `{}`", v.ty)),
+                _ => self.err(
+                    u.span(),
+                    format!("cannot apply `!` to a value of type `{}`", v.ty),
+                ),
             },
             _ => self.err(u.span(), "this operator is not supported"),
         }
@@ -353,7 +412,10 @@ impl Lowerer<'_> {
 
     pub(super) fn map(&mut self, v: &Val, op: Unary) -> Val {
         let comps = v.comps.iter().map(|&c| self.un(op, c)).collect();
-        Val { ty: v.ty.clone(), comps }
+        Val {
+            ty: v.ty.clone(),
+            comps,
+        }
     }
 
     fn binary_expr(&mut self, b: &syn::ExprBinary) -> R<Val> {
@@ -409,43 +471,78 @@ impl Lowerer<'_> {
             a.iter().zip(b).map(|(&x, &y)| s.bin(op, x, y)).collect()
         };
         let bcast = |s: &mut Self, a: &[Var], k: Var, k_left: bool| -> std::vec::Vec<Var> {
-            a.iter().map(|&x| if k_left { s.bin(op, k, x) } else { s.bin(op, x, k) }).collect()
+            a.iter()
+                .map(|&x| {
+                    if k_left {
+                        s.bin(op, k, x)
+                    } else {
+                        s.bin(op, x, k)
+                    }
+                })
+                .collect()
         };
         let v = match (&l.ty, &r.ty) {
             (Error, _) | (_, Error) => return Err(Failed),
-            (F32, F32) | (U32, U32) | (I32, I32) | (Index, Index) if arith => {
-                Val { ty: l.ty.clone(), comps: zip(self, &l.comps, &r.comps) }
-            }
+            (F32, F32) | (U32, U32) | (I32, I32) | (Index, Index) if arith => Val {
+                ty: l.ty.clone(),
+                comps: zip(self, &l.comps, &r.comps),
+            },
             (U32, U32) | (I32, I32) | (Index, Index) | (Bool, Bool)
                 if matches!(op, And | Or | Xor) =>
             {
-                Val { ty: l.ty.clone(), comps: zip(self, &l.comps, &r.comps) }
+                Val {
+                    ty: l.ty.clone(),
+                    comps: zip(self, &l.comps, &r.comps),
+                }
             }
-            (U32, U32) | (I32, I32) | (Index, Index) if matches!(op, Shl | Shr) => {
-                Val { ty: l.ty.clone(), comps: zip(self, &l.comps, &r.comps) }
-            }
-            (F32, F32) | (U32, U32) | (I32, I32) | (Index, Index) if op.is_comparison() => {
-                Val { ty: Bool, comps: zip(self, &l.comps, &r.comps) }
-            }
-            (Bool, Bool) if matches!(op, Eq | Ne) => Val { ty: Bool, comps: zip(self, &l.comps, &r.comps) },
-            (Vec(a), Vec(b)) if a == b && arith => Val { ty: l.ty.clone(), comps: zip(self, &l.comps, &r.comps) },
-            (Vec(_), F32) if arith => Val { ty: l.ty.clone(), comps: bcast(self, &l.comps, r.comps[0], false) },
-            (F32, Vec(_)) if arith => Val { ty: r.ty.clone(), comps: bcast(self, &r.comps, l.comps[0], true) },
-            (Mat(a), Mat(b)) if a == b && matches!(op, Add | Sub) => {
-                Val { ty: l.ty.clone(), comps: zip(self, &l.comps, &r.comps) }
-            }
+            (U32, U32) | (I32, I32) | (Index, Index) if matches!(op, Shl | Shr) => Val {
+                ty: l.ty.clone(),
+                comps: zip(self, &l.comps, &r.comps),
+            },
+            (F32, F32) | (U32, U32) | (I32, I32) | (Index, Index) if op.is_comparison() => Val {
+                ty: Bool,
+                comps: zip(self, &l.comps, &r.comps),
+            },
+            (Bool, Bool) if matches!(op, Eq | Ne) => Val {
+                ty: Bool,
+                comps: zip(self, &l.comps, &r.comps),
+            },
+            (Vec(a), Vec(b)) if a == b && arith => Val {
+                ty: l.ty.clone(),
+                comps: zip(self, &l.comps, &r.comps),
+            },
+            (Vec(_), F32) if arith => Val {
+                ty: l.ty.clone(),
+                comps: bcast(self, &l.comps, r.comps[0], false),
+            },
+            (F32, Vec(_)) if arith => Val {
+                ty: r.ty.clone(),
+                comps: bcast(self, &r.comps, l.comps[0], true),
+            },
+            (Mat(a), Mat(b)) if a == b && matches!(op, Add | Sub) => Val {
+                ty: l.ty.clone(),
+                comps: zip(self, &l.comps, &r.comps),
+            },
             (Mat(a), Mat(b)) if a == b && op == Mul => self.mat_mul(&l, &r),
             (Mat(a), Vec(b)) if a == b && op == Mul => self.mat_vec(&l, &r),
-            (Mat(_), F32) if matches!(op, Mul | Div) => {
-                Val { ty: l.ty.clone(), comps: bcast(self, &l.comps, r.comps[0], false) }
-            }
-            (F32, Mat(_)) if op == Mul => Val { ty: r.ty.clone(), comps: bcast(self, &r.comps, l.comps[0], true) },
+            (Mat(_), F32) if matches!(op, Mul | Div) => Val {
+                ty: l.ty.clone(),
+                comps: bcast(self, &l.comps, r.comps[0], false),
+            },
+            (F32, Mat(_)) if op == Mul => Val {
+                ty: r.ty.clone(),
+                comps: bcast(self, &r.comps, l.comps[0], true),
+            },
             (Quat, Vec(3)) if op == Mul => self.quat_rotate(&l, &r),
             (Quat, Quat) if op == Mul => self.quat_mul(&l, &r),
-            (Quat, Quat) if matches!(op, Add | Sub) => Val { ty: Quat, comps: zip(self, &l.comps, &r.comps) },
-            (Quat, F32) if matches!(op, Mul | Div) => {
-                Val { ty: Quat, comps: bcast(self, &l.comps, r.comps[0], false) }
-            }
+            (Quat, Quat) if matches!(op, Add | Sub) => Val {
+                ty: Quat,
+                comps: zip(self, &l.comps, &r.comps),
+            },
+            (Quat, F32) if matches!(op, Mul | Div) => Val {
+                ty: Quat,
+                comps: bcast(self, &l.comps, r.comps[0], false),
+            },
             (F32, U32 | I32 | Index) | (U32 | I32 | Index, F32) => {
                 return self.err(
                     span,
@@ -458,7 +555,10 @@ impl Lowerer<'_> {
             _ => {
                 return self.err(
                     span,
-                    format!("mismatched types: cannot apply `{sym}` to `{}` and `{}`", l.ty, r.ty),
+                    format!(
+                        "mismatched types: cannot apply `{sym}` to `{}` and `{}`",
+                        l.ty, r.ty
+                    ),
                 );
             }
         };
@@ -468,17 +568,29 @@ impl Lowerer<'_> {
     fn cast(&mut self, c: &syn::ExprCast) -> R<Val> {
         let v = self.expr(&c.expr)?;
         let target = match &*c.ty {
-            syn::Type::Path(p) if p.path.get_ident().is_some() => p.path.get_ident().unwrap().to_string(),
-            t => return self.err(t.span(), "only casts between f32, u32, i32, usize and bool are supported"),
+            syn::Type::Path(p) if p.path.get_ident().is_some() => {
+                p.path.get_ident().unwrap().to_string()
+            }
+            t => {
+                return self.err(
+                    t.span(),
+                    "only casts between f32, u32, i32, usize and bool are supported",
+                );
+            }
         };
         let to = match target.as_str() {
             "f32" => Scalar::F32,
             "u32" => Scalar::U32,
             "i32" => Scalar::I32,
             "usize" => {
-                if let Some(Const::U(_) | Const::I(_)) = v.comps.first().and_then(|x| self.const_of(*x)) {
+                if let Some(Const::U(_) | Const::I(_)) =
+                    v.comps.first().and_then(|x| self.const_of(*x))
+                {
                     let k = self.un(Unary::Cast(Scalar::U32), v.comps[0]);
-                    return Ok(Val { ty: Ty::Index, comps: vec![k] });
+                    return Ok(Val {
+                        ty: Ty::Index,
+                        comps: vec![k],
+                    });
                 }
                 return self.err(c.span(), "`as usize` needs a value known at compile time");
             }
@@ -489,7 +601,10 @@ impl Lowerer<'_> {
             _ => return self.err(c.span(), format!("cannot cast a `{}`", v.ty)),
         }
         if v.ty == Ty::Bool && to == Scalar::F32 {
-            return self.err(c.span(), "cannot cast `bool` to `f32`: use `select(b, 1.0, 0.0)`");
+            return self.err(
+                c.span(),
+                "cannot cast `bool` to `f32`: use `select(b, 1.0, 0.0)`",
+            );
         }
         if v.ty == Ty::F32 && to != Scalar::F32 && self.is_active(v.comps[0]) {
             return self.err(
@@ -512,7 +627,12 @@ impl Lowerer<'_> {
         if let Some(rest) = &s.rest {
             return self.err(rest.span(), "`..base` is not supported: list every field");
         }
-        let name = s.path.segments.last().map(|x| x.ident.to_string()).unwrap_or_default();
+        let name = s
+            .path
+            .segments
+            .last()
+            .map(|x| x.ident.to_string())
+            .unwrap_or_default();
         let mut given = vec![];
         for f in &s.fields {
             let syn::Member::Named(id) = &f.member else {
@@ -520,7 +640,13 @@ impl Lowerer<'_> {
             };
             given.push((id.to_string(), self.expr(&f.expr)?, f.span()));
         }
-        let field = |n: &str| given.iter().find(|g| g.0 == n).map(|g| g.1.ty.clone()).unwrap_or(Ty::Error);
+        let field = |n: &str| {
+            given
+                .iter()
+                .find(|g| g.0 == n)
+                .map(|g| g.1.ty.clone())
+                .unwrap_or(Ty::Error)
+        };
         let ty = if let Some(t) = self.module.find_struct(&name) {
             Ty::Struct(t.clone())
         } else {

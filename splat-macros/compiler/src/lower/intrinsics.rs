@@ -80,10 +80,16 @@ impl Lowerer<'_> {
     }
 
     fn scalar(v: Var) -> Val {
-        Val { ty: Ty::F32, comps: vec![v] }
+        Val {
+            ty: Ty::F32,
+            comps: vec![v],
+        }
     }
 
-    fn args_of(&mut self, args: &syn::punctuated::Punctuated<syn::Expr, syn::Token![,]>) -> R<Vec<Val>> {
+    fn args_of(
+        &mut self,
+        args: &syn::punctuated::Punctuated<syn::Expr, syn::Token![,]>,
+    ) -> R<Vec<Val>> {
         let vals: Vec<R<Val>> = args.iter().map(|a| self.expr(a)).collect();
         vals.into_iter().collect()
     }
@@ -110,10 +116,14 @@ impl Lowerer<'_> {
             if args.len() == n {
                 Ok(())
             } else {
-                s.err(span, format!("`{name}` takes {n} argument(s), found {}", args.len()))
+                s.err(
+                    span,
+                    format!("`{name}` takes {n} argument(s), found {}", args.len()),
+                )
             }
         };
-        let same = |s: &Self, a: &Val| s.check_ty(a, &recv.ty, span, &format!("the argument of `{name}`"));
+        let same =
+            |s: &Self, a: &Val| s.check_ty(a, &recv.ty, span, &format!("the argument of `{name}`"));
         match (&recv.ty, name) {
             (Ty::Error, _) => Err(Failed),
             (Ty::F32, _) if F32_UNARY.iter().any(|(n, _)| *n == name) => {
@@ -349,7 +359,12 @@ impl Lowerer<'_> {
         let syn::Expr::Path(p) = &*c.func else {
             return self.err(c.func.span(), "only calls of named functions are supported");
         };
-        let segs: Vec<String> = p.path.segments.iter().map(|s| s.ident.to_string()).collect();
+        let segs: Vec<String> = p
+            .path
+            .segments
+            .iter()
+            .map(|s| s.ident.to_string())
+            .collect();
         let span = p.span();
         if segs.len() == 1 {
             let name = segs[0].as_str();
@@ -377,7 +392,12 @@ impl Lowerer<'_> {
                     return self.err(span, "`select(cond, a, b)` takes 3 arguments");
                 }
                 let cond = self.expr(&c.args[0])?;
-                self.check_ty(&cond, &Ty::Bool, c.args[0].span(), "the condition of `select`")?;
+                self.check_ty(
+                    &cond,
+                    &Ty::Bool,
+                    c.args[0].span(),
+                    "the condition of `select`",
+                )?;
                 self.lazy_select(cond.comps[0], &c.args[1], &c.args[2], span)
             }
             "no_diff" | "rsqrt" | "sigmoid" => {
@@ -388,7 +408,9 @@ impl Lowerer<'_> {
                 let v = &args[0];
                 match name {
                     "no_diff" => Ok(self.map(v, Unary::NoDiff)),
-                    _ if v.ty != Ty::F32 => self.err(span, format!("`{name}` takes an `f32`, found `{}`", v.ty)),
+                    _ if v.ty != Ty::F32 => {
+                        self.err(span, format!("`{name}` takes an `f32`, found `{}`", v.ty))
+                    }
                     "rsqrt" => Ok(self.map(v, Unary::Rsqrt)),
                     _ => Ok(Self::scalar(self.sigmoid(v.comps[0]))),
                 }
@@ -422,7 +444,14 @@ impl Lowerer<'_> {
         self.branch(cond, |s| s.expr(a), |s| s.expr(b), span)
     }
 
-    fn constructor(&mut self, owner: &str, item: &str, args: Vec<Val>, span: Span, c: &syn::ExprCall) -> R<Val> {
+    fn constructor(
+        &mut self,
+        owner: &str,
+        item: &str,
+        args: Vec<Val>,
+        span: Span,
+        c: &syn::ExprCall,
+    ) -> R<Val> {
         let all = |s: &Self, t: &Ty| -> R<()> {
             for a in &args {
                 s.check_ty(a, t, span, &format!("an argument of `{owner}::{item}`"))?;
@@ -433,28 +462,47 @@ impl Lowerer<'_> {
             if args.len() == n {
                 Ok(())
             } else {
-                s.err(span, format!("`{owner}::{item}` takes {n} argument(s), found {}", args.len()))
+                s.err(
+                    span,
+                    format!(
+                        "`{owner}::{item}` takes {n} argument(s), found {}",
+                        args.len()
+                    ),
+                )
             }
         };
-        let flat = |args: &[Val]| args.iter().flat_map(|a| a.comps.iter().copied()).collect::<Vec<_>>();
+        let flat = |args: &[Val]| {
+            args.iter()
+                .flat_map(|a| a.comps.iter().copied())
+                .collect::<Vec<_>>()
+        };
         match (owner, item) {
             ("Vec2" | "Vec3" | "Vec4", "new") => {
                 let n = owner[3..].parse().unwrap();
                 count(self, n)?;
                 all(self, &Ty::F32)?;
-                Ok(Val { ty: Ty::Vec(n), comps: flat(&args) })
+                Ok(Val {
+                    ty: Ty::Vec(n),
+                    comps: flat(&args),
+                })
             }
             ("Vec2" | "Vec3" | "Vec4", "splat") => {
                 let n = owner[3..].parse().unwrap();
                 count(self, 1)?;
                 all(self, &Ty::F32)?;
-                Ok(Val { ty: Ty::Vec(n), comps: vec![args[0].comps[0]; n] })
+                Ok(Val {
+                    ty: Ty::Vec(n),
+                    comps: vec![args[0].comps[0]; n],
+                })
             }
             ("Mat2" | "Mat3", "from_cols") => {
                 let n = if owner == "Mat2" { 2 } else { 3 };
                 count(self, n)?;
                 all(self, &Ty::Vec(n))?;
-                Ok(Val { ty: Ty::Mat(n), comps: flat(&args) })
+                Ok(Val {
+                    ty: Ty::Mat(n),
+                    comps: flat(&args),
+                })
             }
             ("Mat2" | "Mat3", "from_diagonal") => {
                 let n = if owner == "Mat2" { 2 } else { 3 };
@@ -465,7 +513,10 @@ impl Lowerer<'_> {
                 for i in 0..n {
                     comps[i * n + i] = args[0].comps[i];
                 }
-                Ok(Val { ty: Ty::Mat(n), comps })
+                Ok(Val {
+                    ty: Ty::Mat(n),
+                    comps,
+                })
             }
             ("Mat3", "from_quat") => {
                 count(self, 1)?;
@@ -475,7 +526,10 @@ impl Lowerer<'_> {
             ("Quat", "from_xyzw") => {
                 count(self, 4)?;
                 all(self, &Ty::F32)?;
-                Ok(Val { ty: Ty::Quat, comps: flat(&args) })
+                Ok(Val {
+                    ty: Ty::Quat,
+                    comps: flat(&args),
+                })
             }
             ("f32" | "u32" | "i32" | "Vec2" | "Vec3" | "Vec4" | "Mat2" | "Mat3" | "Quat", m) => {
                 // Method called as a path: `f32::max(a, b)`.
@@ -514,8 +568,15 @@ impl Lowerer<'_> {
         let pos = self.bin(Binary::Gt, d, zero);
         let r = self.un(Unary::Rsqrt, d);
         let inv = self.select(pos, r, zero);
-        let comps = v.comps.iter().map(|&c| self.bin(Binary::Mul, c, inv)).collect();
-        Val { ty: v.ty.clone(), comps }
+        let comps = v
+            .comps
+            .iter()
+            .map(|&c| self.bin(Binary::Mul, c, inv))
+            .collect();
+        Val {
+            ty: v.ty.clone(),
+            comps,
+        }
     }
 
     fn cross(&mut self, a: &Val, b: &Val) -> Val {
@@ -526,7 +587,10 @@ impl Lowerer<'_> {
             self.bin(Binary::Sub, p, q)
         };
         let comps = vec![term(1, 2), term(2, 0), term(0, 1)];
-        Val { ty: Ty::Vec(3), comps }
+        Val {
+            ty: Ty::Vec(3),
+            comps,
+        }
     }
 
     pub(super) fn mat_vec(&mut self, m: &Val, v: &Val) -> Val {
@@ -537,7 +601,10 @@ impl Lowerer<'_> {
                 self.dot(&row, &v.comps)
             })
             .collect();
-        Val { ty: Ty::Vec(n), comps }
+        Val {
+            ty: Ty::Vec(n),
+            comps,
+        }
     }
 
     pub(super) fn mat_mul(&mut self, a: &Val, b: &Val) -> Val {
@@ -550,13 +617,19 @@ impl Lowerer<'_> {
                 comps.push(self.dot(&row, &col));
             }
         }
-        Val { ty: a.ty.clone(), comps }
+        Val {
+            ty: a.ty.clone(),
+            comps,
+        }
     }
 
     fn transpose(&mut self, m: &Val) -> Val {
         let Ty::Mat(n) = m.ty else { unreachable!() };
         let comps = (0..n * n).map(|i| m.comps[(i % n) * n + i / n]).collect();
-        Val { ty: m.ty.clone(), comps }
+        Val {
+            ty: m.ty.clone(),
+            comps,
+        }
     }
 
     fn determinant(&mut self, m: &Val) -> Var {
@@ -566,7 +639,10 @@ impl Lowerer<'_> {
             let q = self.bin(Binary::Mul, c[2], c[1]);
             return self.bin(Binary::Sub, p, q);
         }
-        let col = |i: usize| Val { ty: Ty::Vec(3), comps: c[i * 3..i * 3 + 3].to_vec() };
+        let col = |i: usize| Val {
+            ty: Ty::Vec(3),
+            comps: c[i * 3..i * 3 + 3].to_vec(),
+        };
         let x = self.cross(&col(0), &col(1));
         self.dot(&col(2).comps, &x.comps)
     }
@@ -577,11 +653,22 @@ impl Lowerer<'_> {
         if c.len() == 4 {
             let det = self.determinant(m);
             let inv = self.un(Unary::Recip, det);
-            let adj = [c[3], self.un(Unary::Neg, c[1]), self.un(Unary::Neg, c[2]), c[0]];
+            let adj = [
+                c[3],
+                self.un(Unary::Neg, c[1]),
+                self.un(Unary::Neg, c[2]),
+                c[0],
+            ];
             let comps = adj.iter().map(|&a| self.bin(Binary::Mul, a, inv)).collect();
-            return Val { ty: Ty::Mat(2), comps };
+            return Val {
+                ty: Ty::Mat(2),
+                comps,
+            };
         }
-        let col = |i: usize| Val { ty: Ty::Vec(3), comps: c[i * 3..i * 3 + 3].to_vec() };
+        let col = |i: usize| Val {
+            ty: Ty::Vec(3),
+            comps: c[i * 3..i * 3 + 3].to_vec(),
+        };
         let t0 = self.cross(&col(1), &col(2));
         let t1 = self.cross(&col(2), &col(0));
         let t2 = self.cross(&col(0), &col(1));
@@ -595,16 +682,29 @@ impl Lowerer<'_> {
                 comps.push(self.bin(Binary::Mul, row[cidx], inv));
             }
         }
-        Val { ty: Ty::Mat(3), comps }
+        Val {
+            ty: Ty::Mat(3),
+            comps,
+        }
     }
 
     /// Rotation of `v` by quaternion `q` (x, y, z, w): v + w t + u x t with t = 2 u x v.
     pub(super) fn quat_rotate(&mut self, q: &Val, v: &Val) -> Val {
-        let u = Val { ty: Ty::Vec(3), comps: q.comps[..3].to_vec() };
+        let u = Val {
+            ty: Ty::Vec(3),
+            comps: q.comps[..3].to_vec(),
+        };
         let w = q.comps[3];
         let uv = self.cross(&u, v);
         let two = self.fconst(2.0);
-        let t = Val { ty: Ty::Vec(3), comps: uv.comps.iter().map(|&c| self.bin(Binary::Mul, c, two)).collect() };
+        let t = Val {
+            ty: Ty::Vec(3),
+            comps: uv
+                .comps
+                .iter()
+                .map(|&c| self.bin(Binary::Mul, c, two))
+                .collect(),
+        };
         let ut = self.cross(&u, &t);
         let comps = (0..3)
             .map(|i| {
@@ -613,7 +713,10 @@ impl Lowerer<'_> {
                 self.bin(Binary::Add, s, ut.comps[i])
             })
             .collect();
-        Val { ty: Ty::Vec(3), comps }
+        Val {
+            ty: Ty::Vec(3),
+            comps,
+        }
     }
 
     /// Hamilton product, (x, y, z, w) layout.
@@ -633,11 +736,34 @@ impl Lowerer<'_> {
             }
             acc.unwrap()
         };
-        let x = sum4([(aw, bx, false), (ax, bw, false), (ay, bz, false), (az, by, true)]);
-        let y = sum4([(aw, by, false), (ax, bz, true), (ay, bw, false), (az, bx, false)]);
-        let z = sum4([(aw, bz, false), (ax, by, false), (ay, bx, true), (az, bw, false)]);
-        let w = sum4([(aw, bw, false), (ax, bx, true), (ay, by, true), (az, bz, true)]);
-        Val { ty: Ty::Quat, comps: vec![x, y, z, w] }
+        let x = sum4([
+            (aw, bx, false),
+            (ax, bw, false),
+            (ay, bz, false),
+            (az, by, true),
+        ]);
+        let y = sum4([
+            (aw, by, false),
+            (ax, bz, true),
+            (ay, bw, false),
+            (az, bx, false),
+        ]);
+        let z = sum4([
+            (aw, bz, false),
+            (ax, by, false),
+            (ay, bx, true),
+            (az, bw, false),
+        ]);
+        let w = sum4([
+            (aw, bw, false),
+            (ax, bx, true),
+            (ay, by, true),
+            (az, bz, true),
+        ]);
+        Val {
+            ty: Ty::Quat,
+            comps: vec![x, y, z, w],
+        }
     }
 
     /// The rotation matrix of a unit quaternion (same formula as glam's `Mat3::from_quat`).
@@ -664,7 +790,10 @@ impl Lowerer<'_> {
             self.bin(Binary::Sub, yz, wx),
             self.bin(Binary::Sub, one, xx_yy),
         ];
-        Val { ty: Ty::Mat(3), comps }
+        Val {
+            ty: Ty::Mat(3),
+            comps,
+        }
     }
 
     /// x^n for a compile-time integer n, by repeated squaring.

@@ -27,10 +27,16 @@ pub struct Val {
 
 impl Val {
     fn unit() -> Val {
-        Val { ty: Ty::Tuple(vec![]), comps: vec![] }
+        Val {
+            ty: Ty::Tuple(vec![]),
+            comps: vec![],
+        }
     }
     fn error() -> Val {
-        Val { ty: Ty::Error, comps: vec![] }
+        Val {
+            ty: Ty::Error,
+            comps: vec![],
+        }
     }
 }
 
@@ -85,31 +91,52 @@ pub fn lower_fn(module: &Module, diag: &Diag, def: &FnDef, custom: &[String]) ->
     let mut params = vec![];
     for p in &def.params {
         let names = p.ty.slot_names(&p.name);
-        let comps: Vec<Var> = p
-            .ty
-            .slots()
-            .into_iter()
-            .zip(names)
-            .map(|(s, n)| {
-                let v = l.f.new_var(s, n);
-                if s == Scalar::F32 {
-                    l.active.insert(v);
-                }
-                v
-            })
-            .collect();
+        let comps: Vec<Var> =
+            p.ty.slots()
+                .into_iter()
+                .zip(names)
+                .map(|(s, n)| {
+                    let v = l.f.new_var(s, n);
+                    if s == Scalar::F32 {
+                        l.active.insert(v);
+                    }
+                    v
+                })
+                .collect();
         l.f.params.extend(&comps);
-        l.bind(&p.name, Val { ty: p.ty.clone(), comps }, false);
+        l.bind(
+            &p.name,
+            Val {
+                ty: p.ty.clone(),
+                comps,
+            },
+            false,
+        );
         params.push((p.name.clone(), p.ty.clone()));
     }
     let errors_before = diag.has_errors();
     let body = l.block(&def.item.block);
     if let Ok(v) = body {
-        let span = def.item.block.stmts.last().map(|s| s.span()).unwrap_or(def.item.sig.ident.span());
-        if l.check_ty(&v, &def.ret, span, "the function's result").is_ok() {
-            l.f.body = Block { stmts: std::mem::take(&mut l.stmts), yields: v.comps };
+        let span = def
+            .item
+            .block
+            .stmts
+            .last()
+            .map(|s| s.span())
+            .unwrap_or(def.item.sig.ident.span());
+        if l.check_ty(&v, &def.ret, span, "the function's result")
+            .is_ok()
+        {
+            l.f.body = Block {
+                stmts: std::mem::take(&mut l.stmts),
+                yields: v.comps,
+            };
             if !diag.has_errors() || errors_before {
-                return (!diag.has_errors()).then(|| Lowered { func: l.f, params, ret: def.ret.clone() });
+                return (!diag.has_errors()).then(|| Lowered {
+                    func: l.f,
+                    params,
+                    ret: def.ret.clone(),
+                });
             }
         }
     }
@@ -131,7 +158,10 @@ impl<'m> Lowerer<'m> {
         };
         let v = self.f.new_var(c.ty(), name);
         self.consts.insert(v, c);
-        self.stmts.push(Stmt::Let { var: v, op: Op::Const(c) });
+        self.stmts.push(Stmt::Let {
+            var: v,
+            op: Op::Const(c),
+        });
         v
     }
 
@@ -286,14 +316,29 @@ impl<'m> Lowerer<'m> {
         let else_stmts = std::mem::replace(&mut self.stmts, outer);
         let (a, b) = (a?, b?);
         if a.ty != b.ty {
-            return self.err(span, format!("the two values have different types: `{}` and `{}`", a.ty, b.ty));
+            return self.err(
+                span,
+                format!(
+                    "the two values have different types: `{}` and `{}`",
+                    a.ty, b.ty
+                ),
+            );
         }
         let outs = self.join_branches(
             cond,
-            Block { stmts: then_stmts, yields: a.comps },
-            Block { stmts: else_stmts, yields: b.comps },
+            Block {
+                stmts: then_stmts,
+                yields: a.comps,
+            },
+            Block {
+                stmts: else_stmts,
+                yields: b.comps,
+            },
         );
-        Ok(Val { ty: a.ty, comps: outs })
+        Ok(Val {
+            ty: a.ty,
+            comps: outs,
+        })
     }
 
     fn join_branches(&mut self, cond: Var, then_block: Block, else_block: Block) -> Vec<Var> {
@@ -309,7 +354,12 @@ impl<'m> Lowerer<'m> {
                 v
             })
             .collect();
-        self.stmts.push(Stmt::If { cond, then_block, else_block, outs: outs.clone() });
+        self.stmts.push(Stmt::If {
+            cond,
+            then_block,
+            else_block,
+            outs: outs.clone(),
+        });
         outs
     }
 
@@ -324,7 +374,10 @@ impl<'m> Lowerer<'m> {
                 info.name = n;
             }
         }
-        self.scopes.last_mut().expect("a scope").insert(name.to_string(), Binding { val, mutable });
+        self.scopes
+            .last_mut()
+            .expect("a scope")
+            .insert(name.to_string(), Binding { val, mutable });
     }
 
     fn lookup(&self, name: &str) -> Option<&Binding> {
@@ -339,7 +392,13 @@ impl<'m> Lowerer<'m> {
         if v.ty == *want || v.ty == Ty::Error || *want == Ty::Error {
             return Ok(());
         }
-        self.err(span, format!("mismatched types: {what} is expected to be `{want}`, found `{}`", v.ty))
+        self.err(
+            span,
+            format!(
+                "mismatched types: {what} is expected to be `{want}`, found `{}`",
+                v.ty
+            ),
+        )
     }
 
     // ---- blocks and statements ---------------------------------------------------------------
@@ -428,20 +487,32 @@ impl<'m> Lowerer<'m> {
             syn::Pat::Wild(_) => Ok(()),
             syn::Pat::Tuple(pt) => {
                 let Ty::Tuple(tys) = &val.ty else {
-                    return self.err(pat.span(), format!("expected a tuple to destructure, found `{}`", val.ty));
+                    return self.err(
+                        pat.span(),
+                        format!("expected a tuple to destructure, found `{}`", val.ty),
+                    );
                 };
                 if tys.len() != pt.elems.len() {
                     return self.err(pat.span(), format!("the tuple has {} elements", tys.len()));
                 }
                 let mut at = 0;
                 for (p, t) in pt.elems.iter().zip(tys.clone()) {
-                    let n = t.len();
-                    self.bind_pattern(p, Val { ty: t, comps: val.comps[at..at + n].to_vec() })?;
+                    let n = t.slot_count();
+                    self.bind_pattern(
+                        p,
+                        Val {
+                            ty: t,
+                            comps: val.comps[at..at + n].to_vec(),
+                        },
+                    )?;
                     at += n;
                 }
                 Ok(())
             }
-            _ => self.err(pat.span(), "only names, `_` and tuples of them are supported in `let`"),
+            _ => self.err(
+                pat.span(),
+                "only names, `_` and tuples of them are supported in `let`",
+            ),
         }
     }
 
@@ -486,7 +557,10 @@ impl<'m> Lowerer<'m> {
                 };
                 match expr::member_range(&ty, &member) {
                     Some((t, r)) => Ok((root, t, range.start + r.start..range.start + r.end)),
-                    None => self.err(f.member.span(), format!("no field `{member}` on type `{ty}`")),
+                    None => self.err(
+                        f.member.span(),
+                        format!("no field `{member}` on type `{ty}`"),
+                    ),
                 }
             }
             syn::Expr::Index(ix) => {
@@ -497,7 +571,10 @@ impl<'m> Lowerer<'m> {
                     None => self.err(ix.span(), format!("index {i} out of bounds for `{ty}`")),
                 }
             }
-            _ => self.err(e.span(), "this is not assignable: assign to a variable, its fields or elements"),
+            _ => self.err(
+                e.span(),
+                "this is not assignable: assign to a variable, its fields or elements",
+            ),
         }
     }
 
@@ -518,7 +595,10 @@ impl<'m> Lowerer<'m> {
 
     /// Evaluates an expression that must be a compile-time integer (index, loop bound).
     fn const_index(&mut self, e: &syn::Expr) -> R<usize> {
-        self.const_int(e, "this index must be known at compile time (a literal, a constant or a loop counter)")
+        self.const_int(
+            e,
+            "this index must be known at compile time (a literal, a constant or a loop counter)",
+        )
     }
 
     /// Evaluates an expression that must be a non-negative compile-time integer.
@@ -566,7 +646,10 @@ impl<'m> Lowerer<'m> {
         if then_val.ty != else_val.ty && then_val.ty != Ty::Error && else_val.ty != Ty::Error {
             return self.err(
                 e.span(),
-                format!("`if` and `else` have different types: `{}` and `{}`", then_val.ty, else_val.ty),
+                format!(
+                    "`if` and `else` have different types: `{}` and `{}`",
+                    then_val.ty, else_val.ty
+                ),
             );
         }
         // Variables assigned in either branch leave it as outputs of the branch.
@@ -589,24 +672,36 @@ impl<'m> Lowerer<'m> {
         }
         let outs = self.join_branches(
             cond,
-            Block { stmts: then_stmts, yields: ty_ },
-            Block { stmts: else_stmts, yields: ey },
+            Block {
+                stmts: then_stmts,
+                yields: ty_,
+            },
+            Block {
+                stmts: else_stmts,
+                yields: ey,
+            },
         );
         let n = then_val.comps.len();
         let mut at = n;
         for (depth, name, t, _) in &changed {
             let k = t.len();
-            self.scopes[*depth].get_mut(name).expect("snapshot binding").val.comps = outs[at..at + k].to_vec();
+            self.scopes[*depth]
+                .get_mut(name)
+                .expect("snapshot binding")
+                .val
+                .comps = outs[at..at + k].to_vec();
             at += k;
         }
-        Ok(Val { ty: then_val.ty, comps: outs[..n].to_vec() })
+        Ok(Val {
+            ty: then_val.ty,
+            comps: outs[..n].to_vec(),
+        })
     }
 
     fn for_loop(&mut self, f: &syn::ExprForLoop) -> R<Val> {
         let (lo, hi) = match &*f.expr {
             syn::Expr::Range(r) => {
-                const BOUNDS: &str =
-                    "loop bounds must be compile-time constants (`for i in 0..N`): loops are unrolled";
+                const BOUNDS: &str = "loop bounds must be compile-time constants (`for i in 0..N`): loops are unrolled";
                 let lo = match &r.start {
                     Some(s) => self.const_int(s, BOUNDS)?,
                     None => 0,
@@ -621,7 +716,10 @@ impl<'m> Lowerer<'m> {
                 }
             }
             other => {
-                return self.err(other.span(), "only `for i in A..B` with constant A and B is supported");
+                return self.err(
+                    other.span(),
+                    "only `for i in A..B` with constant A and B is supported",
+                );
             }
         };
         self.unrolled += hi.saturating_sub(lo);
@@ -634,13 +732,19 @@ impl<'m> Lowerer<'m> {
         for i in lo..hi {
             self.scopes.push(HashMap::new());
             let k = self.konst(Const::U(i as u32));
-            let iv = Val { ty: Ty::Index, comps: vec![k] };
+            let iv = Val {
+                ty: Ty::Index,
+                comps: vec![k],
+            };
             self.bind_pattern(&f.pat, iv)?;
             let body = self.block(&f.body);
             self.scopes.pop();
             let body = body?;
             if body.ty != Ty::Tuple(vec![]) {
-                return self.err(f.body.span(), "a loop body cannot produce a value: end it with `;`");
+                return self.err(
+                    f.body.span(),
+                    "a loop body cannot produce a value: end it with `;`",
+                );
             }
         }
         Ok(Val::unit())
@@ -650,12 +754,20 @@ impl<'m> Lowerer<'m> {
     /// [`Stmt::Call`] so that AD uses the user's adjoint instead of differentiating the body.
     fn call_helper(&mut self, def: &'m FnDef, args: Vec<Val>, span: Span) -> R<Val> {
         if self.call_stack.contains(&def.name) {
-            return self.err(span, format!("recursive call to `{}` is not supported", def.name));
+            return self.err(
+                span,
+                format!("recursive call to `{}` is not supported", def.name),
+            );
         }
         if args.len() != def.params.len() {
             return self.err(
                 span,
-                format!("`{}` takes {} argument(s), found {}", def.name, def.params.len(), args.len()),
+                format!(
+                    "`{}` takes {} argument(s), found {}",
+                    def.name,
+                    def.params.len(),
+                    args.len()
+                ),
             );
         }
         for (a, p) in args.iter().zip(&def.params) {
@@ -663,7 +775,13 @@ impl<'m> Lowerer<'m> {
         }
         let saved_scopes = std::mem::replace(&mut self.scopes, vec![HashMap::new()]);
         for (a, p) in args.iter().zip(&def.params) {
-            self.scopes[0].insert(p.name.clone(), Binding { val: a.clone(), mutable: false });
+            self.scopes[0].insert(
+                p.name.clone(),
+                Binding {
+                    val: a.clone(),
+                    mutable: false,
+                },
+            );
         }
         self.call_stack.push(def.name.clone());
         let custom = self.custom.iter().position(|c| *c == def.name);
@@ -676,7 +794,10 @@ impl<'m> Lowerer<'m> {
         let (Some(callee), Some(outer)) = (custom, outer) else {
             return Ok(v);
         };
-        let body = Block { stmts: std::mem::replace(&mut self.stmts, outer), yields: v.comps.clone() };
+        let body = Block {
+            stmts: std::mem::replace(&mut self.stmts, outer),
+            yields: v.comps.clone(),
+        };
         let outs: Vec<Var> = v
             .comps
             .iter()
@@ -689,7 +810,15 @@ impl<'m> Lowerer<'m> {
             })
             .collect();
         let args = args.iter().flat_map(|a| a.comps.iter().copied()).collect();
-        self.stmts.push(Stmt::Call { callee, args, outs: outs.clone(), body });
-        Ok(Val { ty: v.ty, comps: outs })
+        self.stmts.push(Stmt::Call {
+            callee,
+            args,
+            outs: outs.clone(),
+            body,
+        });
+        Ok(Val {
+            ty: v.ty,
+            comps: outs,
+        })
     }
 }

@@ -1,0 +1,135 @@
+//! Unit tests of the compiler's passes on IR, without going through a proc-macro.
+
+use crate::ir::{Function, Op, Stmt, Unary};
+use crate::{Kind, compile_ir};
+
+fn compile(src: &str) -> Vec<(Function, Option<Function>)> {
+    let item: syn::ItemMod = syn::parse_str(src).expect("valid Rust");
+    match compile_ir(Kind::Functions, item) {
+        Ok(c) => c.kernels,
+        Err(e) => panic!("compile errors: {e:?}"),
+    }
+}
+
+fn errors(src: &str) -> Vec<String> {
+    let item: syn::ItemMod = syn::parse_str(src).expect("valid Rust");
+    compile_ir(Kind::Functions, item)
+        .err()
+        .expect("errors expected")
+}
+
+fn count(f: &Function, pred: &dyn Fn(&Stmt) -> bool) -> usize {
+    fn walk(b: &crate::ir::Block, pred: &dyn Fn(&Stmt) -> bool) -> usize {
+        b.stmts
+            .iter()
+            .map(|s| {
+                let inner = match s {
+                    Stmt::If {
+                        then_block,
+                        else_block,
+                        ..
+                    } => walk(then_block, pred) + walk(else_block, pred),
+                    Stmt::Call { body, .. } => walk(body, pred),
+                    Stmt::Let { .. } => 0,
+                };
+                inner + pred(s) as usize
+            })
+            .sum()
+    }
+    walk(&f.body, pred)
+}
+
+fn is_unary(u: Unary) -> impl Fn(&Stmt) -> bool {
+    move |s| matches!(s, Stmt::Let { op: Op::Unary(v, _), .. } if *v == u)
+}
+
+#[test]
+fn values_are_flattened_to_scalar_slots() {
+    let k = compile("mod m { fn f(a: Vec3, m: Mat3, q: Quat) -> Vec2 { (m * a).xy() * q.w } }");
+    let (f, adj) = &k[0];
+    assert_eq!(f.params.len(), 3 + 9 + 4);
+    assert_eq!(f.results().len(), 2);
+    // The adjoint takes the two result cotangents and returns one per input slot.
+    let adj = adj.as_ref().unwrap();
+    assert_eq!(adj.params.len(), 16 + 2);
+    assert_eq!(adj.results().len(), 16);
+}
+
+#[test]
+fn loops_unroll_and_branches_on_the_counter_fold_away() {
+    let k = compile(
+        "mod m { fn f(x: f32) -> f32 { let mut s = x; for i in 0..4 { if i == 2 { s = s * x; } else { s = s + x; } } s } }",
+    );
+    let (f, _) = &k[0];
+    assert_eq!(count(f, &|s| matches!(s, Stmt::If { .. })), 0, "{f}");
+}
+
+#[test]
+fn dead_primal_code_is_removed_from_the_adjoint() {
+    let k =
+        compile("mod m { fn f(x: f32, y: f32) -> f32 { let unused = y.sin(); x.exp() * 2.0 } }");
+    let (f, adj) = &k[0];
+    assert_eq!(count(f, &is_unary(Unary::Sin)), 0);
+    let adj = adj.as_ref().unwrap();
+    assert_eq!(count(adj, &is_unary(Unary::Sin)), 0);
+    assert_eq!(
+        count(adj, &is_unary(Unary::Exp)),
+        1,
+        "the primal exp is recomputed once: {adj}"
+    );
+}
+
+#[test]
+fn the_adjoint_of_a_branch_is_a_branch_on_the_same_condition() {
+    let k = compile("mod m { fn f(x: f32) -> f32 { if x > 0.0 { x.ln() } else { x * x } } }");
+    let (f, adj) = &k[0];
+    let cond = |g: &Function| {
+        g.body.stmts.iter().find_map(|s| {
+            if let Stmt::If { cond, .. } = s {
+                Some(*cond)
+            } else {
+                None
+            }
+        })
+    };
+    let adj = adj.as_ref().unwrap();
+    // Only the reverse branch remains: it recomputes the side it takes, and the primal
+    // branch's value is not needed by the adjoint, so DCE removed it.
+    assert_eq!(count(adj, &|s| matches!(s, Stmt::If { .. })), 1, "{adj}");
+    let reverse_conds: Vec<_> = adj
+        .body
+        .stmts
+        .iter()
+        .filter_map(|s| {
+            if let Stmt::If { cond, .. } = s {
+                Some(*cond)
+            } else {
+                None
+            }
+        })
+        .collect();
+    assert!(reverse_conds.iter().all(|c| Some(*c) == cond(f)), "{adj}");
+}
+
+#[test]
+fn errors_are_collected_not_stopped_at_the_first() {
+    let e = errors("mod m { fn f(x: f32) -> f32 { let a = x.nope(); let b = 1 + x; loop {} } }");
+    assert_eq!(e.len(), 3, "{e:?}");
+}
+
+#[test]
+fn helpers_are_inlined_and_custom_adjoints_kept_as_calls() {
+    let k = compile(
+        "mod m {
+            fn sq(x: f32) -> f32 { x * x }
+            #[adjoint(cube_adjoint)]
+            fn cube(x: f32) -> f32 { x * x * x }
+            fn cube_adjoint(x: f32, d_out: f32) -> f32 { 3.0 * x * x * d_out }
+            fn f(x: f32) -> f32 { sq(x) + cube(x) }
+        }",
+    );
+    // Kernels: sq, cube and f (the adjoint function itself is not a kernel).
+    assert_eq!(k.len(), 3);
+    let (f, _) = &k[2];
+    assert_eq!(count(f, &|s| matches!(s, Stmt::Call { .. })), 1, "{f}");
+}
