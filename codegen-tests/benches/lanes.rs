@@ -5,7 +5,7 @@
 //! The lane form is measured twice: as compiled for the default target (SSE2 on x86-64) and
 //! inside a function compiled with AVX2 + FMA enabled, chosen at run time.
 
-use codegen_tests::tiny_method::tiny::{Method, Shade};
+use splat_examples::isotropic::isotropic::{Method, Shade};
 use splat_runtime::glam::{Vec2, Vec3};
 use splat_runtime::{Contribution, ContributionLanes, F32x8, M32x8, SplatMethod};
 use std::hint::black_box;
@@ -143,7 +143,7 @@ fn main() {
         && std::arch::is_x86_feature_detected!("avx2")
         && std::arch::is_x86_feature_detected!("fma");
     println!(
-        "evaluate of `tiny` (isotropic Gaussian), {PRIMS} primitives x {}x{} pixels",
+        "evaluate of `isotropic` (isotropic Gaussian), {PRIMS} primitives x {}x{} pixels",
         TILE, TILE
     );
     println!("{:<28} {:>12} {:>10}", "form", "ns / pair", "speed-up");

@@ -4,8 +4,8 @@
 //! - [`check`]: the gradient checks (central finite differences of the f64 twin, and the
 //!   dot-product identity) and the lane-vs-scalar comparison, generic over any kernel's flat
 //!   form.
-//! - [`tiny_method`]: a small complete method, snapshot-tested and checked against the trait.
+//!
+//! The method-level tests use `splat_examples::isotropic`, a small complete method.
 
 pub mod check;
 pub mod corpus;
-pub mod tiny_method;

@@ -3,7 +3,7 @@
 //! generated Rust so every change to the emitters shows up in review.
 
 use codegen_tests::check::{gradient, uniform};
-use codegen_tests::tiny_method::tiny::{self, Method, Shade};
+use splat_examples::isotropic::isotropic::{self, Method, Shade};
 use splat_runtime::glam::{Vec2, Vec3};
 use splat_runtime::{Contribution, ContributionLanes, F32x8, LANES, M32x8, SplatMethod};
 
@@ -105,8 +105,8 @@ fn project_gradient_matches_finite_differences_including_the_camera() {
         (x, [])
     };
     let report = gradient(
-        tiny::twin::project,
-        tiny::twin::project_adjoint,
+        isotropic::twin::project,
+        isotropic::twin::project_adjoint,
         sample,
         11,
         20,
@@ -120,7 +120,7 @@ fn project_gradient_matches_finite_differences_including_the_camera() {
 
 #[test]
 fn method_reports_its_shape() {
-    assert_eq!(Method::NAME, "tiny");
+    assert_eq!(Method::NAME, "isotropic");
     const { assert!(Method::HAS_TILE_CULL && !Method::HAS_PIXEL_INFO) };
     assert_eq!(<Shade as splat_runtime::Flat>::LEN, 7);
     assert!(Method::SOURCE.rust.contains("pub fn evaluate_adjoint"));
@@ -128,5 +128,5 @@ fn method_reports_its_shape() {
 
 #[test]
 fn generated_rust_snapshot() {
-    insta::assert_snapshot!(tiny::GENERATED_RUST);
+    insta::assert_snapshot!(isotropic::GENERATED_RUST);
 }

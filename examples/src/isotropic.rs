@@ -1,10 +1,11 @@
-//! A small but complete method (isotropic Gaussians), used for the snapshot of the generated
-//! Rust and to test the `SplatMethod` glue, including the lane forms of `evaluate`.
+//! Isotropic Gaussians: a complete method in under 50 lines, written as a user would in their
+//! own crate (only the public API of splat-macros and splat-runtime). codegen-tests uses it
+//! for the snapshot of the generated Rust and to test the `SplatMethod` glue.
 
 use splat_macros::splat_method;
 
 #[splat_method]
-pub mod tiny {
+pub mod isotropic {
     use splat_runtime::prelude::*;
 
     pub struct Params {
