@@ -1,5 +1,5 @@
 //! Rendering methods written with `#[splat_method]`; each file reads like the paper's listing.
 
-pub mod gs3d;
+mod gaussians;
 
-pub use gs3d::gs3d as gaussians3d;
+pub use gaussians::gs3d;

@@ -11,6 +11,8 @@ pub trait Flat: Copy + Default + Send + Sync + 'static {
     fn write_words(&self, out: &mut [f32]);
     /// Reads `Self::LEN` words from the front of `words`.
     fn read_words(words: &[f32]) -> Self;
+    /// False if any float in the value is NaN or infinite.
+    fn is_finite(&self) -> bool;
 }
 
 impl Flat for f32 {
@@ -20,6 +22,9 @@ impl Flat for f32 {
     }
     fn read_words(words: &[f32]) -> Self {
         words[0]
+    }
+    fn is_finite(&self) -> bool {
+        f32::is_finite(*self)
     }
 }
 
@@ -31,6 +36,9 @@ impl Flat for u32 {
     fn read_words(words: &[f32]) -> Self {
         words[0].to_bits()
     }
+    fn is_finite(&self) -> bool {
+        true
+    }
 }
 
 impl Flat for i32 {
@@ -41,6 +49,9 @@ impl Flat for i32 {
     fn read_words(words: &[f32]) -> Self {
         words[0].to_bits() as i32
     }
+    fn is_finite(&self) -> bool {
+        true
+    }
 }
 
 impl Flat for bool {
@@ -50,6 +61,9 @@ impl Flat for bool {
     }
     fn read_words(words: &[f32]) -> Self {
         words[0].to_bits() != 0
+    }
+    fn is_finite(&self) -> bool {
+        true
     }
 }
 
@@ -64,6 +78,9 @@ macro_rules! flat_via_array {
                 let mut a = [0.0; $n];
                 a.copy_from_slice(&words[..$n]);
                 <$t>::$from(&a)
+            }
+            fn is_finite(&self) -> bool {
+                self.$to().iter().all(|x| x.is_finite())
             }
         }
     )*};
@@ -119,6 +136,9 @@ where
             *v = T::read_words(&words[i * T::LEN..]);
         }
         a
+    }
+    fn is_finite(&self) -> bool {
+        self.iter().all(T::is_finite)
     }
 }
 

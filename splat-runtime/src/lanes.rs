@@ -13,6 +13,10 @@ use std::ops::{Add, BitAnd, BitOr, BitXor, Div, Mul, Neg, Not, Rem, Shl, Shr, Su
 /// Number of lanes of every lane type.
 pub const LANES: usize = 8;
 
+/// `[F32x8; N]`: the lane form of a struct of floats (pixel data, colors).
+pub trait LaneArray: Copy + Default + Send + Sync + AsRef<[F32x8]> + AsMut<[F32x8]> {}
+impl<const N: usize> LaneArray for [F32x8; N] where [F32x8; N]: Default {}
+
 /// Eight `f32` lanes.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[repr(C, align(32))]

@@ -9,16 +9,19 @@
 //! - [`lanes`]: eight-lane SIMD value types used by the generated lane form of `evaluate`.
 //! - [`math`]: branch-free `exp` / `ln` shared by the scalar and lane code paths.
 //! - [`prelude`]: what a method module imports.
+//! - [`pipeline`]: the CPU pipeline (preprocess, rasterize, shade, backward).
 
 pub mod flat;
 pub mod lanes;
 pub mod math;
 pub mod method;
+pub mod pipeline;
 pub mod prelude;
 pub mod types;
 
 pub use flat::Flat;
 pub use glam;
-pub use lanes::{F32x8, I32x8, LANES, M32x8, U32x8};
+pub use lanes::{F32x8, I32x8, LANES, LaneArray, M32x8, U32x8};
 pub use method::{GeneratedSource, SplatMethod};
+pub use pipeline::{Frame, FrameGrad, Gradients, Image, RenderError, RenderOptions, backward, render, render_for_backward};
 pub use types::{Camera, Contribution, ContributionLanes, Projected, Tile};

@@ -7,7 +7,7 @@
 //! gradient reduction) is written once.
 
 use crate::flat::Flat;
-use crate::lanes::M32x8;
+use crate::lanes::{LaneArray, M32x8};
 use crate::types::{Camera, Contribution, ContributionLanes, Projected, Tile};
 use glam::Vec2;
 
@@ -40,9 +40,9 @@ pub trait SplatMethod: Send + Sync + 'static {
     /// The color / feature type `evaluate` returns.
     type Color: Flat;
     /// `Pixel` with every float replaced by an `F32x8` (`[F32x8; Pixel::LEN]`).
-    type PixelLanes: Copy;
+    type PixelLanes: LaneArray;
     /// `Color` as `[F32x8; Color::LEN]`.
-    type ColorLanes: Copy + Default;
+    type ColorLanes: LaneArray;
 
     fn project(params: &Self::Params, camera: &Camera) -> Projected<Self::Cull, Self::Shade>;
 

@@ -23,6 +23,7 @@ pub fn structs(module: &Module) -> TokenStream {
         }
         let ident = &item.ident;
         let mut writes = vec![];
+        let mut finite = vec![];
         let mut reads = vec![];
         let mut at = 0usize;
         for (name, ty) in &s.ty.fields {
@@ -31,6 +32,7 @@ pub fn structs(module: &Module) -> TokenStream {
             let at_lit = proc_macro2::Literal::usize_unsuffixed(at);
             writes.push(quote!(::splat_runtime::Flat::write_words(&self.#f, &mut out[#at_lit..]);));
             reads.push(quote!(#f: <#t as ::splat_runtime::Flat>::read_words(&words[#at_lit..])));
+            finite.push(quote!(::splat_runtime::Flat::is_finite(&self.#f)));
             at += ty.slot_count(); // one 32-bit word per slot
         }
         let len = proc_macro2::Literal::usize_unsuffixed(at);
@@ -45,6 +47,9 @@ pub fn structs(module: &Module) -> TokenStream {
                 }
                 fn read_words(words: &[f32]) -> Self {
                     #ident { #(#reads),* }
+                }
+                fn is_finite(&self) -> bool {
+                    true #(&& #finite)*
                 }
             }
         });

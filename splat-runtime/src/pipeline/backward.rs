@@ -1,0 +1,126 @@
+//! The backward blend (seed 001, eq. 5-7): re-walk each pixel's list front to back, carrying
+//! the transmittance and the color accumulated so far; the color still to come behind
+//! primitive i is the final color minus that prefix, so no per-pixel list is stored. Each
+//! step calls `evaluate`'s lane adjoint, which sums the gradient over the group's lanes; the
+//! sum is written to the entry's own slot of the tile list (tiles own disjoint ranges, so no
+//! two threads write the same slot), and the slots are reduced per primitive afterwards.
+
+use super::ForwardState;
+use super::shade::{group_pixels, step};
+use crate::flat::Flat;
+use crate::lanes::{F32x8, LANES, M32x8};
+use crate::method::SplatMethod;
+use crate::types::{Camera, ContributionLanes};
+
+/// Gradient of the loss with respect to each requested output, in the layout of the frame.
+pub struct FrameGrad {
+    /// H x W x channels.
+    pub color: Vec<f32>,
+    pub alpha: Option<Vec<f32>>,
+    pub depth: Option<Vec<f32>>,
+}
+
+/// Per-entry gradients of one tile: `shade[k * Shade::LEN..]` and `depth[k]` for entry k.
+pub struct TileGrads {
+    pub shade: Vec<f32>,
+    pub depth: Vec<f32>,
+}
+
+fn lanes_of(f: impl Fn(usize) -> f32) -> F32x8 {
+    F32x8(std::array::from_fn(f))
+}
+
+pub fn backward_tile<M: SplatMethod>(
+    state: &ForwardState<M>,
+    camera: &Camera,
+    grad: &FrameGrad,
+    tile: u32,
+) -> TileGrads {
+    let grid = &state.grid;
+    let list = state.visited(tile as usize);
+    let (s, channels, words) = (grid.size, M::Color::LEN, M::Shade::LEN);
+    let mut out = TileGrads { shade: vec![0.0; list.len() * words], depth: vec![0.0; list.len()] };
+    let (tx, ty) = grid.tile_xy(tile);
+    let want_depth = grad.depth.is_some();
+    let mut shade_words = vec![0.0f32; words];
+    for row in 0..s {
+        for gx in (0..s).step_by(LANES) {
+            let (x0, y) = (tx * s + gx, ty * s + row);
+            let (pixels, inside) = group_pixels::<M>(grid, camera, x0, y);
+            // Per-lane image index, clamped for lanes past the edge (they are masked out).
+            let px = |l: usize| {
+                let x = (x0 + l as u32).min(grid.width - 1);
+                (y.min(grid.height - 1) * grid.width + x) as usize
+            };
+            let t_final = lanes_of(|l| state.transmittance[px(l)]);
+            let mut d_color = M::ColorLanes::default();
+            let mut c_final = M::ColorLanes::default();
+            for ch in 0..channels {
+                d_color.as_mut()[ch] = lanes_of(|l| grad.color[px(l) * channels + ch]);
+                c_final.as_mut()[ch] = lanes_of(|l| state.color[px(l) * channels + ch]);
+            }
+            let mut d_alpha_out = match &grad.alpha {
+                Some(a) => lanes_of(|l| a[px(l)]),
+                None => F32x8::splat(0.0),
+            };
+            // depth = D / A with D = sum of w z and A = 1 - T: split its gradient into D and A.
+            let (mut d_d, mut d_final) = (F32x8::splat(0.0), F32x8::splat(0.0));
+            if let Some(g) = &grad.depth {
+                let a = 1.0 - t_final;
+                let has = a.gt(F32x8::splat(0.0));
+                let a_safe = has.select_f32(a, F32x8::splat(1.0));
+                d_final = lanes_of(|l| state.depth_acc[px(l)]);
+                let gd = lanes_of(|l| g[px(l)]);
+                d_d = has.select_f32(gd / a_safe, F32x8::splat(0.0));
+                d_alpha_out = d_alpha_out - has.select_f32(gd * d_final / (a_safe * a_safe), F32x8::splat(0.0));
+            }
+            let mut done = !inside;
+            let mut t = F32x8::splat(1.0);
+            let mut c_acc = M::ColorLanes::default();
+            let mut d_acc = F32x8::splat(0.0);
+            for (k, &prim) in list.iter().enumerate() {
+                if done.all() {
+                    break;
+                }
+                let p = &state.pre.projected[prim as usize];
+                let c = M::evaluate_lanes(&pixels, &p.shade);
+                let st = step(c.alpha, c.valid, done, t);
+                done = done | st.stop;
+                if !st.take.any() {
+                    continue;
+                }
+                let zero = F32x8::splat(0.0);
+                let w = st.alpha * t;
+                let one_minus = 1.0 - st.alpha;
+                let mut d_alpha = zero;
+                let mut d_col = M::ColorLanes::default();
+                for ch in 0..channels {
+                    let (cc, dc) = (c.color.as_ref()[ch], d_color.as_ref()[ch]);
+                    let acc = c_acc.as_ref()[ch] + w * cc;
+                    c_acc.as_mut()[ch] = acc;
+                    let behind = c_final.as_ref()[ch] - acc;
+                    d_alpha = d_alpha + t * cc * dc - behind * dc / one_minus;
+                    d_col.as_mut()[ch] = st.take.select_f32(w * dc, zero);
+                }
+                if want_depth {
+                    d_acc = d_acc + w * p.depth;
+                    d_alpha = d_alpha + t * p.depth * d_d - (d_final - d_acc) * d_d / one_minus;
+                    out.depth[k] += (w * d_d).masked_sum(st.take);
+                }
+                d_alpha = d_alpha + d_alpha_out * t_final / one_minus;
+                let d_out = ContributionLanes {
+                    alpha: st.take.select_f32(d_alpha, zero),
+                    color: d_col,
+                    valid: M32x8::splat(true),
+                };
+                let g = M::evaluate_adjoint_lanes(&pixels, &p.shade, &d_out, st.take);
+                g.write_words(&mut shade_words);
+                for (acc, v) in out.shade[k * words..(k + 1) * words].iter_mut().zip(&shade_words) {
+                    *acc += v;
+                }
+                t = st.take.select_f32(t * one_minus, t);
+            }
+        }
+    }
+    out
+}

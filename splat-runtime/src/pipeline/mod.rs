@@ -1,0 +1,289 @@
+//! The shared pipeline on the CPU, generic over any [`SplatMethod`]:
+//!
+//! 1. [`preprocess`]: `project` over all primitives, keep the visible ones (rayon over
+//!    primitives).
+//! 2. [`rasterize`]: per-tile depth-sorted lists (count, prefix sum, emit, sort, ranges).
+//! 3. [`shade`]: front-to-back blending per tile (rayon over tiles, 8 SIMD lanes over pixels),
+//!    tiles scheduled longest list first (trip-count binning).
+//! 4. [`backward`]: the front-to-back backward blend, a per-primitive reduction, then
+//!    `project`'s adjoint per primitive.
+
+pub mod backward;
+pub mod grid;
+pub mod preprocess;
+pub mod rasterize;
+pub mod shade;
+
+pub use backward::FrameGrad;
+use grid::TileGrid;
+use preprocess::Preprocessed;
+use rasterize::TileLists;
+
+use crate::flat::Flat;
+use crate::method::SplatMethod;
+use crate::types::{Camera, Projected};
+use rayon::prelude::*;
+use std::time::{Duration, Instant};
+
+/// Largest accepted image side, in pixels.
+pub const MAX_SIDE: u32 = 16384;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RenderOptions {
+    /// Tile side in pixels: 8, 16, 32 or 64.
+    pub tile_size: u32,
+    /// At most this many entries of each tile's list are blended (`None`: all).
+    pub p_max: Option<usize>,
+    /// Compute the alpha output.
+    pub alpha: bool,
+    /// Compute the expected-depth output.
+    pub depth: bool,
+}
+
+impl Default for RenderOptions {
+    fn default() -> Self {
+        RenderOptions { tile_size: 16, p_max: None, alpha: false, depth: false }
+    }
+}
+
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum RenderError {
+    #[error("image size {width}x{height} is not supported: each side must be 1..={MAX_SIDE} pixels")]
+    ImageSize { width: f32, height: f32 },
+    #[error("tile size {0} is not supported: use 8, 16, 32 or 64")]
+    TileSize(u32),
+    #[error("camera {0} must be finite and positive")]
+    Camera(&'static str),
+    #[error("primitive {0} has a NaN or infinite parameter")]
+    NonFinite(usize),
+    #[error("{count} tile intersections exceed the limit of {limit}: lower the resolution or the number of primitives")]
+    TooManyIntersections { count: u64, limit: u64 },
+    #[error("gradient `{what}` has {got} values, the frame has {want}")]
+    GradientSize { what: &'static str, got: usize, want: usize },
+}
+
+/// An image of `channels` interleaved f32 values per pixel, rows top to bottom.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Image {
+    pub width: u32,
+    pub height: u32,
+    pub channels: usize,
+    pub data: Vec<f32>,
+}
+
+#[derive(Clone, Debug, Default)]
+pub struct Stats {
+    pub primitives: usize,
+    pub visible: usize,
+    pub intersections: usize,
+    /// (pixel, primitive) evaluations on pixels still blending.
+    pub pairs: u64,
+    pub preprocess: Duration,
+    pub rasterize: Duration,
+    pub shade: Duration,
+}
+
+pub struct Frame {
+    pub color: Image,
+    pub alpha: Option<Image>,
+    pub depth: Option<Image>,
+    pub stats: Stats,
+}
+
+/// What the backward pass needs from the forward pass; only built by [`render_for_backward`].
+pub struct ForwardState<M: SplatMethod> {
+    pub grid: TileGrid,
+    pub pre: Preprocessed<M>,
+    pub lists: TileLists,
+    pub p_max: Option<usize>,
+    /// Final transmittance, color and sum of weight * depth per pixel.
+    pub transmittance: Vec<f32>,
+    pub color: Vec<f32>,
+    pub depth_acc: Vec<f32>,
+}
+
+impl<M: SplatMethod> ForwardState<M> {
+    /// The part of a tile's list that blending visits (`P_max`).
+    pub fn visited(&self, tile: usize) -> &[u32] {
+        let list = self.lists.list(tile);
+        &list[..self.p_max.map_or(list.len(), |p| p.min(list.len()))]
+    }
+}
+
+/// Per-primitive gradients and the camera's.
+pub struct Gradients<M: SplatMethod> {
+    pub params: Vec<M::Params>,
+    pub camera: Camera,
+}
+
+fn check(camera: &Camera, opts: &RenderOptions) -> Result<TileGrid, RenderError> {
+    if ![8, 16, 32, 64].contains(&opts.tile_size) {
+        return Err(RenderError::TileSize(opts.tile_size));
+    }
+    let size = camera.size;
+    let ok = |v: f32| v.is_finite() && v >= 1.0 && v <= MAX_SIDE as f32 && v.fract() == 0.0;
+    if !(ok(size.x) && ok(size.y)) {
+        return Err(RenderError::ImageSize { width: size.x, height: size.y });
+    }
+    if !(camera.focal.is_finite() && camera.focal.min_element() > 0.0) {
+        return Err(RenderError::Camera("focal lengths"));
+    }
+    if !camera.principal.is_finite() {
+        return Err(RenderError::Camera("principal point"));
+    }
+    if !(camera.rotation.is_finite() && camera.translation.is_finite()) {
+        return Err(RenderError::Camera("pose"));
+    }
+    Ok(TileGrid::new(size.x as u32, size.y as u32, opts.tile_size))
+}
+
+/// Renders the requested outputs; allocates nothing for a backward pass.
+pub fn render<M: SplatMethod>(
+    params: &[M::Params],
+    camera: &Camera,
+    opts: &RenderOptions,
+) -> Result<Frame, RenderError> {
+    forward::<M>(params, camera, opts, false).map(|(f, _)| f)
+}
+
+/// Renders and keeps what [`backward`] needs.
+pub fn render_for_backward<M: SplatMethod>(
+    params: &[M::Params],
+    camera: &Camera,
+    opts: &RenderOptions,
+) -> Result<(Frame, ForwardState<M>), RenderError> {
+    forward::<M>(params, camera, opts, true).map(|(f, s)| (f, s.expect("state kept")))
+}
+
+fn forward<M: SplatMethod>(
+    params: &[M::Params],
+    camera: &Camera,
+    opts: &RenderOptions,
+    keep: bool,
+) -> Result<(Frame, Option<ForwardState<M>>), RenderError> {
+    let grid = check(camera, opts)?;
+    if let Some(i) = params.par_iter().position_any(|p| !p.is_finite()) {
+        return Err(RenderError::NonFinite(i));
+    }
+    let mut stats = Stats { primitives: params.len(), ..Stats::default() };
+    let t0 = Instant::now();
+    let pre = preprocess::preprocess::<M>(params, camera, &grid);
+    stats.visible = pre.visible.len();
+    stats.preprocess = t0.elapsed();
+
+    let t1 = Instant::now();
+    let lists = rasterize::rasterize::<M>(&pre, &grid)?;
+    stats.intersections = lists.intersections();
+    stats.rasterize = t1.elapsed();
+
+    let t2 = Instant::now();
+    let capped = |t: usize| {
+        let l = lists.list(t);
+        &l[..opts.p_max.map_or(l.len(), |p| p.min(l.len()))]
+    };
+    // Trip-count binning: the longest lists start first so they do not finish last.
+    let mut order: Vec<u32> = (0..grid.tile_count() as u32).collect();
+    order.sort_by_key(|&t| std::cmp::Reverse(capped(t as usize).len()));
+    let want_depth = opts.depth || keep;
+    let tiles: Vec<(u32, shade::TileOutput)> = order
+        .par_iter()
+        .map(|&t| (t, shade::shade_tile::<M>(&grid, camera, t, capped(t as usize), &pre.projected, want_depth)))
+        .collect();
+    let (w, h) = (grid.width as usize, grid.height as usize);
+    let channels = M::Color::LEN;
+    let mut color = vec![0.0; w * h * channels];
+    let mut transmittance = vec![1.0; w * h];
+    let mut depth_acc = if want_depth { vec![0.0; w * h] } else { vec![] };
+    let s = grid.size as usize;
+    for (t, out) in &tiles {
+        stats.pairs += out.pairs;
+        let (tx, ty) = grid.tile_xy(*t);
+        for row in 0..s {
+            let y = ty as usize * s + row;
+            if y >= h {
+                break;
+            }
+            let x0 = tx as usize * s;
+            let n = s.min(w - x0);
+            let (src, dst) = (row * s, y * w + x0);
+            color[dst * channels..(dst + n) * channels]
+                .copy_from_slice(&out.color[src * channels..(src + n) * channels]);
+            transmittance[dst..dst + n].copy_from_slice(&out.transmittance[src..src + n]);
+            if want_depth {
+                depth_acc[dst..dst + n].copy_from_slice(&out.depth[src..src + n]);
+            }
+        }
+    }
+    stats.shade = t2.elapsed();
+
+    let image = |channels: usize, data: Vec<f32>| Image { width: grid.width, height: grid.height, channels, data };
+    let alpha = opts.alpha.then(|| image(1, transmittance.iter().map(|t| 1.0 - t).collect()));
+    let depth = opts.depth.then(|| {
+        let d = depth_acc.iter().zip(&transmittance).map(|(d, t)| if *t < 1.0 { d / (1.0 - t) } else { 0.0 });
+        image(1, d.collect())
+    });
+    let frame = Frame { color: image(channels, color.clone()), alpha, depth, stats };
+    let state = keep.then(|| ForwardState { grid, pre, lists, p_max: opts.p_max, transmittance, color, depth_acc });
+    Ok((frame, state))
+}
+
+/// Gradients of the parameters and the camera, given the gradient of each output.
+pub fn backward<M: SplatMethod>(
+    state: &ForwardState<M>,
+    params: &[M::Params],
+    camera: &Camera,
+    grad: &FrameGrad,
+) -> Result<Gradients<M>, RenderError> {
+    let pixels = (state.grid.width * state.grid.height) as usize;
+    let sizes = [
+        ("color", Some(grad.color.len()), pixels * M::Color::LEN),
+        ("alpha", grad.alpha.as_ref().map(Vec::len), pixels),
+        ("depth", grad.depth.as_ref().map(Vec::len), pixels),
+    ];
+    for (what, got, want) in sizes {
+        if let Some(got) = got.filter(|g| *g != want) {
+            return Err(RenderError::GradientSize { what, got, want });
+        }
+    }
+    let n = state.pre.projected.len();
+    let words = M::Shade::LEN;
+    let tiles: Vec<(u32, backward::TileGrads)> = (0..state.grid.tile_count() as u32)
+        .into_par_iter()
+        .map(|t| (t, backward::backward_tile::<M>(state, camera, grad, t)))
+        .collect();
+    // Reduce the per-entry slots per primitive.
+    let mut shade = vec![0.0f32; n * words];
+    let mut depth = vec![0.0f32; n];
+    for (t, g) in &tiles {
+        for (k, &prim) in state.visited(*t as usize).iter().enumerate() {
+            let p = prim as usize;
+            for w in 0..words {
+                shade[p * words + w] += g.shade[k * words + w];
+            }
+            depth[p] += g.depth[k];
+        }
+    }
+    let per_prim: Vec<(M::Params, Camera)> = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            let p = &state.pre.projected[i];
+            let d_shade = M::Shade::read_words(&shade[i * words..]);
+            if !p.visible || (depth[i] == 0.0 && shade[i * words..(i + 1) * words].iter().all(|v| *v == 0.0)) {
+                return (M::Params::default(), Camera::default());
+            }
+            let d_out = Projected { depth: depth[i], shade: d_shade, ..Projected::default() };
+            M::project_adjoint(&params[i], camera, &d_out)
+        })
+        .collect();
+    let mut camera_grad = Camera::default();
+    let mut param_grads = Vec::with_capacity(n);
+    for (p, c) in per_prim {
+        param_grads.push(p);
+        camera_grad.rotation += c.rotation;
+        camera_grad.translation += c.translation;
+        camera_grad.focal += c.focal;
+        camera_grad.principal += c.principal;
+        camera_grad.size += c.size;
+    }
+    Ok(Gradients { params: param_grads, camera: camera_grad })
+}

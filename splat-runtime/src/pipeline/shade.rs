@@ -1,0 +1,127 @@
+//! Stage 4: per tile, per group of eight pixels, blend the tile's list front to back.
+//!
+//! A group is eight consecutive pixels of one row of the tile; each lane carries its own
+//! transmittance and stops on its own (a lane is done once the next primitive would bring its
+//! transmittance to `T_MIN` or below, the gsplat rule). The loop leaves a group when every lane
+//! is done. `P_max` caps how many entries of a tile's list are visited.
+
+use super::grid::TileGrid;
+use crate::flat::Flat;
+use crate::lanes::{F32x8, LANES, M32x8};
+use crate::method::SplatMethod;
+use crate::types::{Camera, Projected};
+use glam::Vec2;
+
+/// Blending stops once transmittance would fall to this value.
+pub const T_MIN: f32 = 1e-4;
+
+/// What one tile's blend produced, in the tile's pixel order (row-major over the full tile,
+/// including pixels past the image edge, which stay zero).
+pub struct TileOutput {
+    pub color: Vec<f32>,
+    /// Final transmittance per pixel.
+    pub transmittance: Vec<f32>,
+    /// Sum of weight * depth per pixel (only when depth is requested).
+    pub depth: Vec<f32>,
+    /// Number of (pixel, primitive) evaluations on pixels still blending.
+    pub pairs: u64,
+}
+
+/// The pixel data of the eight pixels of a group, as lanes, and the lanes inside the image.
+pub fn group_pixels<M: SplatMethod>(
+    grid: &TileGrid,
+    camera: &Camera,
+    x0: u32,
+    y: u32,
+) -> (M::PixelLanes, M32x8) {
+    let mut lanes = M::PixelLanes::default();
+    let mut inside = [false; LANES];
+    let mut words = [0.0f32; 64];
+    assert!(M::Pixel::LEN <= words.len(), "pixel data larger than 64 words");
+    for (l, ok) in inside.iter_mut().enumerate() {
+        let x = x0 + l as u32;
+        *ok = x < grid.width && y < grid.height;
+        let pixel = M::pixel_info(Vec2::new(x as f32 + 0.5, y as f32 + 0.5), camera);
+        pixel.write_words(&mut words);
+        for (w, lane) in lanes.as_mut().iter_mut().enumerate() {
+            lane.0[l] = words[w];
+        }
+    }
+    (lanes, M32x8::from(inside))
+}
+
+/// One step of the blend for a group: which lanes take this primitive, and which stop here.
+pub struct Step {
+    pub alpha: F32x8,
+    /// Lanes that blend the primitive in.
+    pub take: M32x8,
+    /// Lanes that end before it.
+    pub stop: M32x8,
+}
+
+/// The blend rule shared by the forward and the backward pass (which must replay it exactly).
+#[inline(always)]
+pub fn step(alpha: F32x8, valid: M32x8, done: M32x8, t: F32x8) -> Step {
+    let live = valid & !done;
+    let next = t * (1.0 - alpha);
+    let stop = live & next.le(F32x8::splat(T_MIN));
+    Step { alpha, take: live & !stop, stop }
+}
+
+pub fn shade_tile<M: SplatMethod>(
+    grid: &TileGrid,
+    camera: &Camera,
+    tile: u32,
+    list: &[u32],
+    projected: &[Projected<M::Cull, M::Shade>],
+    want_depth: bool,
+) -> TileOutput {
+    let s = grid.size as usize;
+    let channels = M::Color::LEN;
+    let mut out = TileOutput {
+        color: vec![0.0; s * s * channels],
+        transmittance: vec![1.0; s * s],
+        depth: if want_depth { vec![0.0; s * s] } else { vec![] },
+        pairs: 0,
+    };
+    let (tx, ty) = grid.tile_xy(tile);
+    for row in 0..s {
+        for gx in (0..s).step_by(LANES) {
+            let (x0, y) = (tx * grid.size + gx as u32, ty * grid.size + row as u32);
+            let (pixels, inside) = group_pixels::<M>(grid, camera, x0, y);
+            let mut done = !inside;
+            let mut t = F32x8::splat(1.0);
+            let mut color = M::ColorLanes::default();
+            let mut depth = F32x8::splat(0.0);
+            for &prim in list {
+                if done.all() {
+                    break;
+                }
+                let p = &projected[prim as usize];
+                let c = M::evaluate_lanes(&pixels, &p.shade);
+                out.pairs += (!done).0.iter().filter(|&&m| m != 0).count() as u64;
+                let st = step(c.alpha, c.valid, done, t);
+                let w = st.take.select_f32(st.alpha * t, F32x8::splat(0.0));
+                for (acc, ch) in color.as_mut().iter_mut().zip(c.color.as_ref()) {
+                    *acc = *acc + w * *ch;
+                }
+                if want_depth {
+                    depth = depth + w * p.depth;
+                }
+                t = st.take.select_f32(t * (1.0 - st.alpha), t);
+                done = done | st.stop;
+            }
+            for l in 0..LANES {
+                let px = row * s + gx + l;
+                out.transmittance[px] = t.lane(l);
+                for (ch, v) in color.as_ref().iter().enumerate() {
+                    out.color[px * channels + ch] = v.lane(l);
+                }
+                if want_depth {
+                    out.depth[px] = depth.lane(l);
+                }
+            }
+        }
+    }
+    out
+}
