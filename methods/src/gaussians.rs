@@ -122,8 +122,17 @@ pub mod gs3d {
             depth: t.z,
             bbox_min: center - radius,
             bbox_max: center + radius,
-            cull: Cull { center, conic, max_power },
-            shade: Shade { center, conic, opacity, color: sh_color(p.sh, p.mean - cam_center) },
+            cull: Cull {
+                center,
+                conic,
+                max_power,
+            },
+            shade: Shade {
+                center,
+                conic,
+                opacity,
+                color: sh_color(p.sh, p.mean - cam_center),
+            },
         }
     }
 
@@ -145,6 +154,10 @@ pub mod gs3d {
         let d = px - s.center;
         let power = 0.5 * (s.conic.x * d.x * d.x + s.conic.z * d.y * d.y) + s.conic.y * d.x * d.y;
         let alpha = (s.opacity * (-power).exp()).min(0.99);
-        Contribution { alpha, color: s.color, valid: power >= 0.0 && alpha >= ALPHA_MIN }
+        Contribution {
+            alpha,
+            color: s.color,
+            valid: power >= 0.0 && alpha >= ALPHA_MIN,
+        }
     }
 }

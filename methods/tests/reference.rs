@@ -12,13 +12,26 @@ fn compare(name: &str, params: &[Params], cam: &Camera) {
     let words: Vec<Vec<f64>> = params.iter().map(common::param_words).collect();
     let reference = common::render(&words, &common::camera_words(cam));
     for tile_size in [8, 16] {
-        let opts = RenderOptions { tile_size, alpha: true, depth: true, ..Default::default() };
+        let opts = RenderOptions {
+            tile_size,
+            alpha: true,
+            depth: true,
+            ..Default::default()
+        };
         let frame = render::<Method>(params, cam, &opts).expect("render");
         let mut worst = 0.0f64;
         let outputs = [
             ("color", &frame.color.data, &reference.color),
-            ("alpha", &frame.alpha.as_ref().unwrap().data, &reference.alpha),
-            ("depth", &frame.depth.as_ref().unwrap().data, &reference.depth),
+            (
+                "alpha",
+                &frame.alpha.as_ref().unwrap().data,
+                &reference.alpha,
+            ),
+            (
+                "depth",
+                &frame.depth.as_ref().unwrap().data,
+                &reference.depth,
+            ),
         ];
         for (what, got, want) in outputs {
             assert_eq!(got.len(), want.len());
@@ -26,7 +39,10 @@ fn compare(name: &str, params: &[Params], cam: &Camera) {
                 let err = (*g as f64 - w).abs();
                 let bound = 1e-5 + 0.01 * w.abs();
                 worst = worst.max(err / bound);
-                assert!(err <= bound, "{name}, tile {tile_size}, {what}[{i}]: {g} vs reference {w}");
+                assert!(
+                    err <= bound,
+                    "{name}, tile {tile_size}, {what}[{i}]: {g} vs reference {w}"
+                );
             }
         }
         let coverage = reference.alpha.iter().sum::<f64>() / reference.alpha.len() as f64;

@@ -13,6 +13,12 @@ pub trait Flat: Copy + Default + Send + Sync + 'static {
     fn read_words(words: &[f32]) -> Self;
     /// False if any float in the value is NaN or infinite.
     fn is_finite(&self) -> bool;
+
+    /// Every word zero: the zero cotangent. (`Default` is not zero for every type: glam's
+    /// `Quat` and matrices default to the identity.)
+    fn zero() -> Self {
+        Self::read_words(&vec![0.0; Self::LEN])
+    }
 }
 
 impl Flat for f32 {

@@ -23,5 +23,8 @@ pub use flat::Flat;
 pub use glam;
 pub use lanes::{F32x8, I32x8, LANES, LaneArray, M32x8, U32x8};
 pub use method::{GeneratedSource, SplatMethod};
-pub use pipeline::{Frame, FrameGrad, Gradients, Image, RenderError, RenderOptions, backward, render, render_for_backward};
+pub use pipeline::{
+    Frame, FrameGrad, Gradients, Image, RenderError, RenderOptions, backward, render,
+    render_for_backward,
+};
 pub use types::{Camera, Contribution, ContributionLanes, Projected, Tile};

@@ -26,6 +26,15 @@ pub struct Camera {
 }
 
 impl Camera {
+    /// All fields zero: the zero cotangent of a camera (`default()` has an identity rotation).
+    pub const ZERO: Camera = Camera {
+        rotation: Mat3::ZERO,
+        translation: Vec3::ZERO,
+        focal: Vec2::ZERO,
+        principal: Vec2::ZERO,
+        size: Vec2::ZERO,
+    };
+
     /// The camera centre in world space, `-rotation^T * translation`.
     pub fn center(&self) -> Vec3 {
         -(self.rotation.transpose() * self.translation)

@@ -12,7 +12,12 @@ pub const T_MIN: f64 = 1e-4;
 
 /// A camera's slots in the order the compiler flattens `Camera`.
 pub fn camera_words(c: &Camera) -> Vec<f64> {
-    let mut v: Vec<f64> = c.rotation.to_cols_array().iter().map(|x| *x as f64).collect();
+    let mut v: Vec<f64> = c
+        .rotation
+        .to_cols_array()
+        .iter()
+        .map(|x| *x as f64)
+        .collect();
     v.extend(c.translation.to_array().map(f64::from));
     v.extend(c.focal.to_array().map(f64::from));
     v.extend(c.principal.to_array().map(f64::from));
@@ -101,9 +106,21 @@ pub fn camera(width: u32, height: u32) -> Camera {
 
 /// A random Gaussian whose centre projects to `pixel` at depth `z` (camera at the origin,
 /// looking down +z, as built by [`camera`]).
-pub fn gaussian_at(rng: &mut fastrand::Rng, cam: &Camera, pixel: Vec2, z: f32, log_scale: f32) -> Params {
+pub fn gaussian_at(
+    rng: &mut fastrand::Rng,
+    cam: &Camera,
+    pixel: Vec2,
+    z: f32,
+    log_scale: f32,
+) -> Params {
     let ndc = (pixel - cam.principal) / cam.focal;
-    let q = Quat::from_xyzw(rng.f32() - 0.5, rng.f32() - 0.5, rng.f32() - 0.5, rng.f32() + 0.2).normalize();
+    let q = Quat::from_xyzw(
+        rng.f32() - 0.5,
+        rng.f32() - 0.5,
+        rng.f32() - 0.5,
+        rng.f32() + 0.2,
+    )
+    .normalize();
     let mut sh = [Vec3::ZERO; 16];
     for c in sh.iter_mut() {
         *c = Vec3::new(rng.f32() - 0.5, rng.f32() - 0.5, rng.f32() - 0.5) * 0.6;

@@ -39,7 +39,10 @@ pub fn backward_tile<M: SplatMethod>(
     let grid = &state.grid;
     let list = state.visited(tile as usize);
     let (s, channels, words) = (grid.size, M::Color::LEN, M::Shade::LEN);
-    let mut out = TileGrads { shade: vec![0.0; list.len() * words], depth: vec![0.0; list.len()] };
+    let mut out = TileGrads {
+        shade: vec![0.0; list.len() * words],
+        depth: vec![0.0; list.len()],
+    };
     let (tx, ty) = grid.tile_xy(tile);
     let want_depth = grad.depth.is_some();
     let mut shade_words = vec![0.0f32; words];
@@ -72,7 +75,8 @@ pub fn backward_tile<M: SplatMethod>(
                 d_final = lanes_of(|l| state.depth_acc[px(l)]);
                 let gd = lanes_of(|l| g[px(l)]);
                 d_d = has.select_f32(gd / a_safe, F32x8::splat(0.0));
-                d_alpha_out = d_alpha_out - has.select_f32(gd * d_final / (a_safe * a_safe), F32x8::splat(0.0));
+                d_alpha_out = d_alpha_out
+                    - has.select_f32(gd * d_final / (a_safe * a_safe), F32x8::splat(0.0));
             }
             let mut done = !inside;
             let mut t = F32x8::splat(1.0);
@@ -115,7 +119,10 @@ pub fn backward_tile<M: SplatMethod>(
                 };
                 let g = M::evaluate_adjoint_lanes(&pixels, &p.shade, &d_out, st.take);
                 g.write_words(&mut shade_words);
-                for (acc, v) in out.shade[k * words..(k + 1) * words].iter_mut().zip(&shade_words) {
+                for (acc, v) in out.shade[k * words..(k + 1) * words]
+                    .iter_mut()
+                    .zip(&shade_words)
+                {
                     *acc += v;
                 }
                 t = st.take.select_f32(t * one_minus, t);

@@ -30,7 +30,13 @@ impl TileRect {
 
 impl TileGrid {
     pub fn new(width: u32, height: u32, size: u32) -> Self {
-        TileGrid { size, width, height, tiles_x: width.div_ceil(size), tiles_y: height.div_ceil(size) }
+        TileGrid {
+            size,
+            width,
+            height,
+            tiles_x: width.div_ceil(size),
+            tiles_y: height.div_ceil(size),
+        }
     }
 
     pub fn tile_count(&self) -> usize {
@@ -45,7 +51,9 @@ impl TileGrid {
         }
         // First and last pixel column / row whose centre is inside the box.
         let first = (min - 0.5).ceil().max(Vec2::ZERO);
-        let last = (max - 0.5).floor().min(Vec2::new(self.width as f32 - 1.0, self.height as f32 - 1.0));
+        let last = (max - 0.5)
+            .floor()
+            .min(Vec2::new(self.width as f32 - 1.0, self.height as f32 - 1.0));
         if first.x > last.x || first.y > last.y {
             return None;
         }
@@ -85,16 +93,37 @@ mod tests {
         assert_eq!((g.tiles_x, g.tiles_y), (3, 2));
         // Pixel centres 15.5 and 16.5 straddle the boundary between tiles 0 and 1.
         let r = g.rect(Vec2::new(15.2, 0.0), Vec2::new(16.6, 3.0)).unwrap();
-        assert_eq!(r, TileRect { x0: 0, y0: 0, x1: 2, y1: 1 });
+        assert_eq!(
+            r,
+            TileRect {
+                x0: 0,
+                y0: 0,
+                x1: 2,
+                y1: 1
+            }
+        );
         // A box between two pixel centres holds no pixel.
         assert_eq!(g.rect(Vec2::new(3.6, 3.6), Vec2::new(4.4, 4.4)), None);
         // Off screen and non-finite boxes hold none either.
         assert_eq!(g.rect(Vec2::new(-9.0, -9.0), Vec2::new(-1.0, -1.0)), None);
         assert_eq!(g.rect(Vec2::new(f32::NAN, 0.0), Vec2::new(1.0, 1.0)), None);
         // Clipped to the image.
-        let r = g.rect(Vec2::new(-100.0, -100.0), Vec2::new(1e6, 1e6)).unwrap();
-        assert_eq!(r, TileRect { x0: 0, y0: 0, x1: 3, y1: 2 });
+        let r = g
+            .rect(Vec2::new(-100.0, -100.0), Vec2::new(1e6, 1e6))
+            .unwrap();
+        assert_eq!(
+            r,
+            TileRect {
+                x0: 0,
+                y0: 0,
+                x1: 3,
+                y1: 2
+            }
+        );
         let b = g.bounds(2, 1);
-        assert_eq!((b.min, b.max), (Vec2::new(32.5, 16.5), Vec2::new(39.5, 19.5)));
+        assert_eq!(
+            (b.min, b.max),
+            (Vec2::new(32.5, 16.5), Vec2::new(39.5, 19.5))
+        );
     }
 }

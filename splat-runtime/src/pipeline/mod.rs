@@ -42,13 +42,20 @@ pub struct RenderOptions {
 
 impl Default for RenderOptions {
     fn default() -> Self {
-        RenderOptions { tile_size: 16, p_max: None, alpha: false, depth: false }
+        RenderOptions {
+            tile_size: 16,
+            p_max: None,
+            alpha: false,
+            depth: false,
+        }
     }
 }
 
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum RenderError {
-    #[error("image size {width}x{height} is not supported: each side must be 1..={MAX_SIDE} pixels")]
+    #[error(
+        "image size {width}x{height} is not supported: each side must be 1..={MAX_SIDE} pixels"
+    )]
     ImageSize { width: f32, height: f32 },
     #[error("tile size {0} is not supported: use 8, 16, 32 or 64")]
     TileSize(u32),
@@ -56,10 +63,16 @@ pub enum RenderError {
     Camera(&'static str),
     #[error("primitive {0} has a NaN or infinite parameter")]
     NonFinite(usize),
-    #[error("{count} tile intersections exceed the limit of {limit}: lower the resolution or the number of primitives")]
+    #[error(
+        "{count} tile intersections exceed the limit of {limit}: lower the resolution or the number of primitives"
+    )]
     TooManyIntersections { count: u64, limit: u64 },
     #[error("gradient `{what}` has {got} values, the frame has {want}")]
-    GradientSize { what: &'static str, got: usize, want: usize },
+    GradientSize {
+        what: &'static str,
+        got: usize,
+        want: usize,
+    },
 }
 
 /// An image of `channels` interleaved f32 values per pixel, rows top to bottom.
@@ -123,7 +136,10 @@ fn check(camera: &Camera, opts: &RenderOptions) -> Result<TileGrid, RenderError>
     let size = camera.size;
     let ok = |v: f32| v.is_finite() && v >= 1.0 && v <= MAX_SIDE as f32 && v.fract() == 0.0;
     if !(ok(size.x) && ok(size.y)) {
-        return Err(RenderError::ImageSize { width: size.x, height: size.y });
+        return Err(RenderError::ImageSize {
+            width: size.x,
+            height: size.y,
+        });
     }
     if !(camera.focal.is_finite() && camera.focal.min_element() > 0.0) {
         return Err(RenderError::Camera("focal lengths"));
@@ -165,7 +181,10 @@ fn forward<M: SplatMethod>(
     if let Some(i) = params.par_iter().position_any(|p| !p.is_finite()) {
         return Err(RenderError::NonFinite(i));
     }
-    let mut stats = Stats { primitives: params.len(), ..Stats::default() };
+    let mut stats = Stats {
+        primitives: params.len(),
+        ..Stats::default()
+    };
     let t0 = Instant::now();
     let pre = preprocess::preprocess::<M>(params, camera, &grid);
     stats.visible = pre.visible.len();
@@ -187,7 +206,19 @@ fn forward<M: SplatMethod>(
     let want_depth = opts.depth || keep;
     let tiles: Vec<(u32, shade::TileOutput)> = order
         .par_iter()
-        .map(|&t| (t, shade::shade_tile::<M>(&grid, camera, t, capped(t as usize), &pre.projected, want_depth)))
+        .map(|&t| {
+            (
+                t,
+                shade::shade_tile::<M>(
+                    &grid,
+                    camera,
+                    t,
+                    capped(t as usize),
+                    &pre.projected,
+                    want_depth,
+                ),
+            )
+        })
         .collect();
     let (w, h) = (grid.width as usize, grid.height as usize);
     let channels = M::Color::LEN;
@@ -216,14 +247,37 @@ fn forward<M: SplatMethod>(
     }
     stats.shade = t2.elapsed();
 
-    let image = |channels: usize, data: Vec<f32>| Image { width: grid.width, height: grid.height, channels, data };
-    let alpha = opts.alpha.then(|| image(1, transmittance.iter().map(|t| 1.0 - t).collect()));
+    let image = |channels: usize, data: Vec<f32>| Image {
+        width: grid.width,
+        height: grid.height,
+        channels,
+        data,
+    };
+    let alpha = opts
+        .alpha
+        .then(|| image(1, transmittance.iter().map(|t| 1.0 - t).collect()));
     let depth = opts.depth.then(|| {
-        let d = depth_acc.iter().zip(&transmittance).map(|(d, t)| if *t < 1.0 { d / (1.0 - t) } else { 0.0 });
+        let d = depth_acc
+            .iter()
+            .zip(&transmittance)
+            .map(|(d, t)| if *t < 1.0 { d / (1.0 - t) } else { 0.0 });
         image(1, d.collect())
     });
-    let frame = Frame { color: image(channels, color.clone()), alpha, depth, stats };
-    let state = keep.then(|| ForwardState { grid, pre, lists, p_max: opts.p_max, transmittance, color, depth_acc });
+    let frame = Frame {
+        color: image(channels, color.clone()),
+        alpha,
+        depth,
+        stats,
+    };
+    let state = keep.then(|| ForwardState {
+        grid,
+        pre,
+        lists,
+        p_max: opts.p_max,
+        transmittance,
+        color,
+        depth_acc,
+    });
     Ok((frame, state))
 }
 
@@ -268,14 +322,24 @@ pub fn backward<M: SplatMethod>(
         .map(|i| {
             let p = &state.pre.projected[i];
             let d_shade = M::Shade::read_words(&shade[i * words..]);
-            if !p.visible || (depth[i] == 0.0 && shade[i * words..(i + 1) * words].iter().all(|v| *v == 0.0)) {
-                return (M::Params::default(), Camera::default());
+            if !p.visible
+                || (depth[i] == 0.0 && shade[i * words..(i + 1) * words].iter().all(|v| *v == 0.0))
+            {
+                return (M::Params::zero(), Camera::ZERO);
             }
-            let d_out = Projected { depth: depth[i], shade: d_shade, ..Projected::default() };
+            // Only depth and shade carry a gradient; the rest of the cotangent is zero.
+            let d_out = Projected {
+                visible: false,
+                depth: depth[i],
+                bbox_min: glam::Vec2::ZERO,
+                bbox_max: glam::Vec2::ZERO,
+                cull: M::Cull::zero(),
+                shade: d_shade,
+            };
             M::project_adjoint(&params[i], camera, &d_out)
         })
         .collect();
-    let mut camera_grad = Camera::default();
+    let mut camera_grad = Camera::ZERO;
     let mut param_grads = Vec::with_capacity(n);
     for (p, c) in per_prim {
         param_grads.push(p);
@@ -285,5 +349,8 @@ pub fn backward<M: SplatMethod>(
         camera_grad.principal += c.principal;
         camera_grad.size += c.size;
     }
-    Ok(Gradients { params: param_grads, camera: camera_grad })
+    Ok(Gradients {
+        params: param_grads,
+        camera: camera_grad,
+    })
 }

@@ -13,7 +13,11 @@ pub struct Preprocessed<M: SplatMethod> {
     pub visible: Vec<(u32, TileRect)>,
 }
 
-pub fn preprocess<M: SplatMethod>(params: &[M::Params], camera: &Camera, grid: &TileGrid) -> Preprocessed<M> {
+pub fn preprocess<M: SplatMethod>(
+    params: &[M::Params],
+    camera: &Camera,
+    grid: &TileGrid,
+) -> Preprocessed<M> {
     let projected: Vec<_> = params.par_iter().map(|p| M::project(p, camera)).collect();
     let visible = projected
         .par_iter()

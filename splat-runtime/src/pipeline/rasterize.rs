@@ -52,7 +52,10 @@ fn key(tile: u32, depth: f32) -> u64 {
     ((tile as u64) << 32) | depth.max(0.0).to_bits() as u64
 }
 
-pub fn rasterize<M: SplatMethod>(pre: &Preprocessed<M>, grid: &TileGrid) -> Result<TileLists, RenderError> {
+pub fn rasterize<M: SplatMethod>(
+    pre: &Preprocessed<M>,
+    grid: &TileGrid,
+) -> Result<TileLists, RenderError> {
     let counts: Vec<u32> = pre
         .visible
         .par_iter()
@@ -64,7 +67,10 @@ pub fn rasterize<M: SplatMethod>(pre: &Preprocessed<M>, grid: &TileGrid) -> Resu
         .collect();
     let total: u64 = counts.iter().map(|&c| c as u64).sum();
     if total > MAX_INTERSECTIONS {
-        return Err(RenderError::TooManyIntersections { count: total, limit: MAX_INTERSECTIONS });
+        return Err(RenderError::TooManyIntersections {
+            count: total,
+            limit: MAX_INTERSECTIONS,
+        });
     }
     // Replicate: each primitive writes its keys into its own slice.
     let mut entries = vec![(0u64, 0u32); total as usize];
@@ -75,14 +81,17 @@ pub fn rasterize<M: SplatMethod>(pre: &Preprocessed<M>, grid: &TileGrid) -> Resu
         slices.push(head);
         rest = tail;
     }
-    pre.visible.par_iter().zip(slices).for_each(|((i, rect), out)| {
-        let p = &pre.projected[*i as usize];
-        let mut k = 0;
-        for_each_kept_tile::<M>(grid, rect, &p.cull, |t| {
-            out[k] = (key(t, p.depth), *i);
-            k += 1;
+    pre.visible
+        .par_iter()
+        .zip(slices)
+        .for_each(|((i, rect), out)| {
+            let p = &pre.projected[*i as usize];
+            let mut k = 0;
+            for_each_kept_tile::<M>(grid, rect, &p.cull, |t| {
+                out[k] = (key(t, p.depth), *i);
+                k += 1;
+            });
         });
-    });
     // Ties in depth are broken by primitive index, so the order is deterministic.
     entries.par_sort_unstable();
     let mut ranges = vec![0u32; grid.tile_count() + 1];
@@ -93,5 +102,8 @@ pub fn rasterize<M: SplatMethod>(pre: &Preprocessed<M>, grid: &TileGrid) -> Resu
     for t in 1..ranges.len() {
         ranges[t] = ranges[t].max(ranges[t - 1]);
     }
-    Ok(TileLists { prims: entries.into_iter().map(|(_, p)| p).collect(), ranges })
+    Ok(TileLists {
+        prims: entries.into_iter().map(|(_, p)| p).collect(),
+        ranges,
+    })
 }

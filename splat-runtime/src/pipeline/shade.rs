@@ -37,7 +37,10 @@ pub fn group_pixels<M: SplatMethod>(
     let mut lanes = M::PixelLanes::default();
     let mut inside = [false; LANES];
     let mut words = [0.0f32; 64];
-    assert!(M::Pixel::LEN <= words.len(), "pixel data larger than 64 words");
+    assert!(
+        M::Pixel::LEN <= words.len(),
+        "pixel data larger than 64 words"
+    );
     for (l, ok) in inside.iter_mut().enumerate() {
         let x = x0 + l as u32;
         *ok = x < grid.width && y < grid.height;
@@ -65,7 +68,11 @@ pub fn step(alpha: F32x8, valid: M32x8, done: M32x8, t: F32x8) -> Step {
     let live = valid & !done;
     let next = t * (1.0 - alpha);
     let stop = live & next.le(F32x8::splat(T_MIN));
-    Step { alpha, take: live & !stop, stop }
+    Step {
+        alpha,
+        take: live & !stop,
+        stop,
+    }
 }
 
 pub fn shade_tile<M: SplatMethod>(

@@ -181,7 +181,7 @@ pub fn method_impl(module: &syn::Ident, kernels: &[Kernel], diag: &Diag) -> Opti
     let project_adjoint = if project.adjoint.is_some() {
         quote! { project_adjoint(#(#project_call,)* *d_out) }
     } else {
-        quote! { (<#p_t as ::core::default::Default>::default(), <#rt::Camera as ::core::default::Default>::default()) }
+        quote! { (<#p_t as #rt::Flat>::zero(), #rt::Camera::ZERO) }
     };
     let tile_cull_body = match tile_cull {
         Some(tc) => {
@@ -247,7 +247,7 @@ pub fn method_impl(module: &syn::Ident, kernels: &[Kernel], diag: &Diag) -> Opti
     let eval_adjoint = if evaluate.adjoint.is_some() {
         quote! { evaluate_adjoint(#(#eval_call,)* *d_out).1 }
     } else {
-        quote! { <#s_t as ::core::default::Default>::default() }
+        quote! { <#s_t as #rt::Flat>::zero() }
     };
     let lanes_adjoint = if evaluate.adjoint.is_some() {
         quote! {
@@ -256,7 +256,7 @@ pub fn method_impl(module: &syn::Ident, kernels: &[Kernel], diag: &Diag) -> Opti
             #shade_from_bars
         }
     } else {
-        quote! { <#s_t as ::core::default::Default>::default() }
+        quote! { <#s_t as #rt::Flat>::zero() }
     };
     let (has_tc, has_pi) = (tile_cull.is_some(), pixel_info.is_some());
     let (np, nc) = (idx(np), idx(nc));
