@@ -10,8 +10,10 @@
 //! - [`math`]: branch-free `exp` / `ln` shared by the scalar and lane code paths.
 //! - [`prelude`]: what a method module imports.
 //! - [`pipeline`]: the CPU pipeline (preprocess, rasterize, shade, backward).
+//! - [`io`]: PLY scenes, JSON cameras, PNG / EXR / NPY outputs (atomic writes).
 
 pub mod flat;
+pub mod io;
 pub mod lanes;
 pub mod math;
 pub mod method;

@@ -263,21 +263,22 @@ fn forward<M: SplatMethod>(
             .map(|(d, t)| if *t < 1.0 { d / (1.0 - t) } else { 0.0 });
         image(1, d.collect())
     });
-    let frame = Frame {
-        color: image(channels, color.clone()),
-        alpha,
-        depth,
-        stats,
-    };
+    // Only a render kept for the backward pass pays for a second copy of the color.
     let state = keep.then(|| ForwardState {
         grid,
         pre,
         lists,
         p_max: opts.p_max,
         transmittance,
-        color,
+        color: color.clone(),
         depth_acc,
     });
+    let frame = Frame {
+        color: image(channels, color),
+        alpha,
+        depth,
+        stats,
+    };
     Ok((frame, state))
 }
 

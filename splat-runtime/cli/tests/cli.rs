@@ -1,0 +1,251 @@
+//! The `splat` command end to end: the default render, every output format, the PLY round
+//! trip, and every kind of bad input (clear error, non-zero exit, no output file).
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn splat(args: &[&str], dir: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_splat"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("run splat")
+}
+
+fn ok(out: &Output) -> String {
+    let stdout = String::from_utf8_lossy(&out.stdout).to_string();
+    assert!(
+        out.status.success(),
+        "stdout:\n{stdout}\nstderr:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    stdout
+}
+
+/// Asserts a failure whose message contains `needle`, and that `out_file` was not created.
+fn fails(out: &Output, needle: &str, out_file: &Path) {
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success(),
+        "expected failure, got success; stdout: {}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    assert!(
+        stderr.contains(needle),
+        "stderr does not mention `{needle}`:\n{stderr}"
+    );
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(
+        !out_file.exists(),
+        "a partial output {} was left behind",
+        out_file.display()
+    );
+}
+
+fn read_npy(path: &Path) -> (Vec<usize>, Vec<f32>) {
+    let bytes = std::fs::read(path).unwrap();
+    assert_eq!(&bytes[..8], b"\x93NUMPY\x01\x00");
+    let len = u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
+    let header = std::str::from_utf8(&bytes[10..10 + len]).unwrap();
+    assert_eq!((10 + len) % 64, 0, "header padded to 64 bytes");
+    let shape_text = header
+        .split("'shape': (")
+        .nth(1)
+        .unwrap()
+        .split(')')
+        .next()
+        .unwrap();
+    let shape: Vec<usize> = shape_text
+        .split(',')
+        .filter_map(|s| s.trim().parse().ok())
+        .collect();
+    let data = bytes[10 + len..]
+        .chunks(4)
+        .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
+        .collect();
+    (shape, data)
+}
+
+fn temp() -> tempfile::TempDir {
+    tempfile::tempdir().unwrap()
+}
+
+#[test]
+fn renders_the_default_scene() {
+    let dir = temp();
+    let stdout = ok(&splat(
+        &["render", "--width", "160", "--height", "120"],
+        dir.path(),
+    ));
+    assert!(
+        stdout.contains("primitives")
+            && stdout.contains("intersections")
+            && stdout.contains("shade")
+    );
+    let png = dir.path().join("render.png");
+    let bytes = std::fs::read(&png).unwrap();
+    assert_eq!(&bytes[1..4], b"PNG");
+}
+
+#[test]
+fn npy_holds_color_then_alpha_then_depth() {
+    let dir = temp();
+    ok(&splat(
+        &[
+            "render", "--width", "64", "--height", "48", "--alpha", "--depth", "--out", "f.npy",
+        ],
+        dir.path(),
+    ));
+    let (shape, data) = read_npy(&dir.path().join("f.npy"));
+    assert_eq!(shape, [48, 64, 5]);
+    assert_eq!(data.len(), 48 * 64 * 5);
+    // The planet covers the centre: alpha near 1 and a depth near 5 there.
+    let centre = (24 * 64 + 32) * 5;
+    assert!(
+        data[centre + 3] > 0.9 && (4.0..7.0).contains(&data[centre + 4]),
+        "{:?}",
+        &data[centre..centre + 5]
+    );
+    ok(&splat(
+        &[
+            "render", "--width", "64", "--height", "48", "--depth", "--out", "f.exr",
+        ],
+        dir.path(),
+    ));
+    assert!(dir.path().join("f.exr").exists() && dir.path().join("f.depth.exr").exists());
+}
+
+#[test]
+fn ply_round_trip_renders_the_same_image() {
+    let dir = temp();
+    ok(&splat(
+        &["scene", "--out", "planet.ply", "--camera-out", "cam.json"],
+        dir.path(),
+    ));
+    ok(&splat(&["render", "--out", "a.npy"], dir.path()));
+    ok(&splat(
+        &[
+            "render",
+            "--scene",
+            "planet.ply",
+            "--camera",
+            "cam.json",
+            "--out",
+            "b.npy",
+        ],
+        dir.path(),
+    ));
+    assert_eq!(
+        read_npy(&dir.path().join("a.npy")),
+        read_npy(&dir.path().join("b.npy"))
+    );
+}
+
+fn write(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, bytes).unwrap();
+    p
+}
+
+#[test]
+fn bad_scenes_are_refused_clearly() {
+    let dir = temp();
+    ok(&splat(&["scene", "--out", "good.ply"], dir.path()));
+    let good = std::fs::read(dir.path().join("good.ply")).unwrap();
+    let out = dir.path().join("out.png");
+    let render = |scene: &str| {
+        splat(
+            &["render", "--scene", scene, "--out", "out.png"],
+            dir.path(),
+        )
+    };
+
+    write(dir.path(), "truncated.ply", &good[..good.len() - 100]);
+    fails(&render("truncated.ply"), "truncated", &out);
+
+    let text = String::from_utf8_lossy(&good).replacen(
+        "property float scale_1\n",
+        "property float scale_x\n",
+        1,
+    );
+    write(dir.path(), "missing.ply", text.as_bytes());
+    fails(&render("missing.ply"), "missing property `scale_1`", &out);
+
+    write(dir.path(), "garbage.ply", b"not a ply at all");
+    fails(&render("garbage.ply"), "not a PLY", &out);
+
+    let header_end = good.windows(11).position(|w| w == b"end_header\n").unwrap() + 11;
+    let mut nan = good.clone();
+    nan[header_end + 4..header_end + 8].copy_from_slice(&f32::NAN.to_le_bytes());
+    write(dir.path(), "nan.ply", &nan);
+    fails(&render("nan.ply"), "vertex 0: property `y`", &out);
+
+    fails(&render("does-not-exist.ply"), "cannot read", &out);
+}
+
+#[test]
+fn bad_cameras_and_options_are_refused_clearly() {
+    let dir = temp();
+    ok(&splat(
+        &["scene", "--out", "s.ply", "--camera-out", "cam.json"],
+        dir.path(),
+    ));
+    let cam = std::fs::read_to_string(dir.path().join("cam.json")).unwrap();
+    let out = dir.path().join("out.png");
+    let render = |extra: &[&str]| {
+        let mut args = vec!["render", "--out", "out.png"];
+        args.extend_from_slice(extra);
+        splat(&args, dir.path())
+    };
+
+    write(
+        dir.path(),
+        "zero.json",
+        cam.replace("\"width\": 800", "\"width\": 0").as_bytes(),
+    );
+    fails(
+        &render(&["--camera", "zero.json"]),
+        "image size 0x600",
+        &out,
+    );
+    write(
+        dir.path(),
+        "huge.json",
+        cam.replace("\"width\": 800", "\"width\": 1000000")
+            .as_bytes(),
+    );
+    fails(
+        &render(&["--camera", "huge.json"]),
+        "image size 1000000x600",
+        &out,
+    );
+    write(
+        dir.path(),
+        "fish.json",
+        cam.replace("pinhole", "fisheye").as_bytes(),
+    );
+    fails(
+        &render(&["--camera", "fish.json"]),
+        "camera model `fisheye`",
+        &out,
+    );
+    write(dir.path(), "broken.json", b"{\"width\": ");
+    fails(
+        &render(&["--camera", "broken.json"]),
+        "not valid JSON",
+        &out,
+    );
+    fails(
+        &render(&["--camera", "nope.json"]),
+        "cannot read camera",
+        &out,
+    );
+    fails(&render(&["--width", "0"]), "image size 0x600", &out);
+    fails(&render(&["--tile", "7"]), "tile size 7", &out);
+    let bad_ext = dir.path().join("out.bmp");
+    fails(
+        &splat(&["render", "--out", "out.bmp"], dir.path()),
+        "unknown extension",
+        &bad_ext,
+    );
+}

@@ -1,0 +1,147 @@
+//! Cameras as JSON:
+//! `{"width": W, "height": H, "fx": .., "fy": .., "cx": .., "cy": ..,
+//!   "world_to_camera": [[4 rows of 4]], "model": "pinhole"}` (row-major, OpenCV convention).
+
+use crate::pipeline::MAX_SIDE;
+use crate::types::Camera;
+use glam::{Mat3, Vec2, Vec3};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraFile {
+    pub width: u32,
+    pub height: u32,
+    pub fx: f32,
+    pub fy: f32,
+    pub cx: f32,
+    pub cy: f32,
+    pub world_to_camera: [[f32; 4]; 4],
+    #[serde(default = "pinhole")]
+    pub model: String,
+}
+
+fn pinhole() -> String {
+    "pinhole".into()
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum CameraError {
+    #[error("cannot read camera {path}: {source}")]
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
+    #[error("camera {path} is not valid JSON for a camera: {source}")]
+    Json {
+        path: String,
+        source: serde_json::Error,
+    },
+    #[error("camera model `{0}` is not supported (supported: pinhole)")]
+    Model(String),
+    #[error("camera image size {0}x{1} is out of range (1..={MAX_SIDE} per side)")]
+    Size(u32, u32),
+    #[error("camera {0} must be finite and positive")]
+    Intrinsics(&'static str),
+    #[error("camera world_to_camera must be finite with last row [0, 0, 0, 1]")]
+    Pose,
+}
+
+impl CameraFile {
+    pub fn to_camera(&self) -> Result<Camera, CameraError> {
+        if self.model != "pinhole" {
+            return Err(CameraError::Model(self.model.clone()));
+        }
+        let side = |v: u32| (1..=MAX_SIDE).contains(&v);
+        if !side(self.width) || !side(self.height) {
+            return Err(CameraError::Size(self.width, self.height));
+        }
+        if !(self.fx.is_finite() && self.fy.is_finite() && self.fx > 0.0 && self.fy > 0.0) {
+            return Err(CameraError::Intrinsics("focal lengths fx, fy"));
+        }
+        if !(self.cx.is_finite() && self.cy.is_finite()) {
+            return Err(CameraError::Intrinsics("principal point cx, cy"));
+        }
+        let m = self.world_to_camera;
+        let finite = m.iter().flatten().all(|v| v.is_finite());
+        if !finite || m[3] != [0.0, 0.0, 0.0, 1.0] {
+            return Err(CameraError::Pose);
+        }
+        let col = |c: usize| Vec3::new(m[0][c], m[1][c], m[2][c]);
+        Ok(Camera {
+            rotation: Mat3::from_cols(col(0), col(1), col(2)),
+            translation: col(3),
+            focal: Vec2::new(self.fx, self.fy),
+            principal: Vec2::new(self.cx, self.cy),
+            size: Vec2::new(self.width as f32, self.height as f32),
+        })
+    }
+
+    pub fn from_camera(c: &Camera) -> CameraFile {
+        let r = c.rotation;
+        let t = c.translation;
+        let row = |i: usize| [r.x_axis[i], r.y_axis[i], r.z_axis[i], t[i]];
+        CameraFile {
+            width: c.size.x as u32,
+            height: c.size.y as u32,
+            fx: c.focal.x,
+            fy: c.focal.y,
+            cx: c.principal.x,
+            cy: c.principal.y,
+            world_to_camera: [row(0), row(1), row(2), [0.0, 0.0, 0.0, 1.0]],
+            model: pinhole(),
+        }
+    }
+}
+
+pub fn read(path: &Path) -> Result<Camera, CameraError> {
+    let text = std::fs::read_to_string(path).map_err(|source| CameraError::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    let file: CameraFile = serde_json::from_str(&text).map_err(|source| CameraError::Json {
+        path: path.display().to_string(),
+        source,
+    })?;
+    file.to_camera()
+}
+
+pub fn write(path: &Path, camera: &Camera) -> std::io::Result<()> {
+    let json =
+        serde_json::to_string_pretty(&CameraFile::from_camera(camera)).expect("serializable");
+    super::write_atomic(path, |w| w.write_all(json.as_bytes()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn json_round_trip_and_validation() {
+        let cam = Camera {
+            rotation: Mat3::from_rotation_y(0.3),
+            translation: Vec3::new(0.1, -0.2, 3.0),
+            focal: Vec2::new(500.0, 510.0),
+            principal: Vec2::new(320.0, 240.0),
+            size: Vec2::new(640.0, 480.0),
+        };
+        let file = CameraFile::from_camera(&cam);
+        let json = serde_json::to_string(&file).unwrap();
+        let back: CameraFile = serde_json::from_str(&json).unwrap();
+        assert_eq!(back.to_camera().unwrap(), cam);
+
+        let mut bad = file.clone();
+        bad.model = "fisheye".into();
+        assert!(bad.to_camera().unwrap_err().to_string().contains("fisheye"));
+        let mut bad = file.clone();
+        bad.width = 0;
+        assert!(matches!(bad.to_camera(), Err(CameraError::Size(0, 480))));
+        let mut bad = file.clone();
+        bad.fx = f32::NAN;
+        assert!(matches!(bad.to_camera(), Err(CameraError::Intrinsics(_))));
+        let mut bad = file;
+        bad.world_to_camera[3] = [0.0, 0.0, 1.0, 1.0];
+        assert!(matches!(bad.to_camera(), Err(CameraError::Pose)));
+    }
+}

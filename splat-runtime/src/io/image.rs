@@ -1,0 +1,170 @@
+//! Writing rendered outputs, chosen by extension: `.png` (8-bit, color clamped to [0, 1]),
+//! `.exr` (float32), `.npy` (float32, H x W x C: color channels, then alpha, then depth).
+//! PNG and EXR hold color (and alpha as a fourth channel when rendered); the depth goes to a
+//! sibling file `<stem>.depth.<ext>`. Every file is written atomically.
+
+use crate::pipeline::{Frame, Image};
+use std::path::{Path, PathBuf};
+
+#[derive(Debug, thiserror::Error)]
+pub enum ImageError {
+    #[error("output `{0}`: unknown extension (use .png, .exr or .npy)")]
+    Extension(String),
+    #[error("{0}-channel color cannot be stored as PNG or EXR (1, 3 or 4 channels): use .npy")]
+    Channels(usize),
+    #[error("cannot write {path}: {source}")]
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
+}
+
+fn io(path: &Path) -> impl FnOnce(std::io::Error) -> ImageError + '_ {
+    move |source| ImageError::Io {
+        path: path.display().to_string(),
+        source,
+    }
+}
+
+/// Writes the frame to `path` (and the depth sibling for PNG / EXR); returns every path written.
+pub fn write_frame(path: &Path, frame: &Frame) -> Result<Vec<PathBuf>, ImageError> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    match ext.as_str() {
+        "npy" => {
+            let mut planes = vec![&frame.color];
+            planes.extend(frame.alpha.as_ref());
+            planes.extend(frame.depth.as_ref());
+            let stacked = stack(&planes);
+            write_npy(path, &stacked).map_err(io(path))?;
+            Ok(vec![path.to_path_buf()])
+        }
+        "png" | "exr" => {
+            let color = match (&frame.alpha, frame.color.channels) {
+                (Some(a), 3) => stack(&[&frame.color, a]),
+                _ => frame.color.clone(),
+            };
+            write_picture(path, &ext, &color, false)?;
+            let mut written = vec![path.to_path_buf()];
+            if let Some(d) = &frame.depth {
+                let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("out");
+                let depth_path = path.with_file_name(format!("{stem}.depth.{ext}"));
+                write_picture(&depth_path, &ext, d, true)?;
+                written.push(depth_path);
+            }
+            Ok(written)
+        }
+        _ => Err(ImageError::Extension(path.display().to_string())),
+    }
+}
+
+/// Interleaves images of the same size channel-wise.
+pub fn stack(images: &[&Image]) -> Image {
+    let (w, h) = (images[0].width, images[0].height);
+    let channels: usize = images.iter().map(|i| i.channels).sum();
+    let mut data = Vec::with_capacity((w * h) as usize * channels);
+    for p in 0..(w * h) as usize {
+        for im in images {
+            data.extend_from_slice(&im.data[p * im.channels..(p + 1) * im.channels]);
+        }
+    }
+    Image {
+        width: w,
+        height: h,
+        channels,
+        data,
+    }
+}
+
+fn write_picture(path: &Path, ext: &str, im: &Image, normalize: bool) -> Result<(), ImageError> {
+    if ![1, 3, 4].contains(&im.channels) {
+        return Err(ImageError::Channels(im.channels));
+    }
+    // Depth as PNG is scaled to [0, 1] over its visible range (zero where nothing was hit).
+    let data: Vec<f32> = if normalize && ext == "png" {
+        let (lo, hi) = im
+            .data
+            .iter()
+            .filter(|v| **v > 0.0)
+            .fold((f32::INFINITY, 0.0f32), |(lo, hi), v| {
+                (lo.min(*v), hi.max(*v))
+            });
+        let span = if hi > lo { hi - lo } else { 1.0 };
+        im.data
+            .iter()
+            .map(|v| {
+                if *v > 0.0 {
+                    1.0 - 0.9 * (v - lo) / span
+                } else {
+                    0.0
+                }
+            })
+            .collect()
+    } else {
+        im.data.clone()
+    };
+    let (w, h) = (im.width, im.height);
+    let dynamic = if ext == "png" {
+        let bytes: Vec<u8> = data
+            .iter()
+            .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
+            .collect();
+        match im.channels {
+            1 => {
+                image::DynamicImage::ImageLuma8(image::ImageBuffer::from_raw(w, h, bytes).unwrap())
+            }
+            3 => image::DynamicImage::ImageRgb8(image::ImageBuffer::from_raw(w, h, bytes).unwrap()),
+            _ => {
+                image::DynamicImage::ImageRgba8(image::ImageBuffer::from_raw(w, h, bytes).unwrap())
+            }
+        }
+    } else {
+        let rgb: Vec<f32> = match im.channels {
+            1 => data.iter().flat_map(|v| [*v, *v, *v]).collect(),
+            _ => data,
+        };
+        match im.channels {
+            4 => {
+                image::DynamicImage::ImageRgba32F(image::ImageBuffer::from_raw(w, h, rgb).unwrap())
+            }
+            _ => image::DynamicImage::ImageRgb32F(image::ImageBuffer::from_raw(w, h, rgb).unwrap()),
+        }
+    };
+    let format = if ext == "png" {
+        image::ImageFormat::Png
+    } else {
+        image::ImageFormat::OpenExr
+    };
+    super::write_atomic(path, |w| {
+        let mut buf = std::io::Cursor::new(Vec::new());
+        dynamic
+            .write_to(&mut buf, format)
+            .map_err(std::io::Error::other)?;
+        w.write_all(buf.get_ref())
+    })
+    .map_err(io(path))
+}
+
+/// NumPy `.npy` v1.0, little-endian float32, shape (H, W, C).
+pub fn write_npy(path: &Path, im: &Image) -> std::io::Result<()> {
+    super::write_atomic(path, |w| {
+        let dict = format!(
+            "{{'descr': '<f4', 'fortran_order': False, 'shape': ({}, {}, {}), }}",
+            im.height, im.width, im.channels
+        );
+        // Magic (6) + version (2) + length (2) + dict + padding + '\n' is a multiple of 64.
+        let unpadded = 10 + dict.len() + 1;
+        let pad = unpadded.div_ceil(64) * 64 - unpadded;
+        let header = format!("{dict}{}\n", " ".repeat(pad));
+        w.write_all(b"\x93NUMPY\x01\x00")?;
+        w.write_all(&(header.len() as u16).to_le_bytes())?;
+        w.write_all(header.as_bytes())?;
+        for v in &im.data {
+            w.write_all(&v.to_le_bytes())?;
+        }
+        Ok(())
+    })
+}

@@ -1,0 +1,394 @@
+//! The INRIA 3D Gaussian Splatting PLY format: binary little endian, one `vertex` element
+//! with float properties `x y z [nx ny nz] f_dc_0..2 f_rest_0..(3(K-1)-1) opacity scale_0..2
+//! rot_0..3`, `f_rest` channel-major (all R coefficients, then G, then B). The SH degree
+//! (0 to 3) is read from the number of `f_rest` properties.
+
+use glam::{Vec3, Vec4};
+use std::collections::HashMap;
+use std::io::{BufRead, Write};
+use std::path::Path;
+
+/// One Gaussian as stored: raw (pre-activation) values.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StoredGaussian {
+    pub mean: Vec3,
+    /// ln of the scales.
+    pub log_scale: Vec3,
+    /// Quaternion (w, x, y, z), not necessarily normalized.
+    pub rotation: Vec4,
+    /// Opacity before the sigmoid.
+    pub opacity_logit: f32,
+    /// SH coefficients by basis function (16 for degree 3; unused ones are zero).
+    pub sh: [Vec3; 16],
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct GaussianCloud {
+    pub sh_degree: u32,
+    pub gaussians: Vec<StoredGaussian>,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum PlyError {
+    #[error("cannot read {path}: {source}")]
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
+    #[error("not a PLY file (it must start with `ply`)")]
+    NotPly,
+    #[error("unsupported PLY format `{0}`: only binary_little_endian 1.0 is supported")]
+    Format(String),
+    #[error("malformed PLY header: {0}")]
+    Header(String),
+    #[error("missing property `{0}` in the vertex element")]
+    Missing(String),
+    #[error("{0} f_rest properties do not match an SH degree (0, 9, 24 or 45 expected)")]
+    ShCount(usize),
+    #[error("truncated PLY: expected {expected} vertices, the file holds data for {found}")]
+    Truncated { expected: usize, found: usize },
+    #[error("vertex {index}: property `{property}` is {value} (NaN or infinite)")]
+    NonFinite {
+        index: usize,
+        property: String,
+        value: f32,
+    },
+}
+
+/// Number of SH coefficients per channel for a degree.
+pub fn sh_coefficients(degree: u32) -> usize {
+    ((degree + 1) * (degree + 1)) as usize
+}
+
+#[derive(Clone, Copy)]
+enum Kind {
+    F32,
+    F64,
+    U8,
+}
+
+impl Kind {
+    fn parse(s: &str) -> Option<Kind> {
+        match s {
+            "float" | "float32" => Some(Kind::F32),
+            "double" | "float64" => Some(Kind::F64),
+            "uchar" | "uint8" => Some(Kind::U8),
+            _ => None,
+        }
+    }
+    fn size(self) -> usize {
+        match self {
+            Kind::F32 => 4,
+            Kind::F64 => 8,
+            Kind::U8 => 1,
+        }
+    }
+}
+
+pub fn read(path: &Path) -> Result<GaussianCloud, PlyError> {
+    let io = |source| PlyError::Io {
+        path: path.display().to_string(),
+        source,
+    };
+    let file = std::fs::File::open(path).map_err(io)?;
+    parse(&mut std::io::BufReader::new(file))
+}
+
+/// Parses a PLY stream (header, then the vertex data).
+pub fn parse(r: &mut impl BufRead) -> Result<GaussianCloud, PlyError> {
+    let mut line = String::new();
+    let mut next_line = |r: &mut dyn BufRead| -> Result<String, PlyError> {
+        line.clear();
+        let n = r
+            .read_line(&mut line)
+            .map_err(|e| PlyError::Header(e.to_string()))?;
+        if n == 0 {
+            return Err(PlyError::Header(
+                "the header ends before `end_header`".into(),
+            ));
+        }
+        Ok(line.trim_end().to_string())
+    };
+    if next_line(r).map_err(|_| PlyError::NotPly)? != "ply" {
+        return Err(PlyError::NotPly);
+    }
+    let mut count = None;
+    let mut props: Vec<(String, Kind)> = vec![];
+    let mut in_vertex = false;
+    loop {
+        let l = next_line(r)?;
+        let words: Vec<&str> = l.split_whitespace().collect();
+        match words.as_slice() {
+            ["end_header"] => break,
+            ["format", f, v] => {
+                if *f != "binary_little_endian" || *v != "1.0" {
+                    return Err(PlyError::Format(format!("{f} {v}")));
+                }
+            }
+            ["comment", ..] | ["obj_info", ..] | [] => {}
+            ["element", name, n] => {
+                if count.is_some() && in_vertex {
+                    return Err(PlyError::Header(format!(
+                        "element `{name}` after `vertex` is not supported"
+                    )));
+                }
+                in_vertex = *name == "vertex";
+                if !in_vertex {
+                    return Err(PlyError::Header(format!(
+                        "element `{name}` before `vertex` is not supported"
+                    )));
+                }
+                count = Some(
+                    n.parse::<usize>()
+                        .map_err(|_| PlyError::Header(format!("bad vertex count `{n}`")))?,
+                );
+            }
+            ["property", "list", ..] => {
+                return Err(PlyError::Header("list properties are not supported".into()));
+            }
+            ["property", ty, name] => {
+                let kind = Kind::parse(ty).ok_or_else(|| {
+                    PlyError::Header(format!("property type `{ty}` is not supported"))
+                })?;
+                props.push((name.to_string(), kind));
+            }
+            _ => return Err(PlyError::Header(format!("unexpected line `{l}`"))),
+        }
+    }
+    let count = count.ok_or_else(|| PlyError::Header("no `element vertex`".into()))?;
+    let index: HashMap<&str, usize> = props
+        .iter()
+        .enumerate()
+        .map(|(i, (n, _))| (n.as_str(), i))
+        .collect();
+    let find = |n: &str| {
+        index
+            .get(n)
+            .copied()
+            .ok_or_else(|| PlyError::Missing(n.into()))
+    };
+    let rest = (0..)
+        .take_while(|k| index.contains_key(format!("f_rest_{k}").as_str()))
+        .count();
+    let sh_degree = match rest {
+        0 => 0,
+        9 => 1,
+        24 => 2,
+        45 => 3,
+        n => return Err(PlyError::ShCount(n)),
+    };
+    let per_channel = sh_coefficients(sh_degree) - 1;
+    let mean = [find("x")?, find("y")?, find("z")?];
+    let dc = [find("f_dc_0")?, find("f_dc_1")?, find("f_dc_2")?];
+    let rest_idx: Vec<usize> = (0..rest)
+        .map(|k| find(&format!("f_rest_{k}")))
+        .collect::<Result<_, _>>()?;
+    let opacity = find("opacity")?;
+    let scale = [find("scale_0")?, find("scale_1")?, find("scale_2")?];
+    let rot = [
+        find("rot_0")?,
+        find("rot_1")?,
+        find("rot_2")?,
+        find("rot_3")?,
+    ];
+
+    let offsets: Vec<usize> = props
+        .iter()
+        .scan(0, |at, (_, k)| {
+            let o = *at;
+            *at += k.size();
+            Some(o)
+        })
+        .collect();
+    let stride: usize = props.iter().map(|(_, k)| k.size()).sum();
+    let mut data = Vec::new();
+    r.read_to_end(&mut data)
+        .map_err(|e| PlyError::Header(e.to_string()))?;
+    let found = data.len() / stride.max(1);
+    if found < count {
+        return Err(PlyError::Truncated {
+            expected: count,
+            found,
+        });
+    }
+    let mut gaussians = Vec::with_capacity(count);
+    for i in 0..count {
+        let row = &data[i * stride..(i + 1) * stride];
+        let get = |p: usize| -> Result<f32, PlyError> {
+            let o = offsets[p];
+            let v = match props[p].1 {
+                Kind::F32 => f32::from_le_bytes(row[o..o + 4].try_into().unwrap()),
+                Kind::F64 => f64::from_le_bytes(row[o..o + 8].try_into().unwrap()) as f32,
+                Kind::U8 => row[o] as f32,
+            };
+            if !v.is_finite() {
+                return Err(PlyError::NonFinite {
+                    index: i,
+                    property: props[p].0.clone(),
+                    value: v,
+                });
+            }
+            Ok(v)
+        };
+        let v3 = |ix: [usize; 3]| -> Result<Vec3, PlyError> {
+            Ok(Vec3::new(get(ix[0])?, get(ix[1])?, get(ix[2])?))
+        };
+        let mut sh = [Vec3::ZERO; 16];
+        sh[0] = v3(dc)?;
+        for k in 0..per_channel {
+            sh[k + 1] = v3([
+                rest_idx[k],
+                rest_idx[per_channel + k],
+                rest_idx[2 * per_channel + k],
+            ])?;
+        }
+        gaussians.push(StoredGaussian {
+            mean: v3(mean)?,
+            log_scale: v3(scale)?,
+            rotation: Vec4::new(get(rot[0])?, get(rot[1])?, get(rot[2])?, get(rot[3])?),
+            opacity_logit: get(opacity)?,
+            sh,
+        });
+    }
+    Ok(GaussianCloud {
+        sh_degree,
+        gaussians,
+    })
+}
+
+/// Writes the cloud in the INRIA layout (with zero normals), atomically.
+pub fn write(path: &Path, cloud: &GaussianCloud) -> std::io::Result<()> {
+    super::write_atomic(path, |w| write_to(w, cloud))
+}
+
+pub fn write_to(w: &mut dyn Write, cloud: &GaussianCloud) -> std::io::Result<()> {
+    let per_channel = sh_coefficients(cloud.sh_degree) - 1;
+    let mut header = format!(
+        "ply\nformat binary_little_endian 1.0\nelement vertex {}\n",
+        cloud.gaussians.len()
+    );
+    let mut names: Vec<String> = [
+        "x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    names.extend((0..3 * per_channel).map(|k| format!("f_rest_{k}")));
+    names.extend(
+        [
+            "opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3",
+        ]
+        .map(String::from),
+    );
+    for n in &names {
+        header.push_str(&format!("property float {n}\n"));
+    }
+    header.push_str("end_header\n");
+    w.write_all(header.as_bytes())?;
+    for g in &cloud.gaussians {
+        let mut row: Vec<f32> = vec![g.mean.x, g.mean.y, g.mean.z, 0.0, 0.0, 0.0];
+        row.extend(g.sh[0].to_array());
+        for ch in 0..3 {
+            row.extend((0..per_channel).map(|k| g.sh[k + 1][ch]));
+        }
+        row.push(g.opacity_logit);
+        row.extend(g.log_scale.to_array());
+        row.extend(g.rotation.to_array());
+        for v in row {
+            w.write_all(&v.to_le_bytes())?;
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cloud(degree: u32) -> GaussianCloud {
+        let mut rng = 0.5f32;
+        let mut next = || {
+            rng = (rng * 3.7 + 0.13).fract();
+            rng - 0.5
+        };
+        let gaussians = (0..5)
+            .map(|_| {
+                let mut sh = [Vec3::ZERO; 16];
+                for c in sh.iter_mut().take(sh_coefficients(degree)) {
+                    *c = Vec3::new(next(), next(), next());
+                }
+                StoredGaussian {
+                    mean: Vec3::new(next(), next(), next()),
+                    log_scale: Vec3::new(next(), next(), next()),
+                    rotation: Vec4::new(1.0, next(), next(), next()),
+                    opacity_logit: next(),
+                    sh,
+                }
+            })
+            .collect();
+        GaussianCloud {
+            sh_degree: degree,
+            gaussians,
+        }
+    }
+
+    #[test]
+    fn round_trips_every_sh_degree() {
+        for degree in 0..=3 {
+            let c = cloud(degree);
+            let mut bytes = vec![];
+            write_to(&mut bytes, &c).unwrap();
+            let back = parse(&mut bytes.as_slice()).unwrap();
+            assert_eq!(back, c);
+        }
+    }
+
+    #[test]
+    fn channel_major_rest_coefficients() {
+        // Degree 1: f_rest_0..2 are R of the three degree-1 functions, then G, then B.
+        let mut c = cloud(1);
+        c.gaussians.truncate(1);
+        c.gaussians[0].sh[1] = Vec3::new(1.0, 2.0, 3.0);
+        c.gaussians[0].sh[2] = Vec3::new(4.0, 5.0, 6.0);
+        c.gaussians[0].sh[3] = Vec3::new(7.0, 8.0, 9.0);
+        let mut bytes = vec![];
+        write_to(&mut bytes, &c).unwrap();
+        let body = &bytes[bytes.len() - 4 * (9 + 9 + 8)..];
+        let f = |k: usize| f32::from_le_bytes(body[4 * k..4 * k + 4].try_into().unwrap());
+        let rest: Vec<f32> = (9..18).map(f).collect();
+        assert_eq!(rest, [1.0, 4.0, 7.0, 2.0, 5.0, 8.0, 3.0, 6.0, 9.0]);
+    }
+
+    #[test]
+    fn malformed_files_get_clear_errors() {
+        let c = cloud(3);
+        let mut bytes = vec![];
+        write_to(&mut bytes, &c).unwrap();
+        let truncated = &bytes[..bytes.len() - 10];
+        let e = parse(&mut &truncated[..]).unwrap_err().to_string();
+        assert!(e.contains("truncated") && e.contains("expected 5"), "{e}");
+
+        let text = String::from_utf8_lossy(&bytes)
+            .replace("property float opacity\n", "property float opacitx\n");
+        let e = parse(&mut text.as_bytes()).unwrap_err().to_string();
+        assert!(e.contains("missing property `opacity`"), "{e}");
+
+        let e = parse(&mut &b"hello"[..]).unwrap_err().to_string();
+        assert!(e.contains("not a PLY"), "{e}");
+
+        let ascii = b"ply\nformat ascii 1.0\nelement vertex 0\nend_header\n";
+        assert!(
+            parse(&mut &ascii[..])
+                .unwrap_err()
+                .to_string()
+                .contains("ascii")
+        );
+
+        let mut nan = c.clone();
+        nan.gaussians[2].mean.y = f32::NAN;
+        let mut bytes = vec![];
+        write_to(&mut bytes, &nan).unwrap();
+        let e = parse(&mut bytes.as_slice()).unwrap_err().to_string();
+        assert!(e.contains("vertex 2") && e.contains("`y`"), "{e}");
+    }
+}
