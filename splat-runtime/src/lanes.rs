@@ -59,6 +59,20 @@ fn zip<T: Copy, U: Copy, V: Copy + Default>(
     out
 }
 
+/// True where the CPU has AVX2 and FMA: hot loops are then run in functions compiled for
+/// them (the results are the same bits: no operation is fused without being asked to).
+#[inline]
+pub fn has_avx2() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
 #[inline(always)]
 fn mask(b: bool) -> u32 {
     (b as u32).wrapping_neg()
@@ -373,6 +387,11 @@ impl M32x8 {
     #[inline(always)]
     pub fn all(self) -> bool {
         self.0.iter().fold(!0, |acc, &m| acc & m) != 0
+    }
+    /// Number of set lanes.
+    #[inline(always)]
+    pub fn count(self) -> u32 {
+        self.0.iter().map(|m| m & 1).sum()
     }
     /// Lane `i` as a bool.
     #[inline(always)]

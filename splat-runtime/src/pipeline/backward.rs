@@ -30,7 +30,34 @@ fn lanes_of(f: impl Fn(usize) -> f32) -> F32x8 {
     F32x8(std::array::from_fn(f))
 }
 
+/// The backward blend of one tile, in code compiled for AVX2 + FMA where the CPU has them.
 pub fn backward_tile<M: SplatMethod>(
+    state: &ForwardState<M>,
+    camera: &Camera,
+    grad: &FrameGrad,
+    tile: u32,
+) -> TileGrads {
+    #[cfg(target_arch = "x86_64")]
+    if crate::lanes::has_avx2() {
+        // SAFETY: the CPU supports the features the function is compiled for.
+        return unsafe { backward_tile_avx2::<M>(state, camera, grad, tile) };
+    }
+    backward_tile_body::<M>(state, camera, grad, tile)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn backward_tile_avx2<M: SplatMethod>(
+    state: &ForwardState<M>,
+    camera: &Camera,
+    grad: &FrameGrad,
+    tile: u32,
+) -> TileGrads {
+    backward_tile_body::<M>(state, camera, grad, tile)
+}
+
+#[inline(always)]
+fn backward_tile_body<M: SplatMethod>(
     state: &ForwardState<M>,
     camera: &Camera,
     grad: &FrameGrad,

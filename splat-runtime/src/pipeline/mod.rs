@@ -127,6 +127,18 @@ impl<M: SplatMethod> ForwardState<M> {
 pub struct Gradients<M: SplatMethod> {
     pub params: Vec<M::Params>,
     pub camera: Camera,
+    pub stats: BackwardStats,
+}
+
+/// Time of each backward stage.
+#[derive(Clone, Debug, Default)]
+pub struct BackwardStats {
+    /// The backward blend over tiles (including `evaluate`'s adjoint).
+    pub blend: Duration,
+    /// Summing the per-intersection gradients per primitive.
+    pub reduce: Duration,
+    /// `project`'s adjoint per primitive.
+    pub project: Duration,
 }
 
 fn check(camera: &Camera, opts: &RenderOptions) -> Result<TileGrid, RenderError> {
@@ -302,11 +314,14 @@ pub fn backward<M: SplatMethod>(
     }
     let n = state.pre.projected.len();
     let words = M::Shade::LEN;
+    let t0 = Instant::now();
     let tiles: Vec<(u32, backward::TileGrads)> = (0..state.grid.tile_count() as u32)
         .into_par_iter()
         .map(|t| (t, backward::backward_tile::<M>(state, camera, grad, t)))
         .collect();
+    let blend = t0.elapsed();
     // Reduce the per-entry slots per primitive.
+    let t1 = Instant::now();
     let mut shade = vec![0.0f32; n * words];
     let mut depth = vec![0.0f32; n];
     for (t, g) in &tiles {
@@ -318,6 +333,8 @@ pub fn backward<M: SplatMethod>(
             depth[p] += g.depth[k];
         }
     }
+    let reduce = t1.elapsed();
+    let t2 = Instant::now();
     let per_prim: Vec<(M::Params, Camera)> = (0..n)
         .into_par_iter()
         .map(|i| {
@@ -350,8 +367,14 @@ pub fn backward<M: SplatMethod>(
         camera_grad.principal += c.principal;
         camera_grad.size += c.size;
     }
+    let stats = BackwardStats {
+        blend,
+        reduce,
+        project: t2.elapsed(),
+    };
     Ok(Gradients {
         params: param_grads,
         camera: camera_grad,
+        stats,
     })
 }

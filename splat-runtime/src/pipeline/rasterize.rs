@@ -1,12 +1,15 @@
-//! Stage 3: tile lists. Count the tiles each visible primitive keeps, prefix-sum the counts,
-//! emit one (tile, depth) key per kept tile, sort, and find each tile's range. Counting and
-//! emitting go through the same [`for_each_kept_tile`], so they cannot disagree.
+//! Stage 3: tile lists. Count the tiles each visible primitive keeps (per tile, with atomic
+//! counters), prefix-sum the counts into tile ranges, emit every (primitive, tile) pair into its
+//! tile's range, then sort each tile's range by depth. Counting and emitting go through the
+//! same [`for_each_kept_tile`], so they cannot disagree. Bucketing by tile first replaces a
+//! global sort of all intersections by many small independent sorts.
 
 use super::RenderError;
 use super::grid::{TileGrid, TileRect};
 use super::preprocess::Preprocessed;
 use crate::method::SplatMethod;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 
 /// Largest number of (primitive, tile) intersections a frame may have: lists are indexed
 /// with `u32`.
@@ -46,64 +49,61 @@ pub fn for_each_kept_tile<M: SplatMethod>(
     }
 }
 
-/// Sort key: tile in the high half, depth in the low half. Depths are positive finite floats
-/// (checked by the caller), whose bit patterns sort like the values.
-fn key(tile: u32, depth: f32) -> u64 {
-    ((tile as u64) << 32) | depth.max(0.0).to_bits() as u64
+/// Depth in the high half, primitive in the low half: sorting these orders a tile's list
+/// front to back, ties broken by index. Depths are positive (the near plane), and the bit
+/// patterns of positive floats sort like their values.
+fn entry(depth: f32, prim: u32) -> u64 {
+    ((depth.max(0.0).to_bits() as u64) << 32) | prim as u64
 }
 
 pub fn rasterize<M: SplatMethod>(
     pre: &Preprocessed<M>,
     grid: &TileGrid,
 ) -> Result<TileLists, RenderError> {
-    let counts: Vec<u32> = pre
-        .visible
-        .par_iter()
-        .map(|(i, rect)| {
-            let mut n = 0;
-            for_each_kept_tile::<M>(grid, rect, &pre.projected[*i as usize].cull, |_| n += 1);
-            n
-        })
-        .collect();
-    let total: u64 = counts.iter().map(|&c| c as u64).sum();
+    let tiles = grid.tile_count();
+    let counts: Vec<AtomicU32> = (0..tiles).map(|_| AtomicU32::new(0)).collect();
+    let total = AtomicU64::new(0);
+    pre.visible.par_iter().for_each(|(i, rect)| {
+        let mut n = 0u64;
+        for_each_kept_tile::<M>(grid, rect, &pre.projected[*i as usize].cull, |t| {
+            counts[t as usize].fetch_add(1, Ordering::Relaxed);
+            n += 1;
+        });
+        total.fetch_add(n, Ordering::Relaxed);
+    });
+    let total = total.into_inner();
     if total > MAX_INTERSECTIONS {
         return Err(RenderError::TooManyIntersections {
             count: total,
             limit: MAX_INTERSECTIONS,
         });
     }
-    // Replicate: each primitive writes its keys into its own slice.
-    let mut entries = vec![(0u64, 0u32); total as usize];
-    let mut slices = Vec::with_capacity(counts.len());
+    let mut ranges = Vec::with_capacity(tiles + 1);
+    ranges.push(0u32);
+    for c in &counts {
+        ranges.push(ranges.last().unwrap() + c.load(Ordering::Relaxed));
+    }
+    // Emit: each pair takes the next free slot of its tile.
+    let cursors: Vec<AtomicU32> = ranges[..tiles].iter().map(|&r| AtomicU32::new(r)).collect();
+    let slots: Vec<AtomicU64> = (0..total).map(|_| AtomicU64::new(0)).collect();
+    pre.visible.par_iter().for_each(|(i, rect)| {
+        let p = &pre.projected[*i as usize];
+        let e = entry(p.depth, *i);
+        for_each_kept_tile::<M>(grid, rect, &p.cull, |t| {
+            let k = cursors[t as usize].fetch_add(1, Ordering::Relaxed);
+            slots[k as usize].store(e, Ordering::Relaxed);
+        });
+    });
+    let mut entries: Vec<u64> = slots.into_iter().map(AtomicU64::into_inner).collect();
+    // Sort every tile's range (the slot order within a tile depended on thread timing).
+    let mut segments = Vec::with_capacity(tiles);
     let mut rest = entries.as_mut_slice();
-    for &c in &counts {
-        let (head, tail) = rest.split_at_mut(c as usize);
-        slices.push(head);
+    for t in 0..tiles {
+        let (head, tail) = rest.split_at_mut((ranges[t + 1] - ranges[t]) as usize);
+        segments.push(head);
         rest = tail;
     }
-    pre.visible
-        .par_iter()
-        .zip(slices)
-        .for_each(|((i, rect), out)| {
-            let p = &pre.projected[*i as usize];
-            let mut k = 0;
-            for_each_kept_tile::<M>(grid, rect, &p.cull, |t| {
-                out[k] = (key(t, p.depth), *i);
-                k += 1;
-            });
-        });
-    // Ties in depth are broken by primitive index, so the order is deterministic.
-    entries.par_sort_unstable();
-    let mut ranges = vec![0u32; grid.tile_count() + 1];
-    for (k, (key, _)) in entries.iter().enumerate() {
-        ranges[(key >> 32) as usize + 1] = k as u32 + 1;
-    }
-    // Tiles without entries take the end of the previous tile.
-    for t in 1..ranges.len() {
-        ranges[t] = ranges[t].max(ranges[t - 1]);
-    }
-    Ok(TileLists {
-        prims: entries.into_iter().map(|(_, p)| p).collect(),
-        ranges,
-    })
+    segments.into_par_iter().for_each(|s| s.sort_unstable());
+    let prims = entries.into_par_iter().map(|e| e as u32).collect();
+    Ok(TileLists { prims, ranges })
 }

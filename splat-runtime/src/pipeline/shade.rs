@@ -75,7 +75,38 @@ pub fn step(alpha: F32x8, valid: M32x8, done: M32x8, t: F32x8) -> Step {
     }
 }
 
+/// Blends one tile, in code compiled for AVX2 + FMA where the CPU has them.
 pub fn shade_tile<M: SplatMethod>(
+    grid: &TileGrid,
+    camera: &Camera,
+    tile: u32,
+    list: &[u32],
+    projected: &[Projected<M::Cull, M::Shade>],
+    want_depth: bool,
+) -> TileOutput {
+    #[cfg(target_arch = "x86_64")]
+    if crate::lanes::has_avx2() {
+        // SAFETY: the CPU supports the features the function is compiled for.
+        return unsafe { shade_tile_avx2::<M>(grid, camera, tile, list, projected, want_depth) };
+    }
+    shade_tile_body::<M>(grid, camera, tile, list, projected, want_depth)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn shade_tile_avx2<M: SplatMethod>(
+    grid: &TileGrid,
+    camera: &Camera,
+    tile: u32,
+    list: &[u32],
+    projected: &[Projected<M::Cull, M::Shade>],
+    want_depth: bool,
+) -> TileOutput {
+    shade_tile_body::<M>(grid, camera, tile, list, projected, want_depth)
+}
+
+#[inline(always)]
+fn shade_tile_body<M: SplatMethod>(
     grid: &TileGrid,
     camera: &Camera,
     tile: u32,
@@ -106,7 +137,7 @@ pub fn shade_tile<M: SplatMethod>(
                 }
                 let p = &projected[prim as usize];
                 let c = M::evaluate_lanes(&pixels, &p.shade);
-                out.pairs += (!done).0.iter().filter(|&&m| m != 0).count() as u64;
+                out.pairs += (!done).count() as u64;
                 let st = step(c.alpha, c.valid, done, t);
                 let w = st.take.select_f32(st.alpha * t, F32x8::splat(0.0));
                 for (acc, ch) in color.as_mut().iter_mut().zip(c.color.as_ref()) {

@@ -1,0 +1,158 @@
+//! 3DGS on the CPU at scale: a procedural scene of 1M Gaussians rendered at 1920x1080.
+//! Prints per-stage times, visible primitives, intersections, evaluated (pixel, primitive)
+//! pairs, ns per pair per core, peak memory, the backward pass, and the P_max trade-off
+//! (time and PSNR against the uncapped render, in the same run).
+//!
+//! `cargo bench -p splat-methods --bench render [-- N WIDTH HEIGHT]`
+
+use splat_methods::gs3d::{Method, Params};
+use splat_runtime::glam::{Mat3, Vec2, Vec3, Vec4};
+use splat_runtime::{Camera, FrameGrad, RenderOptions, backward, render, render_for_backward};
+use std::time::Instant;
+
+/// Gaussians filling the view between depth 4 and 30, with 60% of them in a central cluster
+/// so that the middle tiles get the deep lists that make `P_max` matter, as in real scenes.
+fn scene(n: usize) -> Vec<Params> {
+    let mut rng = fastrand::Rng::with_seed(42);
+    (0..n)
+        .map(|i| {
+            let (x, y, z) = if i % 5 < 3 {
+                let d = Vec3::new(rng.f32() - 0.5, rng.f32() - 0.5, rng.f32() - 0.5) * 6.0;
+                (d.x, d.y, 14.0 + d.z)
+            } else {
+                let z = 4.0 + 26.0 * rng.f32();
+                (
+                    (rng.f32() - 0.5) * 2.0 * z * 0.55,
+                    (rng.f32() - 0.5) * 2.0 * z * 0.32,
+                    z,
+                )
+            };
+            let mut sh = [Vec3::ZERO; 16];
+            for c in sh.iter_mut() {
+                *c = Vec3::new(rng.f32() - 0.5, rng.f32() - 0.5, rng.f32() - 0.5) * 0.4;
+            }
+            let s = (0.01 + 0.05 * rng.f32() * rng.f32()).ln();
+            Params {
+                mean: Vec3::new(x, y, z),
+                log_scale: Vec3::new(
+                    s + 0.3 * rng.f32(),
+                    s + 0.3 * rng.f32(),
+                    s + 0.3 * rng.f32(),
+                ),
+                rotation: Vec4::new(1.0, rng.f32() - 0.5, rng.f32() - 0.5, rng.f32() - 0.5),
+                opacity_logit: rng.f32() * 4.0 - 2.0,
+                sh,
+            }
+        })
+        .collect()
+}
+
+fn peak_rss_mib() -> f64 {
+    let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
+    status
+        .lines()
+        .find(|l| l.starts_with("VmHWM:"))
+        .and_then(|l| l.split_whitespace().nth(1))
+        .and_then(|kb| kb.parse::<f64>().ok())
+        .map_or(f64::NAN, |kb| kb / 1024.0)
+}
+
+fn psnr(a: &[f32], b: &[f32]) -> f64 {
+    let mse = a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| ((x.clamp(0.0, 1.0) - y.clamp(0.0, 1.0)) as f64).powi(2))
+        .sum::<f64>()
+        / a.len() as f64;
+    if mse == 0.0 {
+        f64::INFINITY
+    } else {
+        10.0 * (1.0 / mse).log10()
+    }
+}
+
+fn main() {
+    let args: Vec<usize> = std::env::args()
+        .skip(1)
+        .filter_map(|a| a.parse().ok())
+        .collect();
+    let n = args.first().copied().unwrap_or(1_000_000);
+    let (w, h) = (
+        args.get(1).copied().unwrap_or(1920) as f32,
+        args.get(2).copied().unwrap_or(1080) as f32,
+    );
+    let cores = rayon::current_num_threads();
+    let params = scene(n);
+    let camera = Camera {
+        rotation: Mat3::IDENTITY,
+        translation: Vec3::ZERO,
+        focal: Vec2::splat(0.9 * w),
+        principal: Vec2::new(w / 2.0, h / 2.0),
+        size: Vec2::new(w, h),
+    };
+    println!("3DGS, {n} Gaussians (SH degree 3), {w}x{h}, {cores} threads");
+    let opts = RenderOptions::default();
+    // Warm up (page faults, thread pool).
+    let _ = render::<Method>(&params, &camera, &opts).unwrap();
+    let t = Instant::now();
+    let frame = render::<Method>(&params, &camera, &opts).unwrap();
+    let total = t.elapsed();
+    let s = &frame.stats;
+    let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+    println!(
+        "forward: preprocess {:.1} ms | rasterize {:.1} ms | shade {:.1} ms | total {:.1} ms",
+        ms(s.preprocess),
+        ms(s.rasterize),
+        ms(s.shade),
+        ms(total)
+    );
+    println!(
+        "visible {} | intersections {} | pairs evaluated {}",
+        s.visible, s.intersections, s.pairs
+    );
+    println!(
+        "shade: {:.2} ns per pair per core",
+        s.shade.as_secs_f64() * 1e9 * cores as f64 / s.pairs as f64
+    );
+
+    let t = Instant::now();
+    let (_, state) = render_for_backward::<Method>(&params, &camera, &opts).unwrap();
+    let fwd = t.elapsed();
+    let pixels = (w * h) as usize;
+    let grad = FrameGrad {
+        color: vec![1.0 / pixels as f32; pixels * 3],
+        alpha: None,
+        depth: None,
+    };
+    let t = Instant::now();
+    let g = backward::<Method>(&state, &params, &camera, &grad).unwrap();
+    let bwd = t.elapsed();
+    std::hint::black_box(&g.params[0]);
+    println!(
+        "forward+backward: forward (state kept) {:.1} ms | backward {:.1} ms | {:.2} ns per pair per core (backward)",
+        ms(fwd),
+        ms(bwd),
+        bwd.as_secs_f64() * 1e9 * cores as f64 / s.pairs as f64
+    );
+    drop(state);
+    println!("peak memory {:.0} MiB", peak_rss_mib());
+
+    println!(
+        "{:>10} {:>12} {:>16} {:>10}",
+        "P_max", "shade ms", "pairs", "PSNR dB"
+    );
+    for p_max in [None, Some(8192), Some(4096), Some(1024), Some(256)] {
+        let opts = RenderOptions {
+            p_max,
+            ..RenderOptions::default()
+        };
+        let f = render::<Method>(&params, &camera, &opts).unwrap();
+        let label = p_max.map_or("unbounded".to_string(), |p| p.to_string());
+        println!(
+            "{label:>10} {:>12.1} {:>16} {:>10.2}",
+            ms(f.stats.shade),
+            f.stats.pairs,
+            psnr(&f.color.data, &frame.color.data)
+        );
+    }
+}
