@@ -16,8 +16,9 @@ fn scene(n: usize) -> Vec<Params> {
     let mut rng = fastrand::Rng::with_seed(42);
     (0..n)
         .map(|i| {
-            let (x, y, z) = if i % 5 < 3 {
-                let d = Vec3::new(rng.f32() - 0.5, rng.f32() - 0.5, rng.f32() - 0.5) * 6.0;
+            let cluster = i % 5 < 3;
+            let (x, y, z) = if cluster {
+                let d = Vec3::new(rng.f32() - 0.5, rng.f32() - 0.5, rng.f32() - 0.5) * 4.0;
                 (d.x, d.y, 14.0 + d.z)
             } else {
                 let z = 4.0 + 26.0 * rng.f32();
@@ -31,7 +32,15 @@ fn scene(n: usize) -> Vec<Params> {
             for c in sh.iter_mut() {
                 *c = Vec3::new(rng.f32() - 0.5, rng.f32() - 0.5, rng.f32() - 0.5) * 0.4;
             }
-            let s = (0.01 + 0.05 * rng.f32() * rng.f32()).ln();
+            // The cluster: larger and fainter, so lists are long and blending goes deep.
+            let (s, opacity_logit) = if cluster {
+                ((0.04 + 0.08 * rng.f32()).ln(), -4.5 + 3.0 * rng.f32())
+            } else {
+                (
+                    (0.01 + 0.05 * rng.f32() * rng.f32()).ln(),
+                    rng.f32() * 4.0 - 2.0,
+                )
+            };
             Params {
                 mean: Vec3::new(x, y, z),
                 log_scale: Vec3::new(
@@ -40,7 +49,7 @@ fn scene(n: usize) -> Vec<Params> {
                     s + 0.3 * rng.f32(),
                 ),
                 rotation: Vec4::new(1.0, rng.f32() - 0.5, rng.f32() - 0.5, rng.f32() - 0.5),
-                opacity_logit: rng.f32() * 4.0 - 2.0,
+                opacity_logit,
                 sh,
             }
         })
@@ -107,8 +116,8 @@ fn main() {
         ms(total)
     );
     println!(
-        "visible {} | intersections {} | pairs evaluated {}",
-        s.visible, s.intersections, s.pairs
+        "visible {} | intersections {} | longest tile list {} | pairs evaluated {}",
+        s.visible, s.intersections, s.longest_list, s.pairs
     );
     println!(
         "shade: {:.2} ns per pair per core",
@@ -129,10 +138,13 @@ fn main() {
     let bwd = t.elapsed();
     std::hint::black_box(&g.params[0]);
     println!(
-        "forward+backward: forward (state kept) {:.1} ms | backward {:.1} ms | {:.2} ns per pair per core (backward)",
+        "forward+backward: forward (state kept) {:.1} ms | backward {:.1} ms (blend {:.1}, reduce {:.1}, project adjoint {:.1}) | blend {:.2} ns per pair per core",
         ms(fwd),
         ms(bwd),
-        bwd.as_secs_f64() * 1e9 * cores as f64 / s.pairs as f64
+        ms(g.stats.blend),
+        ms(g.stats.reduce),
+        ms(g.stats.project),
+        g.stats.blend.as_secs_f64() * 1e9 * cores as f64 / s.pairs as f64
     );
     drop(state);
     println!("peak memory {:.0} MiB", peak_rss_mib());
@@ -141,7 +153,14 @@ fn main() {
         "{:>10} {:>12} {:>16} {:>10}",
         "P_max", "shade ms", "pairs", "PSNR dB"
     );
-    for p_max in [None, Some(8192), Some(4096), Some(1024), Some(256)] {
+    for p_max in [
+        None,
+        Some(8192),
+        Some(4096),
+        Some(1024),
+        Some(256),
+        Some(64),
+    ] {
         let opts = RenderOptions {
             p_max,
             ..RenderOptions::default()

@@ -89,6 +89,8 @@ pub struct Stats {
     pub primitives: usize,
     pub visible: usize,
     pub intersections: usize,
+    /// Length of the longest tile list (before `P_max`).
+    pub longest_list: usize,
     /// (pixel, primitive) evaluations on pixels still blending.
     pub pairs: u64,
     pub preprocess: Duration,
@@ -205,6 +207,10 @@ fn forward<M: SplatMethod>(
     let t1 = Instant::now();
     let lists = rasterize::rasterize::<M>(&pre, &grid)?;
     stats.intersections = lists.intersections();
+    stats.longest_list = (0..grid.tile_count())
+        .map(|t| lists.list(t).len())
+        .max()
+        .unwrap_or(0);
     stats.rasterize = t1.elapsed();
 
     let t2 = Instant::now();
