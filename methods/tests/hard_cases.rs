@@ -1,0 +1,164 @@
+//! Hard cases stay finite and correct (DESIGN.md §7): needle and flat Gaussians, a zero
+//! quaternion, the camera inside a Gaussian, Gaussians behind the camera and at the near
+//! plane, opaque stacks (alpha clamp, transmittance underflow), huge and sub-pixel Gaussians,
+//! empty scenes, NaN / Inf parameters.
+
+mod common;
+
+use common::{camera, gaussian_at};
+use splat_methods::gs3d::{Method, Params};
+use splat_runtime::glam::{Vec2, Vec3, Vec4};
+use splat_runtime::{FrameGrad, RenderError, RenderOptions, backward, render, render_for_backward};
+
+fn hard_scene() -> Vec<Params> {
+    let mut rng = fastrand::Rng::with_seed(5);
+    let cam = camera(40, 32);
+    let mut ps = vec![];
+    let mut needle = gaussian_at(&mut rng, &cam, Vec2::new(10.0, 10.0), 3.0, -2.0);
+    needle.log_scale = Vec3::new(-1.5, (1e-7f32).ln(), -1.5);
+    ps.push(needle);
+    let mut flat = gaussian_at(&mut rng, &cam, Vec2::new(30.0, 10.0), 3.0, -2.0);
+    flat.log_scale.z = (1e-7f32).ln();
+    ps.push(flat);
+    let mut zero_q = gaussian_at(&mut rng, &cam, Vec2::new(20.0, 25.0), 4.0, -2.0);
+    zero_q.rotation = Vec4::ZERO;
+    ps.push(zero_q);
+    let mut around_camera = gaussian_at(&mut rng, &cam, Vec2::new(20.0, 16.0), 1.0, 0.5);
+    around_camera.mean = Vec3::new(0.0, 0.0, 0.0);
+    ps.push(around_camera);
+    let mut behind = gaussian_at(&mut rng, &cam, Vec2::new(20.0, 16.0), 2.0, -1.0);
+    behind.mean.z = -3.0;
+    ps.push(behind);
+    let mut near = gaussian_at(&mut rng, &cam, Vec2::new(5.0, 5.0), 0.01, -6.0);
+    near.mean.z = 0.0100001;
+    ps.push(near);
+    // An opaque stack: alpha clamps at 0.99 and transmittance underflows the stopping rule.
+    for k in 0..12 {
+        let mut g = gaussian_at(
+            &mut rng,
+            &cam,
+            Vec2::new(12.0, 22.0),
+            2.0 + 0.1 * k as f32,
+            -1.5,
+        );
+        g.opacity_logit = 12.0;
+        ps.push(g);
+    }
+    // Huge and sub-pixel.
+    ps.push(gaussian_at(&mut rng, &cam, Vec2::new(20.0, 16.0), 9.0, 1.5));
+    ps.push(gaussian_at(
+        &mut rng,
+        &cam,
+        Vec2::new(33.3, 27.7),
+        5.0,
+        -7.0,
+    ));
+    ps
+}
+
+#[test]
+fn hard_cases_match_the_reference_and_stay_finite() {
+    let cam = camera(40, 32);
+    let ps = hard_scene();
+    let words: Vec<Vec<f64>> = ps.iter().map(common::param_words).collect();
+    let reference = common::render(&words, &common::camera_words(&cam));
+    for tile_size in [8, 16] {
+        let opts = RenderOptions {
+            tile_size,
+            alpha: true,
+            depth: true,
+            ..Default::default()
+        };
+        let frame = render::<Method>(&ps, &cam, &opts).unwrap();
+        for (g, w) in frame.color.data.iter().zip(&reference.color) {
+            assert!(g.is_finite());
+            assert!((*g as f64 - w).abs() <= 1e-5 + 0.01 * w.abs(), "{g} vs {w}");
+        }
+        assert!(
+            frame
+                .alpha
+                .unwrap()
+                .data
+                .iter()
+                .all(|a| (0.0..=1.0).contains(a))
+        );
+        assert!(frame.depth.unwrap().data.iter().all(|d| d.is_finite()));
+    }
+    // Gradients stay finite too.
+    let opts = RenderOptions {
+        tile_size: 8,
+        alpha: true,
+        depth: true,
+        ..Default::default()
+    };
+    let (_, state) = render_for_backward::<Method>(&ps, &cam, &opts).unwrap();
+    let n = 40 * 32;
+    let grad = FrameGrad {
+        color: vec![1.0; n * 3],
+        alpha: Some(vec![1.0; n]),
+        depth: Some(vec![0.1; n]),
+    };
+    let g = backward::<Method>(&state, &ps, &cam, &grad).unwrap();
+    for (i, p) in g.params.iter().enumerate() {
+        assert!(splat_runtime::Flat::is_finite(p), "primitive {i}: {p:?}");
+    }
+    assert!(g.camera.rotation.is_finite() && g.camera.translation.is_finite());
+}
+
+#[test]
+fn empty_scenes_render_black() {
+    let cam = camera(17, 9);
+    let frame = render::<Method>(
+        &[],
+        &cam,
+        &RenderOptions {
+            alpha: true,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(frame.color.data.len(), 17 * 9 * 3);
+    assert!(frame.color.data.iter().all(|v| *v == 0.0));
+    assert!(frame.alpha.unwrap().data.iter().all(|v| *v == 0.0));
+}
+
+#[test]
+fn nan_and_inf_parameters_are_refused() {
+    let cam = camera(16, 16);
+    let mut ps = hard_scene();
+    ps[3].sh[7].y = f32::NAN;
+    assert_eq!(
+        render::<Method>(&ps, &cam, &RenderOptions::default()).err(),
+        Some(RenderError::NonFinite(3))
+    );
+    ps[3].sh[7].y = 0.0;
+    ps[5].opacity_logit = f32::INFINITY;
+    assert_eq!(
+        render::<Method>(&ps, &cam, &RenderOptions::default()).err(),
+        Some(RenderError::NonFinite(5))
+    );
+}
+
+#[test]
+fn absurd_sizes_and_options_are_refused() {
+    let mut cam = camera(16, 16);
+    cam.size.x = 0.0;
+    assert!(matches!(
+        render::<Method>(&[], &cam, &RenderOptions::default()),
+        Err(RenderError::ImageSize { .. })
+    ));
+    cam.size.x = 1e9;
+    assert!(matches!(
+        render::<Method>(&[], &cam, &RenderOptions::default()),
+        Err(RenderError::ImageSize { .. })
+    ));
+    let cam = camera(16, 16);
+    let opts = RenderOptions {
+        tile_size: 12,
+        ..Default::default()
+    };
+    assert_eq!(
+        render::<Method>(&[], &cam, &opts).err(),
+        Some(RenderError::TileSize(12))
+    );
+}
