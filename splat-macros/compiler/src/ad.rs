@@ -18,13 +18,13 @@ use std::collections::{BTreeMap, HashMap, HashSet};
 /// (named by `out_names`); results are the cotangents of `f`'s `f32` parameter slots.
 /// `custom[i]` is the user-written adjoint of the helper called by `Stmt::Call { callee: i }`.
 pub fn adjoint(f: &Function, custom: &[Function], out_names: &[String]) -> Function {
+    let consts = f.body.constants().into_keys().collect();
     let mut ad = Ad {
         g: f.clone(),
         custom,
-        consts: HashSet::new(),
+        consts,
     };
     ad.g.name = format!("{}_adjoint", f.name);
-    collect_consts(&f.body, &mut ad.consts);
     let mut rev = vec![];
     let mut adj = HashMap::new();
     let float_results: Vec<Var> = f
@@ -63,53 +63,6 @@ struct Ad<'a> {
     g: Function,
     custom: &'a [Function],
     consts: HashSet<Var>,
-}
-
-fn collect_consts(b: &Block, out: &mut HashSet<Var>) {
-    for s in &b.stmts {
-        match s {
-            Stmt::Let {
-                var,
-                op: Op::Const(_),
-            } => {
-                out.insert(*var);
-            }
-            Stmt::Let { .. } => {}
-            Stmt::If {
-                then_block,
-                else_block,
-                ..
-            } => {
-                collect_consts(then_block, out);
-                collect_consts(else_block, out);
-            }
-            Stmt::Call { body, .. } => collect_consts(body, out),
-        }
-    }
-}
-
-fn defined_in(b: &Block, out: &mut HashSet<Var>) {
-    for s in &b.stmts {
-        match s {
-            Stmt::Let { var, .. } => {
-                out.insert(*var);
-            }
-            Stmt::If {
-                then_block,
-                else_block,
-                outs,
-                ..
-            } => {
-                out.extend(outs);
-                defined_in(then_block, out);
-                defined_in(else_block, out);
-            }
-            Stmt::Call { body, outs, .. } => {
-                out.extend(outs);
-                defined_in(body, out);
-            }
-        }
-    }
 }
 
 impl Ad<'_> {
@@ -290,8 +243,7 @@ impl Ad<'_> {
     ) -> (Vec<Stmt>, HashMap<Var, Var>) {
         let mut remap = HashMap::new();
         let fresh = self.g.clone_fresh(block, &mut remap);
-        let mut inner = HashSet::new();
-        defined_in(&fresh, &mut inner);
+        let inner = fresh.defined();
         let mut stmts = fresh.stmts.clone();
         let mut local = HashMap::new();
         let mut rev = vec![];

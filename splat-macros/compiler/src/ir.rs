@@ -159,6 +159,54 @@ pub struct Block {
     pub yields: Vec<Var>,
 }
 
+impl Block {
+    /// Visits every statement of the block and of the blocks nested in it, outer first.
+    pub fn visit(&self, f: &mut impl FnMut(&Stmt)) {
+        for s in &self.stmts {
+            f(s);
+            match s {
+                Stmt::Let { .. } => {}
+                Stmt::If {
+                    then_block,
+                    else_block,
+                    ..
+                } => {
+                    then_block.visit(f);
+                    else_block.visit(f);
+                }
+                Stmt::Call { body, .. } => body.visit(f),
+            }
+        }
+    }
+
+    /// Every constant defined in the block or nested in it.
+    pub fn constants(&self) -> HashMap<Var, Const> {
+        let mut out = HashMap::new();
+        self.visit(&mut |s| {
+            if let Stmt::Let {
+                var,
+                op: Op::Const(c),
+            } = s
+            {
+                out.insert(*var, *c);
+            }
+        });
+        out
+    }
+
+    /// Every variable defined in the block or nested in it.
+    pub fn defined(&self) -> std::collections::HashSet<Var> {
+        let mut out = std::collections::HashSet::new();
+        self.visit(&mut |s| match s {
+            Stmt::Let { var, .. } => {
+                out.insert(*var);
+            }
+            Stmt::If { outs, .. } | Stmt::Call { outs, .. } => out.extend(outs.iter().copied()),
+        });
+        out
+    }
+}
+
 #[derive(Clone, Debug)]
 pub struct VarInfo {
     pub ty: Scalar,

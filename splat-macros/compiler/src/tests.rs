@@ -19,24 +19,9 @@ fn errors(src: &str) -> Vec<String> {
 }
 
 fn count(f: &Function, pred: &dyn Fn(&Stmt) -> bool) -> usize {
-    fn walk(b: &crate::ir::Block, pred: &dyn Fn(&Stmt) -> bool) -> usize {
-        b.stmts
-            .iter()
-            .map(|s| {
-                let inner = match s {
-                    Stmt::If {
-                        then_block,
-                        else_block,
-                        ..
-                    } => walk(then_block, pred) + walk(else_block, pred),
-                    Stmt::Call { body, .. } => walk(body, pred),
-                    Stmt::Let { .. } => 0,
-                };
-                inner + pred(s) as usize
-            })
-            .sum()
-    }
-    walk(&f.body, pred)
+    let mut n = 0;
+    f.body.visit(&mut |s| n += pred(s) as usize);
+    n
 }
 
 fn is_unary(u: Unary) -> impl Fn(&Stmt) -> bool {

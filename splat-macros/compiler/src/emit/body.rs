@@ -27,8 +27,7 @@ const RT: &str = "::splat_runtime";
 impl<'f> BodyEmitter<'f> {
     /// `reserved` are names the emitted body must not shadow (the wrapper's parameters).
     pub fn new(f: &'f Function, flavor: Flavor, reserved: &[String]) -> Self {
-        let mut consts = HashMap::new();
-        collect_consts(&f.body, &mut consts);
+        let consts = f.body.constants();
         BodyEmitter {
             f,
             flavor,
@@ -357,29 +356,6 @@ fn select_method(s: Scalar) -> Ident {
             Scalar::I32 => "select_i32",
         }
     )
-}
-
-fn collect_consts(b: &Block, out: &mut HashMap<Var, Const>) {
-    for s in &b.stmts {
-        match s {
-            Stmt::Let {
-                var,
-                op: Op::Const(c),
-            } => {
-                out.insert(*var, *c);
-            }
-            Stmt::Let { .. } => {}
-            Stmt::If {
-                then_block,
-                else_block,
-                ..
-            } => {
-                collect_consts(then_block, out);
-                collect_consts(else_block, out);
-            }
-            Stmt::Call { body, .. } => collect_consts(body, out),
-        }
-    }
 }
 
 fn sanitize(s: &str) -> String {
