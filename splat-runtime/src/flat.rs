@@ -17,7 +17,12 @@ pub trait Flat: Copy + Default + Send + Sync + 'static {
     /// Every word zero: the zero cotangent. (`Default` is not zero for every type: glam's
     /// `Quat` and matrices default to the identity.)
     fn zero() -> Self {
-        Self::read_words(&vec![0.0; Self::LEN])
+        const STACK: usize = 256;
+        if Self::LEN <= STACK {
+            Self::read_words(&[0.0; STACK])
+        } else {
+            Self::read_words(&vec![0.0; Self::LEN])
+        }
     }
 }
 

@@ -1,9 +1,10 @@
 //! The backward blend (seed 001, eq. 5-7): re-walk each pixel's list front to back, carrying
 //! the transmittance and the color accumulated so far; the color still to come behind
 //! primitive i is the final color minus that prefix, so no per-pixel list is stored. Each
-//! step calls `evaluate`'s lane adjoint, which sums the gradient over the group's lanes; the
-//! sum is written to the entry's own slot of the tile list (tiles own disjoint ranges, so no
-//! two threads write the same slot), and the slots are reduced per primitive afterwards.
+//! step calls `evaluate`'s lane adjoint, which sums the gradient over the group's eight lanes
+//! (the reduction inside a group); the sum is added to the worker's own dense per-primitive
+//! buffer, so no two threads write the same memory and no atomics are needed. The workers'
+//! buffers are summed afterwards.
 
 use super::ForwardState;
 use super::shade::{group_pixels, step};
@@ -20,10 +21,19 @@ pub struct FrameGrad {
     pub depth: Option<Vec<f32>>,
 }
 
-/// Per-entry gradients of one tile: `shade[k * Shade::LEN..]` and `depth[k]` for entry k.
-pub struct TileGrads {
+/// One worker's gradient sums per primitive: `shade[i * Shade::LEN..]` and `depth[i]`.
+pub struct Accum {
     pub shade: Vec<f32>,
     pub depth: Vec<f32>,
+}
+
+impl Accum {
+    pub fn new(primitives: usize, words: usize) -> Self {
+        Accum {
+            shade: vec![0.0; primitives * words],
+            depth: vec![0.0; primitives],
+        }
+    }
 }
 
 fn lanes_of(f: impl Fn(usize) -> f32) -> F32x8 {
@@ -36,13 +46,14 @@ pub fn backward_tile<M: SplatMethod>(
     camera: &Camera,
     grad: &FrameGrad,
     tile: u32,
-) -> TileGrads {
+    acc: &mut Accum,
+) {
     #[cfg(target_arch = "x86_64")]
     if crate::lanes::has_avx2() {
         // SAFETY: the CPU supports the features the function is compiled for.
-        return unsafe { backward_tile_avx2::<M>(state, camera, grad, tile) };
+        return unsafe { backward_tile_avx2::<M>(state, camera, grad, tile, acc) };
     }
-    backward_tile_body::<M>(state, camera, grad, tile)
+    backward_tile_body::<M>(state, camera, grad, tile, acc)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -52,8 +63,9 @@ fn backward_tile_avx2<M: SplatMethod>(
     camera: &Camera,
     grad: &FrameGrad,
     tile: u32,
-) -> TileGrads {
-    backward_tile_body::<M>(state, camera, grad, tile)
+    acc: &mut Accum,
+) {
+    backward_tile_body::<M>(state, camera, grad, tile, acc)
 }
 
 #[inline(always)]
@@ -62,14 +74,11 @@ fn backward_tile_body<M: SplatMethod>(
     camera: &Camera,
     grad: &FrameGrad,
     tile: u32,
-) -> TileGrads {
+    acc: &mut Accum,
+) {
     let grid = &state.grid;
     let list = state.visited(tile as usize);
     let (s, channels, words) = (grid.size, M::Color::LEN, M::Shade::LEN);
-    let mut out = TileGrads {
-        shade: vec![0.0; list.len() * words],
-        depth: vec![0.0; list.len()],
-    };
     let (tx, ty) = grid.tile_xy(tile);
     let want_depth = grad.depth.is_some();
     let mut shade_words = vec![0.0f32; words];
@@ -109,7 +118,7 @@ fn backward_tile_body<M: SplatMethod>(
             let mut t = F32x8::splat(1.0);
             let mut c_acc = M::ColorLanes::default();
             let mut d_acc = F32x8::splat(0.0);
-            for (k, &prim) in list.iter().enumerate() {
+            for &prim in list {
                 if done.all() {
                     break;
                 }
@@ -136,7 +145,7 @@ fn backward_tile_body<M: SplatMethod>(
                 if want_depth {
                     d_acc = d_acc + w * p.depth;
                     d_alpha = d_alpha + t * p.depth * d_d - (d_final - d_acc) * d_d / one_minus;
-                    out.depth[k] += (w * d_d).masked_sum(st.take);
+                    acc.depth[prim as usize] += (w * d_d).masked_sum(st.take);
                 }
                 d_alpha = d_alpha + d_alpha_out * t_final / one_minus;
                 let d_out = ContributionLanes {
@@ -146,15 +155,15 @@ fn backward_tile_body<M: SplatMethod>(
                 };
                 let g = M::evaluate_adjoint_lanes(&pixels, &p.shade, &d_out, st.take);
                 g.write_words(&mut shade_words);
-                for (acc, v) in out.shade[k * words..(k + 1) * words]
+                let p = prim as usize;
+                for (sum, v) in acc.shade[p * words..(p + 1) * words]
                     .iter_mut()
                     .zip(&shade_words)
                 {
-                    *acc += v;
+                    *sum += v;
                 }
                 t = st.take.select_f32(t * one_minus, t);
             }
         }
     }
-    out
 }
