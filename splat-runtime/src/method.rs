@@ -16,6 +16,8 @@ use glam::Vec2;
 pub struct GeneratedSource {
     /// The pretty-printed Rust the macro emitted for the method's module.
     pub rust: &'static str,
+    /// The WGSL of every kernel and adjoint, written by naga.
+    pub wgsl: &'static str,
 }
 
 /// A point-based differentiable rendering method.

@@ -229,6 +229,16 @@ fn expand_module(kind: Kind, item: syn::ItemMod, diag: &Diag) -> Option<TokenStr
     if kind == Kind::Method {
         items.extend(emit::method::method_impl(&m.name, &kernels, diag)?);
     }
+    let wgsl = match emit::naga::wgsl(&wgsl_kernels(&kernels)) {
+        Ok(w) => w,
+        Err(e) => {
+            diag.error_at(
+                &m.name,
+                format!("the WGSL backend rejected this module: {e}"),
+            );
+            return None;
+        }
+    };
     let source = emit::pretty(&items);
     let (attrs, vis, name) = (&m.attrs, &m.vis, &m.name);
     Some(quote! {
@@ -237,8 +247,35 @@ fn expand_module(kind: Kind, item: syn::ItemMod, diag: &Diag) -> Option<TokenStr
             #items
             /// The Rust this module's attribute generated, pretty-printed.
             pub const GENERATED_RUST: &str = #source;
+            /// WGSL of every kernel and adjoint (built as a naga module, validated, written by naga).
+            pub const GENERATED_WGSL: &str = #wgsl;
         }
     })
+}
+
+/// Each kernel's IR with the names of its result slots (`alpha`, `color_x`, ...; the
+/// adjoint's are `d_` + the parameter slots).
+fn wgsl_kernels<'k>(kernels: &'k [Kernel]) -> Vec<(&'k ir::Function, Vec<String>)> {
+    let mut out = vec![];
+    for k in kernels {
+        out.push((&k.primal, k.ret.slot_names("")));
+        if let Some(adj) = &k.adjoint {
+            let names = k
+                .def
+                .params
+                .iter()
+                .flat_map(|p| {
+                    p.ty.slot_names(&format!("d_{}", p.name))
+                        .into_iter()
+                        .zip(p.ty.slots())
+                })
+                .filter(|(_, s)| *s == ir::Scalar::F32)
+                .map(|(n, _)| n)
+                .collect();
+            out.push((adj, names));
+        }
+    }
+    out
 }
 
 fn const_item(m: &Module, name: &str) -> Option<TokenStream> {

@@ -33,10 +33,12 @@ enum Command {
         #[arg(long)]
         camera_out: Option<PathBuf>,
     },
-    /// Print the Rust the #[splat_method] compiler generated for a method.
+    /// Print the Rust or WGSL the #[splat_method] compiler generated for a method.
     Inspect {
         #[arg(long, value_enum, default_value_t = Method::Gs3d)]
         method: Method,
+        #[arg(long, value_enum, default_value_t = Lang::Rust)]
+        lang: Lang,
     },
 }
 
@@ -45,6 +47,12 @@ enum Method {
     /// 3D Gaussian Splatting (EWA, SH up to degree 3).
     #[value(name = "3dgs")]
     Gs3d,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Lang {
+    Rust,
+    Wgsl,
 }
 
 #[derive(clap::Args)]
@@ -101,8 +109,17 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Inspect {
             method: Method::Gs3d,
+            lang,
         } => {
-            print!("{}", gs3d::Method::SOURCE.rust);
+            let source = gs3d::Method::SOURCE;
+            print!(
+                "{}",
+                if let Lang::Wgsl = lang {
+                    source.wgsl
+                } else {
+                    source.rust
+                }
+            );
             Ok(())
         }
     }

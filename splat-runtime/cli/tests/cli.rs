@@ -249,3 +249,18 @@ fn bad_cameras_and_options_are_refused_clearly() {
         &bad_ext,
     );
 }
+
+#[test]
+fn inspect_prints_the_generated_rust_and_wgsl() {
+    let dir = temp();
+    let rust = ok(&splat(&["inspect", "--method", "3dgs"], dir.path()));
+    assert!(
+        rust.contains("pub fn evaluate_adjoint")
+            && rust.contains("impl ::splat_runtime::SplatMethod for Method")
+    );
+    let wgsl = ok(&splat(
+        &["inspect", "--method", "3dgs", "--lang", "wgsl"],
+        dir.path(),
+    ));
+    assert!(wgsl.contains("fn evaluate(") && wgsl.contains("fn project_adjoint("));
+}

@@ -270,7 +270,7 @@ pub fn method_impl(module: &syn::Ident, kernels: &[Kernel], diag: &Diag) -> Opti
             const NAME: &'static str = #module_name;
             const HAS_TILE_CULL: bool = #has_tc;
             const HAS_PIXEL_INFO: bool = #has_pi;
-            const SOURCE: #rt::GeneratedSource = #rt::GeneratedSource { rust: GENERATED_RUST };
+            const SOURCE: #rt::GeneratedSource = #rt::GeneratedSource { rust: GENERATED_RUST, wgsl: GENERATED_WGSL };
             type Params = #p_t;
             type Cull = #c_t;
             type Shade = #s_t;

@@ -1,9 +1,11 @@
-//! Rust emission: function bodies in three flavors (`body`), the items each kernel becomes
-//! (`api`), the runtime contract of a method (`method`), and the module around them.
+//! Emission: function bodies in three Rust flavors (`body`), the items each kernel becomes
+//! (`api`), the runtime contract of a method (`method`), WGSL through naga (`naga`), and the
+//! module around them.
 
 pub mod api;
 pub mod body;
 pub mod method;
+pub mod naga;
 
 use crate::model::Module;
 use proc_macro2::TokenStream;
