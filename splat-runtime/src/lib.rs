@@ -11,8 +11,10 @@
 //! - [`prelude`]: what a method module imports.
 //! - [`pipeline`]: the CPU pipeline (preprocess, rasterize, shade, backward).
 //! - [`io`]: PLY scenes, JSON cameras, PNG / EXR / NPY outputs (atomic writes).
+//! - [`gpu`]: the wgpu device and a harness running generated WGSL functions on batches.
 
 pub mod flat;
+pub mod gpu;
 pub mod io;
 pub mod lanes;
 pub mod math;
