@@ -49,6 +49,12 @@ enum Method {
     Gs3d,
 }
 
+#[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
+enum Backend {
+    Cpu,
+    Gpu,
+}
+
 #[derive(Clone, Copy, ValueEnum)]
 enum Lang {
     Rust,
@@ -80,6 +86,10 @@ struct RenderArgs {
     /// Blend at most this many primitives per tile.
     #[arg(long)]
     p_max: Option<usize>,
+    /// Where to render: `gpu` runs `project` and blending on a wgpu adapter (tile lists are
+    /// still built on the CPU).
+    #[arg(long, value_enum, default_value_t = Backend::Cpu)]
+    backend: Backend,
     #[arg(long, default_value_t = 800)]
     width: u32,
     #[arg(long, default_value_t = 600)]
@@ -181,17 +191,32 @@ fn render_cmd(args: &RenderArgs) -> Result<()> {
         alpha: args.alpha,
         depth: args.depth,
     };
-    let frame = render::<gs3d::Method>(&params, &camera, &opts)?;
+    let (frame, backend) = match args.backend {
+        Backend::Cpu => (
+            render::<gs3d::Method>(&params, &camera, &opts)?,
+            "CPU".to_string(),
+        ),
+        Backend::Gpu => {
+            let gpu = splat_runtime::gpu::Gpu::new()?;
+            let frame =
+                splat_runtime::gpu::render::render::<gs3d::Method>(&gpu, &params, &camera, &opts)?;
+            (frame, format!("GPU, {}", gpu.adapter))
+        }
+    };
     let written = image_io::write_frame(&args.out, &frame)?;
     let s = &frame.stats;
     let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
     println!(
-        "3dgs on CPU: {} primitives (SH degree {}) from {source}, {}x{}, tile {}",
+        "3dgs on {backend}: {} primitives (SH degree {}) from {source}, {}x{}, tile {}",
         s.primitives, cloud.sh_degree, frame.color.width, frame.color.height, args.tile
     );
+    let pairs = match args.backend {
+        Backend::Cpu => s.pairs.to_string(),
+        Backend::Gpu => "not counted on the GPU".to_string(),
+    };
     println!(
-        "visible {}, intersections {}, pairs evaluated {}",
-        s.visible, s.intersections, s.pairs
+        "visible {}, intersections {}, pairs evaluated {pairs}",
+        s.visible, s.intersections
     );
     println!(
         "load {:.1} ms, preprocess {:.1} ms, rasterize {:.1} ms, shade {:.1} ms",

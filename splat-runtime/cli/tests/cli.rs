@@ -264,3 +264,47 @@ fn inspect_prints_the_generated_rust_and_wgsl() {
     ));
     assert!(wgsl.contains("fn evaluate(") && wgsl.contains("fn project_adjoint("));
 }
+
+#[test]
+fn gpu_backend_renders_when_an_adapter_exists() {
+    let dir = temp();
+    let out = splat(
+        &[
+            "render",
+            "--backend",
+            "gpu",
+            "--width",
+            "96",
+            "--height",
+            "64",
+            "--out",
+            "g.npy",
+        ],
+        dir.path(),
+    );
+    if !out.status.success() {
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(stderr.contains("no GPU adapter"), "{stderr}");
+        assert!(
+            std::env::var("SPLAT_REQUIRE_GPU").map_or(true, |v| v != "1"),
+            "{stderr}"
+        );
+        return;
+    }
+    assert!(String::from_utf8_lossy(&out.stdout).contains("on GPU"));
+    ok(&splat(
+        &[
+            "render", "--width", "96", "--height", "64", "--out", "c.npy",
+        ],
+        dir.path(),
+    ));
+    let (gs, g) = read_npy(&dir.path().join("g.npy"));
+    let (cs, c) = read_npy(&dir.path().join("c.npy"));
+    assert_eq!(gs, cs);
+    let worst = g
+        .iter()
+        .zip(&c)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
+    assert!(worst < 0.02, "GPU and CPU renders differ by {worst}");
+}

@@ -85,21 +85,30 @@ fn store(kind: naga::ScalarKind, value: &str) -> String {
     }
 }
 
-/// The module's WGSL with a compute entry point `splat_harness` calling `sig`.
-pub fn harness_source(wgsl: &str, sig: &Signature) -> String {
-    let (na, nr) = (sig.args.len(), sig.results.len());
+/// The module's WGSL with a compute entry point `splat_harness` calling `sig`: the first
+/// `per_row` arguments come from the row, the rest from the shared words (e.g. the camera).
+pub fn harness_source(wgsl: &str, sig: &Signature, per_row: usize) -> String {
+    let nr = sig.results.len();
     let mut s = String::from(wgsl);
-    s.push_str("\n@group(0) @binding(0) var<storage, read> harness_in: array<u32>;\n");
-    s.push_str("@group(0) @binding(1) var<storage, read_write> harness_out: array<u32>;\n");
-    s.push_str("@group(0) @binding(2) var<uniform> harness_count: vec4<u32>;\n\n");
+    s.push_str("\n@group(0) @binding(0) var<storage, read> harness_rows: array<u32>;\n");
+    s.push_str("@group(0) @binding(1) var<storage, read> harness_shared: array<u32>;\n");
+    s.push_str("@group(0) @binding(2) var<storage, read_write> harness_out: array<u32>;\n");
+    s.push_str("@group(0) @binding(3) var<uniform> harness_count: vec4<u32>;\n\n");
     s.push_str("@compute @workgroup_size(64)\nfn splat_harness(@builtin(global_invocation_id) gid: vec3<u32>) {\n");
-    s.push_str("    let i = gid.x;\n    if (i >= harness_count.x) {\n        return;\n    }\n");
-    let _ = writeln!(s, "    let base = i * {}u;", na.max(1));
+    s.push_str("    let i = gid.y * 65535u * 64u + gid.x;\n    if (i >= harness_count.x) {\n        return;\n    }\n");
+    let _ = writeln!(s, "    let base = i * {}u;", per_row.max(1));
     let args: Vec<String> = sig
         .args
         .iter()
         .enumerate()
-        .map(|(k, kind)| load(*kind, &format!("harness_in[base + {k}u]")))
+        .map(|(k, kind)| {
+            let word = if k < per_row {
+                format!("harness_rows[base + {k}u]")
+            } else {
+                format!("harness_shared[{}u]", k - per_row)
+            };
+            load(*kind, &word)
+        })
         .collect();
     let _ = writeln!(s, "    let r = {}({});", sig.name, args.join(", "));
     let _ = writeln!(s, "    let out = i * {}u;", nr.max(1));
@@ -114,121 +123,54 @@ pub fn harness_source(wgsl: &str, sig: &Signature) -> String {
     s
 }
 
-/// Runs `function` of `wgsl` on every input row (`args.len()` words per row); returns the
-/// result rows (`results.len()` words each).
+/// Runs `function` of `wgsl` on every input row (one word per argument); returns the result
+/// rows (one word per result member).
 pub fn run(
     gpu: &Gpu,
     wgsl: &str,
     function: &str,
     inputs: &[Vec<Word>],
 ) -> Result<Vec<Vec<Word>>, GpuError> {
-    use wgpu::util::DeviceExt;
+    run_shared(gpu, wgsl, function, inputs, &[])
+}
+
+/// Like [`run`], with the last `shared.len()` arguments the same for every row.
+pub fn run_shared(
+    gpu: &Gpu,
+    wgsl: &str,
+    function: &str,
+    rows: &[Vec<Word>],
+    shared: &[Word],
+) -> Result<Vec<Vec<Word>>, GpuError> {
     let sig = signature(wgsl, function)?;
-    let (na, nr) = (sig.args.len(), sig.results.len());
-    let n = inputs.len();
-    if let Some(bad) = inputs.iter().find(|r| r.len() != na) {
+    let per_row = sig.args.len().checked_sub(shared.len()).ok_or_else(|| {
+        GpuError::Shader(format!(
+            "`{function}` takes {} arguments, {} shared given",
+            sig.args.len(),
+            shared.len()
+        ))
+    })?;
+    if let Some(bad) = rows.iter().find(|r| r.len() != per_row) {
         return Err(GpuError::Shader(format!(
-            "`{function}` takes {na} words per row, got {}",
+            "`{function}` takes {per_row} words per row, got {}",
             bad.len()
         )));
     }
-    let source = harness_source(wgsl, &sig);
-    let device = &gpu.device;
-    let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some("splat harness"),
-        source: wgpu::ShaderSource::Wgsl(source.into()),
-    });
-    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some("splat harness"),
-        layout: None,
-        module: &module,
-        entry_point: Some("splat_harness"),
-        compilation_options: Default::default(),
-        cache: None,
-    });
-    if let Some(e) = pollster::block_on(scope.pop()) {
-        return Err(GpuError::Shader(e.to_string()));
-    }
-    let mut flat: Vec<Word> = inputs.iter().flatten().copied().collect();
-    flat.resize(flat.len().max(1), 0);
-    let input = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("harness in"),
-        contents: as_bytes(&flat),
-        usage: wgpu::BufferUsages::STORAGE,
-    });
-    let out_size = (4 * n * nr.max(1)).max(4) as u64;
-    let output = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("harness out"),
-        size: out_size,
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-        mapped_at_creation: false,
-    });
-    let readback = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("harness readback"),
-        size: out_size,
-        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    let count = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("harness count"),
-        contents: as_bytes(&[n as u32, 0, 0, 0]),
-        usage: wgpu::BufferUsages::UNIFORM,
-    });
-    let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("harness"),
-        layout: &pipeline.get_bind_group_layout(0),
-        entries: &[
-            wgpu::BindGroupEntry {
-                binding: 0,
-                resource: input.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 1,
-                resource: output.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 2,
-                resource: count.as_entire_binding(),
-            },
-        ],
-    });
-    let mut encoder = device.create_command_encoder(&Default::default());
-    {
-        let mut pass = encoder.begin_compute_pass(&Default::default());
-        pass.set_pipeline(&pipeline);
-        pass.set_bind_group(0, &bind, &[]);
-        pass.dispatch_workgroups((n as u32).div_ceil(64), 1, 1);
-    }
-    encoder.copy_buffer_to_buffer(&output, 0, &readback, 0, out_size);
-    gpu.queue.submit([encoder.finish()]);
-    let slice = readback.slice(..);
-    let (tx, rx) = std::sync::mpsc::channel();
-    slice.map_async(wgpu::MapMode::Read, move |r| {
-        let _ = tx.send(r);
-    });
-    device
-        .poll(wgpu::PollType::wait_indefinitely())
-        .map_err(|e| GpuError::Readback(e.to_string()))?;
-    rx.recv()
-        .map_err(|e| GpuError::Readback(e.to_string()))?
-        .map_err(|e| GpuError::Readback(e.to_string()))?;
-    let words: Vec<Word> = {
-        let bytes = slice
-            .get_mapped_range()
-            .map_err(|e| GpuError::Readback(e.to_string()))?;
-        bytes
-            .chunks_exact(4)
-            .map(|c| u32::from_le_bytes(c.try_into().unwrap()))
-            .collect()
-    };
-    readback.unmap();
-    Ok((0..n)
-        .map(|i| words[i * nr..(i + 1) * nr].to_vec())
-        .collect())
-}
-
-fn as_bytes(words: &[u32]) -> &[u8] {
-    // SAFETY: u32 has no padding and any byte pattern is a valid u8.
-    unsafe { std::slice::from_raw_parts(words.as_ptr() as *const u8, std::mem::size_of_val(words)) }
+    let n = rows.len();
+    let nr = sig.results.len();
+    let flat: Vec<Word> = rows.iter().flatten().copied().collect();
+    // More than 65,535 workgroups spill into the second dispatch dimension.
+    let groups = (n as u32).div_ceil(64).max(1);
+    let dims = (groups.min(65535), groups.div_ceil(65535));
+    let source = harness_source(wgsl, &sig, per_row);
+    let out = super::dispatch::run(
+        gpu,
+        &source,
+        "splat_harness",
+        &[&flat, shared],
+        &[n as u32],
+        n * nr,
+        dims,
+    )?;
+    Ok((0..n).map(|i| out[i * nr..(i + 1) * nr].to_vec()).collect())
 }

@@ -1,8 +1,10 @@
-//! The wgpu side of the runtime. So far: the device context and a harness that runs any
-//! generated WGSL function over a batch of inputs ([`kernel`]), used to check that the GPU
-//! computes what the Rust forms compute. The tiled pipeline on the GPU is the next step.
+//! The wgpu side of the runtime: the device context, one-dispatch plumbing ([`dispatch`]), a
+//! harness that runs any generated WGSL function over a batch ([`kernel`]), and a forward
+//! render ([`render`]: `project` and blending on the GPU, tile lists still on the CPU).
 
+pub mod dispatch;
 pub mod kernel;
+pub mod render;
 
 /// A wgpu device and its queue.
 pub struct Gpu {

@@ -143,7 +143,7 @@ pub struct BackwardStats {
     pub project: Duration,
 }
 
-fn check(camera: &Camera, opts: &RenderOptions) -> Result<TileGrid, RenderError> {
+pub(crate) fn check(camera: &Camera, opts: &RenderOptions) -> Result<TileGrid, RenderError> {
     if ![8, 16, 32, 64].contains(&opts.tile_size) {
         return Err(RenderError::TileSize(opts.tile_size));
     }
