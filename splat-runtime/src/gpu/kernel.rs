@@ -68,7 +68,8 @@ pub fn signature(wgsl: &str, name: &str) -> Result<Signature, GpuError> {
     })
 }
 
-fn load(kind: naga::ScalarKind, word: &str) -> String {
+/// WGSL reading an argument of `kind` from the 32-bit word expression `word`.
+pub(crate) fn load(kind: naga::ScalarKind, word: &str) -> String {
     match kind {
         naga::ScalarKind::Float => format!("bitcast<f32>({word})"),
         naga::ScalarKind::Sint => format!("bitcast<i32>({word})"),
@@ -89,11 +90,25 @@ fn store(kind: naga::ScalarKind, value: &str) -> String {
 /// `per_row` arguments come from the row, the rest from the shared words (e.g. the camera).
 pub fn harness_source(wgsl: &str, sig: &Signature, per_row: usize) -> String {
     let nr = sig.results.len();
+    let shared = sig.args.len() > per_row;
     let mut s = String::from(wgsl);
+    // Only bindings the entry point uses appear in the derived layout, so the shared words are
+    // bound only when there are some.
     s.push_str("\n@group(0) @binding(0) var<storage, read> harness_rows: array<u32>;\n");
-    s.push_str("@group(0) @binding(1) var<storage, read> harness_shared: array<u32>;\n");
-    s.push_str("@group(0) @binding(2) var<storage, read_write> harness_out: array<u32>;\n");
-    s.push_str("@group(0) @binding(3) var<uniform> harness_count: vec4<u32>;\n\n");
+    let mut next = 1;
+    if shared {
+        s.push_str("@group(0) @binding(1) var<storage, read> harness_shared: array<u32>;\n");
+        next = 2;
+    }
+    let _ = writeln!(
+        s,
+        "@group(0) @binding({next}) var<storage, read_write> harness_out: array<u32>;"
+    );
+    let _ = writeln!(
+        s,
+        "@group(0) @binding({}) var<uniform> harness_count: vec4<u32>;\n",
+        next + 1
+    );
     s.push_str("@compute @workgroup_size(64)\nfn splat_harness(@builtin(global_invocation_id) gid: vec3<u32>) {\n");
     s.push_str("    let i = gid.y * 65535u * 64u + gid.x;\n    if (i >= harness_count.x) {\n        return;\n    }\n");
     let _ = writeln!(s, "    let base = i * {}u;", per_row.max(1));
@@ -163,11 +178,16 @@ pub fn run_shared(
     let groups = (n as u32).div_ceil(64).max(1);
     let dims = (groups.min(65535), groups.div_ceil(65535));
     let source = harness_source(wgsl, &sig, per_row);
+    let inputs: Vec<&[Word]> = if shared.is_empty() {
+        vec![&flat]
+    } else {
+        vec![&flat, shared]
+    };
     let out = super::dispatch::run(
         gpu,
         &source,
         "splat_harness",
-        &[&flat, shared],
+        &inputs,
         &[n as u32],
         n * nr,
         dims,

@@ -7,7 +7,7 @@
 //! Not yet on the GPU: the prefix sum / emit / radix sort of the rasterizer, workgroup-shared
 //! batches, the backward pass.
 
-use super::kernel::{self, Signature};
+use super::kernel::{self, Signature, load};
 use super::{Gpu, GpuError};
 use crate::flat::Flat;
 use crate::method::SplatMethod;
@@ -165,15 +165,6 @@ fn unpack<M: SplatMethod>(w: &[u32]) -> Projected<M::Cull, M::Shade> {
         bbox_max: glam::Vec2::new(f[4], f[5]),
         cull: M::Cull::read_words(&f[6..c]),
         shade: M::Shade::read_words(&f[c..]),
-    }
-}
-
-fn load(kind: naga::ScalarKind, word: &str) -> String {
-    match kind {
-        naga::ScalarKind::Float => format!("bitcast<f32>({word})"),
-        naga::ScalarKind::Sint => format!("bitcast<i32>({word})"),
-        naga::ScalarKind::Bool => format!("({word} != 0u)"),
-        _ => word.to_string(),
     }
 }
 
