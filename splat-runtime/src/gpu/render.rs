@@ -11,8 +11,8 @@ use super::kernel::{self, Signature, load};
 use super::{Gpu, GpuError};
 use crate::flat::Flat;
 use crate::method::SplatMethod;
-use crate::pipeline::preprocess::Preprocessed;
-use crate::pipeline::{Frame, Image, RenderError, RenderOptions, Stats, rasterize};
+use crate::pipeline::preprocess;
+use crate::pipeline::{Frame, Image, RenderError, RenderOptions, Stats};
 use crate::types::{Camera, Projected};
 use std::fmt::Write;
 use std::time::Instant;
@@ -63,29 +63,12 @@ pub fn render<M: SplatMethod>(
     let rows: Vec<Vec<u32>> = params.iter().map(words).collect();
     let out = kernel::run_shared(gpu, wgsl, "project", &rows, &cam)?;
     let projected: Vec<Projected<M::Cull, M::Shade>> = out.iter().map(|w| unpack::<M>(w)).collect();
-    let visible = projected
-        .iter()
-        .enumerate()
-        .filter_map(|(i, p)| {
-            if !p.visible || !p.depth.is_finite() {
-                return None;
-            }
-            grid.rect(p.bbox_min, p.bbox_max).map(|r| (i as u32, r))
-        })
-        .collect();
-    let pre = Preprocessed::<M> { projected, visible };
+    let pre = preprocess::filter::<M>(projected, &grid);
     stats.visible = pre.visible.len();
     stats.preprocess = t0.elapsed();
 
     // 2. tile lists on the CPU.
-    let t1 = Instant::now();
-    let lists = rasterize::rasterize::<M>(&pre, &grid)?;
-    stats.intersections = lists.intersections();
-    stats.longest_list = (0..grid.tile_count())
-        .map(|t| lists.list(t).len())
-        .max()
-        .unwrap_or(0);
-    stats.rasterize = t1.elapsed();
+    let lists = crate::pipeline::tile_lists(&pre, &grid, &mut stats)?;
 
     // 3. blend on the GPU.
     let t2 = Instant::now();
@@ -128,26 +111,15 @@ pub fn render<M: SplatMethod>(
         t.push(f(px[channels]));
         dacc.push(f(px[channels + 1]));
     }
-    let image = |channels: usize, data: Vec<f32>| Image {
+    let (alpha, depth) = crate::pipeline::alpha_and_depth(&grid, opts, &t, &dacc);
+    let color = Image {
         width: grid.width,
         height: grid.height,
         channels,
-        data,
+        data: color,
     };
-    let alpha = opts
-        .alpha
-        .then(|| image(1, t.iter().map(|t| 1.0 - t).collect()));
-    let depth = opts.depth.then(|| {
-        image(
-            1,
-            dacc.iter()
-                .zip(&t)
-                .map(|(d, t)| if *t < 1.0 { d / (1.0 - t) } else { 0.0 })
-                .collect(),
-        )
-    });
     Ok(Frame {
-        color: image(channels, color),
+        color,
         alpha,
         depth,
         stats,

@@ -204,14 +204,7 @@ fn forward<M: SplatMethod>(
     stats.visible = pre.visible.len();
     stats.preprocess = t0.elapsed();
 
-    let t1 = Instant::now();
-    let lists = rasterize::rasterize::<M>(&pre, &grid)?;
-    stats.intersections = lists.intersections();
-    stats.longest_list = (0..grid.tile_count())
-        .map(|t| lists.list(t).len())
-        .max()
-        .unwrap_or(0);
-    stats.rasterize = t1.elapsed();
+    let lists = tile_lists(&pre, &grid, &mut stats)?;
 
     let t2 = Instant::now();
     let capped = |t: usize| {
@@ -265,22 +258,7 @@ fn forward<M: SplatMethod>(
     }
     stats.shade = t2.elapsed();
 
-    let image = |channels: usize, data: Vec<f32>| Image {
-        width: grid.width,
-        height: grid.height,
-        channels,
-        data,
-    };
-    let alpha = opts
-        .alpha
-        .then(|| image(1, transmittance.iter().map(|t| 1.0 - t).collect()));
-    let depth = opts.depth.then(|| {
-        let d = depth_acc
-            .iter()
-            .zip(&transmittance)
-            .map(|(d, t)| if *t < 1.0 { d / (1.0 - t) } else { 0.0 });
-        image(1, d.collect())
-    });
+    let (alpha, depth) = alpha_and_depth(&grid, opts, &transmittance, &depth_acc);
     // Only a render kept for the backward pass pays for a second copy of the color.
     let state = keep.then(|| ForwardState {
         grid,
@@ -292,12 +270,60 @@ fn forward<M: SplatMethod>(
         depth_acc,
     });
     let frame = Frame {
-        color: image(channels, color),
+        color: Image {
+            width: grid.width,
+            height: grid.height,
+            channels,
+            data: color,
+        },
         alpha,
         depth,
         stats,
     };
     Ok((frame, state))
+}
+
+/// Stage 3 with its statistics (shared by the CPU and GPU backends).
+pub(crate) fn tile_lists<M: SplatMethod>(
+    pre: &Preprocessed<M>,
+    grid: &TileGrid,
+    stats: &mut Stats,
+) -> Result<TileLists, RenderError> {
+    let t = Instant::now();
+    let lists = rasterize::rasterize::<M>(pre, grid)?;
+    stats.intersections = lists.intersections();
+    stats.longest_list = (0..grid.tile_count())
+        .map(|t| lists.list(t).len())
+        .max()
+        .unwrap_or(0);
+    stats.rasterize = t.elapsed();
+    Ok(lists)
+}
+
+/// The alpha (1 - T) and expected-depth (sum w z / (1 - T)) outputs, where requested.
+pub(crate) fn alpha_and_depth(
+    grid: &TileGrid,
+    opts: &RenderOptions,
+    transmittance: &[f32],
+    depth_acc: &[f32],
+) -> (Option<Image>, Option<Image>) {
+    let image = |data: Vec<f32>| Image {
+        width: grid.width,
+        height: grid.height,
+        channels: 1,
+        data,
+    };
+    let alpha = opts
+        .alpha
+        .then(|| image(transmittance.iter().map(|t| 1.0 - t).collect()));
+    let depth = opts.depth.then(|| {
+        let d = depth_acc
+            .iter()
+            .zip(transmittance)
+            .map(|(d, t)| if *t < 1.0 { d / (1.0 - t) } else { 0.0 });
+        image(d.collect())
+    });
+    (alpha, depth)
 }
 
 /// Gradients of the parameters and the camera, given the gradient of each output.

@@ -19,6 +19,14 @@ pub fn preprocess<M: SplatMethod>(
     grid: &TileGrid,
 ) -> Preprocessed<M> {
     let projected: Vec<_> = params.par_iter().map(|p| M::project(p, camera)).collect();
+    filter::<M>(projected, grid)
+}
+
+/// Keeps the primitives `project` marked visible, with a finite depth and at least one pixel.
+pub fn filter<M: SplatMethod>(
+    projected: Vec<Projected<M::Cull, M::Shade>>,
+    grid: &TileGrid,
+) -> Preprocessed<M> {
     let visible = projected
         .par_iter()
         .enumerate()
