@@ -1,163 +1,192 @@
 //! 3D Gaussian Splatting (Kerbl et al. 2023) with EWA splatting and the StopThePop tile cull
 //! (seed 000, Listing 1 and §A.1.1), in the conventions of gsplat's "classic" mode
 //! (DESIGN.md §6): OpenCV camera, pixel centres at +0.5, 0.3 px dilation, tangent clamp,
-//! near plane 0.01, alpha <= 0.99, pairs below 1/255 skipped, SH degree 3 + 0.5 clamped at 0.
+//! near plane 0.01, alpha <= 0.99, pairs below 1/255 skipped, SH + 0.5 clamped at 0.
+//!
+//! The SH degree is a compile-time property of the method: `gaussians_3d!` instantiates one
+//! method per degree (`gs3d_sh0` .. `gs3d_sh2`, and `gs3d` for degree 3), so a scene without
+//! view-dependent color carries and evaluates no higher-order coefficients.
 
-use splat_macros::splat_method;
+/// One 3DGS method with `$n` SH coefficients per channel ((degree + 1)^2).
+macro_rules! gaussians_3d {
+    ($name:ident, sh_coefficients = $n:literal) => {
+        #[splat_macros::splat_method]
+        pub mod $name {
+            use splat_runtime::prelude::*;
 
-#[splat_method]
-pub mod gs3d {
-    use splat_runtime::prelude::*;
+            pub const SH_COEFFICIENTS: usize = $n;
 
-    pub const NEAR: f32 = 0.01;
-    pub const ALPHA_MIN: f32 = 1.0 / 255.0;
-    pub const SH_C0: f32 = 0.28209479177387814;
-    pub const SH_C1: f32 = 0.4886025119029199;
-    pub const SH_C2: [f32; 5] = [
-        1.0925484305920792,
-        -1.0925484305920792,
-        0.31539156525252005,
-        -1.0925484305920792,
-        0.5462742152960396,
-    ];
-    pub const SH_C3: [f32; 7] = [
-        -0.5900435899266435,
-        2.890611442640554,
-        -0.4570457994644658,
-        0.3731763325901154,
-        -0.4570457994644658,
-        1.445305721320277,
-        -0.5900435899266435,
-    ];
+            pub const NEAR: f32 = 0.01;
+            pub const ALPHA_MIN: f32 = 1.0 / 255.0;
+            pub const SH_C0: f32 = 0.28209479177387814;
+            pub const SH_C1: f32 = 0.4886025119029199;
+            pub const SH_C2: [f32; 5] = [
+                1.0925484305920792,
+                -1.0925484305920792,
+                0.31539156525252005,
+                -1.0925484305920792,
+                0.5462742152960396,
+            ];
+            pub const SH_C3: [f32; 7] = [
+                -0.5900435899266435,
+                2.890611442640554,
+                -0.4570457994644658,
+                0.3731763325901154,
+                -0.4570457994644658,
+                1.445305721320277,
+                -0.5900435899266435,
+            ];
 
-    pub struct Params {
-        pub mean: Vec3,
-        /// Natural log of the three axis scales.
-        pub log_scale: Vec3,
-        /// Rotation quaternion (w, x, y, z), normalized here.
-        pub rotation: Vec4,
-        /// Opacity before the sigmoid.
-        pub opacity_logit: f32,
-        /// SH coefficients per degree-3 basis function; `sh[0]` is the DC term.
-        pub sh: [Vec3; 16],
-    }
+            pub struct Params {
+                pub mean: Vec3,
+                /// Natural log of the three axis scales.
+                pub log_scale: Vec3,
+                /// Rotation quaternion (w, x, y, z), normalized here.
+                pub rotation: Vec4,
+                /// Opacity before the sigmoid.
+                pub opacity_logit: f32,
+                /// SH coefficients per basis function; `sh[0]` is the DC term.
+                pub sh: [Vec3; $n],
+            }
 
-    pub struct Cull {
-        pub center: Vec2,
-        pub conic: Vec3,
-        /// ln(opacity / ALPHA_MIN): the largest exponent that still reaches ALPHA_MIN.
-        pub max_power: f32,
-    }
+            pub struct Cull {
+                pub center: Vec2,
+                pub conic: Vec3,
+                /// ln(opacity / ALPHA_MIN): the largest exponent that still reaches ALPHA_MIN.
+                pub max_power: f32,
+            }
 
-    pub struct Shade {
-        pub center: Vec2,
-        /// Inverse 2D covariance (xx, xy, yy).
-        pub conic: Vec3,
-        pub opacity: f32,
-        pub color: Vec3,
-    }
+            pub struct Shade {
+                pub center: Vec2,
+                /// Inverse 2D covariance (xx, xy, yy).
+                pub conic: Vec3,
+                pub opacity: f32,
+                pub color: Vec3,
+            }
 
-    /// View-dependent color: real SH of degree 3 in direction `dir`.
-    fn sh_color(sh: [Vec3; 16], dir: Vec3) -> Vec3 {
-        let d = dir.normalize();
-        let (x, y, z) = (d.x, d.y, d.z);
-        let (xx, yy, zz) = (x * x, y * y, z * z);
-        let basis = [
-            SH_C0,
-            -SH_C1 * y,
-            SH_C1 * z,
-            -SH_C1 * x,
-            SH_C2[0] * x * y,
-            SH_C2[1] * y * z,
-            SH_C2[2] * (2.0 * zz - xx - yy),
-            SH_C2[3] * x * z,
-            SH_C2[4] * (xx - yy),
-            SH_C3[0] * y * (3.0 * xx - yy),
-            SH_C3[1] * x * y * z,
-            SH_C3[2] * y * (4.0 * zz - xx - yy),
-            SH_C3[3] * z * (2.0 * zz - 3.0 * xx - 3.0 * yy),
-            SH_C3[4] * x * (4.0 * zz - xx - yy),
-            SH_C3[5] * z * (xx - yy),
-            SH_C3[6] * x * (xx - 3.0 * yy),
-        ];
-        let mut c = Vec3::splat(0.5);
-        for i in 0..16 {
-            c += sh[i] * basis[i];
+            /// View-dependent color: real SH in direction `dir` (basis terms past the method's degree
+            /// are never used, and compiled away).
+            fn sh_color(sh: [Vec3; $n], dir: Vec3) -> Vec3 {
+                let d = dir.normalize();
+                let (x, y, z) = (d.x, d.y, d.z);
+                let (xx, yy, zz) = (x * x, y * y, z * z);
+                let basis = [
+                    SH_C0,
+                    -SH_C1 * y,
+                    SH_C1 * z,
+                    -SH_C1 * x,
+                    SH_C2[0] * x * y,
+                    SH_C2[1] * y * z,
+                    SH_C2[2] * (2.0 * zz - xx - yy),
+                    SH_C2[3] * x * z,
+                    SH_C2[4] * (xx - yy),
+                    SH_C3[0] * y * (3.0 * xx - yy),
+                    SH_C3[1] * x * y * z,
+                    SH_C3[2] * y * (4.0 * zz - xx - yy),
+                    SH_C3[3] * z * (2.0 * zz - 3.0 * xx - 3.0 * yy),
+                    SH_C3[4] * x * (4.0 * zz - xx - yy),
+                    SH_C3[5] * z * (xx - yy),
+                    SH_C3[6] * x * (xx - 3.0 * yy),
+                ];
+                let mut c = Vec3::splat(0.5);
+                for i in 0..SH_COEFFICIENTS {
+                    c += sh[i] * basis[i];
+                }
+                c.max(Vec3::ZERO)
+            }
+
+            pub fn project(p: &Params, cam: &Camera) -> Projected<Cull, Shade> {
+                let t = cam.rotation * p.mean + cam.translation;
+                let z = t.z.max(NEAR);
+                let (f, c, size) = (cam.focal, cam.principal, cam.size);
+                // EWA Jacobian with the tangent clamp of 3DGS / gsplat.
+                let lim_pos = (size - c) / f + size * 0.15 / f;
+                let lim_neg = c / f + size * 0.15 / f;
+                let tx = (t.x / z).clamp(-lim_neg.x, lim_pos.x) * z;
+                let ty = (t.y / z).clamp(-lim_neg.y, lim_pos.y) * z;
+                let j = Mat3::from_cols(
+                    Vec3::new(f.x / z, 0.0, 0.0),
+                    Vec3::new(0.0, f.y / z, 0.0),
+                    Vec3::new(-f.x * tx / (z * z), -f.y * ty / (z * z), 0.0),
+                );
+                let q = Quat::from_xyzw(p.rotation.y, p.rotation.z, p.rotation.w, p.rotation.x)
+                    .normalize();
+                let m = cam.rotation * Mat3::from_quat(q) * Mat3::from_diagonal(p.log_scale.exp());
+                let cov = j * (m * m.transpose()) * j.transpose();
+                let (a, b, d) = (cov.x_axis.x + 0.3, cov.y_axis.x, cov.y_axis.y + 0.3);
+                let det = a * d - b * b;
+                let conic = Vec3::new(d, -b, a) / det;
+                // Opacity-aware extent: every pixel where alpha >= ALPHA_MIN lies within `radius` of
+                // the centre (0.5 d^T conic d <= max_power along the major axis), so the box culls
+                // nothing the threshold would keep.
+                let opacity = sigmoid(p.opacity_logit);
+                let max_power = (opacity / ALPHA_MIN).ln();
+                let mid = 0.5 * (a + d);
+                let lambda = mid + (mid * mid - det).max(0.1).sqrt();
+                let radius = (2.0 * max_power.max(0.0) * lambda).sqrt().ceil();
+                let center = Vec2::new(f.x * t.x / z, f.y * t.y / z) + c;
+                let cam_center = -(cam.rotation.transpose() * cam.translation);
+                Projected {
+                    visible: t.z > NEAR && det > 0.0 && opacity >= ALPHA_MIN,
+                    depth: t.z,
+                    bbox_min: center - radius,
+                    bbox_max: center + radius,
+                    cull: Cull {
+                        center,
+                        conic,
+                        max_power,
+                    },
+                    shade: Shade {
+                        center,
+                        conic,
+                        opacity,
+                        color: sh_color(p.sh, p.mean - cam_center),
+                    },
+                }
+            }
+
+            /// StopThePop: keep the tile iff the Gaussian's largest alpha over the tile's pixel centres
+            /// reaches ALPHA_MIN. That maximum is at the centre, or on an edge facing it, where the
+            /// 1D minimum of the quadratic form along the edge is clamped to the edge.
+            pub fn tile_cull(tile: &Tile, g: &Cull) -> bool {
+                let (mu, k) = (g.center, g.conic);
+                let dx = mu.x - mu.x.clamp(tile.min.x, tile.max.x);
+                let dy1 = mu.y - (mu.y + k.y * dx / k.z).clamp(tile.min.y, tile.max.y);
+                let dy = mu.y - mu.y.clamp(tile.min.y, tile.max.y);
+                let dx2 = mu.x - (mu.x + k.y * dy / k.x).clamp(tile.min.x, tile.max.x);
+                let p1 = k.x * dx * dx + 2.0 * k.y * dx * dy1 + k.z * dy1 * dy1;
+                let p2 = k.x * dx2 * dx2 + 2.0 * k.y * dx2 * dy + k.z * dy * dy;
+                0.5 * p1.min(p2) <= g.max_power
+            }
+
+            pub fn evaluate(px: Vec2, s: &Shade) -> Contribution<Vec3> {
+                let d = px - s.center;
+                let power =
+                    0.5 * (s.conic.x * d.x * d.x + s.conic.z * d.y * d.y) + s.conic.y * d.x * d.y;
+                let alpha = (s.opacity * (-power).exp()).min(0.99);
+                Contribution {
+                    alpha,
+                    color: s.color,
+                    valid: power >= 0.0 && alpha >= ALPHA_MIN,
+                }
+            }
         }
-        c.max(Vec3::ZERO)
-    }
 
-    pub fn project(p: &Params, cam: &Camera) -> Projected<Cull, Shade> {
-        let t = cam.rotation * p.mean + cam.translation;
-        let z = t.z.max(NEAR);
-        let (f, c, size) = (cam.focal, cam.principal, cam.size);
-        // EWA Jacobian with the tangent clamp of 3DGS / gsplat.
-        let lim_pos = (size - c) / f + size * 0.15 / f;
-        let lim_neg = c / f + size * 0.15 / f;
-        let tx = (t.x / z).clamp(-lim_neg.x, lim_pos.x) * z;
-        let ty = (t.y / z).clamp(-lim_neg.y, lim_pos.y) * z;
-        let j = Mat3::from_cols(
-            Vec3::new(f.x / z, 0.0, 0.0),
-            Vec3::new(0.0, f.y / z, 0.0),
-            Vec3::new(-f.x * tx / (z * z), -f.y * ty / (z * z), 0.0),
-        );
-        let q = Quat::from_xyzw(p.rotation.y, p.rotation.z, p.rotation.w, p.rotation.x).normalize();
-        let m = cam.rotation * Mat3::from_quat(q) * Mat3::from_diagonal(p.log_scale.exp());
-        let cov = j * (m * m.transpose()) * j.transpose();
-        let (a, b, d) = (cov.x_axis.x + 0.3, cov.y_axis.x, cov.y_axis.y + 0.3);
-        let det = a * d - b * b;
-        let conic = Vec3::new(d, -b, a) / det;
-        // Opacity-aware extent: every pixel where alpha >= ALPHA_MIN lies within `radius` of
-        // the centre (0.5 d^T conic d <= max_power along the major axis), so the box culls
-        // nothing the threshold would keep.
-        let opacity = sigmoid(p.opacity_logit);
-        let max_power = (opacity / ALPHA_MIN).ln();
-        let mid = 0.5 * (a + d);
-        let lambda = mid + (mid * mid - det).max(0.1).sqrt();
-        let radius = (2.0 * max_power.max(0.0) * lambda).sqrt().ceil();
-        let center = Vec2::new(f.x * t.x / z, f.y * t.y / z) + c;
-        let cam_center = -(cam.rotation.transpose() * cam.translation);
-        Projected {
-            visible: t.z > NEAR && det > 0.0 && opacity >= ALPHA_MIN,
-            depth: t.z,
-            bbox_min: center - radius,
-            bbox_max: center + radius,
-            cull: Cull {
-                center,
-                conic,
-                max_power,
-            },
-            shade: Shade {
-                center,
-                conic,
-                opacity,
-                color: sh_color(p.sh, p.mean - cam_center),
-            },
+        impl crate::FromStored for $name::Params {
+            fn from_stored(g: &splat_runtime::io::ply::StoredGaussian) -> Self {
+                $name::Params {
+                    mean: g.mean,
+                    log_scale: g.log_scale,
+                    rotation: g.rotation,
+                    opacity_logit: g.opacity_logit,
+                    sh: std::array::from_fn(|i| g.sh[i]),
+                }
+            }
         }
-    }
-
-    /// StopThePop: keep the tile iff the Gaussian's largest alpha over the tile's pixel centres
-    /// reaches ALPHA_MIN. That maximum is at the centre, or on an edge facing it, where the
-    /// 1D minimum of the quadratic form along the edge is clamped to the edge.
-    pub fn tile_cull(tile: &Tile, g: &Cull) -> bool {
-        let (mu, k) = (g.center, g.conic);
-        let dx = mu.x - mu.x.clamp(tile.min.x, tile.max.x);
-        let dy1 = mu.y - (mu.y + k.y * dx / k.z).clamp(tile.min.y, tile.max.y);
-        let dy = mu.y - mu.y.clamp(tile.min.y, tile.max.y);
-        let dx2 = mu.x - (mu.x + k.y * dy / k.x).clamp(tile.min.x, tile.max.x);
-        let p1 = k.x * dx * dx + 2.0 * k.y * dx * dy1 + k.z * dy1 * dy1;
-        let p2 = k.x * dx2 * dx2 + 2.0 * k.y * dx2 * dy + k.z * dy * dy;
-        0.5 * p1.min(p2) <= g.max_power
-    }
-
-    pub fn evaluate(px: Vec2, s: &Shade) -> Contribution<Vec3> {
-        let d = px - s.center;
-        let power = 0.5 * (s.conic.x * d.x * d.x + s.conic.z * d.y * d.y) + s.conic.y * d.x * d.y;
-        let alpha = (s.opacity * (-power).exp()).min(0.99);
-        Contribution {
-            alpha,
-            color: s.color,
-            valid: power >= 0.0 && alpha >= ALPHA_MIN,
-        }
-    }
+    };
 }
+
+gaussians_3d!(gs3d, sh_coefficients = 16);
+gaussians_3d!(gs3d_sh0, sh_coefficients = 1);
+gaussians_3d!(gs3d_sh1, sh_coefficients = 4);
+gaussians_3d!(gs3d_sh2, sh_coefficients = 9);

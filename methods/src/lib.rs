@@ -2,4 +2,9 @@
 
 mod gaussians;
 
-pub use gaussians::gs3d;
+pub use gaussians::{gs3d, gs3d_sh0, gs3d_sh1, gs3d_sh2};
+
+/// Parameters that can be built from a Gaussian stored in an INRIA PLY file.
+pub trait FromStored {
+    fn from_stored(g: &splat_runtime::io::ply::StoredGaussian) -> Self;
+}

@@ -423,6 +423,9 @@ impl Resolver<'_> {
 
     fn const_len(&self, e: &syn::Expr) -> Result<usize, String> {
         match e {
+            // Tokens from a `macro_rules!` expansion arrive in invisible groups.
+            syn::Expr::Group(g) => self.const_len(&g.expr),
+            syn::Expr::Paren(p) => self.const_len(&p.expr),
             syn::Expr::Lit(syn::ExprLit {
                 lit: syn::Lit::Int(i),
                 ..

@@ -4,10 +4,10 @@ mod scene;
 
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand, ValueEnum};
-use splat_methods::gs3d;
+use splat_methods::{FromStored, gs3d, gs3d_sh0, gs3d_sh1, gs3d_sh2};
 use splat_runtime::io::ply::GaussianCloud;
 use splat_runtime::io::{camera as camera_io, image as image_io, ply};
-use splat_runtime::{Camera, RenderOptions, SplatMethod, render};
+use splat_runtime::{Camera, Frame, RenderOptions, SplatMethod, render};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -135,18 +135,25 @@ fn run(cli: Cli) -> Result<()> {
     }
 }
 
-fn to_params(cloud: &GaussianCloud) -> Vec<gs3d::Params> {
-    cloud
-        .gaussians
-        .iter()
-        .map(|g| gs3d::Params {
-            mean: g.mean,
-            log_scale: g.log_scale,
-            rotation: g.rotation,
-            opacity_logit: g.opacity_logit,
-            sh: g.sh,
-        })
-        .collect()
+/// Renders with method `M` on the chosen backend; returns the frame and where it ran.
+fn render_with<M: SplatMethod>(
+    cloud: &GaussianCloud,
+    camera: &Camera,
+    opts: &RenderOptions,
+    backend: Backend,
+) -> Result<(Frame, String)>
+where
+    M::Params: FromStored,
+{
+    let params: Vec<M::Params> = cloud.gaussians.iter().map(M::Params::from_stored).collect();
+    Ok(match backend {
+        Backend::Cpu => (render::<M>(&params, camera, opts)?, "CPU".to_string()),
+        Backend::Gpu => {
+            let gpu = splat_runtime::gpu::Gpu::new()?;
+            let frame = splat_runtime::gpu::render::render::<M>(&gpu, &params, camera, opts)?;
+            (frame, format!("GPU, {}", gpu.adapter))
+        }
+    })
 }
 
 fn render_cmd(args: &RenderArgs) -> Result<()> {
@@ -184,24 +191,19 @@ fn render_cmd(args: &RenderArgs) -> Result<()> {
     };
     let load = t0.elapsed();
     let Method::Gs3d = args.method;
-    let params = to_params(&cloud);
     let opts = RenderOptions {
         tile_size: args.tile,
         p_max: args.p_max,
         alpha: args.alpha,
         depth: args.depth,
     };
-    let (frame, backend) = match args.backend {
-        Backend::Cpu => (
-            render::<gs3d::Method>(&params, &camera, &opts)?,
-            "CPU".to_string(),
-        ),
-        Backend::Gpu => {
-            let gpu = splat_runtime::gpu::Gpu::new()?;
-            let frame =
-                splat_runtime::gpu::render::render::<gs3d::Method>(&gpu, &params, &camera, &opts)?;
-            (frame, format!("GPU, {}", gpu.adapter))
-        }
+    // The method instance matching the scene's SH degree: higher-order terms cost nothing when
+    // the scene has none.
+    let (frame, backend) = match cloud.sh_degree {
+        0 => render_with::<gs3d_sh0::Method>(&cloud, &camera, &opts, args.backend)?,
+        1 => render_with::<gs3d_sh1::Method>(&cloud, &camera, &opts, args.backend)?,
+        2 => render_with::<gs3d_sh2::Method>(&cloud, &camera, &opts, args.backend)?,
+        _ => render_with::<gs3d::Method>(&cloud, &camera, &opts, args.backend)?,
     };
     let written = image_io::write_frame(&args.out, &frame)?;
     let s = &frame.stats;
