@@ -45,6 +45,8 @@ pub trait SplatMethod: Send + Sync + 'static {
     type PixelLanes: LaneArray;
     /// `Color` as `[F32x8; Color::LEN]`.
     type ColorLanes: LaneArray;
+    /// The float slots of `Shade` as lanes: per-lane partial sums of its gradient.
+    type ShadeLanes: LaneArray;
 
     fn project(params: &Self::Params, camera: &Camera) -> Projected<Self::Cull, Self::Shade>;
 
@@ -83,4 +85,18 @@ pub trait SplatMethod: Send + Sync + 'static {
         d_out: &ContributionLanes<Self::ColorLanes>,
         active: M32x8,
     ) -> Self::Shade;
+
+    /// `evaluate_adjoint` for eight pixels, added lane by lane into `acc` (lanes outside
+    /// `active` add nothing). Summing the lanes once per (tile, primitive) instead of once per
+    /// group of pixels keeps horizontal sums out of the backward blend loop.
+    fn evaluate_adjoint_lanes_accumulate(
+        pixel: &Self::PixelLanes,
+        shade: &Self::Shade,
+        d_out: &ContributionLanes<Self::ColorLanes>,
+        active: M32x8,
+        acc: &mut Self::ShadeLanes,
+    );
+
+    /// The shade cotangent whose float slots are `sums` (bool and integer fields zero).
+    fn shade_from_float_slots(sums: &[f32]) -> Self::Shade;
 }

@@ -81,7 +81,10 @@ fn backward_tile_body<M: SplatMethod>(
     let (s, channels, words) = (grid.size, M::Color::LEN, M::Shade::LEN);
     let (tx, ty) = grid.tile_xy(tile);
     let want_depth = grad.depth.is_some();
-    let mut shade_words = vec![0.0f32; words];
+    // Per-lane gradient sums for every entry of the tile's list, over all its pixel groups;
+    // the lanes are summed once per entry at the end of the tile.
+    let mut shade_lanes = vec![M::ShadeLanes::default(); list.len()];
+    let mut depth_lanes = vec![F32x8::splat(0.0); if want_depth { list.len() } else { 0 }];
     for row in 0..s {
         for gx in (0..s).step_by(LANES) {
             let (x0, y) = (tx * s + gx, ty * s + row);
@@ -118,7 +121,7 @@ fn backward_tile_body<M: SplatMethod>(
             let mut t = F32x8::splat(1.0);
             let mut c_acc = M::ColorLanes::default();
             let mut d_acc = F32x8::splat(0.0);
-            for &prim in list {
+            for (k, &prim) in list.iter().enumerate() {
                 if done.all() {
                     break;
                 }
@@ -145,7 +148,7 @@ fn backward_tile_body<M: SplatMethod>(
                 if want_depth {
                     d_acc = d_acc + w * p.depth;
                     d_alpha = d_alpha + t * p.depth * d_d - (d_final - d_acc) * d_d / one_minus;
-                    acc.depth[prim as usize] += (w * d_d).masked_sum(st.take);
+                    depth_lanes[k] = depth_lanes[k] + st.take.select_f32(w * d_d, zero);
                 }
                 d_alpha = d_alpha + d_alpha_out * t_final / one_minus;
                 let d_out = ContributionLanes {
@@ -153,17 +156,34 @@ fn backward_tile_body<M: SplatMethod>(
                     color: d_col,
                     valid: M32x8::splat(true),
                 };
-                let g = M::evaluate_adjoint_lanes(&pixels, &p.shade, &d_out, st.take);
-                g.write_words(&mut shade_words);
-                let p = prim as usize;
-                for (sum, v) in acc.shade[p * words..(p + 1) * words]
-                    .iter_mut()
-                    .zip(&shade_words)
-                {
-                    *sum += v;
-                }
+                M::evaluate_adjoint_lanes_accumulate(
+                    &pixels,
+                    &p.shade,
+                    &d_out,
+                    st.take,
+                    &mut shade_lanes[k],
+                );
                 t = st.take.select_f32(t * one_minus, t);
             }
+        }
+    }
+    let all = M32x8::splat(true);
+    let mut sums = vec![0.0f32; M::ShadeLanes::default().as_ref().len()];
+    let mut shade_words = vec![0.0f32; words];
+    for (k, &prim) in list.iter().enumerate() {
+        for (sum, lanes) in sums.iter_mut().zip(shade_lanes[k].as_ref()) {
+            *sum = lanes.masked_sum(all);
+        }
+        M::shade_from_float_slots(&sums).write_words(&mut shade_words);
+        let p = prim as usize;
+        for (acc, v) in acc.shade[p * words..(p + 1) * words]
+            .iter_mut()
+            .zip(&shade_words)
+        {
+            *acc += v;
+        }
+        if want_depth {
+            acc.depth[p] += depth_lanes[k].masked_sum(all);
         }
     }
 }

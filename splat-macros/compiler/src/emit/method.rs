@@ -244,10 +244,45 @@ pub fn method_impl(module: &syn::Ident, kernels: &[Kernel], diag: &Diag) -> Opti
         .collect::<Vec<_>>()
         .into_iter();
     let shade_from_bars = pack(&shade_ty, &mut shade_bars);
+    // The same packing from plain float sums, and the lane-wise accumulation.
+    let mut float_index = 0usize;
+    let mut from_sums = shade_slots
+        .iter()
+        .map(|s| match s {
+            Scalar::F32 => {
+                float_index += 1;
+                let k = idx(float_index - 1);
+                quote!(sums[#k])
+            }
+            Scalar::Bool => quote!(false),
+            Scalar::U32 => quote!(0u32),
+            Scalar::I32 => quote!(0i32),
+        })
+        .collect::<Vec<_>>()
+        .into_iter();
+    let shade_from_sums = pack(&shade_ty, &mut from_sums);
+    let nsf = idx(float_index);
+    let accumulate: Vec<TokenStream> = (0..float_index)
+        .map(|k| {
+            let (a, b) = (idx(k), idx(np + k));
+            quote!(acc[#a] = acc[#a] + active.select_f32(__bars[#b], #f32x8::splat(0.0));)
+        })
+        .collect();
     let eval_adjoint = if evaluate.adjoint.is_some() {
         quote! { evaluate_adjoint(#(#eval_call,)* *d_out).1 }
     } else {
         quote! { <#s_t as #rt::Flat>::zero() }
+    };
+    let lanes_accumulate = if evaluate.adjoint.is_some() {
+        quote! {
+            let __in = [#(#lane_in),*];
+            let __int = [#(#lane_int),*];
+            let __d = [d_out.alpha, #(#d_color),*];
+            let __bars = lanes::evaluate_adjoint(&__in, &__int, &__d);
+            #(#accumulate)*
+        }
+    } else {
+        quote! {}
     };
     let lanes_adjoint = if evaluate.adjoint.is_some() {
         quote! {
@@ -278,6 +313,7 @@ pub fn method_impl(module: &syn::Ident, kernels: &[Kernel], diag: &Diag) -> Opti
             type Color = #col_t;
             type PixelLanes = [#f32x8; #np];
             type ColorLanes = [#f32x8; #nc];
+            type ShadeLanes = [#f32x8; #nsf];
 
             #[inline]
             fn project(params: &#p_t, camera: &#rt::Camera) -> #rt::Projected<#c_t, #s_t> {
@@ -320,6 +356,20 @@ pub fn method_impl(module: &syn::Ident, kernels: &[Kernel], diag: &Diag) -> Opti
                 let __in = [#(#lane_in),*];
                 let __int = [#(#lane_int),*];
                 #lanes_adjoint
+            }
+            #[inline(always)]
+            fn evaluate_adjoint_lanes_accumulate(
+                pixel: &[#f32x8; #np],
+                shade: &#s_t,
+                d_out: &#rt::ContributionLanes<[#f32x8; #nc]>,
+                active: #rt::M32x8,
+                acc: &mut [#f32x8; #nsf],
+            ) {
+                #lanes_accumulate
+            }
+            #[inline]
+            fn shade_from_float_slots(sums: &[f32]) -> #s_t {
+                #shade_from_sums
             }
         }
     })
