@@ -25,6 +25,13 @@ pub fn write_atomic(
         buf.flush()?;
     }
     tmp.as_file().sync_all()?;
+    // Temporary files are private (0600); an output should get the usual permissions.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        tmp.as_file()
+            .set_permissions(std::fs::Permissions::from_mode(0o644))?;
+    }
     tmp.persist(path).map_err(|e| e.error)?;
     Ok(())
 }
