@@ -3,3 +3,4 @@
 
 pub mod features;
 pub mod isotropic;
+pub mod rays;

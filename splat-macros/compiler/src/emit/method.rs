@@ -56,11 +56,18 @@ fn check_params(def: &FnDef, want: &[(&str, Option<&Ty>)], diag: &Diag) -> Resul
     Ok(())
 }
 
-fn call_args(def: &FnDef, names: &[TokenStream]) -> Vec<TokenStream> {
+/// Arguments for calling the user's function from the trait method, whose parameters are
+/// all references except `pixel_info`'s pixel (`by_value` names those passed by value).
+fn call_args(def: &FnDef, names: &[TokenStream], by_value: &[bool]) -> Vec<TokenStream> {
     def.params
         .iter()
         .zip(names)
-        .map(|(p, n)| if p.by_ref { quote!(#n) } else { quote!(*#n) })
+        .zip(by_value)
+        .map(|((p, n), owned)| match (p.by_ref, owned) {
+            (true, false) | (false, true) => quote!(#n),
+            (false, false) => quote!(*#n),
+            (true, true) => quote!(&#n),
+        })
         .collect()
 }
 
@@ -177,7 +184,11 @@ pub fn method_impl(module: &syn::Ident, kernels: &[Kernel], diag: &Diag) -> Opti
     let u32x8 = quote!(::splat_runtime::U32x8);
     let rt = quote!(::splat_runtime);
 
-    let project_call = call_args(project.def, &[quote!(params), quote!(camera)]);
+    let project_call = call_args(
+        project.def,
+        &[quote!(params), quote!(camera)],
+        &[false, false],
+    );
     let project_adjoint = if project.adjoint.is_some() {
         quote! { project_adjoint(#(#project_call,)* *d_out) }
     } else {
@@ -185,19 +196,23 @@ pub fn method_impl(module: &syn::Ident, kernels: &[Kernel], diag: &Diag) -> Opti
     };
     let tile_cull_body = match tile_cull {
         Some(tc) => {
-            let a = call_args(tc.def, &[quote!(tile), quote!(cull)]);
+            let a = call_args(tc.def, &[quote!(tile), quote!(cull)], &[false, false]);
             quote!(tile_cull(#(#a),*))
         }
         None => quote!(true),
     };
     let pixel_info_body = match pixel_info {
         Some(pi) => {
-            let a = call_args(pi.def, &[quote!(pixel), quote!(camera)]);
+            let a = call_args(pi.def, &[quote!(pixel), quote!(camera)], &[true, false]);
             quote!(pixel_info(#(#a),*))
         }
         None => quote!(pixel),
     };
-    let eval_call = call_args(evaluate.def, &[quote!(pixel), quote!(shade)]);
+    let eval_call = call_args(
+        evaluate.def,
+        &[quote!(pixel), quote!(shade)],
+        &[false, false],
+    );
 
     // Lane wrappers: pixel slots come from the lanes, shade slots are broadcast.
     let shade_slots = shade_ty.slots();
