@@ -37,14 +37,9 @@ fn sixteen_channels_match_an_f64_blend() {
 
     // Reference: project every primitive with the f64 twin, sort by depth, blend per pixel.
     let cam_words: Vec<f64> = {
-        let mut v: Vec<f64> = cam.rotation.to_cols_array().map(f64::from).to_vec();
-        v.extend(cam.translation.to_array().map(f64::from));
-        v.extend(
-            [cam.focal, cam.principal, cam.size]
-                .iter()
-                .flat_map(|x| x.to_array().map(f64::from)),
-        );
-        v
+        let mut w = vec![0.0f32; Camera::LEN];
+        cam.write_words(&mut w);
+        w.into_iter().map(f64::from).collect()
     };
     let mut shades = vec![];
     for p in &params {

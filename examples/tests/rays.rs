@@ -32,14 +32,9 @@ fn scene() -> (Camera, Vec<Params>) {
 }
 
 fn cam_words(c: &Camera) -> Vec<f64> {
-    let mut v: Vec<f64> = c.rotation.to_cols_array().map(f64::from).to_vec();
-    v.extend(c.translation.to_array().map(f64::from));
-    v.extend(
-        [c.focal, c.principal, c.size]
-            .iter()
-            .flat_map(|x| x.to_array().map(f64::from)),
-    );
-    v
+    let mut w = vec![0.0f32; Camera::LEN];
+    c.write_words(&mut w);
+    w.into_iter().map(f64::from).collect()
 }
 
 #[test]

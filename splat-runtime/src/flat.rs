@@ -131,6 +131,35 @@ impl FromArrayRef<4> for Quat {
     }
 }
 
+/// In the slot order the compiler gives the built-in `Camera` (field by field, matrices by
+/// column), so the words are the camera arguments of generated flat and WGSL functions.
+impl Flat for crate::types::Camera {
+    const LEN: usize = 18;
+    fn write_words(&self, out: &mut [f32]) {
+        self.rotation.write_words(out);
+        self.translation.write_words(&mut out[9..]);
+        self.focal.write_words(&mut out[12..]);
+        self.principal.write_words(&mut out[14..]);
+        self.size.write_words(&mut out[16..]);
+    }
+    fn read_words(words: &[f32]) -> Self {
+        crate::types::Camera {
+            rotation: Mat3::read_words(words),
+            translation: Vec3::read_words(&words[9..]),
+            focal: Vec2::read_words(&words[12..]),
+            principal: Vec2::read_words(&words[14..]),
+            size: Vec2::read_words(&words[16..]),
+        }
+    }
+    fn is_finite(&self) -> bool {
+        self.rotation.is_finite()
+            && self.translation.is_finite()
+            && self.focal.is_finite()
+            && self.principal.is_finite()
+            && self.size.is_finite()
+    }
+}
+
 impl<T: Flat, const N: usize> Flat for [T; N]
 where
     [T; N]: Default,
@@ -174,5 +203,12 @@ mod tests {
         round_trip(Mat3::from_cols_array(&[1., 2., 3., 4., 5., 6., 7., 8., 9.]));
         round_trip([Vec2::new(1.0, 2.0), Vec2::new(3.0, 4.0)]);
         assert_eq!(<[Vec3; 16]>::LEN, 48);
+        round_trip(crate::types::Camera {
+            rotation: Mat3::from_cols_array(&[1., 2., 3., 4., 5., 6., 7., 8., 9.]),
+            translation: Vec3::new(10., 11., 12.),
+            focal: Vec2::new(13., 14.),
+            principal: Vec2::new(15., 16.),
+            size: Vec2::new(17., 18.),
+        });
     }
 }

@@ -12,17 +12,9 @@ pub const T_MIN: f64 = 1e-4;
 
 /// A camera's slots in the order the compiler flattens `Camera`.
 pub fn camera_words(c: &Camera) -> Vec<f64> {
-    let mut v: Vec<f64> = c
-        .rotation
-        .to_cols_array()
-        .iter()
-        .map(|x| *x as f64)
-        .collect();
-    v.extend(c.translation.to_array().map(f64::from));
-    v.extend(c.focal.to_array().map(f64::from));
-    v.extend(c.principal.to_array().map(f64::from));
-    v.extend(c.size.to_array().map(f64::from));
-    v
+    let mut w = vec![0.0f32; Camera::LEN];
+    c.write_words(&mut w);
+    w.into_iter().map(f64::from).collect()
 }
 
 pub fn param_words(p: &Params) -> Vec<f64> {

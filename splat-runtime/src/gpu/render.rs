@@ -25,16 +25,6 @@ pub enum GpuRenderError {
     Gpu(#[from] GpuError),
 }
 
-/// A camera's words in the order the compiler flattens `Camera`.
-pub fn camera_words(c: &Camera) -> Vec<u32> {
-    let mut v: Vec<f32> = c.rotation.to_cols_array().to_vec();
-    v.extend(c.translation.to_array());
-    v.extend(c.focal.to_array());
-    v.extend(c.principal.to_array());
-    v.extend(c.size.to_array());
-    v.into_iter().map(f32::to_bits).collect()
-}
-
 fn words<T: Flat>(v: &T) -> Vec<u32> {
     let mut w = vec![0.0f32; T::LEN];
     v.write_words(&mut w);
@@ -59,7 +49,7 @@ pub fn render<M: SplatMethod>(
 
     // 1. project on the GPU.
     let t0 = Instant::now();
-    let cam = camera_words(camera);
+    let cam = words(camera);
     let rows: Vec<Vec<u32>> = params.iter().map(words).collect();
     let out = kernel::run_shared(gpu, wgsl, "project", &rows, &cam)?;
     let projected: Vec<Projected<M::Cull, M::Shade>> = out.iter().map(|w| unpack::<M>(w)).collect();
@@ -186,7 +176,7 @@ fn splat_shade(@builtin(global_invocation_id) gid: vec3<u32>) {
     // Pixel data: the pixel centre, or pixel_info's result.
     let pixel_args: Vec<String> = if M::HAS_PIXEL_INFO {
         let info = kernel::signature(wgsl, "pixel_info")?;
-        let cam: Vec<String> = (0..18)
+        let cam: Vec<String> = (0..Camera::LEN)
             .map(|k| format!("bitcast<f32>(camera_words[{k}u])"))
             .collect();
         let _ = writeln!(
