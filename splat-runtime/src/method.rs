@@ -99,4 +99,7 @@ pub trait SplatMethod: Send + Sync + 'static {
 
     /// The shade cotangent whose float slots are `sums` (bool and integer fields zero).
     fn shade_from_float_slots(sums: &[f32]) -> Self::Shade;
+
+    /// The parameter cotangent whose float slots are `sums` (what the GPU backward returns).
+    fn params_from_float_slots(sums: &[f32]) -> Self::Params;
 }

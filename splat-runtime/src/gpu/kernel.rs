@@ -110,7 +110,7 @@ pub fn harness_source(wgsl: &str, sig: &Signature, per_row: usize) -> String {
         next + 1
     );
     s.push_str("@compute @workgroup_size(64)\nfn splat_harness(@builtin(global_invocation_id) gid: vec3<u32>) {\n");
-    s.push_str("    let i = gid.y * 65535u * 64u + gid.x;\n    if (i >= harness_count.x) {\n        return;\n    }\n");
+    s.push_str("    let i = gid.y * 65535u * 64u + gid.x; // past 65,535 groups, dispatches are 2D\n    if (i >= harness_count.x) {\n        return;\n    }\n");
     let _ = writeln!(s, "    let base = i * {}u;", per_row.max(1));
     let args: Vec<String> = sig
         .args
@@ -174,9 +174,6 @@ pub fn run_shared(
     let n = rows.len();
     let nr = sig.results.len();
     let flat: Vec<Word> = rows.iter().flatten().copied().collect();
-    // More than 65,535 workgroups spill into the second dispatch dimension.
-    let groups = (n as u32).div_ceil(64).max(1);
-    let dims = (groups.min(65535), groups.div_ceil(65535));
     let source = harness_source(wgsl, &sig, per_row);
     let inputs: Vec<&[Word]> = if shared.is_empty() {
         vec![&flat]
@@ -190,7 +187,7 @@ pub fn run_shared(
         &inputs,
         &[n as u32],
         n * nr,
-        dims,
+        (n as u32).div_ceil(64),
     )?;
     Ok((0..n).map(|i| out[i * nr..(i + 1) * nr].to_vec()).collect())
 }

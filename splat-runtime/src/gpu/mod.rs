@@ -1,18 +1,21 @@
-//! The wgpu side of the runtime: the device context, one-dispatch plumbing ([`dispatch`]), a
-//! harness that runs any generated WGSL function over a batch ([`kernel`]), and a forward
-//! render ([`render`]: `project` and blending on the GPU, tile lists still on the CPU).
+//! The wgpu backend of the runtime.
+//!
+//! - [`device`]: the device, its optional features, cached pipelines, buffers within limits.
+//! - [`dispatch`] / [`kernel`]: run any generated WGSL function over a batch (tests, tools).
+//! - [`sort`]: prefix sum, radix sort on (tile, depth) keys, tile ranges, trip-count binning.
+//! - [`entries`]: the method-specific entry points (project, count/emit with `tile_cull`,
+//!   per-tile shading, backward blend, `project`'s adjoint) around the generated WGSL.
+//! - [`render`] / [`backward`]: the forward and backward passes, stage by stage.
 
+pub mod backward;
+pub mod device;
 pub mod dispatch;
+pub mod entries;
 pub mod kernel;
 pub mod render;
+pub mod sort;
 
-/// A wgpu device and its queue.
-pub struct Gpu {
-    pub device: wgpu::Device,
-    pub queue: wgpu::Queue,
-    /// Adapter name and backend, for reports.
-    pub adapter: String,
-}
+pub use device::Gpu;
 
 #[derive(Debug, thiserror::Error)]
 pub enum GpuError {
@@ -26,30 +29,14 @@ pub enum GpuError {
     Shader(String),
     #[error("reading results back failed: {0}")]
     Readback(String),
-}
-
-impl Gpu {
-    /// The first adapter wgpu finds (a software one such as lavapipe is fine).
-    pub fn new() -> Result<Gpu, GpuError> {
-        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
-        desc.backends = wgpu::Backends::PRIMARY;
-        let instance = wgpu::Instance::new(desc);
-        let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
-            power_preference: wgpu::PowerPreference::HighPerformance,
-            ..Default::default()
-        }))
-        .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
-        let info = adapter.get_info();
-        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
-            label: Some("splat"),
-            required_limits: adapter.limits(),
-            ..Default::default()
-        }))
-        .map_err(|e| GpuError::Device(e.to_string()))?;
-        Ok(Gpu {
-            device,
-            queue,
-            adapter: format!("{} ({:?})", info.name, info.backend),
-        })
-    }
+    #[error(
+        "{what} needs a {bytes}-byte buffer, over this GPU's limit of {limit} bytes: lower the resolution or the number of primitives"
+    )]
+    TooLarge {
+        what: &'static str,
+        bytes: u64,
+        limit: u64,
+    },
+    #[error("the GPU backend supports tile sizes 8 and 16 (one invocation per pixel), not {0}")]
+    TileSize(u32),
 }

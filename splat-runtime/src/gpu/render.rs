@@ -1,20 +1,24 @@
-//! A forward render on the GPU, as a first step towards the full wgpu pipeline: `project`
-//! runs on the GPU (one invocation per primitive), tile lists are built on the CPU by the same
-//! rasterizer as the CPU backend, and blending runs on the GPU (one invocation per pixel, the
-//! method's generated `evaluate` called per list entry, the same stopping rule). The method's
-//! WGSL is the one the macro generated; only the entry points are written here.
+//! The forward pass on the GPU, stage by stage as on the CPU:
 //!
-//! Not yet on the GPU: the prefix sum / emit / radix sort of the rasterizer, workgroup-shared
-//! batches, the backward pass.
+//! 1. preprocess: `project` per primitive (generated WGSL).
+//! 2. rasterize: count kept tiles per primitive (`tile_cull`), prefix sum, read back the
+//!    total (to size the key buffers), emit (tile, depth) keys, radix sort, tile ranges,
+//!    trip-count binning.
+//! 3. shade: one workgroup per tile, batches of the list staged in workgroup memory.
+//!
+//! Every stage is submitted and waited for on its own so its time can be reported. A render
+//! kept for the backward pass ([`render_for_backward`]) leaves its buffers on the GPU.
 
-use super::kernel::{self, Signature, load};
-use super::{Gpu, GpuError};
+use super::device::dispatch;
+use super::entries::{self, Layout};
+use super::{Gpu, GpuError, sort};
 use crate::flat::Flat;
 use crate::method::SplatMethod;
-use crate::pipeline::preprocess;
+use crate::pipeline::grid::TileGrid;
+use crate::pipeline::rasterize::MAX_INTERSECTIONS;
 use crate::pipeline::{Frame, Image, RenderError, RenderOptions, Stats};
-use crate::types::{Camera, Projected};
-use std::fmt::Write;
+use crate::types::Camera;
+use std::marker::PhantomData;
 use std::time::Instant;
 
 #[derive(Debug, thiserror::Error)]
@@ -25,10 +29,30 @@ pub enum GpuRenderError {
     Gpu(#[from] GpuError),
 }
 
-fn words<T: Flat>(v: &T) -> Vec<u32> {
-    let mut w = vec![0.0f32; T::LEN];
-    v.write_words(&mut w);
+/// 32-bit words of a sequence of `Flat` values, in order.
+pub(crate) fn words_of<T: Flat>(values: &[T]) -> Vec<u32> {
+    let mut w = vec![0.0f32; T::LEN * values.len()];
+    for (v, out) in values.iter().zip(w.chunks_exact_mut(T::LEN.max(1))) {
+        v.write_words(out);
+    }
     w.into_iter().map(f32::to_bits).collect()
+}
+
+/// What the backward pass needs, left on the GPU by [`render_for_backward`].
+pub struct GpuForwardState<M: SplatMethod> {
+    pub grid: TileGrid,
+    pub primitives: usize,
+    pub want_depth: bool,
+    pub(crate) camera: wgpu::Buffer,
+    pub(crate) params: wgpu::Buffer,
+    pub(crate) projected: wgpu::Buffer,
+    pub(crate) prims: wgpu::Buffer,
+    pub(crate) ranges: wgpu::Buffer,
+    pub(crate) order: wgpu::Buffer,
+    /// Per pixel: color, final T, sum of weight * depth.
+    pub(crate) pixels: wgpu::Buffer,
+    pub(crate) p_max: u32,
+    method: PhantomData<M>,
 }
 
 pub fn render<M: SplatMethod>(
@@ -37,200 +61,173 @@ pub fn render<M: SplatMethod>(
     camera: &Camera,
     opts: &RenderOptions,
 ) -> Result<Frame, GpuRenderError> {
-    let grid = crate::pipeline::check(camera, opts)?;
-    if let Some(i) = params.iter().position(|p| !p.is_finite()) {
-        return Err(RenderError::NonFinite(i).into());
-    }
-    let wgsl = M::SOURCE.wgsl;
-    let mut stats = Stats {
-        primitives: params.len(),
-        ..Stats::default()
-    };
+    forward::<M>(gpu, params, camera, opts, false).map(|(f, _)| f)
+}
 
-    // 1. project on the GPU.
-    let t0 = Instant::now();
-    let cam = words(camera);
-    let rows: Vec<Vec<u32>> = params.iter().map(words).collect();
-    let out = kernel::run_shared(gpu, wgsl, "project", &rows, &cam)?;
-    let projected: Vec<Projected<M::Cull, M::Shade>> = out.iter().map(|w| unpack::<M>(w)).collect();
-    let pre = preprocess::filter::<M>(projected, &grid);
-    stats.visible = pre.visible.len();
-    stats.preprocess = t0.elapsed();
+/// Renders and keeps the GPU buffers [`super::backward::backward`] needs; the depth sums are
+/// always accumulated (the backward pass replays them).
+pub fn render_for_backward<M: SplatMethod>(
+    gpu: &Gpu,
+    params: &[M::Params],
+    camera: &Camera,
+    opts: &RenderOptions,
+) -> Result<(Frame, GpuForwardState<M>), GpuRenderError> {
+    forward::<M>(gpu, params, camera, opts, true).map(|(f, s)| (f, s.expect("state kept")))
+}
 
-    // 2. tile lists on the CPU.
-    let lists = crate::pipeline::tile_lists(&pre, &grid, &mut stats)?;
-
-    // 3. blend on the GPU.
-    let t2 = Instant::now();
-    let shade: Vec<u32> = pre.projected.iter().flat_map(|p| words(&p.shade)).collect();
-    let depth: Vec<u32> = pre.projected.iter().map(|p| p.depth.to_bits()).collect();
-    let channels = M::Color::LEN;
-    let source = shade_source::<M>(wgsl)?;
-    let p_max = opts
-        .p_max
-        .map_or(u32::MAX, |p| p.min(u32::MAX as usize) as u32);
-    let uniforms = [
+/// The frame uniform shared by the tile stages (shaders/tiles.wgsl, tile_pass.wgsl).
+pub(crate) fn frame_uniform(gpu: &Gpu, n: u32, grid: &TileGrid, p_max: u32) -> wgpu::Buffer {
+    gpu.uniform(&[
+        n,
         grid.width,
         grid.height,
         grid.size,
         grid.tiles_x,
         p_max,
+        grid.tile_count() as u32,
         0,
-        0,
-        0,
-    ];
-    let pixels = (grid.width * grid.height) as usize;
-    let mut inputs: Vec<&[u32]> = vec![&shade, &depth, &lists.prims, &lists.ranges];
-    if M::HAS_PIXEL_INFO {
-        inputs.push(&cam);
+    ])
+}
+
+fn forward<M: SplatMethod>(
+    gpu: &Gpu,
+    params: &[M::Params],
+    camera: &Camera,
+    opts: &RenderOptions,
+    keep: bool,
+) -> Result<(Frame, Option<GpuForwardState<M>>), GpuRenderError> {
+    let grid = crate::pipeline::check(camera, opts)?;
+    if ![8, 16].contains(&grid.size) {
+        return Err(GpuError::TileSize(grid.size).into());
     }
-    let out = super::dispatch::run_pixels(
-        gpu,
-        &source,
-        &inputs,
-        &uniforms,
-        pixels * (channels + 2),
-        (grid.width, grid.height),
+    if let Some(i) = params.iter().position(|p| !p.is_finite()) {
+        return Err(RenderError::NonFinite(i).into());
+    }
+    let layout = Layout::of::<M>();
+    let n = params.len();
+    let n32 = u32::try_from(n).map_err(|_| GpuError::TooLarge {
+        what: "the primitive count",
+        bytes: n as u64,
+        limit: u32::MAX as u64,
+    })?;
+    let mut stats = Stats {
+        primitives: n,
+        ..Stats::default()
+    };
+    let p_max = opts
+        .p_max
+        .map_or(u32::MAX, |p| p.min(u32::MAX as usize) as u32);
+    let tiles = grid.tile_count() as u32;
+    let frame = frame_uniform(gpu, n32, &grid, p_max);
+    let new_encoder = || gpu.device.create_command_encoder(&Default::default());
+
+    // 1. project.
+    let t0 = Instant::now();
+    let camera_buf = gpu.buffer_from("camera", &words_of(std::slice::from_ref(camera)))?;
+    let params_buf = gpu.buffer_from("parameters", &words_of(params))?;
+    let projected = gpu.buffer("projected primitives", n * layout.stride)?;
+    let project = gpu.pipeline(&entries::project::<M>()?, "splat_harness")?;
+    let count_uniform = gpu.uniform(&[n32]);
+    let mut enc = new_encoder();
+    let bind = gpu.bind(
+        &project,
+        &[&params_buf, &camera_buf, &projected, &count_uniform],
+    );
+    dispatch(&mut enc, &project, &bind, n32.div_ceil(64));
+    gpu.finish(enc)?;
+    stats.preprocess = t0.elapsed();
+
+    // 2. rasterize: count, scan, total.
+    let t1 = Instant::now();
+    let counts = gpu.buffer("tiles per primitive", n)?;
+    let totals = gpu.buffer("intersection totals", 3)?;
+    let count = gpu.pipeline(&entries::tiles::<M>(false)?, "count_tiles")?;
+    let mut enc = new_encoder();
+    enc.clear_buffer(&totals, 0, None);
+    let bind = gpu.bind(&count, &[&projected, &counts, &frame, &totals]);
+    dispatch(&mut enc, &count, &bind, n32.div_ceil(256));
+    sort::exclusive_scan(gpu, &mut enc, &counts, n32)?;
+    gpu.finish(enc)?;
+    let t = gpu.read(&totals, 3)?;
+    let total = t[0] as u64 | (t[1] as u64) << 32;
+    stats.visible = t[2] as usize;
+    if total > MAX_INTERSECTIONS {
+        return Err(RenderError::TooManyIntersections {
+            count: total,
+            limit: MAX_INTERSECTIONS,
+        }
+        .into());
+    }
+    let total = total as u32;
+    stats.intersections = total as usize;
+    // Emit, sort, ranges, bins.
+    let keys = gpu.buffer("intersection keys", 2 * total as usize)?;
+    let vals = gpu.buffer("intersection primitives", total as usize)?;
+    let emit = gpu.pipeline(&entries::tiles::<M>(true)?, "emit_tiles")?;
+    let mut enc = new_encoder();
+    let bind = gpu.bind(&emit, &[&projected, &counts, &frame, &keys, &vals]);
+    dispatch(&mut enc, &emit, &bind, n32.div_ceil(256));
+    let (keys, prims) = sort::sort_by_tile_and_depth(gpu, &mut enc, keys, vals, total, tiles)?;
+    let ranges = sort::tile_ranges(gpu, &mut enc, &keys, total, tiles)?;
+    let order = sort::bin_tiles(gpu, &mut enc, &ranges, tiles, p_max)?;
+    gpu.finish(enc)?;
+    let r = gpu.read(&ranges, 2 * tiles as usize)?;
+    stats.longest_list = r.chunks_exact(2).map(|r| r[1] - r[0]).max().unwrap_or(0) as usize;
+    stats.rasterize = t1.elapsed();
+
+    // 3. shade.
+    let t2 = Instant::now();
+    let want_depth = opts.depth || keep;
+    let channels = layout.channels;
+    let pixels_n = (grid.width * grid.height) as usize;
+    let pixels = gpu.buffer("pixels", pixels_n * (channels + 2))?;
+    let shade = gpu.pipeline(
+        &entries::shade::<M>(gpu, grid.size, want_depth)?,
+        "shade_tiles",
     )?;
+    let mut inputs = vec![&projected, &prims, &ranges, &order, &frame, &pixels];
+    if M::HAS_PIXEL_INFO {
+        inputs.push(&camera_buf);
+    }
+    let mut enc = new_encoder();
+    dispatch(&mut enc, &shade, &gpu.bind(&shade, &inputs), tiles);
+    gpu.finish(enc)?;
+    let out = gpu.read(&pixels, pixels_n * (channels + 2))?;
     stats.shade = t2.elapsed();
-    let f = |w: u32| f32::from_bits(w);
-    let mut color = Vec::with_capacity(pixels * channels);
-    let (mut t, mut dacc) = (Vec::with_capacity(pixels), Vec::with_capacity(pixels));
+
+    let f = f32::from_bits;
+    let mut color = Vec::with_capacity(pixels_n * channels);
+    let (mut t, mut dacc) = (Vec::with_capacity(pixels_n), Vec::with_capacity(pixels_n));
     for px in out.chunks_exact(channels + 2) {
         color.extend(px[..channels].iter().map(|w| f(*w)));
         t.push(f(px[channels]));
         dacc.push(f(px[channels + 1]));
     }
     let (alpha, depth) = crate::pipeline::alpha_and_depth(&grid, opts, &t, &dacc);
-    let color = Image {
-        width: grid.width,
-        height: grid.height,
-        channels,
-        data: color,
-    };
-    Ok(Frame {
-        color,
+    let frame_out = Frame {
+        color: Image {
+            width: grid.width,
+            height: grid.height,
+            channels,
+            data: color,
+        },
         alpha,
         depth,
         stats,
-    })
-}
-
-/// Rebuilds `project`'s output from its result words (slot order = field order).
-fn unpack<M: SplatMethod>(w: &[u32]) -> Projected<M::Cull, M::Shade> {
-    let f: Vec<f32> = w.iter().map(|x| f32::from_bits(*x)).collect();
-    let c = 6 + M::Cull::LEN;
-    Projected {
-        visible: w[0] != 0,
-        depth: f[1],
-        bbox_min: glam::Vec2::new(f[2], f[3]),
-        bbox_max: glam::Vec2::new(f[4], f[5]),
-        cull: M::Cull::read_words(&f[6..c]),
-        shade: M::Shade::read_words(&f[c..]),
-    }
-}
-
-/// The method's WGSL plus the per-pixel blending entry point `splat_shade`.
-fn shade_source<M: SplatMethod>(wgsl: &str) -> Result<String, GpuError> {
-    let eval: Signature = kernel::signature(wgsl, "evaluate")?;
-    let np = M::Pixel::LEN;
-    let ns = M::Shade::LEN;
-    let channels = M::Color::LEN;
-    let mut s = String::from(wgsl);
-    // The camera is bound only when pixel_info reads it (an unused binding is dropped from the
-    // derived layout).
-    let bindings = if M::HAS_PIXEL_INFO {
-        "@group(0) @binding(4) var<storage, read> camera_words: array<u32>;
-@group(0) @binding(5) var<storage, read_write> pixel_out: array<u32>;
-@group(0) @binding(6) var<uniform> frame: array<vec4<u32>, 2>;"
-    } else {
-        "@group(0) @binding(4) var<storage, read_write> pixel_out: array<u32>;
-@group(0) @binding(5) var<uniform> frame: array<vec4<u32>, 2>;"
     };
-    s.push_str(
-        &"
-@group(0) @binding(0) var<storage, read> shade_words: array<u32>;
-@group(0) @binding(1) var<storage, read> prim_depth: array<u32>;
-@group(0) @binding(2) var<storage, read> tile_prims: array<u32>;
-@group(0) @binding(3) var<storage, read> tile_ranges: array<u32>;
-BINDINGS
-
-@compute @workgroup_size(8, 8)
-fn splat_shade(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let width = frame[0].x;
-    let height = frame[0].y;
-    let tile_size = frame[0].z;
-    let tiles_x = frame[0].w;
-    let p_max = frame[1].x;
-    if (gid.x >= width || gid.y >= height) {
-        return;
-    }
-    let tile = (gid.y / tile_size) * tiles_x + gid.x / tile_size;
-    let start = tile_ranges[tile];
-    let end = start + min(tile_ranges[tile + 1u] - start, p_max);
-    let px = f32(gid.x) + 0.5;
-    let py = f32(gid.y) + 0.5;
-"
-        .replace("BINDINGS", bindings),
-    );
-    // Pixel data: the pixel centre, or pixel_info's result.
-    let pixel_args: Vec<String> = if M::HAS_PIXEL_INFO {
-        let info = kernel::signature(wgsl, "pixel_info")?;
-        let cam: Vec<String> = (0..Camera::LEN)
-            .map(|k| format!("bitcast<f32>(camera_words[{k}u])"))
-            .collect();
-        let _ = writeln!(
-            s,
-            "    let pixel = {}(px, py, {});",
-            info.name,
-            cam.join(", ")
-        );
-        info.results
-            .iter()
-            .map(|(m, _)| format!("pixel.{m}"))
-            .collect()
-    } else {
-        vec!["px".into(), "py".into()]
-    };
-    debug_assert_eq!(pixel_args.len(), np);
-    let _ = writeln!(s, "    var t = 1.0;\n    var depth_acc = 0.0;");
-    for ch in 0..channels {
-        let _ = writeln!(s, "    var c{ch} = 0.0;");
-    }
-    s.push_str("    for (var k = start; k < end; k++) {\n        let p = tile_prims[k];\n");
-    let _ = writeln!(s, "        let base = p * {ns}u;");
-    let mut args = pixel_args;
-    for (j, kind) in eval.args.iter().enumerate().skip(np) {
-        args.push(load(*kind, &format!("shade_words[base + {}u]", j - np)));
-    }
-    let _ = writeln!(s, "        let r = {}({});", eval.name, args.join(", "));
-    let (alpha, valid) = (&eval.results[0].0, &eval.results[channels + 1].0);
-    let _ = writeln!(
-        s,
-        "        if (r.{valid} == 0u) {{\n            continue;\n        }}"
-    );
-    let _ = writeln!(
-        s,
-        "        let next = t * (1.0 - r.{alpha});\n        if (next <= 1e-4) {{\n            break;\n        }}"
-    );
-    let _ = writeln!(s, "        let w = r.{alpha} * t;");
-    for ch in 0..channels {
-        let _ = writeln!(s, "        c{ch} += w * r.{};", eval.results[1 + ch].0);
-    }
-    s.push_str("        depth_acc += w * bitcast<f32>(prim_depth[p]);\n        t = next;\n    }\n");
-    let _ = writeln!(
-        s,
-        "    let out = (gid.y * width + gid.x) * {}u;",
-        channels + 2
-    );
-    for ch in 0..channels {
-        let _ = writeln!(s, "    pixel_out[out + {ch}u] = bitcast<u32>(c{ch});");
-    }
-    let _ = writeln!(s, "    pixel_out[out + {}u] = bitcast<u32>(t);", channels);
-    let _ = writeln!(
-        s,
-        "    pixel_out[out + {}u] = bitcast<u32>(depth_acc);\n}}",
-        channels + 1
-    );
-    Ok(s)
+    let state = keep.then(|| GpuForwardState {
+        grid,
+        primitives: n,
+        want_depth,
+        camera: camera_buf,
+        params: params_buf,
+        projected,
+        prims,
+        ranges,
+        order,
+        pixels,
+        p_max,
+        method: PhantomData,
+    });
+    Ok((frame_out, state))
 }

@@ -260,22 +260,10 @@ pub fn method_impl(module: &syn::Ident, kernels: &[Kernel], diag: &Diag) -> Opti
         .into_iter();
     let shade_from_bars = pack(&shade_ty, &mut shade_bars);
     // The same packing from plain float sums, and the lane-wise accumulation.
-    let mut float_index = 0usize;
-    let mut from_sums = shade_slots
-        .iter()
-        .map(|s| match s {
-            Scalar::F32 => {
-                float_index += 1;
-                let k = idx(float_index - 1);
-                quote!(sums[#k])
-            }
-            Scalar::Bool => quote!(false),
-            Scalar::U32 => quote!(0u32),
-            Scalar::I32 => quote!(0i32),
-        })
-        .collect::<Vec<_>>()
-        .into_iter();
+    let mut from_sums = float_slots(&shade_slots);
+    let float_index = shade_slots.iter().filter(|s| **s == Scalar::F32).count();
     let shade_from_sums = pack(&shade_ty, &mut from_sums);
+    let params_from_sums = pack(&params_ty, &mut float_slots(&params_ty.slots()));
     let nsf = idx(float_index);
     let accumulate: Vec<TokenStream> = (0..float_index)
         .map(|k| {
@@ -386,6 +374,30 @@ pub fn method_impl(module: &syn::Ident, kernels: &[Kernel], diag: &Diag) -> Opti
             fn shade_from_float_slots(sums: &[f32]) -> #s_t {
                 #shade_from_sums
             }
+            #[inline]
+            fn params_from_float_slots(sums: &[f32]) -> #p_t {
+                #params_from_sums
+            }
         }
     })
+}
+
+/// `sums[k]` for the k-th float slot of `slots`, zero for the others (cotangents of bools and
+/// integers).
+fn float_slots(slots: &[Scalar]) -> std::vec::IntoIter<TokenStream> {
+    let mut k = 0usize;
+    slots
+        .iter()
+        .map(|s| match s {
+            Scalar::F32 => {
+                let i = proc_macro2::Literal::usize_unsuffixed(k);
+                k += 1;
+                quote!(sums[#i])
+            }
+            Scalar::Bool => quote!(false),
+            Scalar::U32 => quote!(0u32),
+            Scalar::I32 => quote!(0i32),
+        })
+        .collect::<Vec<_>>()
+        .into_iter()
 }

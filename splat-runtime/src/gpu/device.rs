@@ -1,0 +1,240 @@
+//! The device, and the small vocabulary every stage is written in: buffers checked against the
+//! device's limits, compute pipelines compiled once per (source, entry point), bind groups in
+//! binding order, dispatches split over two dimensions, and synchronous readback.
+
+use super::GpuError;
+use std::collections::HashMap;
+use std::hash::{DefaultHasher, Hash, Hasher};
+use std::sync::Mutex;
+use wgpu::util::DeviceExt;
+
+/// Workgroups per dispatch dimension (WebGPU's limit); shaders rebuild the linear index as
+/// `wid.y * MAX_GROUPS + wid.x`.
+pub const MAX_GROUPS: u32 = 65535;
+
+/// A wgpu device and its queue.
+pub struct Gpu {
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    /// Adapter name and backend, for reports.
+    pub adapter: String,
+    /// `atomicAdd` on `f32` in storage memory (`SHADER_FLOAT32_ATOMIC`).
+    pub float_atomics: bool,
+    limits: wgpu::Limits,
+    pipelines: Mutex<HashMap<u64, wgpu::ComputePipeline>>,
+}
+
+pub(crate) fn as_bytes(words: &[u32]) -> &[u8] {
+    // SAFETY: u32 has no padding and every byte pattern is a valid u8.
+    unsafe { std::slice::from_raw_parts(words.as_ptr() as *const u8, std::mem::size_of_val(words)) }
+}
+
+/// Workgroup counts for `groups` workgroups, spilling past 65,535 into the second dimension.
+pub fn grid_of(groups: u32) -> (u32, u32) {
+    let groups = groups.max(1);
+    (groups.min(MAX_GROUPS), groups.div_ceil(MAX_GROUPS))
+}
+
+impl Gpu {
+    /// The first adapter wgpu finds (a software one such as lavapipe is fine), with float
+    /// atomics enabled where the adapter has them.
+    pub fn new() -> Result<Gpu, GpuError> {
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+        desc.backends = wgpu::Backends::PRIMARY;
+        let instance = wgpu::Instance::new(desc);
+        let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+            power_preference: wgpu::PowerPreference::HighPerformance,
+            ..Default::default()
+        }))
+        .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+        let info = adapter.get_info();
+        let features = adapter.features() & wgpu::Features::SHADER_FLOAT32_ATOMIC;
+        let limits = adapter.limits();
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("splat"),
+            required_features: features,
+            required_limits: limits.clone(),
+            ..Default::default()
+        }))
+        .map_err(|e| GpuError::Device(e.to_string()))?;
+        Ok(Gpu {
+            device,
+            queue,
+            adapter: format!("{} ({:?})", info.name, info.backend),
+            float_atomics: features.contains(wgpu::Features::SHADER_FLOAT32_ATOMIC),
+            limits,
+            pipelines: Mutex::new(HashMap::new()),
+        })
+    }
+
+    /// Bytes of workgroup memory a shader may use.
+    pub fn workgroup_storage(&self) -> u32 {
+        self.limits.max_compute_workgroup_storage_size
+    }
+
+    fn check_size(&self, what: &'static str, bytes: u64) -> Result<(), GpuError> {
+        let limit = self
+            .limits
+            .max_storage_buffer_binding_size
+            .min(self.limits.max_buffer_size);
+        if bytes > limit {
+            return Err(GpuError::TooLarge { what, bytes, limit });
+        }
+        Ok(())
+    }
+
+    /// A storage buffer of `words` 32-bit words (at least one), contents undefined until written.
+    pub fn buffer(&self, what: &'static str, words: usize) -> Result<wgpu::Buffer, GpuError> {
+        let bytes = 4 * words.max(1) as u64;
+        self.check_size(what, bytes)?;
+        Ok(self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(what),
+            size: bytes,
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        }))
+    }
+
+    /// A storage buffer holding `words` (one zero word if empty: bindings cannot be empty).
+    pub fn buffer_from(&self, what: &'static str, words: &[u32]) -> Result<wgpu::Buffer, GpuError> {
+        self.check_size(what, 4 * words.len() as u64)?;
+        let contents: &[u32] = if words.is_empty() { &[0] } else { words };
+        Ok(self
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(what),
+                contents: as_bytes(contents),
+                usage: wgpu::BufferUsages::STORAGE
+                    | wgpu::BufferUsages::COPY_SRC
+                    | wgpu::BufferUsages::COPY_DST,
+            }))
+    }
+
+    /// A uniform block of `words`, padded to 16 bytes.
+    pub fn uniform(&self, words: &[u32]) -> wgpu::Buffer {
+        let mut padded = words.to_vec();
+        padded.resize(words.len().div_ceil(4).max(1) * 4, 0);
+        self.device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("uniform"),
+                contents: as_bytes(&padded),
+                usage: wgpu::BufferUsages::UNIFORM,
+            })
+    }
+
+    /// The compute pipeline of `entry` in `source`, compiled on first use.
+    pub fn pipeline(&self, source: &str, entry: &str) -> Result<wgpu::ComputePipeline, GpuError> {
+        let mut h = DefaultHasher::new();
+        (source, entry).hash(&mut h);
+        let key = h.finish();
+        if let Some(p) = self.pipelines.lock().unwrap().get(&key) {
+            return Ok(p.clone());
+        }
+        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let module = self
+            .device
+            .create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(entry),
+                source: wgpu::ShaderSource::Wgsl(source.into()),
+            });
+        let pipeline = self
+            .device
+            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: None,
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            });
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Shader(format!("{entry}: {e}")));
+        }
+        self.pipelines.lock().unwrap().insert(key, pipeline.clone());
+        Ok(pipeline)
+    }
+
+    /// A bind group for `pipeline` with `buffers` at bindings 0, 1, ... (the layout derived from
+    /// the entry point holds exactly the bindings it uses).
+    pub fn bind(
+        &self,
+        pipeline: &wgpu::ComputePipeline,
+        buffers: &[&wgpu::Buffer],
+    ) -> wgpu::BindGroup {
+        let entries: Vec<wgpu::BindGroupEntry> = buffers
+            .iter()
+            .enumerate()
+            .map(|(i, b)| wgpu::BindGroupEntry {
+                binding: i as u32,
+                resource: b.as_entire_binding(),
+            })
+            .collect();
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: None,
+            layout: &pipeline.get_bind_group_layout(0),
+            entries: &entries,
+        })
+    }
+
+    /// Submits `encoder` and waits until the GPU is done (stages are timed one by one).
+    pub fn finish(&self, encoder: wgpu::CommandEncoder) -> Result<(), GpuError> {
+        self.queue.submit([encoder.finish()]);
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        Ok(())
+    }
+
+    /// Reads the first `words` words of `buffer` back.
+    pub fn read(&self, buffer: &wgpu::Buffer, words: usize) -> Result<Vec<u32>, GpuError> {
+        let size = 4 * words.max(1) as u64;
+        let readback = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
+            size,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        encoder.copy_buffer_to_buffer(buffer, 0, &readback, 0, size);
+        self.queue.submit([encoder.finish()]);
+        let slice = readback.slice(..);
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        rx.recv()
+            .map_err(|e| GpuError::Readback(e.to_string()))?
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        let out = {
+            let bytes = slice
+                .get_mapped_range()
+                .map_err(|e| GpuError::Readback(e.to_string()))?;
+            bytes
+                .chunks_exact(4)
+                .map(|c| u32::from_le_bytes(c.try_into().unwrap()))
+                .take(words)
+                .collect()
+        };
+        readback.unmap();
+        Ok(out)
+    }
+}
+
+/// Records one dispatch of `groups` workgroups (split over two dimensions) into `encoder`.
+pub fn dispatch(
+    encoder: &mut wgpu::CommandEncoder,
+    pipeline: &wgpu::ComputePipeline,
+    bind: &wgpu::BindGroup,
+    groups: u32,
+) {
+    let (x, y) = grid_of(groups);
+    let mut pass = encoder.begin_compute_pass(&Default::default());
+    pass.set_pipeline(pipeline);
+    pass.set_bind_group(0, bind, &[]);
+    pass.dispatch_workgroups(x, y, 1);
+}

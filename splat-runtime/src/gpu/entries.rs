@@ -1,0 +1,432 @@
+//! The method-specific compute entry points, written around the method's generated WGSL.
+//!
+//! The templates in `shaders/` hold the runtime's logic; what depends on the method (how many
+//! words each type has, the calls to `project`, `tile_cull`, `pixel_info`, `evaluate` and the
+//! adjoints with one argument per slot) is filled in here from the signatures naga reads back
+//! out of the generated module. The method's source never changes between backends.
+
+use super::kernel::{self, Signature, load};
+use super::{Gpu, GpuError};
+use crate::flat::Flat;
+use crate::method::SplatMethod;
+use crate::types::Camera;
+
+const TILES: &str = include_str!("shaders/tiles.wgsl");
+const COUNT: &str = include_str!("shaders/count.wgsl");
+const EMIT: &str = include_str!("shaders/emit.wgsl");
+const TILE_PASS: &str = include_str!("shaders/tile_pass.wgsl");
+const SHADE: &str = include_str!("shaders/shade.wgsl");
+const BACKWARD: &str = include_str!("shaders/backward.wgsl");
+const PROJECT_BACKWARD: &str = include_str!("shaders/project_backward.wgsl");
+
+/// Words of workgroup memory kept free of the batch (counters, flags).
+const RESERVED_BYTES: u32 = 256;
+
+/// Replaces every `{{KEY}}` of `template`.
+fn fill(template: &str, pairs: &[(&str, String)]) -> String {
+    let mut s = template.to_string();
+    for (k, v) in pairs {
+        s = s.replace(&format!("{{{{{k}}}}}"), v);
+    }
+    debug_assert!(!s.contains("{{"), "unfilled placeholder in\n{s}");
+    s
+}
+
+/// Word counts of a method's types, as laid out in the GPU buffers.
+#[derive(Clone, Copy, Debug)]
+pub struct Layout {
+    /// Words of `project`'s result per primitive: visible, depth, bbox (4), cull, shade.
+    pub stride: usize,
+    pub shade_at: usize,
+    pub shade_words: usize,
+    /// Float slots of the shade type (its gradient words).
+    pub shade_floats: usize,
+    pub channels: usize,
+    /// Gradient words per primitive: shade float slots, then depth.
+    pub grad_words: usize,
+}
+
+impl Layout {
+    pub fn of<M: SplatMethod>() -> Layout {
+        let shade_floats = M::ShadeLanes::default().as_ref().len();
+        Layout {
+            stride: 6 + M::Cull::LEN + M::Shade::LEN,
+            shade_at: 6 + M::Cull::LEN,
+            shade_words: M::Shade::LEN,
+            shade_floats,
+            channels: M::Color::LEN,
+            grad_words: shade_floats + 1,
+        }
+    }
+}
+
+fn sig(wgsl: &str, name: &str) -> Result<Signature, GpuError> {
+    kernel::signature(wgsl, name)
+}
+
+/// `project` over one primitive per invocation (the kernel harness: parameters per row, the
+/// camera shared).
+pub fn project<M: SplatMethod>() -> Result<String, GpuError> {
+    let wgsl = M::SOURCE.wgsl;
+    Ok(kernel::harness_source(
+        wgsl,
+        &sig(wgsl, "project")?,
+        M::Params::LEN,
+    ))
+}
+
+/// `count_tiles` (`emit` false) or `emit_tiles`.
+pub fn tiles<M: SplatMethod>(emit: bool) -> Result<String, GpuError> {
+    let wgsl = M::SOURCE.wgsl;
+    let layout = Layout::of::<M>();
+    let keep = if M::HAS_TILE_CULL {
+        let cull = sig(wgsl, "tile_cull")?;
+        let mut args: Vec<String> = ["lo.x", "lo.y", "hi.x", "hi.y"].map(String::from).into();
+        for (k, kind) in cull.args.iter().enumerate().skip(4) {
+            args.push(load(
+                *kind,
+                &format!("projected[i * STRIDE + CULL_AT + {}u]", k - 4),
+            ));
+        }
+        format!(
+            "{}({}).{} != 0u",
+            cull.name,
+            args.join(", "),
+            cull.results[0].0
+        )
+    } else {
+        "true".into()
+    };
+    let (entry, emit_code) = if emit {
+        (
+            EMIT,
+            "keys[first + n] = vec2<u32>(bitcast<u32>(max(word(i, 1u), 0.0)), ty * frame[1].x + tx);
+                vals[first + n] = i;",
+        )
+    } else {
+        (COUNT, "")
+    };
+    let body = fill(
+        TILES,
+        &[
+            ("STRIDE", layout.stride.to_string()),
+            ("BINDINGS", String::new()),
+            ("KEEP", keep),
+            ("EMIT", emit_code.into()),
+            ("ENTRY", entry.into()),
+        ],
+    );
+    Ok(format!("{wgsl}\n{body}"))
+}
+
+/// How the backward blend adds its gradients to global memory.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Accumulation {
+    /// Sum each entry's gradient over the workgroup first: one atomic per (tile, entry,
+    /// gradient word) instead of one per (pixel, entry, gradient word).
+    pub reduce: bool,
+    /// `atomicAdd` on f32 (`SHADER_FLOAT32_ATOMIC`); otherwise a compare-exchange loop on u32.
+    pub float_atomics: bool,
+}
+
+/// Workgroup sizes and batch sizes of a blend pass.
+struct Blend {
+    wg: u32,
+    batch: u32,
+    /// Gradient words reduced per round (backward with reduction only).
+    rc: u32,
+}
+
+fn blend_sizes(gpu: &Gpu, tile: u32, layout: &Layout, reduce: bool) -> Result<Blend, GpuError> {
+    let wg = tile * tile;
+    let mut budget = gpu.workgroup_storage().saturating_sub(RESERVED_BYTES);
+    let rc = if reduce {
+        let rc = ((budget / 2) / (4 * wg))
+            .min(layout.grad_words as u32)
+            .max(1);
+        budget = budget.saturating_sub(4 * wg * rc);
+        rc
+    } else {
+        1
+    };
+    // Per staged entry: shade words, depth, primitive index.
+    let batch = (budget / (4 * (layout.shade_words as u32 + 2))).min(wg);
+    if batch == 0 {
+        return Err(GpuError::Shader(format!(
+            "a primitive's {} shade words do not fit in {} bytes of workgroup memory",
+            layout.shade_words,
+            gpu.workgroup_storage()
+        )));
+    }
+    Ok(Blend { wg, batch, rc })
+}
+
+/// The pixel data: its binding (camera words, only with `pixel_info`), the code computing it
+/// from `px, py`, and its slot expressions.
+fn pixel<M: SplatMethod>(camera_binding: u32) -> Result<(String, String, Vec<String>), GpuError> {
+    if !M::HAS_PIXEL_INFO {
+        return Ok((String::new(), String::new(), vec!["px".into(), "py".into()]));
+    }
+    let info = sig(M::SOURCE.wgsl, "pixel_info")?;
+    let cam: Vec<String> = (0..Camera::LEN)
+        .map(|k| format!("bitcast<f32>(camera_words[{k}u])"))
+        .collect();
+    let binding = format!(
+        "@group(0) @binding({camera_binding}) var<storage, read> camera_words: array<u32>;"
+    );
+    let code = format!("let pixel = {}(px, py, {});", info.name, cam.join(", "));
+    let args = info
+        .results
+        .iter()
+        .map(|(m, _)| format!("pixel.{m}"))
+        .collect();
+    Ok((binding, code, args))
+}
+
+/// `evaluate(pixel, staged shade words of entry j)`, and its signature.
+fn evaluate_call<M: SplatMethod>(pixel_args: &[String]) -> Result<(String, Signature), GpuError> {
+    let eval = sig(M::SOURCE.wgsl, "evaluate")?;
+    let np = pixel_args.len();
+    let mut args = pixel_args.to_vec();
+    for (j, kind) in eval.args.iter().enumerate().skip(np) {
+        args.push(load(*kind, &format!("batch_words[s + {}u]", j - np)));
+    }
+    Ok((format!("{}({})", eval.name, args.join(", ")), eval))
+}
+
+fn tile_pass(layout: &Layout, tile: u32, b: &Blend) -> String {
+    fill(
+        TILE_PASS,
+        &[
+            ("TILE", tile.to_string()),
+            ("WG", b.wg.to_string()),
+            ("BATCH", b.batch.to_string()),
+            ("NS", layout.shade_words.to_string()),
+            ("STRIDE", layout.stride.to_string()),
+            ("SHADE_AT", layout.shade_at.to_string()),
+            ("CHANNELS", layout.channels.to_string()),
+            (
+                "BATCH_WORDS",
+                (b.batch as usize * layout.shade_words.max(1)).to_string(),
+            ),
+        ],
+    )
+}
+
+/// `shade_tiles`: the forward blend, one workgroup per tile of `tile` x `tile` pixels.
+pub fn shade<M: SplatMethod>(gpu: &Gpu, tile: u32, want_depth: bool) -> Result<String, GpuError> {
+    let wgsl = M::SOURCE.wgsl;
+    let layout = Layout::of::<M>();
+    let b = blend_sizes(gpu, tile, &layout, false)?;
+    let (camera, pixel_code, pixel_args) = pixel::<M>(6)?;
+    let (call, eval) = evaluate_call::<M>(&pixel_args)?;
+    let nc = layout.channels;
+    let accumulate: String = (0..nc)
+        .map(|c| {
+            format!(
+                "            color[{c}] += w * r.{};\n",
+                eval.results[1 + c].0
+            )
+        })
+        .collect();
+    let depth = if want_depth {
+        "depth_acc += w * batch_depth[j];"
+    } else {
+        ""
+    };
+    let body = fill(
+        SHADE,
+        &[
+            ("CAMERA_BINDING", camera),
+            ("WG", b.wg.to_string()),
+            ("PIXEL", pixel_code),
+            ("EVALUATE", call),
+            ("VALID", eval.results[nc + 1].0.clone()),
+            ("ALPHA", eval.results[0].0.clone()),
+            ("ACCUMULATE", accumulate),
+            ("DEPTH", depth.into()),
+        ],
+    );
+    Ok(format!("{wgsl}\n{}\n{body}", tile_pass(&layout, tile, &b)))
+}
+
+/// `backward_tiles`: the backward blend with the gradient accumulation `acc`.
+pub fn backward<M: SplatMethod>(
+    gpu: &Gpu,
+    tile: u32,
+    want_depth: bool,
+    acc: Accumulation,
+) -> Result<String, GpuError> {
+    let wgsl = M::SOURCE.wgsl;
+    let layout = Layout::of::<M>();
+    let b = blend_sizes(gpu, tile, &layout, acc.reduce)?;
+    let (camera, pixel_code, pixel_args) = pixel::<M>(9)?;
+    let (call, eval) = evaluate_call::<M>(&pixel_args)?;
+    let adj = sig(wgsl, "evaluate_adjoint")?;
+    let (np, ns, nc) = (pixel_args.len(), layout.shade_words, layout.channels);
+    if adj.args.len() != np + ns + 1 + nc {
+        return Err(GpuError::Shader(format!(
+            "evaluate_adjoint takes {} arguments, expected {}",
+            adj.args.len(),
+            np + ns + 1 + nc
+        )));
+    }
+    let color_terms: String = (0..nc)
+        .map(|c| {
+            format!(
+                "                        let cc{c} = r.{m};
+                        c_acc[{c}] += w * cc{c};
+                        d_alpha += t * cc{c} * d_color[{c}] - (c_final[{c}] - c_acc[{c}]) * d_color[{c}] / one_minus;
+",
+                m = eval.results[1 + c].0
+            )
+        })
+        .collect();
+    let mut adj_args: Vec<String> = pixel_args.clone();
+    for (j, kind) in adj.args.iter().enumerate().skip(np).take(ns) {
+        adj_args.push(load(*kind, &format!("batch_words[s + {}u]", j - np)));
+    }
+    adj_args.push("d_alpha".into());
+    adj_args.extend((0..nc).map(|c| format!("w * d_color[{c}]")));
+    let nsf = layout.shade_floats;
+    let first = adj.results.len() - nsf;
+    let shade_grads: String = (0..nsf)
+        .map(|k| {
+            format!(
+                "                        g[{k}] = a.{};\n",
+                adj.results[first + k].0
+            )
+        })
+        .collect();
+    let scatter = if acc.reduce {
+        "            for (var c0 = 0u; c0 < NG; c0 += RC) {
+                for (var k = 0u; k < RC; k++) {
+                    red[k * WG + lid] = select(0.0, g[min(c0 + k, NG - 1u)], c0 + k < NG);
+                }
+                workgroupBarrier();
+                for (var half = WG / 2u; half > 0u; half >>= 1u) {
+                    if (lid < half) {
+                        for (var k = 0u; k < RC; k++) {
+                            red[k * WG + lid] += red[k * WG + lid + half];
+                        }
+                    }
+                    workgroupBarrier();
+                }
+                if (lid < RC && c0 + lid < NG) {
+                    let v = red[lid * WG];
+                    if (v != 0.0) {
+                        add_grad(prim * NG + c0 + lid, v);
+                        my_issued++;
+                    }
+                }
+                workgroupBarrier();
+            }"
+    } else {
+        "            for (var k = 0u; k < NG; k++) {
+                if (g[k] != 0.0) {
+                    add_grad(prim * NG + k, g[k]);
+                    my_issued++;
+                }
+            }"
+    };
+    let (grad_atomic, atomic_add) = if acc.float_atomics {
+        ("atomic<f32>", "    atomicAdd(&grads[i], v);")
+    } else {
+        (
+            "atomic<u32>",
+            "    var old = atomicLoad(&grads[i]);
+    loop {
+        let r = atomicCompareExchangeWeak(&grads[i], old, bitcast<u32>(bitcast<f32>(old) + v));
+        if (r.exchanged) {
+            break;
+        }
+        old = r.old_value;
+    }",
+        )
+    };
+    let note = if acc.reduce {
+        "each entry's gradient is first summed over the workgroup in workgroup memory (one atomic per tile, entry and word)."
+    } else {
+        "one atomic per pixel, entry and word (the baseline the workgroup reduction is measured against)."
+    };
+    let body = fill(
+        BACKWARD,
+        &[
+            ("REDUCTION_NOTE", note.into()),
+            ("NG", layout.grad_words.to_string()),
+            ("RC", b.rc.to_string()),
+            ("GRAD_ATOMIC", grad_atomic.into()),
+            ("CAMERA_BINDING", camera),
+            (
+                "RED_WORDS",
+                if acc.reduce { b.rc * b.wg } else { 1 }.to_string(),
+            ),
+            ("ATOMIC_ADD", atomic_add.into()),
+            ("WG", b.wg.to_string()),
+            ("PIXEL", pixel_code),
+            ("EVALUATE", call),
+            ("VALID", eval.results[nc + 1].0.clone()),
+            ("ALPHA", eval.results[0].0.clone()),
+            ("WANT_DEPTH", want_depth.to_string()),
+            ("COLOR_TERMS", color_terms),
+            (
+                "EVALUATE_ADJOINT",
+                format!("{}({})", adj.name, adj_args.join(", ")),
+            ),
+            ("SHADE_GRADS", shade_grads),
+            ("SCATTER", scatter.into()),
+        ],
+    );
+    Ok(format!("{wgsl}\n{}\n{body}", tile_pass(&layout, tile, &b)))
+}
+
+/// `project_backward`: `project`'s adjoint per primitive, camera gradients per workgroup; and
+/// the number of float slots of the parameters (gradient words per primitive).
+pub fn project_backward<M: SplatMethod>() -> Result<(String, usize), GpuError> {
+    let wgsl = M::SOURCE.wgsl;
+    let layout = Layout::of::<M>();
+    let adj = sig(wgsl, "project_adjoint")?;
+    let (np, ncam) = (M::Params::LEN, Camera::LEN);
+    let npf = adj.results.len() - ncam;
+    // Arguments: parameters, camera, then the cotangent's float slots: depth, bbox (4), cull
+    // (zero: no gradient flows through culling), shade.
+    let cull_floats = adj
+        .args
+        .len()
+        .checked_sub(np + ncam + 5 + layout.shade_floats)
+        .ok_or_else(|| GpuError::Shader("project_adjoint has too few arguments".into()))?;
+    let mut args: Vec<String> = adj.args[..np]
+        .iter()
+        .enumerate()
+        .map(|(k, kind)| load(*kind, &format!("params[i * NP + {k}u]")))
+        .collect();
+    args.extend((0..ncam).map(|k| format!("bitcast<f32>(camera_words[{k}u])")));
+    args.push("bitcast<f32>(grads[i * NG + NG - 1u])".into());
+    args.extend(std::iter::repeat_n("0.0".to_string(), 4 + cull_floats));
+    args.extend((0..layout.shade_floats).map(|k| format!("bitcast<f32>(grads[i * NG + {k}u])")));
+    let mut write = String::new();
+    for (k, (m, _)) in adj.results.iter().enumerate() {
+        if k < npf {
+            write += &format!("            param_grads[i * NPF + {k}u] = bitcast<u32>(a.{m});\n");
+        } else {
+            write += &format!("            cam[{}] = a.{m};\n", k - npf);
+        }
+    }
+    let body = fill(
+        PROJECT_BACKWARD,
+        &[
+            ("NP", np.to_string()),
+            ("NPF", npf.to_string()),
+            ("NCAM", ncam.to_string()),
+            ("NG", layout.grad_words.to_string()),
+            ("STRIDE", layout.stride.to_string()),
+            ("RED_WORDS", (64 * ncam).to_string()),
+            (
+                "PROJECT_ADJOINT",
+                format!("{}({})", adj.name, args.join(", ")),
+            ),
+            ("WRITE", write),
+        ],
+    );
+    Ok((format!("{wgsl}\n{body}"), npf))
+}

@@ -1,0 +1,22 @@
+// Tile ranges from the sorted keys: tile t's entries are [ranges[2t], ranges[2t + 1]).
+// `ranges` is cleared to zero beforehand, so tiles without entries read as empty.
+
+@group(0) @binding(0) var<storage, read> keys: array<vec2<u32>>;
+@group(0) @binding(1) var<storage, read_write> ranges: array<u32>;
+@group(0) @binding(2) var<uniform> info: vec4<u32>; // x = number of keys
+
+@compute @workgroup_size(256)
+fn tile_ranges(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let i = (wid.y * 65535u + wid.x) * 256u + lid;
+    let n = info.x;
+    if (i >= n) {
+        return;
+    }
+    let t = keys[i].y;
+    if (i == 0u || keys[i - 1u].y != t) {
+        ranges[2u * t] = i;
+    }
+    if (i + 1u == n || keys[i + 1u].y != t) {
+        ranges[2u * t + 1u] = i + 1u;
+    }
+}

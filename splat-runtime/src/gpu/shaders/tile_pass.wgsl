@@ -1,0 +1,46 @@
+// What the forward and backward blends share: one workgroup per tile, one invocation per
+// pixel; the tile's list is walked in batches staged in workgroup memory, and the walk ends
+// early once every pixel of the tile is done.
+
+const TILE: u32 = {{TILE}}u;
+const WG: u32 = {{WG}}u;
+const BATCH: u32 = {{BATCH}}u;
+const NS: u32 = {{NS}}u; // shade words per primitive
+const STRIDE: u32 = {{STRIDE}}u; // projected words per primitive
+const SHADE_AT: u32 = {{SHADE_AT}}u;
+const CHANNELS: u32 = {{CHANNELS}}u;
+
+@group(0) @binding(0) var<storage, read> projected: array<u32>;
+@group(0) @binding(1) var<storage, read> tile_prims: array<u32>;
+@group(0) @binding(2) var<storage, read> tile_ranges: array<u32>;
+@group(0) @binding(3) var<storage, read> tile_order: array<u32>;
+// frame[0] = (primitives, width, height, tile size), frame[1] = (tiles_x, P_max, ..)
+@group(0) @binding(4) var<uniform> frame: array<vec4<u32>, 2>;
+
+var<workgroup> batch_words: array<u32, {{BATCH_WORDS}}>;
+var<workgroup> batch_depth: array<f32, BATCH>;
+var<workgroup> batch_prim: array<u32, BATCH>;
+var<workgroup> done_count: atomic<u32>;
+var<workgroup> all_done: u32;
+
+// Entries [b, b + BATCH) of the tile's list, one per invocation.
+fn stage_batch(lid: u32, b: u32, end: u32) {
+    let k = b + lid;
+    if (lid < BATCH && k < end) {
+        let p = tile_prims[k];
+        batch_prim[lid] = p;
+        for (var w = 0u; w < NS; w++) {
+            batch_words[lid * NS + w] = projected[p * STRIDE + SHADE_AT + w];
+        }
+        batch_depth[lid] = bitcast<f32>(projected[p * STRIDE + 1u]);
+    }
+}
+
+// True once every invocation of the workgroup is done (read uniformly after a barrier).
+fn all_pixels_done(lid: u32) -> bool {
+    workgroupBarrier();
+    if (lid == 0u) {
+        all_done = atomicLoad(&done_count);
+    }
+    return workgroupUniformLoad(&all_done) == WG;
+}

@@ -1,0 +1,64 @@
+// Count and emit of (primitive, tile) intersections. Both visit a primitive's tiles through
+// `kept_tiles` (whose emit step is empty when counting), so they cannot disagree.
+// `projected` holds `project`'s result per primitive: visible, depth, bbox (4), cull, shade.
+
+const STRIDE: u32 = {{STRIDE}}u;
+const CULL_AT: u32 = 6u;
+
+@group(0) @binding(0) var<storage, read> projected: array<u32>;
+@group(0) @binding(1) var<storage, read_write> counts: array<u32>;
+// frame[0] = (primitives, width, height, tile size), frame[1] = (tiles_x, ..)
+@group(0) @binding(2) var<uniform> frame: array<vec4<u32>, 2>;
+{{BINDINGS}}
+
+fn word(i: u32, k: u32) -> f32 {
+    return bitcast<f32>(projected[i * STRIDE + k]);
+}
+
+fn finite(v: f32) -> bool {
+    return (bitcast<u32>(v) & 0x7f800000u) != 0x7f800000u;
+}
+
+// The tiles holding a pixel centre inside primitive i's box, as (x0, y0, x1, y1) half-open;
+// x1 == x0 if none (the CPU's TileGrid::rect, operation for operation).
+fn tile_rect(i: u32) -> vec4<u32> {
+    let none = vec4<u32>(0u);
+    if (projected[i * STRIDE] == 0u || !finite(word(i, 1u))) {
+        return none;
+    }
+    let lo = vec2<f32>(word(i, 2u), word(i, 3u));
+    let hi = vec2<f32>(word(i, 4u), word(i, 5u));
+    if (!(finite(lo.x) && finite(lo.y) && finite(hi.x) && finite(hi.y))) {
+        return none;
+    }
+    let first = max(ceil(lo - 0.5), vec2<f32>(0.0));
+    let last = min(floor(hi - 0.5), vec2<f32>(f32(frame[0].y) - 1.0, f32(frame[0].z) - 1.0));
+    if (first.x > last.x || first.y > last.y) {
+        return none;
+    }
+    let size = frame[0].w;
+    return vec4<u32>(vec2<u32>(first) / size, vec2<u32>(last) / size + 1u);
+}
+
+// Visits the tiles of `rect` that tile_cull keeps; returns how many (emitting from `first`).
+fn kept_tiles(i: u32, rect: vec4<u32>, first: u32) -> u32 {
+    let size = frame[0].w;
+    var n = 0u;
+    for (var ty = rect.y; ty < rect.w; ty++) {
+        for (var tx = rect.x; tx < rect.z; tx++) {
+            let x0 = tx * size;
+            let y0 = ty * size;
+            let x1 = min(x0 + size, frame[0].y);
+            let y1 = min(y0 + size, frame[0].z);
+            let lo = vec2<f32>(f32(x0) + 0.5, f32(y0) + 0.5);
+            let hi = vec2<f32>(f32(x1) - 0.5, f32(y1) - 0.5);
+            if ({{KEEP}}) {
+                {{EMIT}}
+                n++;
+            }
+        }
+    }
+    return n;
+}
+
+{{ENTRY}}
