@@ -15,7 +15,7 @@ use common::{camera, gaussian_at};
 use splat_methods::gs3d::{Method, Params};
 use splat_runtime::glam::Vec2;
 use splat_runtime::gpu::Gpu;
-use splat_runtime::gpu::entries::Accumulation;
+use splat_runtime::gpu::entries::{Accumulation, Reduction};
 use splat_runtime::types::Camera;
 use splat_runtime::{Flat, FrameGrad, RenderOptions, backward, render, render_for_backward};
 
@@ -147,22 +147,27 @@ fn gpu_gradients_match_cpu() {
         alpha: Some(random(pixels)),
         depth: Some(random(pixels)),
     };
-    let mut modes = vec![
-        Accumulation {
-            reduce: true,
-            float_atomics: false,
-        },
-        Accumulation {
-            reduce: false,
-            float_atomics: false,
-        },
-    ];
-    if gpu.float_atomics {
-        modes.push(Accumulation {
-            reduce: true,
-            float_atomics: true,
-        });
+    // Every way of accumulating the gradients the adapter supports.
+    let mut reductions = vec![Reduction::Workgroup, Reduction::None];
+    if gpu.subgroups {
+        reductions.insert(1, Reduction::Subgroup);
     }
+    let atomics_kinds: &[bool] = if gpu.float_atomics {
+        &[false, true]
+    } else {
+        &[false]
+    };
+    let modes: Vec<Accumulation> = reductions
+        .iter()
+        .flat_map(|&reduce| {
+            atomics_kinds
+                .iter()
+                .map(move |&float_atomics| Accumulation {
+                    reduce,
+                    float_atomics,
+                })
+        })
+        .collect();
     for tile_size in [8, 16] {
         let opts = RenderOptions {
             tile_size,
@@ -229,7 +234,46 @@ fn gpu_gradients_match_cpu() {
             );
         }
         println!("tile {tile_size}: atomics issued per mode {atomics:?}");
-        // The workgroup reduction issues fewer global atomics than one per pixel.
-        assert!(atomics[0] < atomics[1], "{atomics:?}");
+        // Each reduction issues fewer global atomics than one per pixel, the workgroup's
+        // fewest; the kind of atomic does not change the count.
+        let issued = |r: Reduction| atomics[modes.iter().position(|m| m.reduce == r).unwrap()];
+        assert!(
+            issued(Reduction::Workgroup) < issued(Reduction::None),
+            "{atomics:?}"
+        );
+        if gpu.subgroups {
+            assert!(issued(Reduction::Workgroup) <= issued(Reduction::Subgroup));
+            assert!(issued(Reduction::Subgroup) < issued(Reduction::None));
+        }
     }
+}
+
+#[test]
+fn gpu_handles_empty_scenes_and_refuses_bad_input_clearly() {
+    let Some(gpu) = gpu() else { return };
+    let cam = camera(24, 16);
+    let opts = RenderOptions {
+        alpha: true,
+        ..Default::default()
+    };
+    let empty = splat_runtime::gpu::render::render::<Method>(&gpu, &[], &cam, &opts).unwrap();
+    assert!(empty.color.data.iter().all(|c| *c == 0.0));
+    assert!(empty.alpha.unwrap().data.iter().all(|a| *a == 0.0));
+    let mut params = scene(1, 3, &cam, 0.0);
+    let wide = RenderOptions {
+        tile_size: 32,
+        ..opts
+    };
+    let err = splat_runtime::gpu::render::render::<Method>(&gpu, &params, &cam, &wide)
+        .err()
+        .unwrap();
+    assert!(err.to_string().contains("tile sizes 8 and 16"), "{err}");
+    params[2].mean.y = f32::NAN;
+    let err = splat_runtime::gpu::render::render::<Method>(&gpu, &params, &cam, &opts)
+        .err()
+        .unwrap();
+    assert_eq!(
+        err.to_string(),
+        "primitive 2 has a NaN or infinite parameter"
+    );
 }

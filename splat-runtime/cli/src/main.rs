@@ -51,6 +51,9 @@ enum Method {
 
 #[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
 enum Backend {
+    /// A hardware GPU if wgpu finds one, else the CPU (a software adapter such as lavapipe is
+    /// slower than the CPU backend).
+    Auto,
     Cpu,
     Gpu,
 }
@@ -86,9 +89,9 @@ struct RenderArgs {
     /// Blend at most this many primitives per tile.
     #[arg(long)]
     p_max: Option<usize>,
-    /// Where to render: `gpu` runs `project` and blending on a wgpu adapter (tile lists are
-    /// still built on the CPU).
-    #[arg(long, value_enum, default_value_t = Backend::Cpu)]
+    /// Where to render: the CPU backend (rayon + SIMD) or the wgpu backend (any adapter,
+    /// software ones included); `auto` picks a hardware GPU when there is one.
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
     backend: Backend,
     #[arg(long, default_value_t = 800)]
     width: u32,
@@ -146,10 +149,14 @@ where
     M::Params: FromStored,
 {
     let params: Vec<M::Params> = cloud.gaussians.iter().map(M::Params::from_stored).collect();
-    Ok(match backend {
-        Backend::Cpu => (render::<M>(&params, camera, opts)?, "CPU".to_string()),
-        Backend::Gpu => {
-            let gpu = splat_runtime::gpu::Gpu::new()?;
+    let gpu = match backend {
+        Backend::Cpu => None,
+        Backend::Gpu => Some(splat_runtime::gpu::Gpu::new()?),
+        Backend::Auto => splat_runtime::gpu::Gpu::new().ok().filter(|g| !g.software),
+    };
+    Ok(match gpu {
+        None => (render::<M>(&params, camera, opts)?, "CPU".to_string()),
+        Some(gpu) => {
             let frame = splat_runtime::gpu::render::render::<M>(&gpu, &params, camera, opts)?;
             (frame, format!("GPU, {}", gpu.adapter))
         }
@@ -212,9 +219,10 @@ fn render_cmd(args: &RenderArgs) -> Result<()> {
         "3dgs on {backend}: {} primitives (SH degree {}) from {source}, {}x{}, tile {}",
         s.primitives, cloud.sh_degree, frame.color.width, frame.color.height, args.tile
     );
-    let pairs = match args.backend {
-        Backend::Cpu => s.pairs.to_string(),
-        Backend::Gpu => "not counted on the GPU".to_string(),
+    let pairs = if backend == "CPU" {
+        s.pairs.to_string()
+    } else {
+        "not counted on the GPU".to_string()
     };
     println!(
         "visible {}, intersections {}, pairs evaluated {pairs}",

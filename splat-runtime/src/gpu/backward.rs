@@ -4,7 +4,7 @@
 //! workgroup. Gradient buffers are cleared explicitly (no reliance on zeroed memory).
 
 use super::device::dispatch;
-use super::entries::{self, Accumulation, Layout};
+use super::entries::{self, Accumulation, Layout, Reduction};
 use super::render::{GpuForwardState, GpuRenderError, frame_uniform};
 use super::{Gpu, GpuError};
 use crate::flat::Flat;
@@ -43,6 +43,9 @@ pub fn backward<M: SplatMethod>(
     }
     if acc.float_atomics && !gpu.float_atomics {
         return Err(GpuError::Shader("this adapter has no f32 atomics".into()).into());
+    }
+    if acc.reduce == Reduction::Subgroup && !gpu.subgroups {
+        return Err(GpuError::Shader("this adapter has no subgroup operations".into()).into());
     }
     let n = state.primitives;
     let n32 = n as u32;
@@ -143,10 +146,15 @@ pub fn backward<M: SplatMethod>(
 }
 
 impl Accumulation {
-    /// Workgroup reduction, with f32 atomics where the adapter has them.
+    /// Subgroup reduction where the adapter has subgroups (else workgroup reduction), with
+    /// f32 atomics where it has them (else compare-exchange).
     pub fn default_for(gpu: &Gpu) -> Accumulation {
         Accumulation {
-            reduce: true,
+            reduce: if gpu.subgroups {
+                Reduction::Subgroup
+            } else {
+                Reduction::Workgroup
+            },
             float_atomics: gpu.float_atomics,
         }
     }

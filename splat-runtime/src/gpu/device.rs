@@ -20,6 +20,10 @@ pub struct Gpu {
     pub adapter: String,
     /// `atomicAdd` on `f32` in storage memory (`SHADER_FLOAT32_ATOMIC`).
     pub float_atomics: bool,
+    /// Subgroup operations (`subgroupAdd`).
+    pub subgroups: bool,
+    /// A CPU implementation (lavapipe, WARP, SwiftShader): correct but slow.
+    pub software: bool,
     limits: wgpu::Limits,
     pipelines: Mutex<HashMap<u64, wgpu::ComputePipeline>>,
 }
@@ -48,7 +52,8 @@ impl Gpu {
         }))
         .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
         let info = adapter.get_info();
-        let features = adapter.features() & wgpu::Features::SHADER_FLOAT32_ATOMIC;
+        let features =
+            adapter.features() & (wgpu::Features::SHADER_FLOAT32_ATOMIC | wgpu::Features::SUBGROUP);
         let limits = adapter.limits();
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("splat"),
@@ -62,6 +67,8 @@ impl Gpu {
             queue,
             adapter: format!("{} ({:?})", info.name, info.backend),
             float_atomics: features.contains(wgpu::Features::SHADER_FLOAT32_ATOMIC),
+            subgroups: features.contains(wgpu::Features::SUBGROUP),
+            software: info.device_type == wgpu::DeviceType::Cpu,
             limits,
             pipelines: Mutex::new(HashMap::new()),
         })

@@ -119,12 +119,22 @@ pub fn tiles<M: SplatMethod>(emit: bool) -> Result<String, GpuError> {
     Ok(format!("{wgsl}\n{body}"))
 }
 
+/// Where the backward blend sums an entry's gradient over pixels before its global atomics.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Reduction {
+    /// No reduction: one atomic per (pixel, entry, gradient word), the baseline.
+    None,
+    /// `subgroupAdd` over each subgroup (no barrier): one atomic per (subgroup, entry, word).
+    Subgroup,
+    /// A tree in workgroup memory: one atomic per (tile, entry, word), at the price of a
+    /// barrier per level.
+    Workgroup,
+}
+
 /// How the backward blend adds its gradients to global memory.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Accumulation {
-    /// Sum each entry's gradient over the workgroup first: one atomic per (tile, entry,
-    /// gradient word) instead of one per (pixel, entry, gradient word).
-    pub reduce: bool,
+    pub reduce: Reduction,
     /// `atomicAdd` on f32 (`SHADER_FLOAT32_ATOMIC`); otherwise a compare-exchange loop on u32.
     pub float_atomics: bool,
 }
@@ -137,10 +147,15 @@ struct Blend {
     rc: u32,
 }
 
-fn blend_sizes(gpu: &Gpu, tile: u32, layout: &Layout, reduce: bool) -> Result<Blend, GpuError> {
+fn blend_sizes(
+    gpu: &Gpu,
+    tile: u32,
+    layout: &Layout,
+    workgroup_reduce: bool,
+) -> Result<Blend, GpuError> {
     let wg = tile * tile;
     let mut budget = gpu.workgroup_storage().saturating_sub(RESERVED_BYTES);
-    let rc = if reduce {
+    let rc = if workgroup_reduce {
         let rc = ((budget / 2) / (4 * wg))
             .min(layout.grad_words as u32)
             .max(1);
@@ -259,7 +274,7 @@ pub fn backward<M: SplatMethod>(
 ) -> Result<String, GpuError> {
     let wgsl = M::SOURCE.wgsl;
     let layout = Layout::of::<M>();
-    let b = blend_sizes(gpu, tile, &layout, acc.reduce)?;
+    let b = blend_sizes(gpu, tile, &layout, acc.reduce == Reduction::Workgroup)?;
     let (camera, pixel_code, pixel_args) = pixel::<M>(9)?;
     let (call, eval) = evaluate_call::<M>(&pixel_args)?;
     let adj = sig(wgsl, "evaluate_adjoint")?;
@@ -298,8 +313,9 @@ pub fn backward<M: SplatMethod>(
             )
         })
         .collect();
-    let scatter = if acc.reduce {
-        "            for (var c0 = 0u; c0 < NG; c0 += RC) {
+    let scatter = match acc.reduce {
+        Reduction::Workgroup => {
+            "            for (var c0 = 0u; c0 < NG; c0 += RC) {
                 for (var k = 0u; k < RC; k++) {
                     red[k * WG + lid] = select(0.0, g[min(c0 + k, NG - 1u)], c0 + k < NG);
                 }
@@ -321,13 +337,24 @@ pub fn backward<M: SplatMethod>(
                 }
                 workgroupBarrier();
             }"
-    } else {
-        "            for (var k = 0u; k < NG; k++) {
+        }
+        Reduction::Subgroup => {
+            "            for (var k = 0u; k < NG; k++) {
+                let v = subgroupAdd(g[k]);
+                if (lane == 0u && v != 0.0) {
+                    add_grad(prim * NG + k, v);
+                    my_issued++;
+                }
+            }"
+        }
+        Reduction::None => {
+            "            for (var k = 0u; k < NG; k++) {
                 if (g[k] != 0.0) {
                     add_grad(prim * NG + k, g[k]);
                     my_issued++;
                 }
             }"
+        }
     };
     let (grad_atomic, atomic_add) = if acc.float_atomics {
         ("atomic<f32>", "    atomicAdd(&grads[i], v);")
@@ -344,10 +371,23 @@ pub fn backward<M: SplatMethod>(
     }",
         )
     };
-    let note = if acc.reduce {
-        "each entry's gradient is first summed over the workgroup in workgroup memory (one atomic per tile, entry and word)."
+    let note = match acc.reduce {
+        Reduction::Workgroup => {
+            "each entry's gradient is first summed over the workgroup in workgroup memory (one atomic per tile, entry and word)."
+        }
+        Reduction::Subgroup => {
+            "each entry's gradient is first summed over the subgroup (one atomic per subgroup, entry and word)."
+        }
+        Reduction::None => {
+            "one atomic per pixel, entry and word (the baseline the reductions are measured against)."
+        }
+    };
+    // naga takes subgroup builtins without `enable subgroups;` (which it rejects as not yet
+    // implemented) once the device has the SUBGROUP feature.
+    let lane = if acc.reduce == Reduction::Subgroup {
+        ", @builtin(subgroup_invocation_id) lane: u32"
     } else {
-        "one atomic per pixel, entry and word (the baseline the workgroup reduction is measured against)."
+        ""
     };
     let body = fill(
         BACKWARD,
@@ -359,8 +399,14 @@ pub fn backward<M: SplatMethod>(
             ("CAMERA_BINDING", camera),
             (
                 "RED_WORDS",
-                if acc.reduce { b.rc * b.wg } else { 1 }.to_string(),
+                if acc.reduce == Reduction::Workgroup {
+                    b.rc * b.wg
+                } else {
+                    1
+                }
+                .to_string(),
             ),
+            ("LANE", lane.into()),
             ("ATOMIC_ADD", atomic_add.into()),
             ("WG", b.wg.to_string()),
             ("PIXEL", pixel_code),

@@ -161,7 +161,8 @@ fn forward<M: SplatMethod>(
     let total = total as u32;
     stats.intersections = total as usize;
     // Emit, sort, ranges, bins.
-    let keys = gpu.buffer("intersection keys", 2 * total as usize)?;
+    // Keys are `vec2<u32>`: a binding holds at least one, even with no intersection.
+    let keys = gpu.buffer("intersection keys", 2 * total.max(1) as usize)?;
     let vals = gpu.buffer("intersection primitives", total as usize)?;
     let emit = gpu.pipeline(&entries::tiles::<M>(true)?, "emit_tiles")?;
     let mut enc = new_encoder();

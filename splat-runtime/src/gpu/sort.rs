@@ -64,7 +64,7 @@ pub fn sort_by_tile_and_depth(
     let blocks = n.div_ceil(SORT_BLOCK).max(1);
     let hist = gpu.buffer("radix-sort histograms", 16 * blocks as usize)?;
     let (mut keys, mut vals) = (keys, vals);
-    let mut keys_out = gpu.buffer("sorted keys", 2 * n as usize)?;
+    let mut keys_out = gpu.buffer("sorted keys", 2 * n.max(1) as usize)?;
     let mut vals_out = gpu.buffer("sorted values", n as usize)?;
     let histogram = gpu.pipeline(RADIX, "radix_histogram")?;
     let scatter = gpu.pipeline(RADIX, "radix_scatter")?;

@@ -23,7 +23,7 @@ fn add_grad(i: u32, v: f32) {
 }
 
 @compute @workgroup_size({{WG}})
-fn backward_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+fn backward_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32{{LANE}}) {
     let tile = tile_order[wid.y * 65535u + wid.x];
     let x = (tile % frame[1].x) * TILE + lid % TILE;
     let y = (tile / frame[1].x) * TILE + lid / TILE;

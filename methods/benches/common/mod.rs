@@ -1,0 +1,50 @@
+//! The procedural benchmark scene shared by the benches.
+
+use splat_methods::gs3d::Params;
+use splat_runtime::glam::{Vec3, Vec4};
+
+/// Gaussians filling the view between depth 4 and 30, with 60% of them in a central cluster
+/// so that the middle tiles get the deep lists that make `P_max` matter, as in real scenes.
+pub fn scene(n: usize) -> Vec<Params> {
+    let mut rng = fastrand::Rng::with_seed(42);
+    (0..n)
+        .map(|i| {
+            let cluster = i % 5 < 3;
+            let (x, y, z) = if cluster {
+                let d = Vec3::new(rng.f32() - 0.5, rng.f32() - 0.5, rng.f32() - 0.5) * 4.0;
+                (d.x, d.y, 14.0 + d.z)
+            } else {
+                let z = 4.0 + 26.0 * rng.f32();
+                (
+                    (rng.f32() - 0.5) * 2.0 * z * 0.55,
+                    (rng.f32() - 0.5) * 2.0 * z * 0.32,
+                    z,
+                )
+            };
+            let mut sh = [Vec3::ZERO; 16];
+            for c in sh.iter_mut() {
+                *c = Vec3::new(rng.f32() - 0.5, rng.f32() - 0.5, rng.f32() - 0.5) * 0.4;
+            }
+            // The cluster: larger and fainter, so lists are long and blending goes deep.
+            let (s, opacity_logit) = if cluster {
+                ((0.04 + 0.08 * rng.f32()).ln(), -4.5 + 3.0 * rng.f32())
+            } else {
+                (
+                    (0.01 + 0.05 * rng.f32() * rng.f32()).ln(),
+                    rng.f32() * 4.0 - 2.0,
+                )
+            };
+            Params {
+                mean: Vec3::new(x, y, z),
+                log_scale: Vec3::new(
+                    s + 0.3 * rng.f32(),
+                    s + 0.3 * rng.f32(),
+                    s + 0.3 * rng.f32(),
+                ),
+                rotation: Vec4::new(1.0, rng.f32() - 0.5, rng.f32() - 0.5, rng.f32() - 0.5),
+                opacity_logit,
+                sh,
+            }
+        })
+        .collect()
+}
