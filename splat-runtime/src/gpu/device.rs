@@ -245,3 +245,38 @@ pub fn dispatch(
     pass.set_bind_group(0, bind, &[]);
     pass.dispatch_workgroups(x, y, 1);
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn buffers_past_the_device_limits_are_refused_by_name() {
+        let gpu = match Gpu::new() {
+            Ok(g) => g,
+            Err(e) if std::env::var("SPLAT_REQUIRE_GPU").is_ok_and(|v| v == "1") => panic!("{e}"),
+            Err(_) => return,
+        };
+        let limit = gpu
+            .limits
+            .max_storage_buffer_binding_size
+            .min(gpu.limits.max_buffer_size);
+        let err = gpu
+            .buffer("intersection keys", (limit / 4 + 1) as usize)
+            .unwrap_err();
+        assert!(
+            matches!(
+                err,
+                GpuError::TooLarge {
+                    what: "intersection keys",
+                    ..
+                }
+            ),
+            "{err}"
+        );
+        assert!(err.to_string().contains("lower the resolution"), "{err}");
+        assert_eq!(grid_of(65_535), (65_535, 1));
+        assert_eq!(grid_of(65_536), (65_535, 2));
+        assert_eq!(grid_of(0), (1, 1));
+    }
+}
