@@ -15,17 +15,6 @@ use splat_runtime::gpu::{Gpu, kernel};
 const TOL: f64 = 1e-5;
 const TOL_INVERSE_TRIG: f64 = 5e-4;
 
-fn gpu() -> Option<Gpu> {
-    match Gpu::new() {
-        Ok(g) => Some(g),
-        Err(e) if std::env::var("SPLAT_REQUIRE_GPU").is_ok_and(|v| v == "1") => panic!("{e}"),
-        Err(e) => {
-            eprintln!("skipping GPU checks: {e}");
-            None
-        }
-    }
-}
-
 type ScalarFn<const NF: usize, const NI: usize, const MF: usize, const MI: usize> =
     fn(&[f32; NF], &[u32; NI]) -> ([f32; MF], [u32; MI]);
 type AdjointFn<const NF: usize, const NI: usize, const MF: usize> =
@@ -170,7 +159,9 @@ macro_rules! gpu_corpus {
 
 #[test]
 fn corpus_kernels_match_the_rust_forms_on_the_gpu() {
-    let Some(gpu) = gpu() else { return };
+    let Some(gpu) = splat_runtime::gpu::adapter_or_skip() else {
+        return;
+    };
     println!("adapter: {}", gpu.adapter);
     let failures = gpu_corpus!(&gpu,
         scalars::arith / arith_adjoint in 0.2 .. 1.5, ints <= 0;

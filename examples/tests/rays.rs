@@ -110,13 +110,8 @@ fn rays_match_an_f64_reference() {
 
 #[test]
 fn rays_on_the_gpu_match_the_cpu() {
-    let gpu = match splat_runtime::gpu::Gpu::new() {
-        Ok(g) => g,
-        Err(e) if std::env::var("SPLAT_REQUIRE_GPU").is_ok_and(|v| v == "1") => panic!("{e}"),
-        Err(e) => {
-            eprintln!("skipping: {e}");
-            return;
-        }
+    let Some(gpu) = splat_runtime::gpu::adapter_or_skip() else {
+        return;
     };
     let (cam, params) = scene();
     let opts = RenderOptions {

@@ -8,14 +8,13 @@
 //! `cargo bench -p splat-methods --bench gpu [-- N WIDTH HEIGHT]`
 
 use splat_methods::gs3d::{Method, Params};
-use splat_runtime::glam::{Mat3, Vec2, Vec3};
 use splat_runtime::gpu::entries::{Accumulation, Reduction};
 use splat_runtime::gpu::{Gpu, backward as gpu_backward, render as gpu_render};
-use splat_runtime::{Camera, FrameGrad, RenderOptions, backward, render_for_backward};
+use splat_runtime::{FrameGrad, RenderOptions, backward, render_for_backward};
 use std::time::Duration;
 
 mod common;
-use common::scene;
+use common::{camera, scene, size_args};
 
 fn ms(d: Duration) -> f64 {
     d.as_secs_f64() * 1e3
@@ -33,24 +32,10 @@ fn best<const K: usize>(runs: usize, mut f: impl FnMut() -> [Duration; K]) -> [D
 }
 
 fn main() {
-    let args: Vec<usize> = std::env::args()
-        .skip(1)
-        .filter_map(|a| a.parse().ok())
-        .collect();
-    let n = args.first().copied().unwrap_or(20_000);
-    let (w, h) = (
-        args.get(1).copied().unwrap_or(640) as f32,
-        args.get(2).copied().unwrap_or(360) as f32,
-    );
+    let (n, w, h) = size_args(20_000, 640, 360);
     let gpu = Gpu::new().expect("a wgpu adapter (lavapipe is enough)");
     let params: Vec<Params> = scene(n);
-    let camera = Camera {
-        rotation: Mat3::IDENTITY,
-        translation: Vec3::ZERO,
-        focal: Vec2::splat(0.9 * w),
-        principal: Vec2::new(w / 2.0, h / 2.0),
-        size: Vec2::new(w, h),
-    };
+    let camera = camera(w, h);
     let opts = RenderOptions {
         depth: true,
         alpha: true,

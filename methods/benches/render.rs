@@ -7,12 +7,11 @@
 
 use splat_methods::gs3d::Method;
 use splat_methods::gs3d_sh0;
-use splat_runtime::glam::{Mat3, Vec2, Vec3};
-use splat_runtime::{Camera, FrameGrad, RenderOptions, backward, render, render_for_backward};
+use splat_runtime::{FrameGrad, RenderOptions, backward, render, render_for_backward};
 use std::time::Instant;
 
 mod common;
-use common::scene;
+use common::{camera, scene, size_args};
 
 fn peak_rss_mib() -> f64 {
     let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
@@ -39,24 +38,10 @@ fn psnr(a: &[f32], b: &[f32]) -> f64 {
 }
 
 fn main() {
-    let args: Vec<usize> = std::env::args()
-        .skip(1)
-        .filter_map(|a| a.parse().ok())
-        .collect();
-    let n = args.first().copied().unwrap_or(1_000_000);
-    let (w, h) = (
-        args.get(1).copied().unwrap_or(1920) as f32,
-        args.get(2).copied().unwrap_or(1080) as f32,
-    );
+    let (n, w, h) = size_args(1_000_000, 1920, 1080);
     let cores = rayon::current_num_threads();
     let params = scene(n);
-    let camera = Camera {
-        rotation: Mat3::IDENTITY,
-        translation: Vec3::ZERO,
-        focal: Vec2::splat(0.9 * w),
-        principal: Vec2::new(w / 2.0, h / 2.0),
-        size: Vec2::new(w, h),
-    };
+    let camera = camera(w, h);
     println!("3DGS, {n} Gaussians (SH degree 3), {w}x{h}, {cores} threads");
     let opts = RenderOptions::default();
     // Warm up (page faults, thread pool).

@@ -11,39 +11,30 @@
 
 mod common;
 
-use common::{camera, gaussian_at};
+use common::{camera, camera_words, gaussian_at, group_error, param_words};
 use splat_methods::gs3d::{Method, Params};
 use splat_runtime::glam::Vec2;
-use splat_runtime::gpu::Gpu;
+use splat_runtime::gpu::adapter_or_skip;
 use splat_runtime::gpu::entries::{Accumulation, Reduction};
 use splat_runtime::types::Camera;
-use splat_runtime::{Flat, FrameGrad, RenderOptions, backward, render, render_for_backward};
+use splat_runtime::{FrameGrad, RenderOptions, backward, render, render_for_backward};
 
-fn gpu() -> Option<Gpu> {
-    match Gpu::new() {
-        Ok(g) => Some(g),
-        Err(e) if std::env::var("SPLAT_REQUIRE_GPU").is_ok_and(|v| v == "1") => panic!("{e}"),
-        Err(e) => {
-            eprintln!("skipping GPU parity: {e}");
-            None
-        }
-    }
-}
-
-fn scene(seed: u64, count: usize, cam: &Camera, opacity_logit: f32) -> Vec<Params> {
+fn scene(seed: u64, count: usize, cam: &Camera, log_scale: f32) -> Vec<Params> {
     let mut rng = fastrand::Rng::with_seed(seed);
     (0..count)
         .map(|_| {
             let px = Vec2::new(rng.f32() * 88.0 - 8.0, rng.f32() * 72.0 - 8.0);
             let z = 2.0 + rng.f32() * 6.0;
-            gaussian_at(&mut rng, cam, px, z, opacity_logit)
+            gaussian_at(&mut rng, cam, px, z, log_scale)
         })
         .collect()
 }
 
 #[test]
 fn gpu_forward_matches_cpu() {
-    let Some(gpu) = gpu() else { return };
+    let Some(gpu) = adapter_or_skip() else {
+        return;
+    };
     let cam = camera(72, 56);
     let params = scene(21, 150, &cam, -2.0);
     for tile_size in [8, 16] {
@@ -98,18 +89,11 @@ fn gpu_forward_matches_cpu() {
     }
 }
 
-/// max |a - b| / max |b| over a group.
-fn group_error(got: &[f32], want: &[f32]) -> f32 {
-    let scale = want.iter().fold(0.0f32, |m, v| m.max(v.abs())).max(1e-12);
-    got.iter()
-        .zip(want)
-        .fold(0.0f32, |m, (a, b)| m.max((a - b).abs()))
-        / scale
-}
-
 #[test]
 fn gpu_gradients_match_cpu() {
-    let Some(gpu) = gpu() else { return };
+    let Some(gpu) = adapter_or_skip() else {
+        return;
+    };
     let cam = camera(40, 32);
     // Clear of the thresholds: each Gaussian covers the whole image with alpha above 1/255
     // (no pixel sits at the cutoff) and transmittance stays far above 1e-4.
@@ -192,15 +176,7 @@ fn gpu_gradients_match_cpu() {
         for acc in &modes {
             let g = splat_runtime::gpu::backward::backward(&gpu, &gstate, &grad, *acc).unwrap();
             atomics.push(g.atomics);
-            let words = |ps: &[Params]| -> Vec<Vec<f32>> {
-                ps.iter()
-                    .map(|p| {
-                        let mut w = vec![0.0; Params::LEN];
-                        p.write_words(&mut w);
-                        w
-                    })
-                    .collect()
-            };
+            let words = |ps: &[Params]| -> Vec<Vec<f64>> { ps.iter().map(param_words).collect() };
             let (gw, cw) = (words(&g.gradients.params), words(&cpu.params));
             let groups = [
                 ("mean", 0..3),
@@ -210,7 +186,7 @@ fn gpu_gradients_match_cpu() {
                 ("sh", 11..59),
             ];
             for (name, range) in groups {
-                let pick = |w: &[Vec<f32>]| -> Vec<f32> {
+                let pick = |w: &[Vec<f64>]| -> Vec<f64> {
                     w.iter().flat_map(|p| p[range.clone()].to_vec()).collect()
                 };
                 let err = group_error(&pick(&gw), &pick(&cw));
@@ -220,12 +196,7 @@ fn gpu_gradients_match_cpu() {
                     "tile {tile_size}, {acc:?}, {name}: error {err}"
                 );
             }
-            let cam_words = |c: &Camera| {
-                let mut w = vec![0.0; Camera::LEN];
-                c.write_words(&mut w);
-                w
-            };
-            let (gc, cc) = (cam_words(&g.gradients.camera), cam_words(&cpu.camera));
+            let (gc, cc) = (camera_words(&g.gradients.camera), camera_words(&cpu.camera));
             let err = group_error(&gc[..16], &cc[..16]);
             println!("tile {tile_size}, {acc:?}, camera: {err:.2e}");
             assert!(
@@ -250,7 +221,9 @@ fn gpu_gradients_match_cpu() {
 
 #[test]
 fn gpu_handles_empty_scenes_and_refuses_bad_input_clearly() {
-    let Some(gpu) = gpu() else { return };
+    let Some(gpu) = adapter_or_skip() else {
+        return;
+    };
     let cam = camera(24, 16);
     let opts = RenderOptions {
         alpha: true,

@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{camera, gaussian_at};
+use common::{camera, gaussian_at, group_error};
 use splat_methods::gs3d::{Method, Params};
 use splat_runtime::glam::Vec2;
 use splat_runtime::{Flat, FrameGrad, RenderOptions, backward, render_for_backward};
@@ -28,15 +28,6 @@ fn loss(params: &[Vec<f64>], cam: &[f64], w: &Weights) -> f64 {
 fn fd(f: impl Fn(f64) -> f64, x: f64) -> f64 {
     let h = 1e-5 * x.abs().max(1.0);
     (f(x + h) - f(x - h)) / (2.0 * h)
-}
-
-/// max |a - b| / max |b| over a group.
-fn group_error(got: &[f64], want: &[f64]) -> f64 {
-    let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(1e-9);
-    got.iter()
-        .zip(want)
-        .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()))
-        / scale
 }
 
 #[test]

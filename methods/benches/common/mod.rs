@@ -1,7 +1,32 @@
 //! The procedural benchmark scene shared by the benches.
 
 use splat_methods::gs3d::Params;
-use splat_runtime::glam::{Vec3, Vec4};
+use splat_runtime::Camera;
+use splat_runtime::glam::{Mat3, Vec2, Vec3, Vec4};
+
+/// `N WIDTH HEIGHT` from the command line, each defaulting when absent.
+pub fn size_args(n: usize, width: usize, height: usize) -> (usize, f32, f32) {
+    let args: Vec<usize> = std::env::args()
+        .skip(1)
+        .filter_map(|a| a.parse().ok())
+        .collect();
+    (
+        args.first().copied().unwrap_or(n),
+        args.get(1).copied().unwrap_or(width) as f32,
+        args.get(2).copied().unwrap_or(height) as f32,
+    )
+}
+
+/// A camera at the origin looking down +z, with a field of view of about 58 degrees.
+pub fn camera(w: f32, h: f32) -> Camera {
+    Camera {
+        rotation: Mat3::IDENTITY,
+        translation: Vec3::ZERO,
+        focal: Vec2::splat(0.9 * w),
+        principal: Vec2::new(w / 2.0, h / 2.0),
+        size: Vec2::new(w, h),
+    }
+}
 
 /// Gaussians filling the view between depth 4 and 30, with 60% of them in a central cluster
 /// so that the middle tiles get the deep lists that make `P_max` matter, as in real scenes.

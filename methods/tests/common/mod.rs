@@ -129,3 +129,12 @@ pub fn gaussian_at(
         sh,
     }
 }
+
+/// max |a - b| / max |b| over a group of gradients.
+pub fn group_error(got: &[f64], want: &[f64]) -> f64 {
+    let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(1e-12);
+    got.iter()
+        .zip(want)
+        .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()))
+        / scale
+}

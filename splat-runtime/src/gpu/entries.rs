@@ -19,7 +19,7 @@ const SHADE: &str = include_str!("shaders/shade.wgsl");
 const BACKWARD: &str = include_str!("shaders/backward.wgsl");
 const PROJECT_BACKWARD: &str = include_str!("shaders/project_backward.wgsl");
 
-/// Words of workgroup memory kept free of the batch (counters, flags).
+/// Bytes of workgroup memory kept free of the batch (counters, flags).
 const RESERVED_BYTES: u32 = 256;
 
 /// Replaces every `{{KEY}}` of `template`.
@@ -110,7 +110,6 @@ pub fn tiles<M: SplatMethod>(emit: bool) -> Result<String, GpuError> {
         TILES,
         &[
             ("STRIDE", layout.stride.to_string()),
-            ("BINDINGS", String::new()),
             ("KEEP", keep),
             ("EMIT", emit_code.into()),
             ("ENTRY", entry.into()),

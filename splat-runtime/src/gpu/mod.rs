@@ -17,6 +17,19 @@ pub mod sort;
 
 pub use device::Gpu;
 
+/// The adapter for tests and tools that can do without one: `None` (with a line on stderr)
+/// when there is none, unless `SPLAT_REQUIRE_GPU=1` (set by CI), which makes that a panic.
+pub fn adapter_or_skip() -> Option<Gpu> {
+    match Gpu::new() {
+        Ok(g) => Some(g),
+        Err(e) if std::env::var("SPLAT_REQUIRE_GPU").is_ok_and(|v| v == "1") => panic!("{e}"),
+        Err(e) => {
+            eprintln!("skipping the GPU part: {e}");
+            None
+        }
+    }
+}
+
 #[derive(Debug, thiserror::Error)]
 pub enum GpuError {
     #[error(

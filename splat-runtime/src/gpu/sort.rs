@@ -45,11 +45,6 @@ pub fn exclusive_scan(
     Ok(())
 }
 
-/// Number of sort passes for keys whose tile part takes `tile_bits` bits.
-pub fn sort_passes(tile_bits: u32) -> u32 {
-    32 / DIGIT_BITS + tile_bits.div_ceil(DIGIT_BITS)
-}
-
 /// Sorts `n` keys (`vec2(depth bits, tile)`) with their values by tile, then depth, keeping
 /// the input order among equal keys. Returns the sorted keys and values (ping-pong buffers).
 pub fn sort_by_tile_and_depth(
@@ -128,20 +123,11 @@ pub fn bin_tiles(
 mod tests {
     use super::*;
 
-    fn gpu() -> Option<Gpu> {
-        match Gpu::new() {
-            Ok(g) => Some(g),
-            Err(e) if std::env::var("SPLAT_REQUIRE_GPU").is_ok_and(|v| v == "1") => panic!("{e}"),
-            Err(e) => {
-                eprintln!("skipping: {e}");
-                None
-            }
-        }
-    }
-
     #[test]
     fn scan_matches_a_sequential_sum_across_three_levels() {
-        let Some(gpu) = gpu() else { return };
+        let Some(gpu) = super::super::adapter_or_skip() else {
+            return;
+        };
         let mut rng = fastrand::Rng::with_seed(3);
         // 70,000 words: 274 blocks of 256, whose sums need a second and a third level.
         let words: Vec<u32> = (0..70_000).map(|_| rng.u32(0..50)).collect();
@@ -159,7 +145,9 @@ mod tests {
 
     #[test]
     fn radix_sort_is_stable_and_orders_by_tile_then_depth() {
-        let Some(gpu) = gpu() else { return };
+        let Some(gpu) = super::super::adapter_or_skip() else {
+            return;
+        };
         let mut rng = fastrand::Rng::with_seed(4);
         let tiles = 300u32;
         // Few distinct depths, so many equal keys test stability; 9,001 keys = 3 blocks.
@@ -210,7 +198,9 @@ mod tests {
 
     #[test]
     fn binning_puts_longer_lists_first_and_keeps_every_tile_once() {
-        let Some(gpu) = gpu() else { return };
+        let Some(gpu) = super::super::adapter_or_skip() else {
+            return;
+        };
         let lens = [0u32, 5, 1, 300, 2, 17, 0, 64, 1000, 3];
         let mut ranges = vec![];
         let mut start = 0;

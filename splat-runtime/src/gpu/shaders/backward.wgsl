@@ -24,30 +24,25 @@ fn add_grad(i: u32, v: f32) {
 
 @compute @workgroup_size({{WG}})
 fn backward_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32{{LANE}}) {
-    let tile = tile_order[wid.y * 65535u + wid.x];
-    let x = (tile % frame[1].x) * TILE + lid % TILE;
-    let y = (tile / frame[1].x) * TILE + lid / TILE;
-    let inside = x < frame[0].y && y < frame[0].z;
-    let start = tile_ranges[2u * tile];
-    let end = start + min(tile_ranges[2u * tile + 1u] - start, frame[1].y);
-    let px = f32(x) + 0.5;
-    let py = f32(y) + 0.5;
+    let at = tile_pixel(wid, lid);
+    let px = f32(at.x) + 0.5;
+    let py = f32(at.y) + 0.5;
     {{PIXEL}}
     // Pixels past the image edge read pixel 0 and stay done.
-    let at = select(0u, y * frame[0].y + x, inside) * (CHANNELS + 2u);
+    let pix = select(0u, at.y * frame[0].y + at.x, at.inside) * (CHANNELS + 2u);
     var c_final: array<f32, CHANNELS>;
     var d_color: array<f32, CHANNELS>;
     var c_acc: array<f32, CHANNELS>;
     for (var c = 0u; c < CHANNELS; c++) {
-        c_final[c] = bitcast<f32>(pixel_state[at + c]);
-        d_color[c] = bitcast<f32>(pixel_grad[at + c]);
+        c_final[c] = bitcast<f32>(pixel_state[pix + c]);
+        d_color[c] = bitcast<f32>(pixel_grad[pix + c]);
     }
-    let t_final = bitcast<f32>(pixel_state[at + CHANNELS]);
-    let d_final = bitcast<f32>(pixel_state[at + CHANNELS + 1u]);
-    var d_alpha_out = bitcast<f32>(pixel_grad[at + CHANNELS]);
+    let t_final = bitcast<f32>(pixel_state[pix + CHANNELS]);
+    let d_final = bitcast<f32>(pixel_state[pix + CHANNELS + 1u]);
+    var d_alpha_out = bitcast<f32>(pixel_grad[pix + CHANNELS]);
     // depth = D / A with D = sum of w z and A = 1 - T: split its gradient into D and A.
     var d_d = 0.0;
-    let gd = bitcast<f32>(pixel_grad[at + CHANNELS + 1u]);
+    let gd = bitcast<f32>(pixel_grad[pix + CHANNELS + 1u]);
     let a_final = 1.0 - t_final;
     if ({{WANT_DEPTH}} && a_final > 0.0) {
         d_d = gd / a_final;
@@ -55,23 +50,19 @@ fn backward_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
     }
     var t = 1.0;
     var d_acc = 0.0;
-    var done = !inside;
+    var done = !at.inside;
     var my_issued = 0u;
     if (lid == 0u) {
-        atomicStore(&done_count, 0u);
         atomicStore(&group_issued, 0u);
     }
-    workgroupBarrier();
-    if (done) {
-        atomicAdd(&done_count, 1u);
-    }
-    for (var b = start; b < end; b += BATCH) {
+    start_walk(lid, done);
+    for (var b = at.start; b < at.end; b += BATCH) {
         if (all_pixels_done(lid)) {
             break;
         }
-        stage_batch(lid, b, end);
+        stage_batch(lid, b, at.end);
         workgroupBarrier();
-        let m = min(BATCH, end - b);
+        let m = min(BATCH, at.end - b);
         for (var j = 0u; j < m; j++) {
             var g: array<f32, NG>;
             if (!done) {

@@ -6,33 +6,22 @@
 
 @compute @workgroup_size({{WG}})
 fn shade_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
-    let tile = tile_order[wid.y * 65535u + wid.x];
-    let x = (tile % frame[1].x) * TILE + lid % TILE;
-    let y = (tile / frame[1].x) * TILE + lid / TILE;
-    let inside = x < frame[0].y && y < frame[0].z;
-    let start = tile_ranges[2u * tile];
-    let end = start + min(tile_ranges[2u * tile + 1u] - start, frame[1].y);
-    let px = f32(x) + 0.5;
-    let py = f32(y) + 0.5;
+    let at = tile_pixel(wid, lid);
+    let px = f32(at.x) + 0.5;
+    let py = f32(at.y) + 0.5;
     {{PIXEL}}
     var t = 1.0;
     var depth_acc = 0.0;
     var color: array<f32, CHANNELS>;
-    var done = !inside;
-    if (lid == 0u) {
-        atomicStore(&done_count, 0u);
-    }
-    workgroupBarrier();
-    if (done) {
-        atomicAdd(&done_count, 1u);
-    }
-    for (var b = start; b < end; b += BATCH) {
+    var done = !at.inside;
+    start_walk(lid, done);
+    for (var b = at.start; b < at.end; b += BATCH) {
         if (all_pixels_done(lid)) {
             break;
         }
-        stage_batch(lid, b, end);
+        stage_batch(lid, b, at.end);
         workgroupBarrier();
-        let m = min(BATCH, end - b);
+        let m = min(BATCH, at.end - b);
         for (var j = 0u; j < m && !done; j++) {
             let s = j * NS;
             let r = {{EVALUATE}};
@@ -51,8 +40,8 @@ fn shade_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_
             t = next;
         }
     }
-    if (inside) {
-        let out = (y * frame[0].y + x) * (CHANNELS + 2u);
+    if (at.inside) {
+        let out = (at.y * frame[0].y + at.x) * (CHANNELS + 2u);
         for (var c = 0u; c < CHANNELS; c++) {
             pixel_out[out + c] = bitcast<u32>(color[c]);
         }

@@ -23,6 +23,37 @@ var<workgroup> batch_prim: array<u32, BATCH>;
 var<workgroup> done_count: atomic<u32>;
 var<workgroup> all_done: u32;
 
+// The pixel of invocation `lid` in the workgroup's tile, and the tile's list range (capped at
+// P_max). Tiles are taken in the binned order.
+struct TilePixel {
+    x: u32,
+    y: u32,
+    inside: bool,
+    start: u32,
+    end: u32,
+}
+
+fn tile_pixel(wid: vec3<u32>, lid: u32) -> TilePixel {
+    let tile = tile_order[wid.y * 65535u + wid.x];
+    let x = (tile % frame[1].x) * TILE + lid % TILE;
+    let y = (tile / frame[1].x) * TILE + lid / TILE;
+    let start = tile_ranges[2u * tile];
+    let end = start + min(tile_ranges[2u * tile + 1u] - start, frame[1].y);
+    return TilePixel(x, y, x < frame[0].y && y < frame[0].z, start, end);
+}
+
+// Starts the walk of the list: no pixel is done yet but those for which `done` holds already
+// (past the image edge).
+fn start_walk(lid: u32, done: bool) {
+    if (lid == 0u) {
+        atomicStore(&done_count, 0u);
+    }
+    workgroupBarrier();
+    if (done) {
+        atomicAdd(&done_count, 1u);
+    }
+}
+
 // Entries [b, b + BATCH) of the tile's list, one per invocation.
 fn stage_batch(lid: u32, b: u32, end: u32) {
     let k = b + lid;

@@ -9,7 +9,6 @@ const CULL_AT: u32 = 6u;
 @group(0) @binding(1) var<storage, read_write> counts: array<u32>;
 // frame[0] = (primitives, width, height, tile size), frame[1] = (tiles_x, ..)
 @group(0) @binding(2) var<uniform> frame: array<vec4<u32>, 2>;
-{{BINDINGS}}
 
 fn word(i: u32, k: u32) -> f32 {
     return bitcast<f32>(projected[i * STRIDE + k]);
