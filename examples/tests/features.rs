@@ -14,6 +14,7 @@ fn sixteen_channels_match_an_f64_blend() {
         focal: Vec2::splat(24.0),
         principal: Vec2::new(12.0, 10.0),
         size: Vec2::new(w as f32, h as f32),
+        ..Default::default()
     };
     let mut rng = fastrand::Rng::with_seed(8);
     let params: Vec<Params> = (0..30)
@@ -36,21 +37,17 @@ fn sixteen_channels_match_an_f64_blend() {
     assert_eq!(frame.color.channels, 16);
 
     // Reference: project every primitive with the f64 twin, sort by depth, blend per pixel.
-    let cam_words: Vec<f64> = {
-        let mut w = vec![0.0f32; Camera::LEN];
-        cam.write_words(&mut w);
-        w.into_iter().map(f64::from).collect()
-    };
+    let cam_words = cam.float_slots().map(f64::from);
     let mut shades = vec![];
     for p in &params {
         let mut words = vec![0.0f32; Params::LEN];
         p.write_words(&mut words);
-        let mut input = [0.0f64; 21 + 18];
+        let mut input = [0.0f64; 21 + Camera::FLOAT_SLOTS];
         for (d, s) in input.iter_mut().zip(&words) {
             *d = *s as f64;
         }
         input[21..].copy_from_slice(&cam_words);
-        let (out, flags) = features::twin::project(&input, &[]);
+        let (out, flags) = features::twin::project(&input, &[cam.model as u32]);
         if flags[0] != 0 {
             // Outputs: depth, bbox (4), cull (1), then the shade (20 words).
             shades.push((out[0], out[6..26].to_vec()));

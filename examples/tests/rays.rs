@@ -14,6 +14,7 @@ fn scene() -> (Camera, Vec<Params>) {
         focal: Vec2::splat(36.0),
         principal: Vec2::new(w / 2.0, h / 2.0),
         size: Vec2::new(w, h),
+        ..Default::default()
     };
     let mut rng = fastrand::Rng::with_seed(12);
     let params = (0..40)
@@ -31,26 +32,20 @@ fn scene() -> (Camera, Vec<Params>) {
     (cam, params)
 }
 
-fn cam_words(c: &Camera) -> Vec<f64> {
-    let mut w = vec![0.0f32; Camera::LEN];
-    c.write_words(&mut w);
-    w.into_iter().map(f64::from).collect()
-}
-
 #[test]
 fn rays_match_an_f64_reference() {
     let (cam, params) = scene();
-    let cw = cam_words(&cam);
+    let cw = cam.float_slots().map(f64::from);
     let mut prims = vec![];
     for p in &params {
         let mut w = vec![0.0f32; Params::LEN];
         p.write_words(&mut w);
-        let mut input = [0.0f64; 8 + 18];
+        let mut input = [0.0f64; 8 + Camera::FLOAT_SLOTS];
         for (d, s) in input.iter_mut().zip(&w) {
             *d = *s as f64;
         }
         input[8..].copy_from_slice(&cw);
-        let (out, flags) = rays::twin::project(&input, &[]);
+        let (out, flags) = rays::twin::project(&input, &[cam.model as u32]);
         if flags[0] != 0 {
             prims.push((out[0], out[6..14].to_vec()));
         }
@@ -69,11 +64,11 @@ fn rays_match_an_f64_reference() {
     let mut covered = 0;
     for y in 0..h {
         for x in 0..w {
-            let mut pin = [0.0f64; 20];
+            let mut pin = [0.0f64; 2 + Camera::FLOAT_SLOTS];
             pin[0] = x as f64 + 0.5;
             pin[1] = y as f64 + 0.5;
             pin[2..].copy_from_slice(&cw);
-            let (ray, _) = rays::twin::pixel_info(&pin, &[]);
+            let (ray, _) = rays::twin::pixel_info(&pin, &[cam.model as u32]);
             let (mut t, mut c) = (1.0f64, [0.0f64; 3]);
             for (_, shade) in &prims {
                 let mut input = [0.0f64; 14];

@@ -14,28 +14,8 @@ macro_rules! gaussians_3d {
         pub mod $name {
             use splat_runtime::prelude::*;
 
-            pub const SH_COEFFICIENTS: usize = $n;
-
             pub const NEAR: f32 = 0.01;
             pub const ALPHA_MIN: f32 = 1.0 / 255.0;
-            pub const SH_C0: f32 = 0.28209479177387814;
-            pub const SH_C1: f32 = 0.4886025119029199;
-            pub const SH_C2: [f32; 5] = [
-                1.0925484305920792,
-                -1.0925484305920792,
-                0.31539156525252005,
-                -1.0925484305920792,
-                0.5462742152960396,
-            ];
-            pub const SH_C3: [f32; 7] = [
-                -0.5900435899266435,
-                2.890611442640554,
-                -0.4570457994644658,
-                0.3731763325901154,
-                -0.4570457994644658,
-                1.445305721320277,
-                -0.5900435899266435,
-            ];
 
             pub struct Params {
                 pub mean: Vec3,
@@ -62,37 +42,6 @@ macro_rules! gaussians_3d {
                 pub conic: Vec3,
                 pub opacity: f32,
                 pub color: Vec3,
-            }
-
-            /// View-dependent color: real SH in direction `dir` (basis terms past the method's degree
-            /// are never used, and compiled away).
-            fn sh_color(sh: [Vec3; $n], dir: Vec3) -> Vec3 {
-                let d = dir.normalize();
-                let (x, y, z) = (d.x, d.y, d.z);
-                let (xx, yy, zz) = (x * x, y * y, z * z);
-                let basis = [
-                    SH_C0,
-                    -SH_C1 * y,
-                    SH_C1 * z,
-                    -SH_C1 * x,
-                    SH_C2[0] * x * y,
-                    SH_C2[1] * y * z,
-                    SH_C2[2] * (2.0 * zz - xx - yy),
-                    SH_C2[3] * x * z,
-                    SH_C2[4] * (xx - yy),
-                    SH_C3[0] * y * (3.0 * xx - yy),
-                    SH_C3[1] * x * y * z,
-                    SH_C3[2] * y * (4.0 * zz - xx - yy),
-                    SH_C3[3] * z * (2.0 * zz - 3.0 * xx - 3.0 * yy),
-                    SH_C3[4] * x * (4.0 * zz - xx - yy),
-                    SH_C3[5] * z * (xx - yy),
-                    SH_C3[6] * x * (xx - 3.0 * yy),
-                ];
-                let mut c = Vec3::splat(0.5);
-                for i in 0..SH_COEFFICIENTS {
-                    c += sh[i] * basis[i];
-                }
-                c.max(Vec3::ZERO)
             }
 
             pub fn project(p: &Params, cam: &Camera) -> Projected<Cull, Shade> {
@@ -125,7 +74,6 @@ macro_rules! gaussians_3d {
                 let lambda = mid + (mid * mid - det).max(0.1).sqrt();
                 let radius = (2.0 * max_power.max(0.0) * lambda).sqrt().ceil();
                 let center = Vec2::new(f.x * t.x / z, f.y * t.y / z) + c;
-                let cam_center = -(cam.rotation.transpose() * cam.translation);
                 Projected {
                     visible: t.z > NEAR && det > 0.0 && opacity >= ALPHA_MIN,
                     depth: t.z,
@@ -140,7 +88,8 @@ macro_rules! gaussians_3d {
                         center,
                         conic,
                         opacity,
-                        color: sh_color(p.sh, p.mean - cam_center),
+                        color: (spherical_harmonics(p.sh, p.mean - cam.center()) + 0.5)
+                            .max(Vec3::ZERO),
                     },
                 }
             }

@@ -132,16 +132,21 @@ impl FromArrayRef<4> for Quat {
 }
 
 /// In the slot order the compiler gives the built-in `Camera` (field by field, matrices by
-/// column), so the words are the camera arguments of generated flat and WGSL functions.
+/// column), so the words are the camera arguments of generated flat and WGSL functions. The
+/// float slots come first (`FLOAT_SLOTS` of them, the camera's gradient words), the model's
+/// code last.
 impl Flat for crate::types::Camera {
-    const LEN: usize = 18;
+    const LEN: usize = 23;
     fn write_words(&self, out: &mut [f32]) {
         self.rotation.write_words(out);
         self.translation.write_words(&mut out[9..]);
         self.focal.write_words(&mut out[12..]);
         self.principal.write_words(&mut out[14..]);
         self.size.write_words(&mut out[16..]);
+        self.distortion.write_words(&mut out[18..]);
+        (self.model as u32).write_words(&mut out[22..]);
     }
+    /// An unknown model code reads as pinhole (cotangents carry zero there).
     fn read_words(words: &[f32]) -> Self {
         crate::types::Camera {
             rotation: Mat3::read_words(words),
@@ -149,6 +154,9 @@ impl Flat for crate::types::Camera {
             focal: Vec2::read_words(&words[12..]),
             principal: Vec2::read_words(&words[14..]),
             size: Vec2::read_words(&words[16..]),
+            distortion: Vec4::read_words(&words[18..]),
+            model: crate::types::CameraModel::from_code(u32::read_words(&words[22..]))
+                .unwrap_or_default(),
         }
     }
     fn is_finite(&self) -> bool {
@@ -157,6 +165,20 @@ impl Flat for crate::types::Camera {
             && self.focal.is_finite()
             && self.principal.is_finite()
             && self.size.is_finite()
+            && self.distortion.is_finite()
+    }
+}
+
+impl crate::types::Camera {
+    /// The camera's float slots: every word but the model code (the last).
+    pub const FLOAT_SLOTS: usize = 22;
+
+    /// The float slots in the compiler's order: the camera's float arguments of a generated
+    /// flat function (its integer argument is `model as u32`).
+    pub fn float_slots(&self) -> [f32; Self::FLOAT_SLOTS] {
+        let mut w = [0.0; Self::LEN];
+        self.write_words(&mut w);
+        std::array::from_fn(|i| w[i])
     }
 }
 
@@ -209,6 +231,8 @@ mod tests {
             focal: Vec2::new(13., 14.),
             principal: Vec2::new(15., 16.),
             size: Vec2::new(17., 18.),
+            distortion: Vec4::new(19., 20., 21., 22.),
+            model: crate::types::CameraModel::Equiangular,
         });
     }
 }

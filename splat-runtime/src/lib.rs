@@ -31,4 +31,4 @@ pub use pipeline::{
     Frame, FrameGrad, Gradients, Image, RenderError, RenderOptions, backward, render,
     render_for_backward,
 };
-pub use types::{Camera, Contribution, ContributionLanes, Projected, Tile};
+pub use types::{Camera, CameraModel, Contribution, ContributionLanes, Projected, Tile};

@@ -28,6 +28,10 @@ pub trait SplatMethod: Send + Sync + 'static {
     const HAS_TILE_CULL: bool;
     /// Whether the method declared `pixel_info` (otherwise the pixel data is the pixel centre).
     const HAS_PIXEL_INFO: bool;
+    /// Whether the method reaches the camera model only through `cam.project_point` /
+    /// `cam.pixel_ray` (so it works with every [`CameraModel`](crate::CameraModel)); otherwise
+    /// it is pinhole-only and rendering with another model is refused.
+    const GENERIC_CAMERA: bool;
     /// What the macro generated, as text.
     const SOURCE: GeneratedSource;
 

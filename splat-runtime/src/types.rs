@@ -4,13 +4,61 @@
 //! by field name, so a change here that the compiler does not mirror fails to compile.
 
 use crate::lanes::{F32x8, M32x8};
-use glam::{Mat3, Vec2, Vec3};
+use glam::{Mat3, Vec2, Vec3, Vec4};
 
-/// A pinhole camera in the OpenCV convention (x right, y down, z forward).
+/// How a camera maps camera-space directions to pixels (seed 003 §3.3).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[repr(u32)]
+pub enum CameraModel {
+    /// `focal * (x / z, y / z) + principal`.
+    #[default]
+    Pinhole = 0,
+    /// OpenCV fisheye: θ = atan2(√(x² + y²), z), r = θ (1 + k1 θ² + k2 θ⁴ + k3 θ⁶ + k4 θ⁸),
+    /// pixel = `focal * r * (x, y) / √(x² + y²) + principal`; valid past 180° field of view.
+    KannalaBrandt = 1,
+    /// Equiangular (BEAP): `focal * (atan2(x, z), atan2(y, z)) + principal`.
+    Equiangular = 2,
+}
+
+impl CameraModel {
+    pub const ALL: [CameraModel; 3] = [
+        CameraModel::Pinhole,
+        CameraModel::KannalaBrandt,
+        CameraModel::Equiangular,
+    ];
+
+    /// The name used in camera files and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            CameraModel::Pinhole => "pinhole",
+            CameraModel::KannalaBrandt => "kannala_brandt",
+            CameraModel::Equiangular => "equiangular",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<CameraModel> {
+        CameraModel::ALL.into_iter().find(|m| m.name() == name)
+    }
+
+    /// The model with code `code` (its `u32` word in GPU buffers and generated code).
+    pub fn from_code(code: u32) -> Option<CameraModel> {
+        CameraModel::ALL.into_iter().find(|m| *m as u32 == code)
+    }
+}
+
+impl std::fmt::Display for CameraModel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A camera in the OpenCV convention (x right, y down, z forward).
 ///
-/// A world point `p` maps to camera space as `rotation * p + translation`, and to the pixel
-/// `focal * (x / z, y / z) + principal`, where pixel (col j, row i) is sampled at
-/// `(j + 0.5, i + 0.5)`.
+/// A world point `p` maps to camera space as `rotation * p + translation`, and to a pixel by
+/// the camera `model` ([`Camera::project_point`]); pixel (col j, row i) is sampled at
+/// `(j + 0.5, i + 0.5)`. Methods reach the model through `cam.project_point(p)` and
+/// `cam.pixel_ray(pixel)`, which the `#[splat_method]` compiler knows (and differentiates);
+/// a method that uses neither is pinhole-only, and the runtime refuses other models for it.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Camera {
     /// World-to-camera rotation.
@@ -23,6 +71,9 @@ pub struct Camera {
     pub principal: Vec2,
     /// Image size (width, height) in pixels.
     pub size: Vec2,
+    /// Kannala-Brandt coefficients (k1, k2, k3, k4); unused by the other models.
+    pub distortion: Vec4,
+    pub model: CameraModel,
 }
 
 impl Camera {
@@ -33,13 +84,74 @@ impl Camera {
         focal: Vec2::ZERO,
         principal: Vec2::ZERO,
         size: Vec2::ZERO,
+        distortion: Vec4::ZERO,
+        model: CameraModel::Pinhole,
     };
 
     /// The camera centre in world space, `-rotation^T * translation`.
     pub fn center(&self) -> Vec3 {
         -(self.rotation.transpose() * self.translation)
     }
+
+    /// The pixel of a camera-space point. The `#[splat_method]` compiler's version of this
+    /// function (`splat-compiler/src/builtins.rs`) is the one kernels run; tests keep the two equal.
+    pub fn project_point(&self, p: Vec3) -> Vec2 {
+        let (f, c) = (self.focal, self.principal);
+        match self.model {
+            CameraModel::Pinhole => f * Vec2::new(p.x, p.y) / p.z + c,
+            CameraModel::KannalaBrandt => {
+                let rxy = (p.x * p.x + p.y * p.y).sqrt();
+                let theta = rxy.atan2(p.z);
+                let scale = if rxy > 1e-20 {
+                    self.kb_distort(theta) / rxy
+                } else {
+                    1.0 / p.z
+                };
+                f * Vec2::new(p.x, p.y) * scale + c
+            }
+            CameraModel::Equiangular => f * Vec2::new(p.x.atan2(p.z), p.y.atan2(p.z)) + c,
+        }
+    }
+
+    /// The camera-space unit direction through a pixel position (the inverse of
+    /// [`Camera::project_point`]). For Kannala-Brandt, θ is found by Newton's method.
+    pub fn pixel_ray(&self, pixel: Vec2) -> Vec3 {
+        let m = (pixel - self.principal) / self.focal;
+        match self.model {
+            CameraModel::Pinhole => m.extend(1.0).normalize(),
+            CameraModel::KannalaBrandt => {
+                let r = m.length();
+                let mut theta = r;
+                for _ in 0..KB_NEWTON_STEPS {
+                    let k = self.distortion;
+                    let t2 = theta * theta;
+                    let slope = 1.0
+                        + t2 * (3.0 * k.x + t2 * (5.0 * k.y + t2 * (7.0 * k.z + t2 * 9.0 * k.w)));
+                    theta -= (self.kb_distort(theta) - r) / slope;
+                }
+                let dir = if r > 1e-20 { m / r } else { Vec2::ZERO };
+                (dir * theta.sin()).extend(theta.cos())
+            }
+            CameraModel::Equiangular => Vec3::new(
+                m.x.sin() * m.y.cos(),
+                m.x.cos() * m.y.sin(),
+                m.x.cos() * m.y.cos(),
+            )
+            .normalize(),
+        }
+    }
+
+    /// r(θ) = θ (1 + k1 θ² + k2 θ⁴ + k3 θ⁶ + k4 θ⁸).
+    fn kb_distort(&self, theta: f32) -> f32 {
+        let k = self.distortion;
+        let t2 = theta * theta;
+        theta * (1.0 + t2 * (k.x + t2 * (k.y + t2 * (k.z + t2 * k.w))))
+    }
 }
+
+/// Newton steps that invert the Kannala-Brandt distortion in [`Camera::pixel_ray`] (from
+/// θ = r; converges to f32 precision in a few steps for the usual coefficients).
+pub const KB_NEWTON_STEPS: usize = 8;
 
 /// What `project` returns for one primitive.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]

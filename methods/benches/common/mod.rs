@@ -25,6 +25,7 @@ pub fn camera(w: f32, h: f32) -> Camera {
         focal: Vec2::splat(0.9 * w),
         principal: Vec2::new(w / 2.0, h / 2.0),
         size: Vec2::new(w, h),
+        ..Default::default()
     }
 }
 

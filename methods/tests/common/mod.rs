@@ -4,23 +4,72 @@
 
 #![allow(dead_code)]
 
-use splat_methods::gs3d::{self, Params};
+use splat_methods::gs3d::Params;
 use splat_runtime::glam::{Mat3, Quat, Vec2, Vec3, Vec4};
-use splat_runtime::{Camera, Flat};
+use splat_runtime::{Camera, CameraModel, Flat};
 
 pub const T_MIN: f64 = 1e-4;
 
-/// A camera's slots in the order the compiler flattens `Camera`.
+/// A generated flat f64 function (`module::twin::f`) taking and returning slices.
+pub type Flat64 = fn(&[f64], &[u32]) -> (Vec<f64>, Vec<u32>);
+
+/// A method's f64 twin: its flat `project`, `pixel_info` and `evaluate`, and how many float
+/// words its tile-cull data has (every method here has float-only cull and shade data) and
+/// its color channels.
+pub struct Twin {
+    pub project: Flat64,
+    pub pixel_info: Option<Flat64>,
+    pub evaluate: Flat64,
+    pub cull_words: usize,
+    pub channels: usize,
+}
+
+/// `Twin` of a method module: `twin!(path::to::module, Cull)` or with `pixel_info`.
+#[macro_export]
+macro_rules! twin {
+    (@f $($m:ident)::+, $f:ident) => {
+        |x: &[f64], i: &[u32]| {
+            let (a, b) = $($m)::+::twin::$f(x.try_into().unwrap(), i.try_into().unwrap());
+            (a.to_vec(), b.to_vec())
+        }
+    };
+    ($($m:ident)::+, pixel_info) => {
+        $crate::common::Twin {
+            project: twin!(@f $($m)::+, project),
+            pixel_info: Some(twin!(@f $($m)::+, pixel_info)),
+            evaluate: twin!(@f $($m)::+, evaluate),
+            cull_words: <$($m)::+::Cull as splat_runtime::Flat>::LEN,
+            channels: <<$($m)::+::Method as splat_runtime::SplatMethod>::Color as splat_runtime::Flat>::LEN,
+        }
+    };
+    ($($m:ident)::+) => {
+        $crate::common::Twin {
+            project: twin!(@f $($m)::+, project),
+            pixel_info: None,
+            evaluate: twin!(@f $($m)::+, evaluate),
+            cull_words: <$($m)::+::Cull as splat_runtime::Flat>::LEN,
+            channels: <<$($m)::+::Method as splat_runtime::SplatMethod>::Color as splat_runtime::Flat>::LEN,
+        }
+    };
+}
+
+pub fn gs3d() -> Twin {
+    twin!(splat_methods::gs3d)
+}
+
+/// A camera's float slots as f64 (its model is passed separately, as the integer slot).
 pub fn camera_words(c: &Camera) -> Vec<f64> {
-    let mut w = vec![0.0f32; Camera::LEN];
-    c.write_words(&mut w);
+    c.float_slots().map(f64::from).to_vec()
+}
+
+pub fn words<P: Flat>(p: &P) -> Vec<f64> {
+    let mut w = vec![0.0f32; P::LEN];
+    p.write_words(&mut w);
     w.into_iter().map(f64::from).collect()
 }
 
 pub fn param_words(p: &Params) -> Vec<f64> {
-    let mut w = vec![0.0f32; Params::LEN];
-    p.write_words(&mut w);
-    w.into_iter().map(f64::from).collect()
+    words(p)
 }
 
 pub struct Reference {
@@ -31,39 +80,49 @@ pub struct Reference {
     pub depth: Vec<f64>,
 }
 
-/// Renders `params` (flat f64 parameter words per primitive) through `camera` (flat words).
+/// Renders 3DGS `params` (flat f64 parameter words per primitive) through a pinhole `camera`
+/// (its float words).
 pub fn render(params: &[Vec<f64>], camera: &[f64]) -> Reference {
+    render_with(&gs3d(), params, camera, CameraModel::Pinhole)
+}
+
+/// Renders `params` with the method `twin` through `camera` (float words) of `model`.
+pub fn render_with(
+    twin: &Twin,
+    params: &[Vec<f64>],
+    camera: &[f64],
+    model: CameraModel,
+) -> Reference {
     let (width, height) = (camera[16] as usize, camera[17] as usize);
-    let mut prims: Vec<(f64, usize, [f64; 9])> = vec![];
+    let ints = [model as u32];
+    let mut prims: Vec<(f64, usize, Vec<f64>)> = vec![];
     for (i, p) in params.iter().enumerate() {
-        let mut input = [0.0; 77];
-        input[..59].copy_from_slice(p);
-        input[59..].copy_from_slice(camera);
-        let (f, b) = gs3d::twin::project(&input, &[]);
+        let input: Vec<f64> = p.iter().chain(camera).copied().collect();
+        let (f, b) = (twin.project)(&input, &ints);
         if b[0] == 0 || !f[0].is_finite() {
             continue;
         }
-        let mut shade = [0.0; 9];
-        shade.copy_from_slice(&f[11..20]);
-        prims.push((f[0], i, shade));
+        prims.push((f[0], i, f[5 + twin.cull_words..].to_vec()));
     }
     prims.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
     let mut out = Reference {
         width,
         height,
-        color: vec![0.0; width * height * 3],
+        color: vec![],
         alpha: vec![0.0; width * height],
         depth: vec![0.0; width * height],
     };
     for y in 0..height {
         for x in 0..width {
-            let (mut t, mut c, mut d) = (1.0f64, [0.0f64; 3], 0.0f64);
+            let mut pixel = vec![x as f64 + 0.5, y as f64 + 0.5];
+            if let Some(info) = twin.pixel_info {
+                pixel.extend(camera);
+                pixel = info(&pixel, &ints).0;
+            }
+            let (mut t, mut c, mut d) = (1.0f64, vec![0.0; twin.channels], 0.0f64);
             for (depth, _, shade) in &prims {
-                let mut input = [0.0; 11];
-                input[0] = x as f64 + 0.5;
-                input[1] = y as f64 + 0.5;
-                input[2..].copy_from_slice(shade);
-                let (o, valid) = gs3d::twin::evaluate(&input, &[]);
+                let input: Vec<f64> = pixel.iter().chain(shade).copied().collect();
+                let (o, valid) = (twin.evaluate)(&input, &[]);
                 if valid[0] == 0 {
                     continue;
                 }
@@ -71,14 +130,14 @@ pub fn render(params: &[Vec<f64>], camera: &[f64]) -> Reference {
                 if next <= T_MIN {
                     break;
                 }
-                for ch in 0..3 {
-                    c[ch] += o[0] * t * o[1 + ch];
+                for (ch, v) in c.iter_mut().zip(&o[1..]) {
+                    *ch += o[0] * t * v;
                 }
                 d += o[0] * t * depth;
                 t = next;
             }
+            out.color.extend(&c);
             let px = y * width + x;
-            out.color[px * 3..px * 3 + 3].copy_from_slice(&c);
             out.alpha[px] = 1.0 - t;
             out.depth[px] = if t < 1.0 { d / (1.0 - t) } else { 0.0 };
         }
@@ -93,6 +152,7 @@ pub fn camera(width: u32, height: u32) -> Camera {
         focal: Vec2::splat(width as f32),
         principal: Vec2::new(width as f32 / 2.0, height as f32 / 2.0),
         size: Vec2::new(width as f32, height as f32),
+        ..Default::default()
     }
 }
 

@@ -16,6 +16,7 @@
 //! `splat-macros/README.md`.
 
 pub mod ad;
+pub mod builtins;
 pub mod diag;
 pub mod emit;
 pub mod ir;
@@ -149,7 +150,7 @@ fn build_kernels<'m>(
         Kind::Functions => m
             .fns
             .iter()
-            .filter(|f| !custom.adjoint_fn_names.contains(&f.name))
+            .filter(|f| !f.builtin && !custom.adjoint_fn_names.contains(&f.name))
             .collect(),
     };
     let mut kernels = vec![];
@@ -181,6 +182,7 @@ fn build_kernels<'m>(
             primal,
             adjoint,
             ret: l.ret,
+            camera_model: l.camera_model,
         });
     }
     (!diag.has_errors()).then_some(kernels)

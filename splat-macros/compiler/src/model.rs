@@ -43,6 +43,8 @@ pub struct FnDef {
     pub ret: Ty,
     /// `#[adjoint(other)]`: `other` is the user-written adjoint of this helper.
     pub adjoint: Option<syn::Ident>,
+    /// One of the compiler's own helpers (`builtins`), not written by the user.
+    pub builtin: bool,
 }
 
 impl Module {
@@ -130,6 +132,11 @@ impl Module {
                 fns.push(def);
             }
         }
+        let builtins = crate::builtins::builtin_fns(
+            |f| parse_fn(f, &mut resolver, diag).map(|d| FnDef { builtin: true, ..d }),
+            diag,
+        );
+        fns.extend(builtins);
         Some(Module {
             name: item.ident,
             vis: item.vis,
@@ -255,6 +262,7 @@ fn parse_fn(mut item: syn::ItemFn, resolver: &mut Resolver, diag: &Diag) -> Opti
         params,
         ret,
         adjoint,
+        builtin: false,
     })
 }
 

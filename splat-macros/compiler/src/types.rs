@@ -190,6 +190,12 @@ impl std::fmt::Display for Ty {
     }
 }
 
+/// A `u32` field of a built-in struct that the runtime stores as a `#[repr(u32)]` enum with
+/// `from_code` (`Camera::model`): the enum's path, for reading (`as u32`) and building it.
+pub fn builtin_enum_field(s: &StructTy, field: &str) -> Option<TokenStream> {
+    (s.display == "Camera" && field == "model").then(|| quote!(::splat_runtime::CameraModel))
+}
+
 /// The names of the built-in generic structs and their parameters.
 pub const BUILTIN_STRUCTS: &[&str] = &["Camera", "Tile", "Projected", "Contribution"];
 
@@ -206,6 +212,9 @@ pub fn builtin_struct(name: &str, args: &[Ty]) -> Option<Result<Ty, String>> {
                 ("focal", v2.clone()),
                 ("principal", v2.clone()),
                 ("size", v2.clone()),
+                ("distortion", Ty::Vec(4)),
+                // `CameraModel as u32`, last so the float slots are the leading words.
+                ("model", Ty::U32),
             ],
         ),
         "Tile" => (0, vec![("min", v2.clone()), ("max", v2.clone())]),

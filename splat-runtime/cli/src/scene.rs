@@ -112,5 +112,6 @@ pub fn camera(width: u32, height: u32) -> Camera {
         focal: Vec2::splat(f),
         principal: Vec2::new(width as f32 / 2.0, height as f32 / 2.0),
         size: Vec2::new(width as f32, height as f32),
+        ..Default::default()
     }
 }

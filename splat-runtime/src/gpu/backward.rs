@@ -98,7 +98,10 @@ pub fn backward<M: SplatMethod>(
     let project = gpu.pipeline(&source, "project_backward")?;
     let groups = n32.div_ceil(64).max(1);
     let param_grads = gpu.buffer("parameter gradients", n * npf)?;
-    let partials = gpu.buffer("camera gradient partials", groups as usize * Camera::LEN)?;
+    let partials = gpu.buffer(
+        "camera gradient partials",
+        groups as usize * Camera::FLOAT_SLOTS,
+    )?;
     let info = gpu.uniform(&[n32]);
     let mut enc = gpu.device.create_command_encoder(&Default::default());
     let bind = gpu.bind(
@@ -122,9 +125,10 @@ pub fn backward<M: SplatMethod>(
         .take(n)
         .map(M::params_from_float_slots)
         .collect();
-    let partials = gpu.read(&partials, groups as usize * Camera::LEN)?;
+    let partials = gpu.read(&partials, groups as usize * Camera::FLOAT_SLOTS)?;
+    // The model word (last) stays zero: a cotangent has no model.
     let mut cam = vec![0.0f64; Camera::LEN];
-    for group in partials.chunks_exact(Camera::LEN) {
+    for group in partials.chunks_exact(Camera::FLOAT_SLOTS) {
         for (c, w) in cam.iter_mut().zip(group) {
             *c += f32::from_bits(*w) as f64;
         }

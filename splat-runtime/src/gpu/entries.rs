@@ -182,8 +182,10 @@ fn pixel<M: SplatMethod>(camera_binding: u32) -> Result<(String, String, Vec<Str
         return Ok((String::new(), String::new(), vec!["px".into(), "py".into()]));
     }
     let info = sig(M::SOURCE.wgsl, "pixel_info")?;
-    let cam: Vec<String> = (0..Camera::LEN)
-        .map(|k| format!("bitcast<f32>(camera_words[{k}u])"))
+    let cam: Vec<String> = info.args[2..]
+        .iter()
+        .enumerate()
+        .map(|(k, kind)| load(*kind, &format!("camera_words[{k}u]")))
         .collect();
     let binding = format!(
         "@group(0) @binding({camera_binding}) var<storage, read> camera_words: array<u32>;"
@@ -432,7 +434,8 @@ pub fn project_backward<M: SplatMethod>() -> Result<(String, usize), GpuError> {
     let layout = Layout::of::<M>();
     let adj = sig(wgsl, "project_adjoint")?;
     let (np, ncam) = (M::Params::LEN, Camera::LEN);
-    let npf = adj.results.len() - ncam;
+    // Results: the parameters' float slots, then the camera's (its leading words).
+    let npf = adj.results.len() - Camera::FLOAT_SLOTS;
     // Arguments: parameters, camera, then the cotangent's float slots: depth, bbox (4), cull
     // (zero: no gradient flows through culling), shade.
     let cull_floats = adj
@@ -445,7 +448,12 @@ pub fn project_backward<M: SplatMethod>() -> Result<(String, usize), GpuError> {
         .enumerate()
         .map(|(k, kind)| load(*kind, &format!("params[i * NP + {k}u]")))
         .collect();
-    args.extend((0..ncam).map(|k| format!("bitcast<f32>(camera_words[{k}u])")));
+    args.extend(
+        adj.args[np..np + ncam]
+            .iter()
+            .enumerate()
+            .map(|(k, kind)| load(*kind, &format!("camera_words[{k}u]"))),
+    );
     args.push("bitcast<f32>(grads[i * NG + NG - 1u])".into());
     args.extend(std::iter::repeat_n("0.0".to_string(), 4 + cull_floats));
     args.extend((0..layout.shade_floats).map(|k| format!("bitcast<f32>(grads[i * NG + {k}u])")));
@@ -462,10 +470,10 @@ pub fn project_backward<M: SplatMethod>() -> Result<(String, usize), GpuError> {
         &[
             ("NP", np.to_string()),
             ("NPF", npf.to_string()),
-            ("NCAM", ncam.to_string()),
+            ("NCAM", Camera::FLOAT_SLOTS.to_string()),
             ("NG", layout.grad_words.to_string()),
             ("STRIDE", layout.stride.to_string()),
-            ("RED_WORDS", (64 * ncam).to_string()),
+            ("RED_WORDS", (64 * Camera::FLOAT_SLOTS).to_string()),
             (
                 "PROJECT_ADJOINT",
                 format!("{}({})", adj.name, args.join(", ")),

@@ -96,7 +96,7 @@ fn forward<M: SplatMethod>(
     opts: &RenderOptions,
     keep: bool,
 ) -> Result<(Frame, Option<GpuForwardState<M>>), GpuRenderError> {
-    let grid = crate::pipeline::check(camera, opts)?;
+    let grid = crate::pipeline::check::<M>(camera, opts)?;
     if ![8, 16].contains(&grid.size) {
         return Err(GpuError::TileSize(grid.size).into());
     }

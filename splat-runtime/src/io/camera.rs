@@ -1,10 +1,12 @@
 //! Cameras as JSON:
 //! `{"width": W, "height": H, "fx": .., "fy": .., "cx": .., "cy": ..,
 //!   "world_to_camera": [[4 rows of 4]], "model": "pinhole"}` (row-major, OpenCV convention).
+//! `model` is `pinhole` (the default), `kannala_brandt` (with `"k": [k1, k2, k3, k4]`, zeros
+//! if absent: the equidistant fisheye) or `equiangular`; see [`CameraModel`].
 
 use crate::pipeline::MAX_SIDE;
-use crate::types::Camera;
-use glam::{Mat3, Vec2, Vec3};
+use crate::types::{Camera, CameraModel};
+use glam::{Mat3, Vec2, Vec3, Vec4};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -20,6 +22,9 @@ pub struct CameraFile {
     pub world_to_camera: [[f32; 4]; 4],
     #[serde(default = "pinhole")]
     pub model: String,
+    /// Kannala-Brandt coefficients; only with `"model": "kannala_brandt"`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub k: Option<[f32; 4]>,
 }
 
 fn pinhole() -> String {
@@ -38,8 +43,12 @@ pub enum CameraError {
         path: String,
         source: serde_json::Error,
     },
-    #[error("camera model `{0}` is not supported (supported: pinhole)")]
+    #[error(
+        "camera model `{0}` is not supported (supported: pinhole, kannala_brandt, equiangular)"
+    )]
     Model(String),
+    #[error("camera coefficients `k` are only for the kannala_brandt model, not {0}")]
+    Coefficients(CameraModel),
     #[error("camera image size {0}x{1} is out of range (1..={MAX_SIDE} per side)")]
     Size(u32, u32),
     #[error("camera {0} must be finite and positive")]
@@ -50,8 +59,14 @@ pub enum CameraError {
 
 impl CameraFile {
     pub fn to_camera(&self) -> Result<Camera, CameraError> {
-        if self.model != "pinhole" {
-            return Err(CameraError::Model(self.model.clone()));
+        let model = CameraModel::from_name(&self.model)
+            .ok_or_else(|| CameraError::Model(self.model.clone()))?;
+        if self.k.is_some() && model != CameraModel::KannalaBrandt {
+            return Err(CameraError::Coefficients(model));
+        }
+        let k = self.k.unwrap_or_default();
+        if !k.iter().all(|v| v.is_finite()) {
+            return Err(CameraError::Intrinsics("coefficients k"));
         }
         let side = |v: u32| (1..=MAX_SIDE).contains(&v);
         if !side(self.width) || !side(self.height) {
@@ -75,6 +90,8 @@ impl CameraFile {
             focal: Vec2::new(self.fx, self.fy),
             principal: Vec2::new(self.cx, self.cy),
             size: Vec2::new(self.width as f32, self.height as f32),
+            distortion: Vec4::from_array(k),
+            model,
         })
     }
 
@@ -90,7 +107,8 @@ impl CameraFile {
             cx: c.principal.x,
             cy: c.principal.y,
             world_to_camera: [row(0), row(1), row(2), [0.0, 0.0, 0.0, 1.0]],
-            model: pinhole(),
+            model: c.model.name().into(),
+            k: (c.model == CameraModel::KannalaBrandt).then(|| c.distortion.to_array()),
         }
     }
 }
@@ -125,6 +143,7 @@ mod tests {
             focal: Vec2::new(500.0, 510.0),
             principal: Vec2::new(320.0, 240.0),
             size: Vec2::new(640.0, 480.0),
+            ..Default::default()
         };
         let file = CameraFile::from_camera(&cam);
         let json = serde_json::to_string(&file).unwrap();
@@ -140,8 +159,39 @@ mod tests {
         let mut bad = file.clone();
         bad.fx = f32::NAN;
         assert!(matches!(bad.to_camera(), Err(CameraError::Intrinsics(_))));
-        let mut bad = file;
+        let mut bad = file.clone();
         bad.world_to_camera[3] = [0.0, 0.0, 1.0, 1.0];
         assert!(matches!(bad.to_camera(), Err(CameraError::Pose)));
+        let mut bad = file;
+        bad.k = Some([0.1, 0.0, 0.0, 0.0]);
+        assert!(
+            bad.to_camera()
+                .unwrap_err()
+                .to_string()
+                .contains("only for the kannala_brandt")
+        );
+    }
+
+    #[test]
+    fn fisheye_and_equiangular_models_round_trip() {
+        let json = r#"{"width": 64, "height": 48, "fx": 20, "fy": 20, "cx": 32, "cy": 24,
+            "world_to_camera": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]],
+            "model": "kannala_brandt", "k": [0.05, -0.01, 0.002, 0.0]}"#;
+        let file: CameraFile = serde_json::from_str(json).unwrap();
+        let cam = file.to_camera().unwrap();
+        assert_eq!(cam.model, CameraModel::KannalaBrandt);
+        assert_eq!(cam.distortion, Vec4::new(0.05, -0.01, 0.002, 0.0));
+        let back = CameraFile::from_camera(&cam).to_camera().unwrap();
+        assert_eq!(back, cam);
+        let eq = Camera {
+            model: CameraModel::Equiangular,
+            ..cam
+        };
+        let back = CameraFile::from_camera(&Camera {
+            distortion: Vec4::ZERO,
+            ..eq
+        });
+        assert_eq!(back.model, "equiangular");
+        assert_eq!(back.k, None);
     }
 }

@@ -61,6 +61,13 @@ pub enum RenderError {
     TileSize(u32),
     #[error("camera {0} must be finite and positive")]
     Camera(&'static str),
+    #[error(
+        "method `{method}` projects with a pinhole camera only (it never calls `cam.project_point` or `cam.pixel_ray`); the camera is {model}"
+    )]
+    CameraModel {
+        method: &'static str,
+        model: crate::types::CameraModel,
+    },
     #[error("primitive {0} has a NaN or infinite parameter")]
     NonFinite(usize),
     #[error(
@@ -143,7 +150,16 @@ pub struct BackwardStats {
     pub project: Duration,
 }
 
-pub(crate) fn check(camera: &Camera, opts: &RenderOptions) -> Result<TileGrid, RenderError> {
+pub(crate) fn check<M: SplatMethod>(
+    camera: &Camera,
+    opts: &RenderOptions,
+) -> Result<TileGrid, RenderError> {
+    if camera.model != crate::types::CameraModel::Pinhole && !M::GENERIC_CAMERA {
+        return Err(RenderError::CameraModel {
+            method: M::NAME,
+            model: camera.model,
+        });
+    }
     if ![8, 16, 32, 64].contains(&opts.tile_size) {
         return Err(RenderError::TileSize(opts.tile_size));
     }
@@ -163,6 +179,9 @@ pub(crate) fn check(camera: &Camera, opts: &RenderOptions) -> Result<TileGrid, R
     }
     if !(camera.rotation.is_finite() && camera.translation.is_finite()) {
         return Err(RenderError::Camera("pose"));
+    }
+    if !camera.distortion.is_finite() {
+        return Err(RenderError::Camera("distortion"));
     }
     Ok(TileGrid::new(size.x as u32, size.y as u32, opts.tile_size))
 }
@@ -191,7 +210,7 @@ fn forward<M: SplatMethod>(
     opts: &RenderOptions,
     keep: bool,
 ) -> Result<(Frame, Option<ForwardState<M>>), RenderError> {
-    let grid = check(camera, opts)?;
+    let grid = check::<M>(camera, opts)?;
     if let Some(i) = params.par_iter().position_any(|p| !p.is_finite()) {
         return Err(RenderError::NonFinite(i));
     }
@@ -416,6 +435,8 @@ pub fn backward<M: SplatMethod>(
             focal: a.focal + b.focal,
             principal: a.principal + b.principal,
             size: a.size + b.size,
+            distortion: a.distortion + b.distortion,
+            model: a.model,
         },
     );
     let stats = BackwardStats {

@@ -15,6 +15,8 @@ pub struct Kernel<'m> {
     /// `None` when the kernel has no float input or no float output.
     pub adjoint: Option<Function>,
     pub ret: Ty,
+    /// Whether the kernel reads the camera model (see `builtins::MODEL_AWARE`).
+    pub camera_model: bool,
 }
 
 /// Expressions reading each slot of a value of type `ty` called `base`.
@@ -54,8 +56,13 @@ fn push_access(ty: &Ty, base: TokenStream, out: &mut Vec<TokenStream>) {
         }
         Ty::Struct(s) => {
             for (f, t) in &s.fields {
+                let is_enum = crate::types::builtin_enum_field(s, f).is_some();
                 let f = format_ident!("{f}");
-                push_access(t, quote!(#base.#f), out);
+                if is_enum {
+                    out.push(quote!((#base.#f as u32)));
+                } else {
+                    push_access(t, quote!(#base.#f), out);
+                }
             }
         }
         Ty::Tuple(ts) => {
@@ -97,9 +104,13 @@ pub fn pack(ty: &Ty, slots: &mut impl Iterator<Item = TokenStream>) -> TokenStre
                 .fields
                 .iter()
                 .map(|(f, t)| {
+                    let e = crate::types::builtin_enum_field(s, f);
                     let f = format_ident!("{f}");
                     let v = pack(t, slots);
-                    quote!(#f: #v)
+                    match e {
+                        Some(e) => quote!(#f: #e::from_code(#v).unwrap_or_default()),
+                        None => quote!(#f: #v),
+                    }
                 })
                 .collect();
             quote!(#path { #(#fields),* })

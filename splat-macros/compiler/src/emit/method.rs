@@ -297,6 +297,7 @@ pub fn method_impl(module: &syn::Ident, kernels: &[Kernel], diag: &Diag) -> Opti
         quote! { <#s_t as #rt::Flat>::zero() }
     };
     let (has_tc, has_pi) = (tile_cull.is_some(), pixel_info.is_some());
+    let generic_camera = kernels.iter().any(|k| k.camera_model);
     let (np, nc) = (idx(np), idx(nc));
     Some(quote! {
         /// The method as the runtime sees it.
@@ -308,6 +309,7 @@ pub fn method_impl(module: &syn::Ident, kernels: &[Kernel], diag: &Diag) -> Opti
             const NAME: &'static str = #module_name;
             const HAS_TILE_CULL: bool = #has_tc;
             const HAS_PIXEL_INFO: bool = #has_pi;
+            const GENERIC_CAMERA: bool = #generic_camera;
             const SOURCE: #rt::GeneratedSource = #rt::GeneratedSource { rust: GENERATED_RUST, wgsl: GENERATED_WGSL };
             type Params = #p_t;
             type Cull = #c_t;

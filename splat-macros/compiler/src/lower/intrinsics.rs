@@ -7,6 +7,7 @@
 //! is infinite; `select` and `if` differentiate only the side taken.
 
 use super::{Failed, Lowerer, R, Val};
+use crate::builtins::{CAMERA_METHODS, MODEL_AWARE, SH_COEFFICIENTS, sh_helper};
 use crate::ir::{Binary, Const, Unary, Var};
 use crate::types::Ty;
 use proc_macro2::Span;
@@ -72,7 +73,8 @@ const FREE_AS_METHOD: &[(&str, &str)] = &[
 ];
 
 pub const INTRINSIC_LIST: &str = "exp, log/ln, log1p, sqrt, rsqrt, abs, min, max, clamp, select, sin, \
-    cos, tan, atan2, dot, cross, length, normalize, transpose, inverse, determinant, sigmoid, no_diff";
+    cos, tan, atan2, dot, cross, length, normalize, transpose, inverse, determinant, sigmoid, no_diff, \
+    spherical_harmonics, and the camera methods project_point, pixel_ray, center";
 
 impl Lowerer<'_> {
     fn f(&self, v: &Val) -> Var {
@@ -126,6 +128,16 @@ impl Lowerer<'_> {
             |s: &Self, a: &Val| s.check_ty(a, &recv.ty, span, &format!("the argument of `{name}`"));
         match (&recv.ty, name) {
             (Ty::Error, _) => Err(Failed),
+            (Ty::Struct(s), _)
+                if s.display == "Camera" && CAMERA_METHODS.iter().any(|(m, _)| *m == name) =>
+            {
+                let helper = CAMERA_METHODS.iter().find(|(m, _)| *m == name).unwrap().1;
+                let def = self.module.find_fn(helper).expect("builtin camera helpers are in every module");
+                self.camera_model |= MODEL_AWARE.contains(&name);
+                let mut all = vec![recv];
+                all.extend(args);
+                self.call_helper(def, all, span)
+            }
             (Ty::F32, _) if F32_UNARY.iter().any(|(n, _)| *n == name) => {
                 want(self, 0)?;
                 let op = F32_UNARY.iter().find(|(n, _)| *n == name).unwrap().1;
@@ -414,6 +426,23 @@ impl Lowerer<'_> {
                     "rsqrt" => Ok(self.map(v, Unary::Rsqrt)),
                     _ => Ok(Self::scalar(self.sigmoid(v.comps[0]))),
                 }
+            }
+            "spherical_harmonics" => {
+                let args = self.args_of(&c.args)?;
+                let n = match args.first().map(|a| &a.ty) {
+                    Some(Ty::Array(t, n)) if **t == Ty::Vec(3) && SH_COEFFICIENTS.contains(n) => *n,
+                    _ => {
+                        return self.err(
+                            span,
+                            "`spherical_harmonics(sh, dir)` takes `[Vec3; N]` with N = 1, 4, 9 or 16 (degree 0 to 3) and a `Vec3`",
+                        );
+                    }
+                };
+                let def = self
+                    .module
+                    .find_fn(&sh_helper(n))
+                    .expect("builtin SH helpers are in every module");
+                self.call_helper(def, args, span)
             }
             _ => {
                 if let Some((_, m)) = FREE_AS_METHOD.iter().find(|(f, _)| *f == name) {

@@ -55,6 +55,8 @@ pub struct Lowered {
     pub func: Function,
     pub params: Vec<(String, Ty)>,
     pub ret: Ty,
+    /// Whether the function reads the camera model (`cam.project_point` / `cam.pixel_ray`).
+    pub camera_model: bool,
 }
 
 /// Most iterations all unrolled loops of one function may have together.
@@ -72,6 +74,8 @@ pub struct Lowerer<'m> {
     unrolled: usize,
     /// Helpers with a user-written adjoint; the index is the `callee` of [`Stmt::Call`].
     custom: &'m [String],
+    /// Set when a model-aware camera method is called.
+    camera_model: bool,
 }
 
 /// Lowers one function of `module`. Returns `None` if it had errors (recorded in `diag`).
@@ -87,6 +91,7 @@ pub fn lower_fn(module: &Module, diag: &Diag, def: &FnDef, custom: &[String]) ->
         call_stack: vec![def.name.clone()],
         unrolled: 0,
         custom,
+        camera_model: false,
     };
     let mut params = vec![];
     for p in &def.params {
@@ -136,6 +141,7 @@ pub fn lower_fn(module: &Module, diag: &Diag, def: &FnDef, custom: &[String]) ->
                     func: l.f,
                     params,
                     ret: def.ret.clone(),
+                    camera_model: l.camera_model,
                 });
             }
         }

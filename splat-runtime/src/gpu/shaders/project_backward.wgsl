@@ -4,7 +4,7 @@
 
 const NP: u32 = {{NP}}u; // parameter words per primitive
 const NPF: u32 = {{NPF}}u; // parameter float slots (gradient words)
-const NCAM: u32 = {{NCAM}}u; // camera words (all floats)
+const NCAM: u32 = {{NCAM}}u; // camera float slots (its gradient words)
 const NG: u32 = {{NG}}u;
 const STRIDE: u32 = {{STRIDE}}u;
 

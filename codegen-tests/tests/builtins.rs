@@ -1,0 +1,183 @@
+//! The compiler's builtins as kernels see them (compiled from `splat-compiler/src/builtins.rs`):
+//! the camera models (`cam.project_point`, `cam.pixel_ray`) equal to the runtime's plain-Rust
+//! `Camera` methods, inverse to each other (also past 90° off axis for the fisheye), and
+//! differentiated correctly (f64 finite differences) for every model; `spherical_harmonics`
+//! equal to the runtime prelude's.
+
+use codegen_tests::check::{gradient, uniform};
+use splat_macros::splat_functions;
+use splat_runtime::glam::{Mat3, Vec2, Vec3, Vec4};
+use splat_runtime::{Camera, CameraModel};
+
+#[splat_functions]
+mod cameras {
+    use splat_runtime::prelude::*;
+
+    pub fn project_point(cam: &Camera, p: Vec3) -> Vec2 {
+        cam.project_point(p)
+    }
+
+    pub fn pixel_ray(cam: &Camera, pixel: Vec2) -> Vec3 {
+        cam.pixel_ray(pixel)
+    }
+
+    pub fn sh3(sh: [Vec3; 16], dir: Vec3) -> Vec3 {
+        spherical_harmonics(sh, dir)
+    }
+}
+
+#[test]
+fn spherical_harmonics_match_the_runtime_prelude() {
+    let mut rng = fastrand::Rng::with_seed(5);
+    for _ in 0..50 {
+        let mut v = || Vec3::new(rng.f32() - 0.5, rng.f32() - 0.5, rng.f32() - 0.5);
+        let sh: [Vec3; 16] = std::array::from_fn(|_| v());
+        let dir = v();
+        let want = splat_runtime::prelude::spherical_harmonics(sh, dir);
+        let got = cameras::sh3(sh, dir);
+        assert!((got - want).length() < 1e-5, "{got} vs {want}");
+    }
+}
+
+/// A small image keeps the inputs' magnitudes (and so the finite-difference step, relative
+/// to the largest input) small: the Newton inverse of the fisheye is curved enough that a
+/// 128-pixel camera's step leaves a truncation error of 3e-6 in the dot-product test.
+fn camera(model: CameraModel) -> Camera {
+    Camera {
+        rotation: Mat3::from_rotation_y(0.2) * Mat3::from_rotation_x(-0.1),
+        translation: Vec3::new(0.1, -0.2, 0.5),
+        focal: Vec2::new(15.0, 14.5),
+        principal: Vec2::new(16.0, 12.0),
+        size: Vec2::new(32.0, 24.0),
+        distortion: Vec4::new(0.04, -0.01, 0.002, -0.0005),
+        model,
+    }
+}
+
+/// Camera-space points up to `max_angle` radians off the optical axis.
+fn points(max_angle: f32) -> Vec<Vec3> {
+    let mut rng = fastrand::Rng::with_seed(3);
+    (0..200)
+        .map(|_| {
+            let theta = max_angle * rng.f32();
+            let phi = std::f32::consts::TAU * rng.f32();
+            let r = 0.5 + 4.0 * rng.f32();
+            Vec3::new(
+                theta.sin() * phi.cos(),
+                theta.sin() * phi.sin(),
+                theta.cos(),
+            ) * r
+        })
+        .collect()
+}
+
+fn max_angle(model: CameraModel) -> f32 {
+    match model {
+        // Pinhole and equiangular images cover less than a half space.
+        CameraModel::Pinhole => 1.2,
+        CameraModel::Equiangular => 1.0,
+        // A fisheye sees past 90 degrees off axis (a field of view beyond 180 degrees).
+        CameraModel::KannalaBrandt => 1.75,
+    }
+}
+
+#[test]
+fn compiled_camera_models_match_the_runtime_and_invert() {
+    for model in CameraModel::ALL {
+        let cam = camera(model);
+        for p in points(max_angle(model)) {
+            let want = cam.project_point(p);
+            let got = cameras::project_point(&cam, p);
+            assert!(
+                (got - want).length() <= 1e-4 * want.length().max(1.0),
+                "{model}: project_point({p}) = {got} vs runtime {want}"
+            );
+            let ray = cameras::pixel_ray(&cam, got);
+            let runtime_ray = cam.pixel_ray(got);
+            assert!(
+                (ray - runtime_ray).length() < 1e-5,
+                "{model}: {ray} vs {runtime_ray}"
+            );
+            let angle = ray.cross(p.normalize()).length(); // acos is imprecise near 0
+            assert!(
+                angle < 2e-4,
+                "{model}: pixel_ray(project_point(p)) is {angle} rad off p = {p}"
+            );
+            assert!((ray.length() - 1.0).abs() < 1e-5, "{model}: ray not unit");
+        }
+    }
+}
+
+#[test]
+fn the_fisheye_sees_behind_the_image_plane() {
+    let cam = camera(CameraModel::KannalaBrandt);
+    let p = Vec3::new(1.0, 0.3, -0.2); // 100 degrees off axis
+    let px = cameras::project_point(&cam, p);
+    assert!(px.is_finite() && px.x > cam.principal.x);
+    assert!(cameras::pixel_ray(&cam, px).cross(p.normalize()).length() < 1e-4);
+}
+
+/// Inputs: the camera's float slots (rotation 9, translation 3, focal 2, principal 2, size 2,
+/// distortion 4) and a point or pixel; the model is the integer slot.
+fn sample<const N: usize>(
+    model: CameraModel,
+    tail: impl Fn(&mut fastrand::Rng) -> Vec<f64>,
+) -> impl Fn(&mut fastrand::Rng) -> ([f64; N], [u32; 1]) {
+    move |r: &mut fastrand::Rng| {
+        let mut x: [f64; N] = uniform(r, -0.1, 0.1);
+        let cam = camera(model).float_slots();
+        for (i, v) in x[..22].iter_mut().enumerate() {
+            // Perturb every camera slot by up to 1% (rotation off orthogonality included).
+            *v = cam[i] as f64 * (1.0 + 0.02 * (*v));
+        }
+        for (d, s) in x[22..].iter_mut().zip(tail(r)) {
+            *d = s;
+        }
+        (x, [model as u32])
+    }
+}
+
+#[test]
+fn camera_model_gradients_match_finite_differences() {
+    for model in CameraModel::ALL {
+        let angle = max_angle(model) as f64 * 0.9;
+        let point = move |r: &mut fastrand::Rng| {
+            let (theta, phi) = (
+                0.05 + (angle - 0.05) * r.f64(),
+                std::f64::consts::TAU * r.f64(),
+            );
+            let d = 1.0 + 3.0 * r.f64();
+            vec![
+                d * theta.sin() * phi.cos(),
+                d * theta.sin() * phi.sin(),
+                d * theta.cos(),
+            ]
+        };
+        let report = gradient(
+            cameras::twin::project_point,
+            cameras::twin::project_point_adjoint,
+            sample::<25>(model, point),
+            7,
+            30,
+        );
+        println!("{model} project_point: {report:?}");
+        assert!(
+            report.jacobian <= 1e-6 && report.dot_product <= 1e-6,
+            "{model}: {report:?}"
+        );
+
+        let pixel = |r: &mut fastrand::Rng| vec![1.0 + 30.0 * r.f64(), 1.0 + 22.0 * r.f64()];
+        let report = gradient(
+            cameras::twin::pixel_ray,
+            cameras::twin::pixel_ray_adjoint,
+            sample::<24>(model, pixel),
+            8,
+            30,
+        );
+        println!("{model} pixel_ray: {report:?}");
+        assert!(
+            report.jacobian <= 1e-6 && report.dot_product <= 1e-6,
+            "{model}: {report:?}"
+        );
+    }
+}
