@@ -2,5 +2,6 @@
 //! public API of `splat-macros` and `splat-runtime`.
 
 pub mod features;
+pub mod generalized;
 pub mod isotropic;
 pub mod rays;

@@ -1,8 +1,10 @@
 //! Rendering methods written with `#[splat_method]`; each file reads like the paper's listing.
 
 mod gaussians;
+mod unscented;
 
 pub use gaussians::{gs3d, gs3d_sh0, gs3d_sh1, gs3d_sh2};
+pub use unscented::gut;
 
 /// Parameters that can be built from a Gaussian stored in an INRIA PLY file.
 pub trait FromStored {

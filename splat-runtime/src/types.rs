@@ -141,6 +141,16 @@ impl Camera {
         }
     }
 
+    /// Whether [`Camera::project_point`] maps the camera-space point `p` to a meaningful pixel:
+    /// in front of the image plane (pinhole, equiangular), or up to 3 rad (172°) off axis for
+    /// the fisheye, whose polynomial folds back near 180°.
+    pub fn can_project(&self, p: Vec3) -> bool {
+        match self.model {
+            CameraModel::KannalaBrandt => (p.x * p.x + p.y * p.y).sqrt().atan2(p.z) < 3.0,
+            _ => p.z > 0.0,
+        }
+    }
+
     /// r(θ) = θ (1 + k1 θ² + k2 θ⁴ + k3 θ⁶ + k4 θ⁸).
     fn kb_distort(&self, theta: f32) -> f32 {
         let k = self.distortion;

@@ -4,6 +4,8 @@
 
 #![allow(dead_code)]
 
+pub mod checks;
+
 use splat_methods::gs3d::Params;
 use splat_runtime::glam::{Mat3, Quat, Vec2, Vec3, Vec4};
 use splat_runtime::{Camera, CameraModel, Flat};
@@ -38,7 +40,7 @@ macro_rules! twin {
             project: twin!(@f $($m)::+, project),
             pixel_info: Some(twin!(@f $($m)::+, pixel_info)),
             evaluate: twin!(@f $($m)::+, evaluate),
-            cull_words: <$($m)::+::Cull as splat_runtime::Flat>::LEN,
+            cull_words: <<$($m)::+::Method as splat_runtime::SplatMethod>::Cull as splat_runtime::Flat>::LEN,
             channels: <<$($m)::+::Method as splat_runtime::SplatMethod>::Color as splat_runtime::Flat>::LEN,
         }
     };
@@ -47,7 +49,7 @@ macro_rules! twin {
             project: twin!(@f $($m)::+, project),
             pixel_info: None,
             evaluate: twin!(@f $($m)::+, evaluate),
-            cull_words: <$($m)::+::Cull as splat_runtime::Flat>::LEN,
+            cull_words: <<$($m)::+::Method as splat_runtime::SplatMethod>::Cull as splat_runtime::Flat>::LEN,
             channels: <<$($m)::+::Method as splat_runtime::SplatMethod>::Color as splat_runtime::Flat>::LEN,
         }
     };
@@ -198,3 +200,54 @@ pub fn group_error(got: &[f64], want: &[f64]) -> f64 {
         .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()))
         / scale
 }
+
+/// A camera at the origin looking down +z with the given model; the fisheye and equiangular
+/// cameras see wide: past 90 degrees off axis in the fisheye's corners.
+pub fn wide_camera(width: u32, height: u32, model: CameraModel) -> Camera {
+    let focal = match model {
+        CameraModel::Pinhole => width as f32,
+        CameraModel::KannalaBrandt => width as f32 / 3.2,
+        CameraModel::Equiangular => width as f32 / 2.6,
+    };
+    Camera {
+        focal: Vec2::splat(focal),
+        distortion: match model {
+            CameraModel::KannalaBrandt => Vec4::new(0.03, -0.006, 0.001, -0.0001),
+            _ => Vec4::ZERO,
+        },
+        model,
+        ..camera(width, height)
+    }
+}
+
+/// Like [`gaussian_at`], with the centre on `pixel`'s ray at `distance` (any camera model,
+/// camera at the origin).
+pub fn gaussian_toward(
+    rng: &mut fastrand::Rng,
+    cam: &Camera,
+    pixel: Vec2,
+    distance: f32,
+    log_scale: f32,
+) -> Params {
+    let mut p = gaussian_at(rng, cam, pixel, distance, log_scale);
+    p.mean = cam.pixel_ray(pixel) * distance;
+    p
+}
+
+/// Parameter groups of the 3DGS-like methods (word ranges of `Params`).
+pub const GAUSSIAN_GROUPS: [(&str, std::ops::Range<usize>); 5] = [
+    ("mean", 0..3),
+    ("log_scale", 3..6),
+    ("rotation", 6..10),
+    ("opacity", 10..11),
+    ("sh", 11..59),
+];
+
+/// Camera groups (ranges of its float slots); distortion only matters for the fisheye.
+pub const CAMERA_GROUPS: [(&str, std::ops::Range<usize>); 5] = [
+    ("rotation", 0..9),
+    ("translation", 9..12),
+    ("focal", 12..14),
+    ("principal", 14..16),
+    ("distortion", 18..22),
+];

@@ -12,6 +12,7 @@ pub const CAMERA_METHODS: &[(&str, &str)] = &[
     ("project_point", "__camera_project_point"),
     ("pixel_ray", "__camera_pixel_ray"),
     ("center", "__camera_center"),
+    ("can_project", "__camera_can_project"),
 ];
 
 /// Coefficient counts `spherical_harmonics` accepts: degrees 0 to 3.
@@ -23,7 +24,7 @@ pub fn sh_helper(n: usize) -> String {
 }
 
 /// Methods that read the camera model: a kernel calling them works with every model.
-pub const MODEL_AWARE: &[&str] = &["project_point", "pixel_ray"];
+pub const MODEL_AWARE: &[&str] = &["project_point", "pixel_ray", "can_project"];
 
 /// Model codes are `CameraModel as u32`: 0 pinhole, 1 Kannala-Brandt, 2 equiangular.
 const SOURCE: &str = r#"
@@ -66,6 +67,17 @@ fn __camera_pixel_ray(cam: &Camera, pixel: Vec2) -> Vec3 {
         Vec3::new(m.x.sin() * m.y.cos(), m.x.cos() * m.y.sin(), m.x.cos() * m.y.cos()).normalize()
     } else {
         m.extend(1.0).normalize()
+    }
+}
+
+/// Whether `project_point` maps the camera-space point `p` to a meaningful pixel: in front
+/// of the image plane for pinhole and equiangular cameras; up to 172 degrees off axis for the
+/// fisheye (the Kannala-Brandt polynomial folds back near 180).
+fn __camera_can_project(cam: &Camera, p: Vec3) -> bool {
+    if cam.model == 1u32 {
+        (p.x * p.x + p.y * p.y).sqrt().atan2(p.z) < 3.0
+    } else {
+        p.z > 0.0
     }
 }
 

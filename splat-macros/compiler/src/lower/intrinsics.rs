@@ -74,7 +74,7 @@ const FREE_AS_METHOD: &[(&str, &str)] = &[
 
 pub const INTRINSIC_LIST: &str = "exp, log/ln, log1p, sqrt, rsqrt, abs, min, max, clamp, select, sin, \
     cos, tan, atan2, dot, cross, length, normalize, transpose, inverse, determinant, sigmoid, no_diff, \
-    spherical_harmonics, and the camera methods project_point, pixel_ray, center";
+    spherical_harmonics, and the camera methods project_point, pixel_ray, can_project, center";
 
 impl Lowerer<'_> {
     fn f(&self, v: &Val) -> Var {
