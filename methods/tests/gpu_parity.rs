@@ -44,6 +44,7 @@ fn gpu_forward_matches_cpu() {
                 p_max,
                 alpha: true,
                 depth: true,
+                ..Default::default()
             };
             let cpu = render::<Method>(&params, &cam, &opts).unwrap();
             let gpu_frame =

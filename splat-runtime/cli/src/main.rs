@@ -203,6 +203,7 @@ fn render_cmd(args: &RenderArgs) -> Result<()> {
         p_max: args.p_max,
         alpha: args.alpha,
         depth: args.depth,
+        ..Default::default()
     };
     // The method instance matching the scene's SH degree: higher-order terms cost nothing when
     // the scene has none.

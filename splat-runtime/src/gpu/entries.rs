@@ -75,11 +75,11 @@ pub fn project<M: SplatMethod>() -> Result<String, GpuError> {
     ))
 }
 
-/// `count_tiles` (`emit` false) or `emit_tiles`.
-pub fn tiles<M: SplatMethod>(emit: bool) -> Result<String, GpuError> {
+/// `count_tiles` (`emit` false) or `emit_tiles`; `use_cull` false keeps every box tile.
+pub fn tiles<M: SplatMethod>(emit: bool, use_cull: bool) -> Result<String, GpuError> {
     let wgsl = M::SOURCE.wgsl;
     let layout = Layout::of::<M>();
-    let keep = if M::HAS_TILE_CULL {
+    let keep = if M::HAS_TILE_CULL && use_cull {
         let cull = sig(wgsl, "tile_cull")?;
         let mut args: Vec<String> = ["lo.x", "lo.y", "hi.x", "hi.y"].map(String::from).into();
         for (k, kind) in cull.args.iter().enumerate().skip(4) {

@@ -141,7 +141,7 @@ fn forward<M: SplatMethod>(
     let t1 = Instant::now();
     let counts = gpu.buffer("tiles per primitive", n)?;
     let totals = gpu.buffer("intersection totals", 3)?;
-    let count = gpu.pipeline(&entries::tiles::<M>(false)?, "count_tiles")?;
+    let count = gpu.pipeline(&entries::tiles::<M>(false, opts.tile_cull)?, "count_tiles")?;
     let mut enc = new_encoder();
     enc.clear_buffer(&totals, 0, None);
     let bind = gpu.bind(&count, &[&projected, &counts, &frame, &totals]);
@@ -164,7 +164,7 @@ fn forward<M: SplatMethod>(
     // Keys are `vec2<u32>`: a binding holds at least one, even with no intersection.
     let keys = gpu.buffer("intersection keys", 2 * total.max(1) as usize)?;
     let vals = gpu.buffer("intersection primitives", total as usize)?;
-    let emit = gpu.pipeline(&entries::tiles::<M>(true)?, "emit_tiles")?;
+    let emit = gpu.pipeline(&entries::tiles::<M>(true, opts.tile_cull)?, "emit_tiles")?;
     let mut enc = new_encoder();
     let bind = gpu.bind(&emit, &[&projected, &counts, &frame, &keys, &vals]);
     dispatch(&mut enc, &emit, &bind, n32.div_ceil(256));

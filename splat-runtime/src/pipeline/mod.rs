@@ -38,6 +38,9 @@ pub struct RenderOptions {
     pub alpha: bool,
     /// Compute the expected-depth output.
     pub depth: bool,
+    /// Apply the method's `tile_cull` (false keeps every tile of each bounding box: what the
+    /// cull saves, and a check that it only drops pairs the alpha threshold would skip).
+    pub tile_cull: bool,
 }
 
 impl Default for RenderOptions {
@@ -47,6 +50,7 @@ impl Default for RenderOptions {
             p_max: None,
             alpha: false,
             depth: false,
+            tile_cull: true,
         }
     }
 }
@@ -223,7 +227,7 @@ fn forward<M: SplatMethod>(
     stats.visible = pre.visible.len();
     stats.preprocess = t0.elapsed();
 
-    let lists = tile_lists(&pre, &grid, &mut stats)?;
+    let lists = tile_lists(&pre, &grid, opts.tile_cull, &mut stats)?;
 
     let t2 = Instant::now();
     let capped = |t: usize| {
@@ -306,10 +310,11 @@ fn forward<M: SplatMethod>(
 pub(crate) fn tile_lists<M: SplatMethod>(
     pre: &Preprocessed<M>,
     grid: &TileGrid,
+    tile_cull: bool,
     stats: &mut Stats,
 ) -> Result<TileLists, RenderError> {
     let t = Instant::now();
-    let lists = rasterize::rasterize::<M>(pre, grid)?;
+    let lists = rasterize::rasterize::<M>(pre, grid, tile_cull)?;
     stats.intersections = lists.intersections();
     stats.longest_list = (0..grid.tile_count())
         .map(|t| lists.list(t).len())

@@ -33,16 +33,19 @@ impl TileLists {
     }
 }
 
-/// Calls `f(tile_id)` for every tile of `rect` that `tile_cull` keeps.
+/// Calls `f(tile_id)` for every tile of `rect` that `tile_cull` keeps (every tile when the
+/// method has none or `use_cull` is false).
 pub fn for_each_kept_tile<M: SplatMethod>(
     grid: &TileGrid,
     rect: &TileRect,
     cull: &M::Cull,
+    use_cull: bool,
     mut f: impl FnMut(u32),
 ) {
+    let use_cull = use_cull && M::HAS_TILE_CULL;
     for ty in rect.y0..rect.y1 {
         for tx in rect.x0..rect.x1 {
-            if !M::HAS_TILE_CULL || M::tile_cull(&grid.bounds(tx, ty), cull) {
+            if !use_cull || M::tile_cull(&grid.bounds(tx, ty), cull) {
                 f(ty * grid.tiles_x + tx);
             }
         }
@@ -59,16 +62,23 @@ fn entry(depth: f32, prim: u32) -> u64 {
 pub fn rasterize<M: SplatMethod>(
     pre: &Preprocessed<M>,
     grid: &TileGrid,
+    use_cull: bool,
 ) -> Result<TileLists, RenderError> {
     let tiles = grid.tile_count();
     let counts: Vec<AtomicU32> = (0..tiles).map(|_| AtomicU32::new(0)).collect();
     let total = AtomicU64::new(0);
     pre.visible.par_iter().for_each(|(i, rect)| {
         let mut n = 0u64;
-        for_each_kept_tile::<M>(grid, rect, &pre.projected[*i as usize].cull, |t| {
-            counts[t as usize].fetch_add(1, Ordering::Relaxed);
-            n += 1;
-        });
+        for_each_kept_tile::<M>(
+            grid,
+            rect,
+            &pre.projected[*i as usize].cull,
+            use_cull,
+            |t| {
+                counts[t as usize].fetch_add(1, Ordering::Relaxed);
+                n += 1;
+            },
+        );
         total.fetch_add(n, Ordering::Relaxed);
     });
     let total = total.into_inner();
@@ -89,7 +99,7 @@ pub fn rasterize<M: SplatMethod>(
     pre.visible.par_iter().for_each(|(i, rect)| {
         let p = &pre.projected[*i as usize];
         let e = entry(p.depth, *i);
-        for_each_kept_tile::<M>(grid, rect, &p.cull, |t| {
+        for_each_kept_tile::<M>(grid, rect, &p.cull, use_cull, |t| {
             let k = cursors[t as usize].fetch_add(1, Ordering::Relaxed);
             slots[k as usize].store(e, Ordering::Relaxed);
         });

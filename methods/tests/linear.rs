@@ -1,0 +1,168 @@
+//! LinPrim: the CPU render against the f64 brute-force reference, the tile cull conservative
+//! (rendering with and without it gives the same image), render gradients against finite
+//! differences, the GPU backend against the CPU backend, and the pinhole-only refusal.
+
+mod common;
+
+use common::checks::{
+    forward_matches_reference, gpu_forward_matches_cpu, gpu_gradients_match_cpu,
+    gradients_match_finite_differences,
+};
+use common::{CAMERA_GROUPS, GAUSSIAN_GROUPS, camera, gaussian_at, wide_camera};
+use splat_methods::linprim::{Method, Params};
+use splat_runtime::glam::Vec2;
+use splat_runtime::{Camera, CameraModel, RenderOptions, render};
+
+fn to_linprim(p: splat_methods::gs3d::Params) -> Params {
+    Params {
+        mean: p.mean,
+        log_scale: p.log_scale,
+        rotation: p.rotation,
+        opacity_logit: p.opacity_logit,
+        sh: p.sh,
+    }
+}
+
+fn twin() -> common::Twin {
+    twin!(splat_methods::linprim)
+}
+
+/// Octahedra spread over the image (and past its edges), 2 to 8 units away.
+fn scene(cam: &Camera, count: usize) -> Vec<Params> {
+    let mut rng = fastrand::Rng::with_seed(41);
+    (0..count)
+        .map(|_| {
+            let px = Vec2::new(rng.f32() * 1.2 - 0.1, rng.f32() * 1.2 - 0.1) * cam.size;
+            let z = 2.0 + rng.f32() * 6.0;
+            to_linprim(gaussian_at(&mut rng, cam, px, z, -1.2))
+        })
+        .collect()
+}
+
+/// Four octahedra in front of a small, narrow image: every pixel's ray crosses each of them
+/// with alpha above 2/255.
+fn covering_scene(cam: &Camera) -> Vec<Params> {
+    let mut rng = fastrand::Rng::with_seed(9);
+    (0..4)
+        .map(|i| {
+            let px = Vec2::new(10.0 + 1.5 * i as f32, 7.0 + 1.0 * i as f32);
+            let mut p = gaussian_at(&mut rng, cam, px, 3.0 + 0.5 * i as f32, 0.3);
+            p.opacity_logit = -2.0 + 0.4 * rng.f32();
+            to_linprim(p)
+        })
+        .collect()
+}
+
+/// 24 x 16 pixels over 17 x 11 degrees.
+fn narrow_camera() -> Camera {
+    Camera {
+        focal: Vec2::splat(80.0),
+        ..camera(24, 16)
+    }
+}
+
+#[test]
+fn forward_matches_the_reference() {
+    let cam = camera(64, 48);
+    let coverage = forward_matches_reference::<Method>("linprim", &twin(), &scene(&cam, 80), &cam);
+    assert!(
+        coverage > 0.2,
+        "the scene should cover the image ({coverage})"
+    );
+}
+
+#[test]
+fn the_tile_cull_is_conservative() {
+    let cam = camera(96, 64);
+    let params = scene(&cam, 120);
+    for tile_size in [8, 16] {
+        let opts = |tile_cull| RenderOptions {
+            tile_size,
+            alpha: true,
+            depth: true,
+            tile_cull,
+            ..Default::default()
+        };
+        let culled = render::<Method>(&params, &cam, &opts(true)).unwrap();
+        let all = render::<Method>(&params, &cam, &opts(false)).unwrap();
+        let outputs = [
+            ("color", &culled.color.data, &all.color.data),
+            (
+                "alpha",
+                &culled.alpha.as_ref().unwrap().data,
+                &all.alpha.as_ref().unwrap().data,
+            ),
+            (
+                "depth",
+                &culled.depth.as_ref().unwrap().data,
+                &all.depth.as_ref().unwrap().data,
+            ),
+        ];
+        let mut worst = 0.0f32;
+        for (what, a, b) in outputs {
+            for (i, (x, y)) in a.iter().zip(b.iter()).enumerate() {
+                worst = worst.max((x - y).abs());
+                assert!(
+                    (x - y).abs() <= 1e-6,
+                    "tile {tile_size}, {what}[{i}]: {x} with the cull, {y} without"
+                );
+            }
+        }
+        println!(
+            "tile {tile_size}: {} intersections with the cull, {} without; largest difference {worst:e}",
+            culled.stats.intersections, all.stats.intersections
+        );
+        assert!(
+            culled.stats.intersections < all.stats.intersections,
+            "the cull removes pairs"
+        );
+    }
+}
+
+#[test]
+fn render_gradients_match_finite_differences() {
+    let cam = narrow_camera();
+    let params = covering_scene(&cam);
+    forward_matches_reference::<Method>("linprim covering", &twin(), &params, &cam);
+    let solo = common::render_with(
+        &twin(),
+        &[common::words(&params[3])],
+        &common::camera_words(&cam),
+        cam.model,
+    );
+    let min_alpha = solo.alpha.iter().fold(1.0f64, |m, a| m.min(*a));
+    assert!(
+        min_alpha > 2.0 / 255.0,
+        "the farthest octahedron covers the image (min alpha {min_alpha})"
+    );
+    gradients_match_finite_differences::<Method>(
+        "linprim",
+        &twin(),
+        &params,
+        &cam,
+        &GAUSSIAN_GROUPS,
+        &CAMERA_GROUPS[..4],
+        1e-4,
+    );
+}
+
+#[test]
+fn gpu_matches_cpu() {
+    let cam = camera(48, 40);
+    gpu_forward_matches_cpu::<Method>("linprim", &scene(&cam, 80), &cam);
+    let cam = narrow_camera();
+    gpu_gradients_match_cpu::<Method>("linprim", &covering_scene(&cam), &cam);
+}
+
+#[test]
+fn a_fisheye_is_refused_by_name() {
+    let cam = wide_camera(16, 16, CameraModel::KannalaBrandt);
+    let Err(err) = render::<Method>(&[], &cam, &Default::default()) else {
+        panic!("LinPrim rendered with a fisheye");
+    };
+    assert!(
+        err.to_string()
+            .contains("`linprim` projects with a pinhole camera only"),
+        "{err}"
+    );
+}
