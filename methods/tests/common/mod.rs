@@ -212,7 +212,7 @@ pub fn wide_camera(width: u32, height: u32, model: CameraModel) -> Camera {
     Camera {
         focal: Vec2::splat(focal),
         distortion: match model {
-            CameraModel::KannalaBrandt => Vec4::new(0.03, -0.006, 0.001, -0.0001),
+            CameraModel::KannalaBrandt => Vec4::new(0.02, -0.002, 0.0002, -0.00001),
             _ => Vec4::ZERO,
         },
         model,
