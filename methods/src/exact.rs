@@ -23,7 +23,7 @@ pub mod geer {
 
     pub const NEAR: f32 = 0.01;
     pub const ALPHA_MIN: f32 = 1.0 / 255.0;
-    pub const PI: f32 = 3.14159265;
+    pub const PI: f32 = std::f32::consts::PI;
     /// Stands for an unbounded box side (the runtime clamps boxes to the image).
     pub const FAR: f32 = 1e6;
 
