@@ -78,8 +78,15 @@ pub mod linprim {
             rows: a.inverse(),
             sigma,
         };
+        // Frustum cull with the 3DGS guard band (1.3x the half field of view): far off axis
+        // the linearization describes nothing the camera sees.
+        let tangent = Vec2::new(t.x, t.y) / z;
+        let guard = ((cam.size - cam.principal).max(cam.principal) / f) * 1.3;
         Projected {
-            visible: t.z > NEAR && a.determinant().abs() > 1e-30,
+            visible: t.z > NEAR
+                && tangent.x.abs() <= guard.x
+                && tangent.y.abs() <= guard.y
+                && a.determinant().abs() > 1e-30,
             depth: dist,
             bbox_min: center - extent,
             bbox_max: center + extent,

@@ -4,10 +4,10 @@ mod scene;
 
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand, ValueEnum};
-use splat_methods::{FromStored, gs3d, gs3d_sh0, gs3d_sh1, gs3d_sh2};
+use splat_methods::{FromStored, geer, gs3d, gs3d_sh0, gs3d_sh1, gs3d_sh2, gut, linprim};
 use splat_runtime::io::ply::GaussianCloud;
 use splat_runtime::io::{camera as camera_io, image as image_io, ply};
-use splat_runtime::{Camera, Frame, RenderOptions, SplatMethod, render};
+use splat_runtime::{Camera, CameraModel, Frame, Image, RenderOptions, SplatMethod, render};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -33,6 +33,17 @@ enum Command {
         #[arg(long)]
         camera_out: Option<PathBuf>,
     },
+    /// Render the built-in scene with every method and camera model into one picture (rows:
+    /// methods; columns: pinhole, fisheye, equiangular).
+    Gallery {
+        #[arg(long, default_value = "gallery.png")]
+        out: PathBuf,
+        /// Size of each panel.
+        #[arg(long, default_value_t = 320)]
+        width: u32,
+        #[arg(long, default_value_t = 240)]
+        height: u32,
+    },
     /// Print the Rust or WGSL the #[splat_method] compiler generated for a method.
     Inspect {
         #[arg(long, value_enum, default_value_t = Method::Gs3d)]
@@ -42,11 +53,60 @@ enum Command {
     },
 }
 
-#[derive(Clone, Copy, ValueEnum)]
+#[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
 enum Method {
-    /// 3D Gaussian Splatting (EWA, SH up to degree 3).
+    /// 3D Gaussian Splatting (EWA, SH up to degree 3); pinhole only.
     #[value(name = "3dgs")]
     Gs3d,
+    /// 3DGUT: unscented-transform projection, evaluation along camera rays; every camera.
+    #[value(name = "3dgut")]
+    Gut,
+    /// LinPrim: octahedra (each Gaussian of the scene becomes one); pinhole only.
+    #[value(name = "linprim")]
+    Linprim,
+    /// 3DGEER: exact ray integral, particle bounding frustums; every camera.
+    #[value(name = "3dgeer")]
+    Geer,
+}
+
+impl Method {
+    const ALL: [Method; 4] = [Method::Gs3d, Method::Gut, Method::Linprim, Method::Geer];
+
+    fn name(self) -> &'static str {
+        match self {
+            Method::Gs3d => "3dgs",
+            Method::Gut => "3dgut",
+            Method::Linprim => "linprim",
+            Method::Geer => "3dgeer",
+        }
+    }
+
+    fn source(self) -> splat_runtime::GeneratedSource {
+        match self {
+            Method::Gs3d => gs3d::Method::SOURCE,
+            Method::Gut => gut::Method::SOURCE,
+            Method::Linprim => linprim::Method::SOURCE,
+            Method::Geer => geer::Method::SOURCE,
+        }
+    }
+}
+
+#[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
+enum Model {
+    Pinhole,
+    #[value(name = "kannala_brandt")]
+    KannalaBrandt,
+    Equiangular,
+}
+
+impl From<Model> for CameraModel {
+    fn from(m: Model) -> CameraModel {
+        match m {
+            Model::Pinhole => CameraModel::Pinhole,
+            Model::KannalaBrandt => CameraModel::KannalaBrandt,
+            Model::Equiangular => CameraModel::Equiangular,
+        }
+    }
 }
 
 #[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
@@ -69,9 +129,12 @@ struct RenderArgs {
     /// INRIA 3DGS PLY scene.
     #[arg(long)]
     scene: Option<PathBuf>,
-    /// Camera JSON (default: the built-in view, at --width x --height).
+    /// Camera JSON (default: the built-in view, at --width x --height, of --camera-model).
     #[arg(long)]
     camera: Option<PathBuf>,
+    /// The built-in camera's model (a camera file names its own).
+    #[arg(long, value_enum, default_value_t = Model::Pinhole)]
+    camera_model: Model,
     #[arg(long, value_enum, default_value_t = Method::Gs3d)]
     method: Method,
     /// Output file: .png, .exr or .npy.
@@ -114,17 +177,15 @@ fn run(cli: Cli) -> Result<()> {
                 .with_context(|| format!("writing {}", out.display()))?;
             println!("wrote {}", out.display());
             if let Some(c) = camera_out {
-                camera_io::write(&c, &scene::camera(800, 600))
+                camera_io::write(&c, &scene::camera(800, 600, CameraModel::Pinhole))
                     .with_context(|| format!("writing {}", c.display()))?;
                 println!("wrote {}", c.display());
             }
             Ok(())
         }
-        Command::Inspect {
-            method: Method::Gs3d,
-            lang,
-        } => {
-            let source = gs3d::Method::SOURCE;
+        Command::Gallery { out, width, height } => gallery(&out, width, height),
+        Command::Inspect { method, lang } => {
+            let source = method.source();
             print!(
                 "{}",
                 if let Lang::Wgsl = lang {
@@ -163,6 +224,79 @@ where
     })
 }
 
+/// Renders `cloud` with `method`. 3DGS runs the instance matching the scene's SH degree
+/// (higher-order terms cost nothing when the scene has none); the others carry degree 3.
+fn render_method(
+    method: Method,
+    cloud: &GaussianCloud,
+    camera: &Camera,
+    opts: &RenderOptions,
+    backend: Backend,
+) -> Result<(Frame, String)> {
+    match (method, cloud.sh_degree) {
+        (Method::Gs3d, 0) => render_with::<gs3d_sh0::Method>(cloud, camera, opts, backend),
+        (Method::Gs3d, 1) => render_with::<gs3d_sh1::Method>(cloud, camera, opts, backend),
+        (Method::Gs3d, 2) => render_with::<gs3d_sh2::Method>(cloud, camera, opts, backend),
+        (Method::Gs3d, _) => render_with::<gs3d::Method>(cloud, camera, opts, backend),
+        (Method::Gut, _) => render_with::<gut::Method>(cloud, camera, opts, backend),
+        (Method::Linprim, _) => render_with::<linprim::Method>(cloud, camera, opts, backend),
+        (Method::Geer, _) => render_with::<geer::Method>(cloud, camera, opts, backend),
+    }
+}
+
+/// Every method on every camera model, panels in a grid; a method that does not support a
+/// model gets a dark panel.
+fn gallery(out: &std::path::Path, width: u32, height: u32) -> Result<()> {
+    let side = 1..=2048;
+    if !side.contains(&width) || !side.contains(&height) {
+        bail!("panel size {width}x{height} is out of range (1..=2048 per side)");
+    }
+    let cloud = scene::planet();
+    let (cols, rows) = (CameraModel::ALL.len() as u32, Method::ALL.len() as u32);
+    let mut grid = Image {
+        width: width * cols,
+        height: height * rows,
+        channels: 3,
+        data: vec![0.08; (width * cols * height * rows * 3) as usize],
+    };
+    let opts = RenderOptions::default();
+    for (r, method) in Method::ALL.into_iter().enumerate() {
+        for (c, model) in CameraModel::ALL.into_iter().enumerate() {
+            let camera = scene::camera(width, height, model);
+            let frame = match render_method(method, &cloud, &camera, &opts, Backend::Cpu) {
+                Ok((frame, _)) => frame,
+                Err(e) => {
+                    println!("{} / {model}: {e}", method.name());
+                    continue;
+                }
+            };
+            for y in 0..height {
+                let src = (y * width * 3) as usize;
+                let dst = (((r as u32 * height + y) * grid.width + c as u32 * width) * 3) as usize;
+                let row = (width * 3) as usize;
+                grid.data[dst..dst + row].copy_from_slice(&frame.color.data[src..src + row]);
+            }
+            println!(
+                "{} / {model}: {} visible, {} intersections, shade {:.1} ms",
+                method.name(),
+                frame.stats.visible,
+                frame.stats.intersections,
+                frame.stats.shade.as_secs_f64() * 1e3
+            );
+        }
+    }
+    let frame = Frame {
+        color: grid,
+        alpha: None,
+        depth: None,
+        stats: Default::default(),
+    };
+    for p in image_io::write_frame(out, &frame)? {
+        println!("wrote {}", p.display());
+    }
+    Ok(())
+}
+
 fn render_cmd(args: &RenderArgs) -> Result<()> {
     let ext = args
         .out
@@ -193,11 +327,10 @@ fn render_cmd(args: &RenderArgs) -> Result<()> {
                     side.end()
                 );
             }
-            scene::camera(args.width, args.height)
+            scene::camera(args.width, args.height, args.camera_model.into())
         }
     };
     let load = t0.elapsed();
-    let Method::Gs3d = args.method;
     let opts = RenderOptions {
         tile_size: args.tile,
         p_max: args.p_max,
@@ -205,20 +338,19 @@ fn render_cmd(args: &RenderArgs) -> Result<()> {
         depth: args.depth,
         ..Default::default()
     };
-    // The method instance matching the scene's SH degree: higher-order terms cost nothing when
-    // the scene has none.
-    let (frame, backend) = match cloud.sh_degree {
-        0 => render_with::<gs3d_sh0::Method>(&cloud, &camera, &opts, args.backend)?,
-        1 => render_with::<gs3d_sh1::Method>(&cloud, &camera, &opts, args.backend)?,
-        2 => render_with::<gs3d_sh2::Method>(&cloud, &camera, &opts, args.backend)?,
-        _ => render_with::<gs3d::Method>(&cloud, &camera, &opts, args.backend)?,
-    };
+    let (frame, backend) = render_method(args.method, &cloud, &camera, &opts, args.backend)?;
     let written = image_io::write_frame(&args.out, &frame)?;
     let s = &frame.stats;
     let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
     println!(
-        "3dgs on {backend}: {} primitives (SH degree {}) from {source}, {}x{}, tile {}",
-        s.primitives, cloud.sh_degree, frame.color.width, frame.color.height, args.tile
+        "{} on {backend}: {} primitives (SH degree {}) from {source}, {}x{} {} camera, tile {}",
+        args.method.name(),
+        s.primitives,
+        cloud.sh_degree,
+        frame.color.width,
+        frame.color.height,
+        camera.model,
+        args.tile
     );
     let pairs = if backend == "CPU" {
         s.pairs.to_string()

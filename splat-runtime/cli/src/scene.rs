@@ -1,9 +1,10 @@
 //! The built-in scene: a ringed planet of a few thousand Gaussians (banded sphere, tilted
-//! ring, a moon), and a camera looking at it, so `splat render` runs with no files.
+//! ring, a moon, stars all around), and a camera looking at it, so `splat render` runs with no
+//! files.
 
-use splat_runtime::Camera;
 use splat_runtime::glam::{Mat3, Vec2, Vec3, Vec4};
 use splat_runtime::io::ply::{GaussianCloud, StoredGaussian};
+use splat_runtime::{Camera, CameraModel};
 
 /// SH DC coefficient for a target color (color = 0.5 + C0 * dc).
 fn dc(color: Vec3) -> Vec3 {
@@ -91,27 +92,51 @@ pub fn planet() -> GaussianCloud {
             Vec3::ZERO,
         ));
     }
+    // Stars on a sphere of radius 25 around the camera's target, in every direction: what a
+    // wide camera sees beyond the planet (a fisheye past 180 degrees sees some behind it).
+    for _ in 0..1500 {
+        let z = rng.next() * 2.0 - 1.0;
+        let phi = rng.next() * std::f32::consts::TAU;
+        let r = (1.0 - z * z).sqrt();
+        let warm = rng.next();
+        let c = Vec3::new(0.8 + 0.2 * warm, 0.85, 1.0 - 0.2 * warm);
+        out.push(gaussian(
+            Vec3::new(r * phi.cos(), z, r * phi.sin()) * 25.0,
+            0.04 + 0.05 * rng.next(),
+            c,
+            0.9,
+            Vec3::ZERO,
+        ));
+    }
     GaussianCloud {
         sh_degree: 1,
         gaussians: out,
     }
 }
 
-/// Looks at the origin from slightly above the ring plane, 6 units away.
-pub fn camera(width: u32, height: u32) -> Camera {
+/// Looks at the origin from slightly above the ring plane, 6 units away: a pinhole with a
+/// 58° horizontal field of view, a 190° fisheye (equidistant with a little distortion) or a
+/// 126° equiangular camera.
+pub fn camera(width: u32, height: u32, model: CameraModel) -> Camera {
     let eye = Vec3::new(0.0, 1.5, -5.8);
     let forward = (-eye).normalize();
     let right = Vec3::Y.cross(forward).normalize() * -1.0;
     let down = forward.cross(right);
     // Rows of the world-to-camera rotation are the camera axes (x right, y down, z forward).
     let rotation = Mat3::from_cols(right, down, forward).transpose();
-    let f = 0.9 * width as f32;
+    let w = width as f32;
+    let (f, distortion) = match model {
+        CameraModel::Pinhole => (0.9 * w, Vec4::ZERO),
+        CameraModel::KannalaBrandt => (0.3 * w, Vec4::new(0.02, -0.002, 0.0002, -0.00001)),
+        CameraModel::Equiangular => (0.45 * w, Vec4::ZERO),
+    };
     Camera {
         rotation,
         translation: -(rotation * eye),
         focal: Vec2::splat(f),
-        principal: Vec2::new(width as f32 / 2.0, height as f32 / 2.0),
-        size: Vec2::new(width as f32, height as f32),
-        ..Default::default()
+        principal: Vec2::new(w / 2.0, height as f32 / 2.0),
+        size: Vec2::new(w, height as f32),
+        distortion,
+        model,
     }
 }

@@ -88,6 +88,67 @@ fn renders_the_default_scene() {
 }
 
 #[test]
+fn every_method_renders_on_the_cameras_it_supports() {
+    let dir = temp();
+    for (method, model) in [
+        ("3dgut", "kannala_brandt"),
+        ("3dgeer", "equiangular"),
+        ("linprim", "pinhole"),
+    ] {
+        let out = format!("{method}.png");
+        let stdout = ok(&splat(
+            &[
+                "render",
+                "--method",
+                method,
+                "--camera-model",
+                model,
+                "--width",
+                "96",
+                "--height",
+                "64",
+                "--backend",
+                "cpu",
+                "--out",
+                &out,
+            ],
+            dir.path(),
+        ));
+        assert!(stdout.starts_with(&format!("{method} on CPU")), "{stdout}");
+        assert!(stdout.contains(&format!("{model} camera")), "{stdout}");
+        assert!(dir.path().join(&out).exists());
+    }
+    // A pinhole-only method refuses a fisheye by name and writes nothing.
+    let out = splat(
+        &[
+            "render",
+            "--method",
+            "linprim",
+            "--camera-model",
+            "kannala_brandt",
+            "--out",
+            "no.png",
+        ],
+        dir.path(),
+    );
+    fails(&out, "pinhole camera only", &dir.path().join("no.png"));
+}
+
+#[test]
+fn the_gallery_renders_every_method_and_camera() {
+    let dir = temp();
+    let stdout = ok(&splat(
+        &[
+            "gallery", "--width", "48", "--height", "32", "--out", "g.png",
+        ],
+        dir.path(),
+    ));
+    assert_eq!(stdout.matches("intersections").count(), 8, "{stdout}");
+    assert_eq!(stdout.matches("pinhole camera only").count(), 4, "{stdout}");
+    assert!(dir.path().join("g.png").exists());
+}
+
+#[test]
 fn npy_holds_color_then_alpha_then_depth() {
     let dir = temp();
     ok(&splat(
@@ -263,6 +324,8 @@ fn inspect_prints_the_generated_rust_and_wgsl() {
         dir.path(),
     ));
     assert!(wgsl.contains("fn evaluate(") && wgsl.contains("fn project_adjoint("));
+    let geer = ok(&splat(&["inspect", "--method", "3dgeer"], dir.path()));
+    assert!(geer.contains("pub fn pixel_info("));
 }
 
 #[test]
