@@ -1,7 +1,7 @@
 //! The README picture of generalized exponential splats: four splats of equal size, opacity
 //! and color with shape β = 1, 2 (a Gaussian), 4 and 8, left to right, rendered on the CPU.
 //!
-//! `cargo run --release -p splat-examples --example generalized_picture -- docs/generalized.png`
+//! `cargo run --release -p splat-examples --example generalized_picture -- examples/images/generalized.png`
 
 use splat_examples::generalized::generalized::{Method, Params};
 use splat_runtime::glam::{Mat3, Vec2, Vec3, Vec4};
