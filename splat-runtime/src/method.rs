@@ -92,14 +92,21 @@ pub trait SplatMethod: Send + Sync + 'static {
 
     /// `evaluate_adjoint` for eight pixels, added lane by lane into `acc` (lanes outside
     /// `active` add nothing). Summing the lanes once per (tile, primitive) instead of once per
-    /// group of pixels keeps horizontal sums out of the backward blend loop.
+    /// group of pixels keeps horizontal sums out of the backward blend loop. With
+    /// `pixel_info`, the pixel data's cotangent is added lane by lane into `d_pixel` too
+    /// (without it the pixel centre is a constant and `d_pixel` is left alone).
     fn evaluate_adjoint_lanes_accumulate(
         pixel: &Self::PixelLanes,
         shade: &Self::Shade,
         d_out: &ContributionLanes<Self::ColorLanes>,
         active: M32x8,
         acc: &mut Self::ShadeLanes,
+        d_pixel: &mut Self::PixelLanes,
     );
+
+    /// The camera's cotangent through `pixel_info` at `pixel`, given the pixel data's
+    /// cotangent (zero without `pixel_info`).
+    fn pixel_info_adjoint(pixel: Vec2, camera: &Camera, d_out: &Self::Pixel) -> Camera;
 
     /// The shade cotangent whose float slots are `sums` (bool and integer fields zero).
     fn shade_from_float_slots(sums: &[f32]) -> Self::Shade;

@@ -88,6 +88,20 @@ impl Camera {
         model: CameraModel::Pinhole,
     };
 
+    /// The sum of two camera cotangents (every float field; the model is not a cotangent and
+    /// stays `self`'s).
+    pub fn add_cotangent(&self, other: &Camera) -> Camera {
+        Camera {
+            rotation: self.rotation + other.rotation,
+            translation: self.translation + other.translation,
+            focal: self.focal + other.focal,
+            principal: self.principal + other.principal,
+            size: self.size + other.size,
+            distortion: self.distortion + other.distortion,
+            model: self.model,
+        }
+    }
+
     /// The camera centre in world space, `-rotation^T * translation`.
     pub fn center(&self) -> Vec3 {
         -(self.rotation.transpose() * self.translation)

@@ -80,8 +80,16 @@ pub fn backward<M: SplatMethod>(
         &grads,
         &issued,
     ];
-    if M::HAS_PIXEL_INFO {
+    // With `pixel_info`: the cotangent of each pixel's data, for the camera's ray gradient.
+    let npx = M::PixelLanes::default().as_ref().len();
+    let pixel_cotangent = if M::HAS_PIXEL_INFO {
+        Some(gpu.buffer("pixel data cotangents", pixels * npx)?)
+    } else {
+        None
+    };
+    if let Some(pc) = &pixel_cotangent {
         inputs.push(&state.camera);
+        inputs.push(pc);
     }
     let mut enc = gpu.device.create_command_encoder(&Default::default());
     enc.clear_buffer(&grads, 0, None);
@@ -125,7 +133,10 @@ pub fn backward<M: SplatMethod>(
         .take(n)
         .map(M::params_from_float_slots)
         .collect();
-    let partials = gpu.read(&partials, groups as usize * Camera::FLOAT_SLOTS)?;
+    let mut partials = gpu.read(&partials, groups as usize * Camera::FLOAT_SLOTS)?;
+    if let Some(pc) = &pixel_cotangent {
+        partials.extend(pixel_backward::<M>(gpu, state, pc)?);
+    }
     // The model word (last) stays zero: a cotangent has no model.
     let mut cam = vec![0.0f64; Camera::LEN];
     for group in partials.chunks_exact(Camera::FLOAT_SLOTS) {
@@ -162,4 +173,30 @@ impl Accumulation {
             float_atomics: gpu.float_atomics,
         }
     }
+}
+
+/// `pixel_info`'s adjoint over every pixel: the camera gradient's partial sums through the
+/// rays (one per workgroup of 64 pixels).
+fn pixel_backward<M: SplatMethod>(
+    gpu: &Gpu,
+    state: &GpuForwardState<M>,
+    pixel_cotangent: &wgpu::Buffer,
+) -> Result<Vec<u32>, GpuRenderError> {
+    let grid = &state.grid;
+    let pixels = grid.width * grid.height;
+    let pipeline = gpu.pipeline(&entries::pixel_backward::<M>()?, "pixel_backward")?;
+    let groups = pixels.div_ceil(64).max(1);
+    let partials = gpu.buffer(
+        "camera ray gradient partials",
+        groups as usize * Camera::FLOAT_SLOTS,
+    )?;
+    let info = gpu.uniform(&[grid.width, grid.height]);
+    let mut enc = gpu.device.create_command_encoder(&Default::default());
+    let bind = gpu.bind(
+        &pipeline,
+        &[&state.camera, pixel_cotangent, &partials, &info],
+    );
+    dispatch(&mut enc, &pipeline, &bind, groups);
+    gpu.finish(enc)?;
+    Ok(gpu.read(&partials, groups as usize * Camera::FLOAT_SLOTS)?)
 }

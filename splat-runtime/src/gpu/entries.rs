@@ -18,6 +18,7 @@ const TILE_PASS: &str = include_str!("shaders/tile_pass.wgsl");
 const SHADE: &str = include_str!("shaders/shade.wgsl");
 const BACKWARD: &str = include_str!("shaders/backward.wgsl");
 const PROJECT_BACKWARD: &str = include_str!("shaders/project_backward.wgsl");
+const PIXEL_BACKWARD: &str = include_str!("shaders/pixel_backward.wgsl");
 
 /// Bytes of workgroup memory kept free of the batch (counters, flags).
 const RESERVED_BYTES: u32 = 256;
@@ -390,9 +391,39 @@ pub fn backward<M: SplatMethod>(
     } else {
         ""
     };
+    // With `pixel_info`, each pixel sums its data's cotangent and stores it for
+    // `pixel_backward` (the camera's gradient through the rays).
+    let (pixel_binding, pixel_decl, pixel_grads, pixel_store) = if M::HAS_PIXEL_INFO {
+        (
+            "@group(0) @binding(10) var<storage, read_write> pixel_cotangent: array<u32>;".into(),
+            format!("    var d_pixel: array<f32, {np}>;"),
+            (0..np)
+                .map(|k| {
+                    format!(
+                        "                        d_pixel[{k}] += a.{};
+",
+                        adj.results[k].0
+                    )
+                })
+                .collect(),
+            format!(
+                "    if (at.inside) {{
+        for (var k = 0u; k < {np}u; k++) {{
+            pixel_cotangent[(at.y * frame[0].y + at.x) * {np}u + k] = bitcast<u32>(d_pixel[k]);
+        }}
+    }}"
+            ),
+        )
+    } else {
+        (String::new(), String::new(), String::new(), String::new())
+    };
     let body = fill(
         BACKWARD,
         &[
+            ("PIXEL_GRAD_BINDING", pixel_binding),
+            ("PIXEL_GRAD_DECL", pixel_decl),
+            ("PIXEL_GRADS", pixel_grads),
+            ("PIXEL_GRAD_STORE", pixel_store),
             ("REDUCTION_NOTE", note.into()),
             ("NG", layout.grad_words.to_string()),
             ("RC", b.rc.to_string()),
@@ -482,4 +513,42 @@ pub fn project_backward<M: SplatMethod>() -> Result<(String, usize), GpuError> {
         ],
     );
     Ok((format!("{wgsl}\n{body}"), npf))
+}
+
+/// `pixel_backward`: `pixel_info`'s adjoint per pixel, camera gradients per workgroup (only
+/// for methods with `pixel_info`).
+pub fn pixel_backward<M: SplatMethod>() -> Result<String, GpuError> {
+    let wgsl = M::SOURCE.wgsl;
+    let adj = sig(wgsl, "pixel_info_adjoint")?;
+    let ncam = Camera::LEN;
+    // Arguments: the pixel centre, the camera, the pixel data's cotangent. Results: the
+    // centre's cotangent (2), then the camera's float slots.
+    let npx = adj.args.len() - 2 - ncam;
+    let mut args: Vec<String> = vec!["px".into(), "py".into()];
+    args.extend(
+        adj.args[2..2 + ncam]
+            .iter()
+            .enumerate()
+            .map(|(k, kind)| load(*kind, &format!("camera_words[{k}u]"))),
+    );
+    args.extend((0..npx).map(|k| format!("bitcast<f32>(pixel_cotangent[i * NPX + {k}u])")));
+    let write: String = adj.results[2..]
+        .iter()
+        .enumerate()
+        .map(|(k, (m, _))| format!("        cam[{k}] = a.{m};\n"))
+        .collect();
+    let body = fill(
+        PIXEL_BACKWARD,
+        &[
+            ("NCAM", Camera::FLOAT_SLOTS.to_string()),
+            ("NPX", npx.to_string()),
+            ("RED_WORDS", (64 * Camera::FLOAT_SLOTS).to_string()),
+            (
+                "PIXEL_INFO_ADJOINT",
+                format!("{}({})", adj.name, args.join(", ")),
+            ),
+            ("WRITE", write),
+        ],
+    );
+    Ok(format!("{wgsl}\n{body}"))
 }

@@ -21,10 +21,12 @@ pub struct FrameGrad {
     pub depth: Option<Vec<f32>>,
 }
 
-/// One worker's gradient sums per primitive: `shade[i * Shade::LEN..]` and `depth[i]`.
+/// One worker's gradient sums per primitive: `shade[i * Shade::LEN..]` and `depth[i]`; and
+/// the camera's through the pixel data of its pixels (methods with `pixel_info`).
 pub struct Accum {
     pub shade: Vec<f32>,
     pub depth: Vec<f32>,
+    pub camera: Camera,
 }
 
 impl Accum {
@@ -32,6 +34,7 @@ impl Accum {
         Accum {
             shade: vec![0.0; primitives * words],
             depth: vec![0.0; primitives],
+            camera: Camera::ZERO,
         }
     }
 }
@@ -118,6 +121,7 @@ fn backward_tile_body<M: SplatMethod>(
                     - has.select_f32(gd * d_final / (a_safe * a_safe), F32x8::splat(0.0));
             }
             let mut done = !inside;
+            let mut d_pixel = M::PixelLanes::default();
             let mut t = F32x8::splat(1.0);
             let mut c_acc = M::ColorLanes::default();
             let mut d_acc = F32x8::splat(0.0);
@@ -162,8 +166,12 @@ fn backward_tile_body<M: SplatMethod>(
                     &d_out,
                     st.take,
                     &mut shade_lanes[k],
+                    &mut d_pixel,
                 );
                 t = st.take.select_f32(t * one_minus, t);
+            }
+            if M::HAS_PIXEL_INFO {
+                add_ray_gradient::<M>(camera, &d_pixel, inside, x0, y, &mut acc.camera);
             }
         }
     }
@@ -185,5 +193,29 @@ fn backward_tile_body<M: SplatMethod>(
         if want_depth {
             acc.depth[p] += depth_lanes[k].masked_sum(all);
         }
+    }
+}
+
+/// Adds the camera's cotangent through each inside lane's pixel data (`pixel_info`'s adjoint
+/// at the pixel centre, given the pixel data's summed cotangent).
+fn add_ray_gradient<M: SplatMethod>(
+    camera: &Camera,
+    d_pixel: &M::PixelLanes,
+    inside: M32x8,
+    x0: u32,
+    y: u32,
+    out: &mut Camera,
+) {
+    let mut words = [0.0f32; 64];
+    for l in 0..LANES {
+        if !inside.lane(l) {
+            continue;
+        }
+        for (w, lanes) in words.iter_mut().zip(d_pixel.as_ref()) {
+            *w = lanes.0[l];
+        }
+        let centre = glam::Vec2::new((x0 + l as u32) as f32 + 0.5, y as f32 + 0.5);
+        let d = M::pixel_info_adjoint(centre, camera, &M::Pixel::read_words(&words));
+        *out = out.add_cotangent(&d);
     }
 }

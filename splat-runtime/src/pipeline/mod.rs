@@ -388,9 +388,14 @@ pub fn backward<M: SplatMethod>(
     let blend = t0.elapsed();
     // Sum the workers' buffers.
     let t1 = Instant::now();
+    // The camera's cotangent through the pixel rays (`pixel_info`), summed over the workers.
+    let ray_camera = accs
+        .iter()
+        .fold(Camera::ZERO, |c, a| c.add_cotangent(&a.camera));
     let backward::Accum {
         mut shade,
         mut depth,
+        ..
     } = accs.remove(0);
     const CHUNK: usize = 1 << 14;
     let add = |out: &mut [f32], pick: &dyn Fn(&backward::Accum) -> &[f32], c: usize| {
@@ -432,18 +437,11 @@ pub fn backward<M: SplatMethod>(
             M::project_adjoint(&params[i], camera, &d_out)
         })
         .unzip();
-    let camera_grad = camera_grads.par_iter().copied().reduce(
-        || Camera::ZERO,
-        |a, b| Camera {
-            rotation: a.rotation + b.rotation,
-            translation: a.translation + b.translation,
-            focal: a.focal + b.focal,
-            principal: a.principal + b.principal,
-            size: a.size + b.size,
-            distortion: a.distortion + b.distortion,
-            model: a.model,
-        },
-    );
+    let camera_grad = camera_grads
+        .par_iter()
+        .copied()
+        .reduce(|| Camera::ZERO, |a, b| a.add_cotangent(&b))
+        .add_cotangent(&ray_camera);
     let stats = BackwardStats {
         blend,
         reduce,

@@ -208,6 +208,14 @@ pub fn method_impl(module: &syn::Ident, kernels: &[Kernel], diag: &Diag) -> Opti
         }
         None => quote!(pixel),
     };
+    // The camera's cotangent through the pixel data (rays depend on the camera).
+    let pixel_info_adjoint_body = match pixel_info {
+        Some(pi) if pi.adjoint.is_some() => {
+            let a = call_args(pi.def, &[quote!(pixel), quote!(camera)], &[true, false]);
+            quote!(pixel_info_adjoint(#(#a,)* *d_out).1)
+        }
+        _ => quote!(#rt::Camera::ZERO),
+    };
     let eval_call = call_args(
         evaluate.def,
         &[quote!(pixel), quote!(shade)],
@@ -265,12 +273,19 @@ pub fn method_impl(module: &syn::Ident, kernels: &[Kernel], diag: &Diag) -> Opti
     let shade_from_sums = pack(&shade_ty, &mut from_sums);
     let params_from_sums = pack(&params_ty, &mut float_slots(&params_ty.slots()));
     let nsf = idx(float_index);
-    let accumulate: Vec<TokenStream> = (0..float_index)
+    let mut accumulate: Vec<TokenStream> = (0..float_index)
         .map(|k| {
             let (a, b) = (idx(k), idx(np + k));
             quote!(acc[#a] = acc[#a] + active.select_f32(__bars[#b], #f32x8::splat(0.0));)
         })
         .collect();
+    // Only a method with `pixel_info` has pixel data that depends on anything.
+    if pixel_info.is_some() {
+        accumulate.extend((0..np).map(|k| {
+            let k = idx(k);
+            quote!(d_pixel[#k] = d_pixel[#k] + active.select_f32(__bars[#k], #f32x8::splat(0.0));)
+        }));
+    }
     let eval_adjoint = if evaluate.adjoint.is_some() {
         quote! { evaluate_adjoint(#(#eval_call,)* *d_out).1 }
     } else {
@@ -369,8 +384,13 @@ pub fn method_impl(module: &syn::Ident, kernels: &[Kernel], diag: &Diag) -> Opti
                 d_out: &#rt::ContributionLanes<[#f32x8; #nc]>,
                 active: #rt::M32x8,
                 acc: &mut [#f32x8; #nsf],
+                d_pixel: &mut [#f32x8; #np],
             ) {
                 #lanes_accumulate
+            }
+            #[inline]
+            fn pixel_info_adjoint(pixel: #rt::glam::Vec2, camera: &#rt::Camera, d_out: &#px_t) -> #rt::Camera {
+                #pixel_info_adjoint_body
             }
             #[inline]
             fn shade_from_float_slots(sums: &[f32]) -> #s_t {

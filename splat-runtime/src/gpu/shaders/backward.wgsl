@@ -14,6 +14,7 @@ const RC: u32 = {{RC}}u; // gradient words reduced per round
 // Global atomic adds issued (low word, high word).
 @group(0) @binding(8) var<storage, read_write> issued: array<atomic<u32>, 2>;
 {{CAMERA_BINDING}}
+{{PIXEL_GRAD_BINDING}}
 
 var<workgroup> red: array<f32, {{RED_WORDS}}>;
 var<workgroup> group_issued: atomic<u32>;
@@ -52,6 +53,7 @@ fn backward_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
     var d_acc = 0.0;
     var done = !at.inside;
     var my_issued = 0u;
+{{PIXEL_GRAD_DECL}}
     if (lid == 0u) {
         atomicStore(&group_issued, 0u);
     }
@@ -88,6 +90,7 @@ fn backward_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
                         d_alpha += d_alpha_out * t_final / one_minus;
                         let a = {{EVALUATE_ADJOINT}};
 {{SHADE_GRADS}}
+{{PIXEL_GRADS}}
                         t = next;
                     }
                 }
@@ -96,6 +99,7 @@ fn backward_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
 {{SCATTER}}
         }
     }
+{{PIXEL_GRAD_STORE}}
     atomicAdd(&group_issued, my_issued);
     workgroupBarrier();
     if (lid == 0u) {
