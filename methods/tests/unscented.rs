@@ -107,6 +107,17 @@ fn gpu_matches_cpu_on_every_camera_model() {
     }
 }
 
+/// The box widens an approximate footprint (the UT's): the reference says by enough, on a
+/// larger scene than the other tests', for every camera model.
+#[test]
+fn the_box_holds_every_contributing_pixel_on_every_camera_model() {
+    for model in CameraModel::ALL {
+        let cam = wide_camera(96, 64, model);
+        let label = format!("3dgut {model} 96x64");
+        forward_matches_reference::<Method>(&label, &twin(), &scene(&cam, 120), &cam);
+    }
+}
+
 #[test]
 fn the_pinhole_only_method_refuses_a_fisheye_by_name() {
     let cam = wide_camera(16, 16, CameraModel::KannalaBrandt);
