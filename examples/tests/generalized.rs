@@ -1,7 +1,8 @@
 //! Generalized exponential splats: CPU renders against an f64 brute-force reference built from
 //! the method's twin, full-render gradients (β included) against central differences of that
 //! reference, and the falloff itself (β = 2 is the Gaussian; a larger β is flatter inside and
-//! sharper at the edge; the box holds every pixel the alpha threshold keeps).
+//! sharper at the edge; the box holds every pixel the alpha threshold keeps), and the GPU
+//! backend against the CPU backend.
 
 use splat_examples::generalized::generalized::{self, Method, Params, Shade};
 use splat_runtime::glam::{Mat3, Quat, Vec2, Vec3, Vec4};
@@ -113,8 +114,8 @@ fn reference(params: &[Vec<f64>], cam: &Camera) -> Reference {
     r
 }
 
-#[test]
-fn renders_match_an_f64_reference() {
+/// Twelve splats with shapes from 1 to 6 in front of a 48 x 32 camera.
+fn scene() -> (Camera, Vec<Params>) {
     let cam = camera(
         48.0,
         32.0,
@@ -140,6 +141,12 @@ fn renders_match_an_f64_reference() {
             }
         })
         .collect();
+    (cam, params)
+}
+
+#[test]
+fn renders_match_an_f64_reference() {
+    let (cam, params) = scene();
     let opts = RenderOptions {
         tile_size: 8,
         alpha: true,
@@ -171,6 +178,38 @@ fn renders_match_an_f64_reference() {
         covered > want.alpha.len() / 3,
         "the scene should cover the image"
     );
+}
+
+#[test]
+fn the_gpu_renders_what_the_cpu_renders() {
+    let Some(gpu) = splat_runtime::gpu::adapter_or_skip() else {
+        return;
+    };
+    let (cam, params) = scene();
+    for tile_size in [8, 16] {
+        let opts = RenderOptions {
+            tile_size,
+            alpha: true,
+            ..Default::default()
+        };
+        let cpu = render::<Method>(&params, &cam, &opts).unwrap();
+        let g = splat_runtime::gpu::render::render::<Method>(&gpu, &params, &cam, &opts).unwrap();
+        assert_eq!(cpu.stats.intersections, g.stats.intersections);
+        let cpu_alpha = &cpu.alpha.as_ref().unwrap().data;
+        let gpu_alpha = &g.alpha.as_ref().unwrap().data;
+        for (a, b) in cpu
+            .color
+            .data
+            .iter()
+            .chain(cpu_alpha)
+            .zip(g.color.data.iter().chain(gpu_alpha))
+        {
+            assert!(
+                (a - b).abs() <= 1e-4 + 0.01 * a.abs(),
+                "tile {tile_size}: cpu {a} gpu {b}"
+            );
+        }
+    }
 }
 
 /// max |a - b| / max |b| over a group of gradients.
