@@ -101,7 +101,10 @@ pub mod geer {
         let azimuth = dir.y.atan2(dir.x);
         let outer = fisheye_radius(cam.distortion, (polar + half).min(PI));
         let inner = fisheye_radius(cam.distortion, (polar - half).max(0.0));
-        let spread = select(half < polar, (half.sin() / polar.sin()).min(1.0).asin(), PI);
+        // The sector's half-width in azimuth; all around when the cone holds the axis (either
+        // end of it).
+        let around = half >= polar || polar + half >= PI;
+        let spread = select(around, PI, (half.sin() / polar.sin()).min(1.0).asin());
         let mut lo = Vec2::splat(FAR);
         let mut hi = Vec2::splat(-FAR);
         let sides = [-1.0, 1.0, -1.0, 1.0];
@@ -134,8 +137,13 @@ pub mod geer {
         let lambda2 = 2.0 * (opacity / ALPHA_MIN).ln().max(0.0);
         let contour = axes * axes.transpose() * lambda2;
         let t = contour - Mat3::from_cols(mean * mean.x, mean * mean.y, mean * mean.z);
-        let inside = t.z_axis.x * t.z_axis.x < t.z_axis.z * t.x_axis.x
-            || t.z_axis.y * t.z_axis.y < t.z_axis.z * t.y_axis.y;
+        // No tangent plane through the camera's y (x) axis when that axis crosses the
+        // contour: every horizontal (vertical) angle is reached. Both: the camera is inside.
+        let open = Vec2::new(
+            select(t.z_axis.x * t.z_axis.x < t.z_axis.z * t.x_axis.x, FAR, 0.0),
+            select(t.z_axis.y * t.z_axis.y < t.z_axis.z * t.y_axis.y, FAR, 0.0),
+        );
+        let inside = open.min_element() > 0.0;
         let theta = bounds(t.z_axis.z, t.z_axis.x, t.x_axis.x, mean.x.atan2(mean.z));
         let phi = bounds(t.z_axis.z, t.z_axis.y, t.y_axis.y, mean.y.atan2(mean.z));
         let (f, c) = (cam.focal, cam.principal);
@@ -151,7 +159,7 @@ pub mod geer {
             .asin();
         let (fish_lo, fish_hi) = fisheye_box(cam, mean, reach);
         let (box_lo, box_hi) = if cam.model == 2u32 {
-            (f * lo + c, f * hi + c)
+            (f * lo + c - open, f * hi + c + open)
         } else if cam.model == 1u32 {
             (fish_lo, fish_hi)
         } else {
@@ -160,7 +168,8 @@ pub mod geer {
                 select(ahead, pin_hi, c + FAR),
             )
         };
-        let whole = inside || reach >= PI / 2.0;
+        // The fisheye's cone bound covers everything once it reaches a half space.
+        let whole = inside || (cam.model == 1u32 && reach >= PI / 2.0);
         let whiten = Mat3::from_diagonal(Vec3::ONE / scale) * rot.transpose();
         Projected {
             visible: mean.length() > NEAR && cam.can_project(mean) && opacity >= ALPHA_MIN,

@@ -1,13 +1,14 @@
 //! 3DGEER on every camera model: the CPU render against the f64 brute-force reference, the
 //! PBF tile association conservative, render gradients against finite differences, the GPU
-//! backend against the CPU backend, and the hard cases (flat Gaussians, particles behind the
-//! camera of a fisheye past 180 degrees, the camera inside a particle).
+//! backend against the CPU backend, the boxes conservative, and the hard cases (flat
+//! Gaussians, a fisheye past 180 degrees, the camera inside a particle, rays that must not
+//! pick up particles behind the camera).
 
 mod common;
 
 use common::checks::{
-    forward_matches_reference, gpu_forward_matches_cpu, gpu_gradients_match_cpu,
-    gradients_match_finite_differences,
+    boxes_hold_every_contributing_pixel, forward_matches_reference, gpu_forward_matches_cpu,
+    gpu_gradients_match_cpu, gradients_match_finite_differences,
 };
 use common::{CAMERA_GROUPS, GAUSSIAN_GROUPS, gaussian_toward, wide_camera};
 use splat_methods::geer::{Method, Params};
@@ -175,7 +176,7 @@ fn hard_cases_stay_finite_and_exact() {
             vec![gaussian(Vec3::new(0.1, 0.0, 0.2), Vec3::splat(0.5))],
         ),
         (
-            "a fisheye past 180 degrees: a particle 100 degrees off axis, one straight behind",
+            "a fisheye past 180 degrees: a particle 100 degrees off axis, one straight behind (culled: past can_project's 172 degrees)",
             fisheye,
             vec![
                 gaussian(Vec3::new(2.9, 0.2, -0.5), Vec3::splat(-1.0)),
@@ -204,28 +205,50 @@ fn hard_cases_stay_finite_and_exact() {
         );
         forward_matches_reference::<Method>(name, &twin(), &params, &cam);
     }
-    // The particle behind the fisheye is not picked up: only the one 100 degrees off axis shows.
-    let ahead = render::<Method>(
-        &[gaussian(Vec3::new(2.9, 0.2, -0.5), Vec3::splat(-1.0))],
-        &fisheye,
-        &Default::default(),
-    )
-    .unwrap();
-    let both = render::<Method>(
-        &[
-            gaussian(Vec3::new(2.9, 0.2, -0.5), Vec3::splat(-1.0)),
-            gaussian(Vec3::new(0.0, 0.0, -3.0), Vec3::splat(-1.0)),
-        ],
-        &fisheye,
-        &Default::default(),
-    )
-    .unwrap();
+}
+
+/// The PBF boxes (exact for pinhole and BEAP, a cone image for the fisheye) cut nothing off.
+#[test]
+fn the_boxes_hold_every_contributing_pixel() {
+    for model in CameraModel::ALL {
+        let cam = wide_camera(96, 64, model);
+        let label = format!("3dgeer {model}");
+        let checked = boxes_hold_every_contributing_pixel::<Method>(
+            &label,
+            &twin(),
+            &scene(&cam, 120),
+            &cam,
+            1.0 / 255.0,
+        );
+        println!("{label}: {checked} (primitive, pixel) pairs outside the boxes, all below 1/255");
+    }
+}
+
+/// A ray starts at the camera: a particle behind its origin, which the whole-line integral
+/// exp(-D²/2) would count in full, contributes only its tail at the camera (here nothing);
+/// the ray turned around sees it.
+#[test]
+fn rays_do_not_pick_up_particles_behind_the_camera() {
+    use splat_methods::geer::{Ray, Shade, evaluate};
+    use splat_runtime::glam::Mat3;
+    let shade = Shade {
+        // A unit particle 4 units behind the camera on the optical axis, seen from the camera.
+        origin: Vec3::new(0.0, 0.0, 4.0),
+        whiten: Mat3::IDENTITY,
+        opacity: 0.9,
+        color: Vec3::ONE,
+    };
+    let forward = evaluate(Ray { dir: Vec3::Z }, &shade);
+    let backward = evaluate(Ray { dir: -Vec3::Z }, &shade);
     assert!(
-        ahead.color.data.iter().any(|v| *v > 0.01),
-        "the particle 100 degrees off axis is seen"
+        !forward.valid && forward.alpha < 1e-4,
+        "forward ray: alpha {}",
+        forward.alpha
     );
-    assert_eq!(
-        ahead.color.data, both.color.data,
-        "the particle behind the camera is not picked up"
+    assert!(
+        // Φ(4) = 0.99997: the closest point is four standard deviations down the ray.
+        backward.valid && (backward.alpha - 0.9 * 0.999_968).abs() < 1e-6,
+        "backward ray: alpha {}",
+        backward.alpha
     );
 }

@@ -5,8 +5,8 @@
 mod common;
 
 use common::checks::{
-    forward_matches_reference, gpu_forward_matches_cpu, gpu_gradients_match_cpu,
-    gradients_match_finite_differences,
+    boxes_hold_every_contributing_pixel, forward_matches_reference, gpu_forward_matches_cpu,
+    gpu_gradients_match_cpu, gradients_match_finite_differences,
 };
 use common::{CAMERA_GROUPS, GAUSSIAN_GROUPS, camera, gaussian_at, wide_camera};
 use splat_methods::linprim::{Method, Params};
@@ -69,6 +69,20 @@ fn forward_matches_the_reference() {
         coverage > 0.2,
         "the scene should cover the image ({coverage})"
     );
+}
+
+/// The boxes (the projected vertices) cut nothing off.
+#[test]
+fn the_boxes_hold_every_contributing_pixel() {
+    let cam = camera(96, 64);
+    let checked = boxes_hold_every_contributing_pixel::<Method>(
+        "linprim",
+        &twin(),
+        &scene(&cam, 120),
+        &cam,
+        1.0 / 255.0,
+    );
+    println!("linprim: {checked} (primitive, pixel) pairs outside the boxes, all below 1/255");
 }
 
 #[test]

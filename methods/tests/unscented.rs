@@ -5,8 +5,8 @@
 mod common;
 
 use common::checks::{
-    forward_matches_reference, gpu_forward_matches_cpu, gpu_gradients_match_cpu,
-    gradients_match_finite_differences,
+    boxes_hold_every_contributing_pixel, forward_matches_reference, gpu_forward_matches_cpu,
+    gpu_gradients_match_cpu, gradients_match_finite_differences,
 };
 use common::{CAMERA_GROUPS, GAUSSIAN_GROUPS, gaussian_toward, wide_camera};
 use splat_methods::gut::{Method, Params};
@@ -76,7 +76,7 @@ fn covering_scene(cam: &Camera) -> Vec<Params> {
 /// the fisheye's distortion coefficients too.
 #[test]
 fn render_gradients_match_finite_differences() {
-    for model in [CameraModel::Pinhole, CameraModel::KannalaBrandt] {
+    for model in CameraModel::ALL {
         let cam = wide_camera(24, 16, model);
         let cameras = if model == CameraModel::KannalaBrandt {
             &CAMERA_GROUPS[..]
@@ -107,14 +107,21 @@ fn gpu_matches_cpu_on_every_camera_model() {
     }
 }
 
-/// The box widens an approximate footprint (the UT's): the reference says by enough, on a
-/// larger scene than the other tests', for every camera model.
+/// The box widens an approximate footprint (the UT's): no pixel outside it gets alpha 1/255
+/// from the primitive, on every camera model.
 #[test]
 fn the_box_holds_every_contributing_pixel_on_every_camera_model() {
     for model in CameraModel::ALL {
         let cam = wide_camera(96, 64, model);
-        let label = format!("3dgut {model} 96x64");
-        forward_matches_reference::<Method>(&label, &twin(), &scene(&cam, 120), &cam);
+        let label = format!("3dgut {model}");
+        let checked = boxes_hold_every_contributing_pixel::<Method>(
+            &label,
+            &twin(),
+            &scene(&cam, 120),
+            &cam,
+            1.0 / 255.0,
+        );
+        println!("{label}: {checked} (primitive, pixel) pairs outside the boxes, all below 1/255");
     }
 }
 

@@ -141,7 +141,9 @@ impl Camera {
                     let t2 = theta * theta;
                     let slope = 1.0
                         + t2 * (3.0 * k.x + t2 * (5.0 * k.y + t2 * (7.0 * k.z + t2 * 9.0 * k.w)));
-                    theta -= (self.kb_distort(theta) - r) / slope;
+                    // Past the polynomial's fold the steps would run off: keep a direction.
+                    theta = (theta - (self.kb_distort(theta) - r) / slope)
+                        .clamp(0.0, std::f32::consts::PI);
                 }
                 let dir = if r > 1e-20 { m / r } else { Vec2::ZERO };
                 (dir * theta.sin()).extend(theta.cos())

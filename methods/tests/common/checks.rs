@@ -69,6 +69,43 @@ pub fn forward_matches_reference<M: SplatMethod>(
     reference.alpha.iter().sum::<f64>() / reference.alpha.len() as f64
 }
 
+/// Every pixel outside a primitive's box gets alpha below `alpha_min` from it (the reference,
+/// one primitive at a time): the box, however approximate its construction, cuts nothing off.
+/// Returns how many (primitive, pixel) pairs were checked outside the boxes.
+pub fn boxes_hold_every_contributing_pixel<M: SplatMethod>(
+    label: &str,
+    twin: &Twin,
+    params: &[M::Params],
+    cam: &Camera,
+    alpha_min: f64,
+) -> usize {
+    let (w, h) = (cam.size.x as usize, cam.size.y as usize);
+    let mut outside = 0;
+    for (i, p) in params.iter().enumerate() {
+        let projected = M::project(p, cam);
+        if !projected.visible {
+            continue;
+        }
+        let solo = render_with(twin, &[words(p)], &camera_words(cam), cam.model);
+        let (lo, hi) = (projected.bbox_min, projected.bbox_max);
+        for y in 0..h {
+            for x in 0..w {
+                let (cx, cy) = (x as f32 + 0.5, y as f32 + 0.5);
+                if cx >= lo.x && cx <= hi.x && cy >= lo.y && cy <= hi.y {
+                    continue;
+                }
+                outside += 1;
+                let a = solo.alpha[y * w + x];
+                assert!(
+                    a < alpha_min,
+                    "{label}: primitive {i} reaches alpha {a} at ({cx}, {cy}), outside its box {lo} .. {hi}"
+                );
+            }
+        }
+    }
+    outside
+}
+
 /// Random loss weights on color, alpha and depth for a `width x height` frame.
 fn weights(n: usize, channels: usize) -> [Vec<f64>; 3] {
     let mut rng = fastrand::Rng::with_seed(10);

@@ -24,7 +24,7 @@ pub fn sh_helper(n: usize) -> String {
 }
 
 /// Methods that read the camera model: a kernel calling them works with every model.
-pub const MODEL_AWARE: &[&str] = &["project_point", "pixel_ray", "can_project"];
+pub const MODEL_AWARE: &[&str] = &["project_point", "pixel_ray"];
 
 /// Model codes are `CameraModel as u32`: 0 pinhole, 1 Kannala-Brandt, 2 equiangular.
 const SOURCE: &str = r#"
@@ -59,7 +59,9 @@ fn __camera_pixel_ray(cam: &Camera, pixel: Vec2) -> Vec3 {
             let t2 = theta * theta;
             let value = theta * (1.0 + t2 * (k.x + t2 * (k.y + t2 * (k.z + t2 * k.w))));
             let slope = 1.0 + t2 * (3.0 * k.x + t2 * (5.0 * k.y + t2 * (7.0 * k.z + t2 * 9.0 * k.w)));
-            theta -= (value - r) / slope;
+            // Past the polynomial's fold (a pixel no ray reaches) the steps would run off:
+            // keep theta a direction.
+            theta = (theta - (value - r) / slope).clamp(0.0, 3.14159265);
         }
         let dir = select(r > 1e-20, m / r, Vec2::ZERO);
         (dir * theta.sin()).extend(theta.cos())

@@ -132,9 +132,9 @@ struct RenderArgs {
     /// Camera JSON (default: the built-in view, at --width x --height, of --camera-model).
     #[arg(long)]
     camera: Option<PathBuf>,
-    /// The built-in camera's model (a camera file names its own).
-    #[arg(long, value_enum, default_value_t = Model::Pinhole)]
-    camera_model: Model,
+    /// The built-in camera's model (default pinhole; a camera file names its own).
+    #[arg(long, value_enum, conflicts_with = "camera")]
+    camera_model: Option<Model>,
     #[arg(long, value_enum, default_value_t = Method::Gs3d)]
     method: Method,
     /// Output file: .png, .exr or .npy.
@@ -265,10 +265,17 @@ fn gallery(out: &std::path::Path, width: u32, height: u32) -> Result<()> {
             let camera = scene::camera(width, height, model);
             let frame = match render_method(method, &cloud, &camera, &opts, Backend::Cpu) {
                 Ok((frame, _)) => frame,
-                Err(e) => {
+                // A pinhole-only method on another model: a dark panel. Any other error is one.
+                Err(e)
+                    if matches!(
+                        e.downcast_ref::<splat_runtime::RenderError>(),
+                        Some(splat_runtime::RenderError::CameraModel { .. })
+                    ) =>
+                {
                     println!("{} / {model}: {e}", method.name());
                     continue;
                 }
+                Err(e) => return Err(e),
             };
             for y in 0..height {
                 let src = (y * width * 3) as usize;
@@ -327,7 +334,8 @@ fn render_cmd(args: &RenderArgs) -> Result<()> {
                     side.end()
                 );
             }
-            scene::camera(args.width, args.height, args.camera_model.into())
+            let model = args.camera_model.unwrap_or(Model::Pinhole);
+            scene::camera(args.width, args.height, model.into())
         }
     };
     let load = t0.elapsed();

@@ -115,8 +115,8 @@ pub fn planet() -> GaussianCloud {
 }
 
 /// Looks at the origin from slightly above the ring plane, 6 units away: a pinhole with a
-/// 58° horizontal field of view, a 190° fisheye (equidistant with a little distortion) or a
-/// 126° equiangular camera.
+/// 58° horizontal field of view, a nearly equidistant fisheye seeing 183° across and 225°
+/// diagonally, or a 126° equiangular camera.
 pub fn camera(width: u32, height: u32, model: CameraModel) -> Camera {
     let eye = Vec3::new(0.0, 1.5, -5.8);
     let forward = (-eye).normalize();

@@ -132,6 +132,20 @@ fn every_method_renders_on_the_cameras_it_supports() {
         dir.path(),
     );
     fails(&out, "pinhole camera only", &dir.path().join("no.png"));
+    // A camera file names its own model.
+    let out = splat(
+        &[
+            "render",
+            "--camera",
+            "cam.json",
+            "--camera-model",
+            "equiangular",
+            "--out",
+            "no.png",
+        ],
+        dir.path(),
+    );
+    fails(&out, "cannot be used with", &dir.path().join("no.png"));
 }
 
 #[test]

@@ -207,12 +207,21 @@ fn add_ray_gradient<M: SplatMethod>(
     out: &mut Camera,
 ) {
     let mut words = [0.0f32; 64];
+    assert!(
+        M::Pixel::LEN <= words.len(),
+        "pixel data larger than 64 words"
+    );
     for l in 0..LANES {
         if !inside.lane(l) {
             continue;
         }
         for (w, lanes) in words.iter_mut().zip(d_pixel.as_ref()) {
             *w = lanes.0[l];
+        }
+        // A pixel no primitive took has no ray gradient (and a degenerate ray cannot poison
+        // the sum through 0 * NaN).
+        if words.iter().all(|w| *w == 0.0) {
+            continue;
         }
         let centre = glam::Vec2::new((x0 + l as u32) as f32 + 0.5, y as f32 + 0.5);
         let d = M::pixel_info_adjoint(centre, camera, &M::Pixel::read_words(&words));

@@ -35,7 +35,8 @@ fn pixel_backward(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
         }
         workgroupBarrier();
     }
-    if (lid < NCAM) {
+    // Dispatches past 65,535 groups are rounded up to whole rows: extra groups write nothing.
+    if (lid < NCAM && group * 64u < info.x * info.y) {
         camera_partials[group * NCAM + lid] = red[lid * 64u];
     }
 }

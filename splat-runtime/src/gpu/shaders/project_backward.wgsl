@@ -49,7 +49,8 @@ fn project_backward(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invoca
         }
         workgroupBarrier();
     }
-    if (lid < NCAM) {
+    // Dispatches past 65,535 groups are rounded up to whole rows: extra groups write nothing.
+    if (lid < NCAM && group * 64u < max(info.x, 1u)) {
         camera_partials[group * NCAM + lid] = red[lid * 64u];
     }
 }
