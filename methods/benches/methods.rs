@@ -6,8 +6,9 @@
 //!
 //! `cargo bench -p splat-methods --bench methods [-- N WIDTH HEIGHT]`
 
-use splat_methods::{geer, gs3d, gut, linprim};
+use splat_methods::{FromStored, geer, gs3d, gut, linprim};
 use splat_runtime::glam::Vec2;
+use splat_runtime::io::ply::StoredGaussian;
 use splat_runtime::{
     Camera, CameraModel, Frame, FrameGrad, RenderOptions, SplatMethod, backward, render,
     render_for_backward,
@@ -75,30 +76,29 @@ fn psnr(a: &[f32], b: &[f32]) -> f64 {
     10.0 * (1.0 / mse).log10()
 }
 
-/// The same Gaussians in another method's parameter type (all share the 3DGS fields).
-macro_rules! convert {
-    ($ps:expr, $m:ident) => {
-        $ps.iter()
-            .map(|p| $m::Params {
-                mean: p.mean,
-                log_scale: p.log_scale,
-                rotation: p.rotation,
-                opacity_logit: p.opacity_logit,
-                sh: p.sh,
+/// The same Gaussians as another method's parameters, through its `FromStored` (as the CLI
+/// converts a PLY scene: LinPrim's octahedra get their vertices at two standard deviations).
+fn as_method<P: FromStored>(gaussians: &[gs3d::Params]) -> Vec<P> {
+    gaussians
+        .iter()
+        .map(|g| {
+            P::from_stored(&StoredGaussian {
+                mean: g.mean,
+                log_scale: g.log_scale,
+                rotation: g.rotation,
+                opacity_logit: g.opacity_logit,
+                sh: g.sh,
             })
-            .collect::<Vec<_>>()
-    };
+        })
+        .collect()
 }
 
 fn main() {
     let (n, w, h) = size_args(100_000, 960, 540);
     let gaussians = scene(n);
-    let (gut_params, geer_params) = (convert!(gaussians, gut), convert!(gaussians, geer));
-    // Octahedra with vertices at two standard deviations (as the CLI converts scenes).
-    let mut lin_params = convert!(gaussians, linprim);
-    for p in &mut lin_params {
-        p.log_scale += std::f32::consts::LN_2;
-    }
+    let gut_params: Vec<gut::Params> = as_method(&gaussians);
+    let lin_params: Vec<linprim::Params> = as_method(&gaussians);
+    let geer_params: Vec<geer::Params> = as_method(&gaussians);
     println!(
         "{n} Gaussians (SH degree 3), {w}x{h}, {} threads, tile 16",
         rayon::current_num_threads()

@@ -250,15 +250,3 @@ pub mod geer {
         }
     }
 }
-
-impl crate::FromStored for geer::Params {
-    fn from_stored(g: &splat_runtime::io::ply::StoredGaussian) -> Self {
-        geer::Params {
-            mean: g.mean,
-            log_scale: g.log_scale,
-            rotation: g.rotation,
-            opacity_logit: g.opacity_logit,
-            sh: g.sh,
-        }
-    }
-}

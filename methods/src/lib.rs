@@ -14,3 +14,22 @@ pub use unscented::gut;
 pub trait FromStored {
     fn from_stored(g: &splat_runtime::io::ply::StoredGaussian) -> Self;
 }
+
+/// `FromStored` for methods whose parameters are the stored Gaussian's fields as they are.
+macro_rules! from_stored_as_is {
+    ($($params:path),*) => {$(
+        impl FromStored for $params {
+            fn from_stored(g: &splat_runtime::io::ply::StoredGaussian) -> Self {
+                Self {
+                    mean: g.mean,
+                    log_scale: g.log_scale,
+                    rotation: g.rotation,
+                    opacity_logit: g.opacity_logit,
+                    sh: g.sh,
+                }
+            }
+        }
+    )*};
+}
+
+from_stored_as_is!(gut::Params, geer::Params);

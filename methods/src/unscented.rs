@@ -105,15 +105,3 @@ pub mod gut {
         }
     }
 }
-
-impl crate::FromStored for gut::Params {
-    fn from_stored(g: &splat_runtime::io::ply::StoredGaussian) -> Self {
-        gut::Params {
-            mean: g.mean,
-            log_scale: g.log_scale,
-            rotation: g.rotation,
-            opacity_logit: g.opacity_logit,
-            sh: g.sh,
-        }
-    }
-}

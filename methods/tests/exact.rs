@@ -8,56 +8,25 @@ mod common;
 
 use common::checks::{
     boxes_hold_every_contributing_pixel, forward_matches_reference, gpu_forward_matches_cpu,
-    gpu_gradients_match_cpu, gradients_match_finite_differences,
+    gpu_gradients_match_cpu, gradients_match_finite_differences, tile_cull_is_conservative,
 };
-use common::{CAMERA_GROUPS, GAUSSIAN_GROUPS, gaussian_toward, wide_camera};
+use common::{
+    CAMERA_GROUPS, GAUSSIAN_GROUPS, as_method, covering_gaussians, spread_gaussians, wide_camera,
+};
 use splat_methods::geer::{Method, Params};
-use splat_runtime::glam::{Vec2, Vec3};
+use splat_runtime::glam::Vec3;
 use splat_runtime::{Camera, CameraModel, RenderOptions, render};
-
-fn to_geer(p: splat_methods::gs3d::Params) -> Params {
-    Params {
-        mean: p.mean,
-        log_scale: p.log_scale,
-        rotation: p.rotation,
-        opacity_logit: p.opacity_logit,
-        sh: p.sh,
-    }
-}
 
 fn twin() -> common::Twin {
     twin!(splat_methods::geer, pixel_info)
 }
 
-/// Gaussians spread over the whole image (and past its edges), 1.5 to 6 units away; larger
-/// on the wide cameras.
 fn scene(cam: &Camera, count: usize) -> Vec<Params> {
-    let mut rng = fastrand::Rng::with_seed(51);
-    let log_scale = if cam.model == CameraModel::Pinhole {
-        -2.5
-    } else {
-        -1.4
-    };
-    (0..count)
-        .map(|_| {
-            let px = Vec2::new(rng.f32() * 1.2 - 0.1, rng.f32() * 1.2 - 0.1) * cam.size;
-            let d = 1.5 + rng.f32() * 4.5;
-            to_geer(gaussian_toward(&mut rng, cam, px, d, log_scale))
-        })
-        .collect()
+    as_method(spread_gaussians(cam, count, 51))
 }
 
-/// Four large Gaussians that cover the small image with alpha above 2/255 everywhere.
 fn covering_scene(cam: &Camera) -> Vec<Params> {
-    let mut rng = fastrand::Rng::with_seed(9);
-    (0..4)
-        .map(|i| {
-            let px = Vec2::new(8.0 + 3.0 * i as f32, 6.0 + 1.5 * i as f32);
-            let mut p = gaussian_toward(&mut rng, cam, px, 3.0 + 0.5 * i as f32, 0.4);
-            p.opacity_logit = -1.0 + 0.4 * rng.f32();
-            to_geer(p)
-        })
-        .collect()
+    as_method(covering_gaussians(cam))
 }
 
 #[test]
@@ -77,42 +46,10 @@ fn forward_matches_the_reference_on_every_camera_model() {
 fn the_tile_association_is_conservative() {
     for model in CameraModel::ALL {
         let cam = wide_camera(96, 64, model);
-        let params = scene(&cam, 120);
-        let opts = |tile_cull| RenderOptions {
-            tile_size: 8,
-            alpha: true,
-            tile_cull,
-            ..Default::default()
-        };
-        let culled = render::<Method>(&params, &cam, &opts(true)).unwrap();
-        let all = render::<Method>(&params, &cam, &opts(false)).unwrap();
-        let diff = culled
-            .color
-            .data
-            .iter()
-            .zip(&all.color.data)
-            .chain(
-                culled
-                    .alpha
-                    .as_ref()
-                    .unwrap()
-                    .data
-                    .iter()
-                    .zip(&all.alpha.as_ref().unwrap().data),
-            )
-            .fold(0.0f32, |m, (a, b)| m.max((a - b).abs()));
-        println!(
-            "3dgeer {model}: {} intersections with the PBF-CSF test, {} without; largest difference {diff:e}",
-            culled.stats.intersections, all.stats.intersections
-        );
-        assert!(
-            diff <= 1e-6,
-            "{model}: the tile association dropped a contributing pair ({diff})"
-        );
+        tile_cull_is_conservative::<Method>(&format!("3dgeer {model}"), &scene(&cam, 120), &cam);
     }
 }
 
-/// The camera's gradient includes the path through the pixel rays (`pixel_info`'s adjoint).
 #[test]
 fn render_gradients_match_finite_differences() {
     for model in CameraModel::ALL {

@@ -11,7 +11,7 @@
 
 mod common;
 
-use common::{camera, camera_words, gaussian_at, group_error, param_words};
+use common::{camera, camera_words, gaussian_at, group_error, words};
 use splat_methods::gs3d::{Method, Params};
 use splat_runtime::glam::Vec2;
 use splat_runtime::gpu::adapter_or_skip;
@@ -177,7 +177,7 @@ fn gpu_gradients_match_cpu() {
         for acc in &modes {
             let g = splat_runtime::gpu::backward::backward(&gpu, &gstate, &grad, *acc).unwrap();
             atomics.push(g.atomics);
-            let words = |ps: &[Params]| -> Vec<Vec<f64>> { ps.iter().map(param_words).collect() };
+            let words = |ps: &[Params]| -> Vec<Vec<f64>> { ps.iter().map(words).collect() };
             let (gw, cw) = (words(&g.gradients.params), words(&cpu.params));
             let groups = [
                 ("mean", 0..3),

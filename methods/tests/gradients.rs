@@ -42,7 +42,7 @@ fn render_gradients_match_finite_differences() {
             p
         })
         .collect();
-    let words: Vec<Vec<f64>> = params.iter().map(common::param_words).collect();
+    let words: Vec<Vec<f64>> = params.iter().map(common::words).collect();
     let cam_words = common::camera_words(&cam);
 
     // Clear of the thresholds: alpha of every Gaussian above 1/255 at every pixel, T high.

@@ -60,7 +60,7 @@ fn hard_scene() -> Vec<Params> {
 fn hard_cases_match_the_reference_and_stay_finite() {
     let cam = camera(40, 32);
     let ps = hard_scene();
-    let words: Vec<Vec<f64>> = ps.iter().map(common::param_words).collect();
+    let words: Vec<Vec<f64>> = ps.iter().map(common::words).collect();
     let reference = common::render(&words, &common::camera_words(&cam));
     for tile_size in [8, 16] {
         let opts = RenderOptions {

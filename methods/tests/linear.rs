@@ -6,12 +6,12 @@ mod common;
 
 use common::checks::{
     boxes_hold_every_contributing_pixel, forward_matches_reference, gpu_forward_matches_cpu,
-    gpu_gradients_match_cpu, gradients_match_finite_differences,
+    gpu_gradients_match_cpu, gradients_match_finite_differences, tile_cull_is_conservative,
 };
 use common::{CAMERA_GROUPS, GAUSSIAN_GROUPS, camera, gaussian_at, wide_camera};
 use splat_methods::linprim::{Method, Params};
 use splat_runtime::glam::Vec2;
-use splat_runtime::{Camera, CameraModel, RenderOptions, render};
+use splat_runtime::{Camera, CameraModel, render};
 
 fn to_linprim(p: splat_methods::gs3d::Params) -> Params {
     Params {
@@ -88,48 +88,8 @@ fn the_boxes_hold_every_contributing_pixel() {
 #[test]
 fn the_tile_cull_is_conservative() {
     let cam = camera(96, 64);
-    let params = scene(&cam, 120);
-    for tile_size in [8, 16] {
-        let opts = |tile_cull| RenderOptions {
-            tile_size,
-            alpha: true,
-            depth: true,
-            tile_cull,
-            ..Default::default()
-        };
-        let culled = render::<Method>(&params, &cam, &opts(true)).unwrap();
-        let all = render::<Method>(&params, &cam, &opts(false)).unwrap();
-        let outputs = [
-            ("color", &culled.color.data, &all.color.data),
-            (
-                "alpha",
-                &culled.alpha.as_ref().unwrap().data,
-                &all.alpha.as_ref().unwrap().data,
-            ),
-            (
-                "depth",
-                &culled.depth.as_ref().unwrap().data,
-                &all.depth.as_ref().unwrap().data,
-            ),
-        ];
-        let mut worst = 0.0f32;
-        for (what, a, b) in outputs {
-            for (i, (x, y)) in a.iter().zip(b.iter()).enumerate() {
-                worst = worst.max((x - y).abs());
-                assert!(
-                    (x - y).abs() <= 1e-6,
-                    "tile {tile_size}, {what}[{i}]: {x} with the cull, {y} without"
-                );
-            }
-        }
-        println!(
-            "tile {tile_size}: {} intersections with the cull, {} without; largest difference {worst:e}",
-            culled.stats.intersections, all.stats.intersections
-        );
-        assert!(
-            culled.stats.intersections < all.stats.intersections,
-            "the cull removes pairs"
-        );
+    for (with, without) in tile_cull_is_conservative::<Method>("linprim", &scene(&cam, 120), &cam) {
+        assert!(with < without, "the cull removes pairs");
     }
 }
 

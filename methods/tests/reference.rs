@@ -3,55 +3,15 @@
 
 mod common;
 
+use common::checks::forward_matches_reference;
 use common::{camera, gaussian_at};
 use splat_methods::gs3d::{Method, Params};
 use splat_runtime::glam::Vec2;
 use splat_runtime::{Camera, RenderOptions, render};
 
 fn compare(name: &str, params: &[Params], cam: &Camera) {
-    let words: Vec<Vec<f64>> = params.iter().map(common::param_words).collect();
-    let reference = common::render(&words, &common::camera_words(cam));
-    for tile_size in [8, 16] {
-        let opts = RenderOptions {
-            tile_size,
-            alpha: true,
-            depth: true,
-            ..Default::default()
-        };
-        let frame = render::<Method>(params, cam, &opts).expect("render");
-        let mut worst = 0.0f64;
-        let outputs = [
-            ("color", &frame.color.data, &reference.color),
-            (
-                "alpha",
-                &frame.alpha.as_ref().unwrap().data,
-                &reference.alpha,
-            ),
-            (
-                "depth",
-                &frame.depth.as_ref().unwrap().data,
-                &reference.depth,
-            ),
-        ];
-        for (what, got, want) in outputs {
-            assert_eq!(got.len(), want.len());
-            for (i, (g, w)) in got.iter().zip(want.iter()).enumerate() {
-                let err = (*g as f64 - w).abs();
-                let bound = 1e-5 + 0.01 * w.abs();
-                worst = worst.max(err / bound);
-                assert!(
-                    err <= bound,
-                    "{name}, tile {tile_size}, {what}[{i}]: {g} vs reference {w}"
-                );
-            }
-        }
-        let coverage = reference.alpha.iter().sum::<f64>() / reference.alpha.len() as f64;
-        println!(
-            "{name}, tile {tile_size}: {} visible, {} intersections, mean alpha {coverage:.3}; worst error {:.3} of the bound",
-            frame.stats.visible, frame.stats.intersections, worst
-        );
-        assert!(coverage > 0.2, "{name}: the scene should cover the image");
-    }
+    let coverage = forward_matches_reference::<Method>(name, &common::gs3d(), params, cam);
+    assert!(coverage > 0.2, "{name}: the scene should cover the image");
 }
 
 #[test]

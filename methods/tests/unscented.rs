@@ -8,37 +8,14 @@ use common::checks::{
     boxes_hold_every_contributing_pixel, forward_matches_reference, gpu_forward_matches_cpu,
     gpu_gradients_match_cpu, gradients_match_finite_differences,
 };
-use common::{CAMERA_GROUPS, GAUSSIAN_GROUPS, gaussian_toward, wide_camera};
+use common::{
+    CAMERA_GROUPS, GAUSSIAN_GROUPS, as_method, covering_gaussians, spread_gaussians, wide_camera,
+};
 use splat_methods::gut::{Method, Params};
-use splat_runtime::glam::Vec2;
 use splat_runtime::{Camera, CameraModel};
 
-fn to_gut(p: splat_methods::gs3d::Params) -> Params {
-    Params {
-        mean: p.mean,
-        log_scale: p.log_scale,
-        rotation: p.rotation,
-        opacity_logit: p.opacity_logit,
-        sh: p.sh,
-    }
-}
-
-/// Gaussians spread over the whole image (and past its edges), 1.5 to 6 units away; larger
-/// on the wide cameras, which have fewer pixels per radian.
 fn scene(cam: &Camera, count: usize) -> Vec<Params> {
-    let log_scale = if cam.model == CameraModel::Pinhole {
-        -2.5
-    } else {
-        -1.4
-    };
-    let mut rng = fastrand::Rng::with_seed(31);
-    (0..count)
-        .map(|_| {
-            let px = Vec2::new(rng.f32() * 1.2 - 0.1, rng.f32() * 1.2 - 0.1) * cam.size;
-            let d = 1.5 + rng.f32() * 4.5;
-            to_gut(gaussian_toward(&mut rng, cam, px, d, log_scale))
-        })
-        .collect()
+    as_method(spread_gaussians(cam, count, 31))
 }
 
 fn twin() -> common::Twin {
@@ -59,17 +36,8 @@ fn forward_matches_the_reference_on_every_camera_model() {
     }
 }
 
-/// Four large Gaussians that cover the small image with alpha above 2/255 everywhere.
 fn covering_scene(cam: &Camera) -> Vec<Params> {
-    let mut rng = fastrand::Rng::with_seed(9);
-    (0..4)
-        .map(|i| {
-            let px = Vec2::new(8.0 + 3.0 * i as f32, 6.0 + 1.5 * i as f32);
-            let mut p = gaussian_toward(&mut rng, cam, px, 3.0 + 0.5 * i as f32, 0.4);
-            p.opacity_logit = -1.0 + 0.4 * rng.f32();
-            to_gut(p)
-        })
-        .collect()
+    as_method(covering_gaussians(cam))
 }
 
 /// The camera's gradient includes the path through the pixel rays (`pixel_info`'s adjoint);

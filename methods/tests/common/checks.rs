@@ -106,6 +106,54 @@ pub fn boxes_hold_every_contributing_pixel<M: SplatMethod>(
     outside
 }
 
+/// Rendering with and without the method's `tile_cull` (tiles 8 and 16) gives the same color,
+/// alpha and depth within 1e-6: the cull drops only pairs the alpha threshold would skip.
+/// Returns the intersection counts (with the cull, without) per tile size.
+pub fn tile_cull_is_conservative<M: SplatMethod>(
+    label: &str,
+    params: &[M::Params],
+    cam: &Camera,
+) -> Vec<(usize, usize)> {
+    let mut counts = vec![];
+    for tile_size in [8, 16] {
+        let opts = |tile_cull| RenderOptions {
+            tile_cull,
+            ..options(tile_size)
+        };
+        let culled = render::<M>(params, cam, &opts(true)).unwrap();
+        let all = render::<M>(params, cam, &opts(false)).unwrap();
+        let outputs = [
+            ("color", &culled.color.data, &all.color.data),
+            (
+                "alpha",
+                &culled.alpha.as_ref().unwrap().data,
+                &all.alpha.as_ref().unwrap().data,
+            ),
+            (
+                "depth",
+                &culled.depth.as_ref().unwrap().data,
+                &all.depth.as_ref().unwrap().data,
+            ),
+        ];
+        let mut worst = 0.0f32;
+        for (what, a, b) in outputs {
+            for (i, (x, y)) in a.iter().zip(b.iter()).enumerate() {
+                worst = worst.max((x - y).abs());
+                assert!(
+                    (x - y).abs() <= 1e-6,
+                    "{label}, tile {tile_size}, {what}[{i}]: {x} with the cull, {y} without"
+                );
+            }
+        }
+        let (with, without) = (culled.stats.intersections, all.stats.intersections);
+        println!(
+            "{label}, tile {tile_size}: {with} intersections with the cull, {without} without; largest difference {worst:e}"
+        );
+        counts.push((with, without));
+    }
+    counts
+}
+
 /// Random loss weights on color, alpha and depth for a `width x height` frame.
 fn weights(n: usize, channels: usize) -> [Vec<f64>; 3] {
     let mut rng = fastrand::Rng::with_seed(10);

@@ -70,10 +70,6 @@ pub fn words<P: Flat>(p: &P) -> Vec<f64> {
     w.into_iter().map(f64::from).collect()
 }
 
-pub fn param_words(p: &Params) -> Vec<f64> {
-    words(p)
-}
-
 pub struct Reference {
     pub width: usize,
     pub height: usize,
@@ -251,3 +247,51 @@ pub const CAMERA_GROUPS: [(&str, std::ops::Range<usize>); 5] = [
     ("principal", 14..16),
     ("distortion", 18..22),
 ];
+
+/// The same Gaussians as another method's parameters, through the method's own `FromStored`
+/// (what the CLI does with a PLY scene).
+pub fn as_method<P: splat_methods::FromStored>(gaussians: Vec<Params>) -> Vec<P> {
+    gaussians
+        .into_iter()
+        .map(|g| {
+            P::from_stored(&splat_runtime::io::ply::StoredGaussian {
+                mean: g.mean,
+                log_scale: g.log_scale,
+                rotation: g.rotation,
+                opacity_logit: g.opacity_logit,
+                sh: g.sh,
+            })
+        })
+        .collect()
+}
+
+/// Gaussians spread over the whole image (and past its edges) of a camera at the origin, 1.5
+/// to 6 units away; larger on the wide cameras, which have fewer pixels per radian.
+pub fn spread_gaussians(cam: &Camera, count: usize, seed: u64) -> Vec<Params> {
+    let log_scale = if cam.model == CameraModel::Pinhole {
+        -2.5
+    } else {
+        -1.4
+    };
+    let mut rng = fastrand::Rng::with_seed(seed);
+    (0..count)
+        .map(|_| {
+            let px = Vec2::new(rng.f32() * 1.2 - 0.1, rng.f32() * 1.2 - 0.1) * cam.size;
+            let d = 1.5 + rng.f32() * 4.5;
+            gaussian_toward(&mut rng, cam, px, d, log_scale)
+        })
+        .collect()
+}
+
+/// Four large Gaussians that cover a 24 x 16 image with alpha above 2/255 everywhere.
+pub fn covering_gaussians(cam: &Camera) -> Vec<Params> {
+    let mut rng = fastrand::Rng::with_seed(9);
+    (0..4)
+        .map(|i| {
+            let px = Vec2::new(8.0 + 3.0 * i as f32, 6.0 + 1.5 * i as f32);
+            let mut p = gaussian_toward(&mut rng, cam, px, 3.0 + 0.5 * i as f32, 0.4);
+            p.opacity_logit = -1.0 + 0.4 * rng.f32();
+            p
+        })
+        .collect()
+}
