@@ -8,13 +8,15 @@ mod common;
 
 use common::checks::{
     boxes_hold_every_contributing_pixel, forward_matches_reference, gpu_forward_matches_cpu,
-    gpu_gradients_match_cpu, gradients_match_finite_differences, tile_cull_is_conservative,
+    gpu_gradients_match_cpu, gradients_match_finite_differences, gradients_match_reference_adjoint,
+    invalid_pairs_leave_no_trace, tile_cull_is_conservative,
 };
 use common::{
-    CAMERA_GROUPS, GAUSSIAN_GROUPS, as_method, covering_gaussians, spread_gaussians, wide_camera,
+    CAMERA_GROUPS, GAUSSIAN_GROUPS, as_method, covering_gaussians, gaussian_toward,
+    spread_gaussians, wide_camera,
 };
 use splat_methods::geer::{Method, Params};
-use splat_runtime::glam::Vec3;
+use splat_runtime::glam::{Vec2, Vec3};
 use splat_runtime::{Camera, CameraModel, RenderOptions, render};
 
 fn twin() -> common::Twin {
@@ -188,4 +190,61 @@ fn rays_do_not_pick_up_particles_behind_the_camera() {
         "backward ray: alpha {}",
         backward.alpha
     );
+}
+
+fn camera_groups(model: CameraModel) -> &'static [(&'static str, std::ops::Range<usize>)] {
+    if model == CameraModel::KannalaBrandt {
+        &CAMERA_GROUPS[..]
+    } else {
+        &CAMERA_GROUPS[..4]
+    }
+}
+
+/// Realistic scenes: pairs below 1/255 at the footprints' edges, lists that end at the T-stop.
+#[test]
+fn gradients_match_the_reference_adjoint_on_realistic_scenes() {
+    for model in CameraModel::ALL {
+        let cam = wide_camera(64, 48, model);
+        gradients_match_reference_adjoint::<Method>(
+            &format!("3dgeer {model}"),
+            &twin(),
+            &scene(&cam, 1000),
+            &cam,
+            &GAUSSIAN_GROUPS,
+            camera_groups(model),
+            1e-4,
+        );
+    }
+}
+
+#[test]
+fn a_particle_leaves_no_trace_where_it_is_invalid() {
+    for model in CameraModel::ALL {
+        let cam = wide_camera(16, 16, model);
+        let mut rng = fastrand::Rng::with_seed(3);
+        let extra = gaussian_toward(&mut rng, &cam, Vec2::new(5.0, 4.0), 2.5, -2.0);
+        let extra = as_method::<Params>(vec![extra])[0];
+        let label = format!("3dgeer {model}");
+        let valid = invalid_pairs_leave_no_trace::<Method>(
+            &label,
+            &twin(),
+            &scene(&cam, 40),
+            extra,
+            &cam,
+            16,
+        );
+        println!("{label}: the extra particle is valid on {valid} pixels");
+    }
+}
+
+#[test]
+fn gpu_gradients_match_cpu_on_realistic_scenes() {
+    for model in CameraModel::ALL {
+        let cam = wide_camera(64, 48, model);
+        gpu_gradients_match_cpu::<Method>(
+            &format!("3dgeer {model} realistic"),
+            &scene(&cam, 400),
+            &cam,
+        );
+    }
 }

@@ -1,11 +1,15 @@
 //! Full-render gradients of 3DGS (color, alpha and expected depth, every parameter group and
-//! the camera) against central finite differences of the f64 reference renderer. The scene is
-//! chosen clear of the thresholds: every Gaussian covers the whole image with alpha well above
-//! 1/255 and transmittance stays far above 1e-4, so the render is smooth in every parameter.
+//! the camera) against central finite differences of the f64 reference renderer, on a scene
+//! clear of the thresholds (every Gaussian covers the whole image with alpha well above 1/255
+//! and transmittance stays far above 1e-4, so the render is smooth in every parameter); and
+//! against the reference's analytic adjoint on realistic scenes, where they are crossed.
 
 mod common;
 
-use common::{camera, gaussian_at, group_error};
+use common::checks::{
+    gpu_gradients_match_cpu, gradients_match_reference_adjoint, invalid_pairs_leave_no_trace,
+};
+use common::{CAMERA_GROUPS, GAUSSIAN_GROUPS, camera, gaussian_at, group_error, spread_gaussians};
 use splat_methods::gs3d::{Method, Params};
 use splat_runtime::glam::Vec2;
 use splat_runtime::{Flat, FrameGrad, RenderOptions, backward, render_for_backward};
@@ -140,4 +144,49 @@ fn render_gradients_match_finite_differences() {
         println!("{name}: max error {err:.2e} of the largest gradient");
         assert!(err <= 1e-4, "{name}: {got:?} vs {want:?}");
     }
+}
+
+/// Gaussians spread over the image, dense enough that lists end at the T-stop; most pairs at
+/// the footprints' edges fall below 1/255.
+fn realistic_scene(cam: &splat_runtime::Camera, count: usize) -> Vec<Params> {
+    spread_gaussians(cam, count, 12)
+}
+
+#[test]
+fn gradients_match_the_reference_adjoint_on_a_realistic_scene() {
+    let cam = camera(64, 48);
+    gradients_match_reference_adjoint::<Method>(
+        "3dgs",
+        &common::gs3d(),
+        &realistic_scene(&cam, 1000),
+        &cam,
+        &GAUSSIAN_GROUPS,
+        &CAMERA_GROUPS[..4],
+        1e-4,
+    );
+}
+
+#[test]
+fn a_gaussian_leaves_no_trace_where_it_is_invalid() {
+    for tile_size in [8, 16] {
+        let cam = camera(tile_size, tile_size);
+        let params = realistic_scene(&cam, 40);
+        let mut rng = fastrand::Rng::with_seed(3);
+        let extra = gaussian_at(&mut rng, &cam, Vec2::new(5.0, 4.0), 2.5, -2.8);
+        let valid = invalid_pairs_leave_no_trace::<Method>(
+            "3dgs",
+            &common::gs3d(),
+            &params,
+            extra,
+            &cam,
+            tile_size,
+        );
+        println!("tile {tile_size}: the extra Gaussian is valid on {valid} pixels");
+    }
+}
+
+#[test]
+fn gpu_gradients_match_cpu_on_a_realistic_scene() {
+    let cam = camera(64, 48);
+    gpu_gradients_match_cpu::<Method>("3dgs realistic", &realistic_scene(&cam, 1000), &cam);
 }

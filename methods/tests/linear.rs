@@ -6,7 +6,8 @@ mod common;
 
 use common::checks::{
     boxes_hold_every_contributing_pixel, forward_matches_reference, gpu_forward_matches_cpu,
-    gpu_gradients_match_cpu, gradients_match_finite_differences, tile_cull_is_conservative,
+    gpu_gradients_match_cpu, gradients_match_finite_differences, gradients_match_reference_adjoint,
+    invalid_pairs_leave_no_trace, tile_cull_is_conservative,
 };
 use common::{CAMERA_GROUPS, GAUSSIAN_GROUPS, camera, gaussian_at, wide_camera};
 use splat_methods::linprim::{Method, Params};
@@ -139,4 +140,41 @@ fn a_fisheye_is_refused_by_name() {
             .contains("`linprim` projects with a pinhole camera only"),
         "{err}"
     );
+}
+
+/// A realistic scene: rays that miss or barely graze octahedra, lists that end at the T-stop.
+#[test]
+fn gradients_match_the_reference_adjoint_on_a_realistic_scene() {
+    let cam = camera(64, 48);
+    gradients_match_reference_adjoint::<Method>(
+        "linprim",
+        &twin(),
+        &scene(&cam, 1000),
+        &cam,
+        &GAUSSIAN_GROUPS,
+        &CAMERA_GROUPS[..4],
+        1e-4,
+    );
+}
+
+#[test]
+fn an_octahedron_leaves_no_trace_where_it_is_invalid() {
+    let cam = camera(16, 16);
+    let mut rng = fastrand::Rng::with_seed(3);
+    let extra = to_linprim(gaussian_at(&mut rng, &cam, Vec2::new(5.0, 4.0), 2.5, -2.0));
+    let valid = invalid_pairs_leave_no_trace::<Method>(
+        "linprim",
+        &twin(),
+        &scene(&cam, 40),
+        extra,
+        &cam,
+        16,
+    );
+    println!("the extra octahedron is valid on {valid} pixels");
+}
+
+#[test]
+fn gpu_gradients_match_cpu_on_a_realistic_scene() {
+    let cam = camera(64, 48);
+    gpu_gradients_match_cpu::<Method>("linprim realistic", &scene(&cam, 400), &cam);
 }

@@ -4,6 +4,7 @@
 
 #![allow(dead_code)]
 
+pub mod adjoint;
 pub mod checks;
 
 use splat_methods::gs3d::Params;
@@ -15,13 +16,20 @@ pub const T_MIN: f64 = 1e-4;
 /// A generated flat f64 function (`module::twin::f`) taking and returning slices.
 pub type Flat64 = fn(&[f64], &[u32]) -> (Vec<f64>, Vec<u32>);
 
-/// A method's f64 twin: its flat `project`, `pixel_info` and `evaluate`, and how many float
-/// words its tile-cull data has (every method here has float-only cull and shade data) and
-/// its color channels.
+/// A generated flat f64 adjoint (`module::twin::f_adjoint`): inputs, integer inputs and the
+/// cotangent of the float results to the cotangent of the float inputs.
+pub type Adjoint64 = fn(&[f64], &[u32], &[f64]) -> Vec<f64>;
+
+/// A method's f64 twin: its flat `project`, `pixel_info` and `evaluate` and their adjoints,
+/// and how many float words its tile-cull data has (every method here has float-only cull
+/// and shade data) and its color channels.
 pub struct Twin {
     pub project: Flat64,
+    pub project_adjoint: Adjoint64,
     pub pixel_info: Option<Flat64>,
+    pub pixel_info_adjoint: Option<Adjoint64>,
     pub evaluate: Flat64,
+    pub evaluate_adjoint: Adjoint64,
     pub cull_words: usize,
     pub channels: usize,
 }
@@ -35,11 +43,20 @@ macro_rules! twin {
             (a.to_vec(), b.to_vec())
         }
     };
+    (@adjoint $($m:ident)::+, $f:ident) => {
+        |x: &[f64], i: &[u32], d: &[f64]| {
+            $($m)::+::twin::$f(x.try_into().unwrap(), i.try_into().unwrap(), d.try_into().unwrap())
+                .to_vec()
+        }
+    };
     ($($m:ident)::+, pixel_info) => {
         $crate::common::Twin {
             project: twin!(@f $($m)::+, project),
+            project_adjoint: twin!(@adjoint $($m)::+, project_adjoint),
             pixel_info: Some(twin!(@f $($m)::+, pixel_info)),
+            pixel_info_adjoint: Some(twin!(@adjoint $($m)::+, pixel_info_adjoint)),
             evaluate: twin!(@f $($m)::+, evaluate),
+            evaluate_adjoint: twin!(@adjoint $($m)::+, evaluate_adjoint),
             cull_words: <<$($m)::+::Method as splat_runtime::SplatMethod>::Cull as splat_runtime::Flat>::LEN,
             channels: <<$($m)::+::Method as splat_runtime::SplatMethod>::Color as splat_runtime::Flat>::LEN,
         }
@@ -47,8 +64,11 @@ macro_rules! twin {
     ($($m:ident)::+) => {
         $crate::common::Twin {
             project: twin!(@f $($m)::+, project),
+            project_adjoint: twin!(@adjoint $($m)::+, project_adjoint),
             pixel_info: None,
+            pixel_info_adjoint: None,
             evaluate: twin!(@f $($m)::+, evaluate),
+            evaluate_adjoint: twin!(@adjoint $($m)::+, evaluate_adjoint),
             cull_words: <<$($m)::+::Method as splat_runtime::SplatMethod>::Cull as splat_runtime::Flat>::LEN,
             channels: <<$($m)::+::Method as splat_runtime::SplatMethod>::Color as splat_runtime::Flat>::LEN,
         }

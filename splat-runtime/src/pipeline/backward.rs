@@ -137,7 +137,8 @@ fn backward_tile_body<M: SplatMethod>(
                     continue;
                 }
                 let zero = F32x8::splat(0.0);
-                let w = st.alpha * t;
+                // Lanes that skip the pair (invalid there, or done) add nothing to the prefixes.
+                let w = st.weight;
                 let one_minus = 1.0 - st.alpha;
                 let mut d_alpha = zero;
                 let mut d_col = M::ColorLanes::default();

@@ -437,10 +437,13 @@ pub fn backward<M: SplatMethod>(
             M::project_adjoint(&params[i], camera, &d_out)
         })
         .unzip();
+    // Summed in fixed chunks, in order: the same gradient whatever the thread count.
     let camera_grad = camera_grads
-        .par_iter()
-        .copied()
-        .reduce(|| Camera::ZERO, |a, b| a.add_cotangent(&b))
+        .par_chunks(CHUNK)
+        .map(|c| c.iter().fold(Camera::ZERO, |a, b| a.add_cotangent(b)))
+        .collect::<Vec<_>>()
+        .iter()
+        .fold(Camera::ZERO, |a, b| a.add_cotangent(b))
         .add_cotangent(&ray_camera);
     let stats = BackwardStats {
         blend,

@@ -56,6 +56,9 @@ pub fn group_pixels<M: SplatMethod>(
 /// One step of the blend for a group: which lanes take this primitive, and which stop here.
 pub struct Step {
     pub alpha: F32x8,
+    /// alpha * T on the lanes that take the primitive, zero on every other lane: what the
+    /// primitive adds to any blended quantity (color, depth, the backward pass's prefixes).
+    pub weight: F32x8,
     /// Lanes that blend the primitive in.
     pub take: M32x8,
     /// Lanes that end before it.
@@ -68,9 +71,11 @@ pub fn step(alpha: F32x8, valid: M32x8, done: M32x8, t: F32x8) -> Step {
     let live = valid & !done;
     let next = t * (1.0 - alpha);
     let stop = live & next.le(F32x8::splat(T_MIN));
+    let take = live & !stop;
     Step {
         alpha,
-        take: live & !stop,
+        weight: take.select_f32(alpha * t, F32x8::splat(0.0)),
+        take,
         stop,
     }
 }
@@ -139,7 +144,7 @@ fn shade_tile_body<M: SplatMethod>(
                 let c = M::evaluate_lanes(&pixels, &p.shade);
                 out.pairs += (!done).count() as u64;
                 let st = step(c.alpha, c.valid, done, t);
-                let w = st.take.select_f32(st.alpha * t, F32x8::splat(0.0));
+                let w = st.weight;
                 for (acc, ch) in color.as_mut().iter_mut().zip(c.color.as_ref()) {
                     *acc = *acc + w * *ch;
                 }
