@@ -1,17 +1,20 @@
 //! The CPU backend against the GPU backend on the same scene and machine, stage by stage,
 //! forward and backward; then the global atomic adds of the GPU backward blend with and
 //! without the workgroup reduction (seed 001 Table I), with f32 atomics and with the
-//! compare-exchange loop. Each figure is the best of 3 runs after a warm-up (pipelines
-//! compile on first use). On a machine without a GPU the wgpu backend runs on a software
-//! adapter (lavapipe): the ratios then compare two CPU implementations, not a GPU.
+//! compare-exchange loop; and the wall time of a frame through the one-shot path (upload,
+//! build, render, download) against the resident pipeline (scene and renderer kept, nothing
+//! read back but the intersection count). GPU stage times are GPU timestamps where the adapter
+//! has them. Each figure is the best of 3 runs after a warm-up (pipelines compile on first
+//! use). On a machine without a GPU the wgpu backend runs on a software adapter (lavapipe):
+//! the ratios then compare two CPU implementations, not a GPU.
 //!
 //! `cargo bench -p splat-methods --bench gpu [-- N WIDTH HEIGHT]`
 
 use splat_methods::gs3d::{Method, Params};
 use splat_runtime::gpu::entries::{Accumulation, Reduction};
-use splat_runtime::gpu::{Gpu, backward as gpu_backward, render as gpu_render};
+use splat_runtime::gpu::{Gpu, GpuRenderer, GpuScene, render as gpu_render};
 use splat_runtime::{FrameGrad, RenderOptions, backward, render_for_backward};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 mod common;
 use common::{camera, scene, size_args};
@@ -67,11 +70,13 @@ fn main() {
         ]
     };
     let acc = Accumulation::default_for(&gpu);
-    let gpu_run = |acc: Accumulation| {
-        let (f, state) =
-            gpu_render::render_for_backward::<Method>(&gpu, &params, &camera, &opts).unwrap();
-        let g = gpu_backward::backward(&gpu, &state, &grad, acc).unwrap();
-        let s = f.stats;
+    let scene_gpu = GpuScene::<Method>::new(&gpu, &params).unwrap();
+    let mut renderer = GpuRenderer::<Method>::new(&gpu, &opts).unwrap();
+    let gpu_run = |renderer: &mut GpuRenderer<Method>, acc: Accumulation| {
+        renderer.forward(&scene_gpu, &camera).unwrap();
+        renderer.backward(&scene_gpu, &grad, acc).unwrap();
+        let s = renderer.download_frame().unwrap().stats;
+        let g = renderer.download_gradients().unwrap();
         let b = g.gradients.stats;
         (
             [s.preprocess, s.rasterize, s.shade, b.blend, b.project],
@@ -79,9 +84,9 @@ fn main() {
         )
     };
     cpu();
-    gpu_run(acc);
+    gpu_run(&mut renderer, acc);
     let c = best(3, cpu);
-    let g = best(3, || gpu_run(acc).0);
+    let g = best(3, || gpu_run(&mut renderer, acc).0);
     println!("\n| stage | CPU backend (ms) | GPU backend (ms) | GPU / CPU |");
     println!("|---|---:|---:|---:|");
     let names = [
@@ -107,6 +112,52 @@ fn main() {
         ms(gt) / ms(ct)
     );
 
+    let wait = || gpu.wait().unwrap();
+    let timed = |f: &mut dyn FnMut()| {
+        f();
+        best(3, || {
+            let t = Instant::now();
+            f();
+            [t.elapsed()]
+        })[0]
+    };
+    let one_shot_forward = timed(&mut || {
+        gpu_render::render::<Method>(&gpu, &params, &camera, &opts).unwrap();
+    });
+    let one_shot_both = timed(&mut || {
+        let (_, mut state) =
+            gpu_render::render_for_backward::<Method>(&gpu, &params, &camera, &opts).unwrap();
+        gpu_render::backward(&mut state, &grad, acc).unwrap();
+    });
+    let resident_forward = timed(&mut || {
+        renderer.forward(&scene_gpu, &camera).unwrap();
+        wait();
+    });
+    let resident_both = timed(&mut || {
+        renderer.forward(&scene_gpu, &camera).unwrap();
+        renderer.backward(&scene_gpu, &grad, acc).unwrap();
+        wait();
+    });
+    println!(
+        "\nWall time of a GPU frame, one-shot (upload, build, render, download) against resident:"
+    );
+    println!("| pass | one-shot (ms) | resident (ms) | one-shot / resident |");
+    println!("|---|---:|---:|---:|");
+    for (name, a, b) in [
+        ("forward", one_shot_forward, resident_forward),
+        ("forward + backward", one_shot_both, resident_both),
+    ] {
+        println!(
+            "| {name} | {:.1} | {:.1} | {:.2} |",
+            ms(a),
+            ms(b),
+            ms(a) / ms(b)
+        );
+    }
+    if !gpu.timestamps {
+        println!("(no GPU timestamps on this adapter: GPU stage times above are zero)");
+    }
+
     println!("\nGlobal atomic adds of the GPU backward blend:");
     println!("| reduction | atomics | adds issued | blend (ms) |");
     println!("|---|---|---:|---:|");
@@ -128,7 +179,7 @@ fn main() {
         };
         let mut issued = 0;
         let blend = best(3, || {
-            let (t, a) = gpu_run(acc);
+            let (t, a) = gpu_run(&mut renderer, acc);
             issued = a;
             [t[3]]
         });

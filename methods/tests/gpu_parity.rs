@@ -6,6 +6,9 @@
 //!   gradient, for each way of accumulating them (workgroup reduction or not, f32 atomics or
 //!   a compare-exchange loop).
 //!
+//! The resident renderer (one renderer and scene across changing frames) equals the one-shot
+//! path frame by frame.
+//!
 //! Needs a wgpu adapter (lavapipe is enough); with `SPLAT_REQUIRE_GPU=1` a missing adapter
 //! fails the test, otherwise it skips.
 
@@ -14,8 +17,8 @@ mod common;
 use common::{camera, camera_words, gaussian_at, group_error, words};
 use splat_methods::gs3d::{Method, Params};
 use splat_runtime::glam::Vec2;
-use splat_runtime::gpu::adapter_or_skip;
 use splat_runtime::gpu::entries::{Accumulation, Reduction};
+use splat_runtime::gpu::{GpuRenderer, GpuScene, adapter_or_skip};
 use splat_runtime::types::Camera;
 use splat_runtime::{FrameGrad, RenderOptions, backward, render, render_for_backward};
 
@@ -170,12 +173,12 @@ fn gpu_gradients_match_cpu() {
             .fold(0.0f32, |m, a| m.max(*a));
         assert!(min_t < 0.99, "transmittance stays far from 1e-4");
         let cpu = backward::<Method>(&state, &params, &cam, &grad).unwrap();
-        let (_, gstate) =
+        let (_, mut gstate) =
             splat_runtime::gpu::render::render_for_backward::<Method>(&gpu, &params, &cam, &opts)
                 .unwrap();
         let mut atomics = vec![];
         for acc in &modes {
-            let g = splat_runtime::gpu::backward::backward(&gpu, &gstate, &grad, *acc).unwrap();
+            let g = splat_runtime::gpu::render::backward(&mut gstate, &grad, *acc).unwrap();
             atomics.push(g.atomics);
             let words = |ps: &[Params]| -> Vec<Vec<f64>> { ps.iter().map(words).collect() };
             let (gw, cw) = (words(&g.gradients.params), words(&cpu.params));
@@ -250,4 +253,92 @@ fn gpu_handles_empty_scenes_and_refuses_bad_input_clearly() {
         err.to_string(),
         "primitive 2 has a NaN or infinite parameter"
     );
+}
+
+/// One renderer and one scene across frames whose parameters, cameras, image sizes and
+/// intersection counts change (up and down, so buffers are reused and grown): every frame
+/// equals a fresh one-shot render bit for bit, and its gradients equal the one-shot backward's
+/// (up to the order of the atomic adds).
+#[test]
+fn the_resident_renderer_matches_one_shot_frames_as_scenes_change() {
+    let Some(gpu) = adapter_or_skip() else {
+        return;
+    };
+    let opts = RenderOptions {
+        tile_size: 16,
+        alpha: true,
+        depth: true,
+        ..Default::default()
+    };
+    let acc = Accumulation::default_for(&gpu);
+    let mut renderer = GpuRenderer::<Method>::new(&gpu, &opts).unwrap();
+    let mut scene = GpuScene::<Method>::new(&gpu, &[]).unwrap();
+    let frames = [
+        (40, 32, 30, 1),
+        (72, 56, 300, 2),
+        (24, 16, 12, 3),
+        (72, 56, 320, 4),
+    ];
+    let mut last_intersections = 0;
+    for (k, (w, h, count, seed)) in frames.into_iter().enumerate() {
+        let mut cam = camera(w, h);
+        cam.translation.x = 0.05 * k as f32;
+        let params = scene_for(seed, count, &cam);
+        scene.upload(&gpu, &params).unwrap();
+        let info = renderer.forward(&scene, &cam).unwrap();
+        let got = renderer.download_frame().unwrap();
+        let want =
+            splat_runtime::gpu::render::render::<Method>(&gpu, &params, &cam, &opts).unwrap();
+        assert_eq!(got.color, want.color, "frame {k}");
+        assert_eq!(got.alpha, want.alpha, "frame {k}");
+        assert_eq!(got.depth, want.depth, "frame {k}");
+        assert_eq!(info.intersections, want.stats.intersections);
+        println!(
+            "frame {k}: {w}x{h}, {count} Gaussians, {} intersections",
+            info.intersections
+        );
+        let pixels = (w * h) as usize;
+        let mut rng = fastrand::Rng::with_seed(seed);
+        let mut random = |n: usize| (0..n).map(|_| rng.f32() - 0.5).collect::<Vec<f32>>();
+        let grad = FrameGrad {
+            color: random(3 * pixels),
+            alpha: Some(random(pixels)),
+            depth: Some(random(pixels)),
+        };
+        renderer.backward(&scene, &grad, acc).unwrap();
+        let got = renderer.download_gradients().unwrap().gradients;
+        let (_, mut state) =
+            splat_runtime::gpu::render::render_for_backward::<Method>(&gpu, &params, &cam, &opts)
+                .unwrap();
+        let want = splat_runtime::gpu::render::backward(&mut state, &grad, acc)
+            .unwrap()
+            .gradients;
+        let flat = |ps: &[Params]| -> Vec<f64> { ps.iter().flat_map(words).collect() };
+        let err = group_error(&flat(&got.params), &flat(&want.params));
+        let cam_err = group_error(&camera_words(&got.camera), &camera_words(&want.camera));
+        assert!(err <= 1e-5 && cam_err <= 1e-5, "frame {k}: {err} {cam_err}");
+        if k == 1 || k == 3 {
+            assert!(info.intersections > last_intersections, "the frame grows");
+        }
+        last_intersections = info.intersections;
+    }
+    // The scene on the device is what was uploaded last.
+    let params = scene_for(4, 320, &camera(72, 56));
+    let back = scene.download(&gpu).unwrap();
+    assert_eq!(flat_words(&back), flat_words(&params));
+}
+
+fn scene_for(seed: u64, count: usize, cam: &Camera) -> Vec<Params> {
+    let mut rng = fastrand::Rng::with_seed(seed);
+    (0..count)
+        .map(|_| {
+            let px = Vec2::new(rng.f32() * 1.2 - 0.1, rng.f32() * 1.2 - 0.1) * cam.size;
+            let z = 2.0 + rng.f32() * 6.0;
+            gaussian_at(&mut rng, cam, px, z, -2.0)
+        })
+        .collect()
+}
+
+fn flat_words(ps: &[Params]) -> Vec<f64> {
+    ps.iter().flat_map(words).collect()
 }

@@ -440,12 +440,11 @@ pub fn gpu_gradients_match_cpu<M: SplatMethod>(label: &str, params: &[M::Params]
     for tile_size in [8, 16] {
         let opts = options(tile_size);
         let (_, state) = render_for_backward::<M>(params, cam, &opts).unwrap();
-        let (_, gstate) =
+        let (_, mut gstate) =
             splat_runtime::gpu::render::render_for_backward::<M>(&gpu, params, cam, &opts).unwrap();
         let want = backward::<M>(&state, params, cam, &grad).unwrap();
-        let got = splat_runtime::gpu::backward::backward(
-            &gpu,
-            &gstate,
+        let got = splat_runtime::gpu::render::backward(
+            &mut gstate,
             &grad,
             Accumulation::default_for(&gpu),
         )

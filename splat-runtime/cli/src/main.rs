@@ -369,13 +369,21 @@ fn render_cmd(args: &RenderArgs) -> Result<()> {
         "visible {}, intersections {}, pairs evaluated {pairs}",
         s.visible, s.intersections
     );
-    println!(
-        "load {:.1} ms, preprocess {:.1} ms, rasterize {:.1} ms, shade {:.1} ms",
-        ms(load),
-        ms(s.preprocess),
-        ms(s.rasterize),
-        ms(s.shade)
-    );
+    let stages = s.preprocess + s.rasterize + s.shade;
+    if backend != "CPU" && stages.is_zero() {
+        println!(
+            "load {:.1} ms; no stage times: this adapter has no GPU timestamps",
+            ms(load)
+        );
+    } else {
+        println!(
+            "load {:.1} ms, preprocess {:.1} ms, rasterize {:.1} ms, shade {:.1} ms",
+            ms(load),
+            ms(s.preprocess),
+            ms(s.rasterize),
+            ms(s.shade)
+        );
+    }
     for p in written {
         println!("wrote {}", p.display());
     }

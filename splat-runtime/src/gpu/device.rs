@@ -1,6 +1,7 @@
 //! The device, and the small vocabulary every stage is written in: buffers checked against the
-//! device's limits, compute pipelines compiled once per (source, entry point), bind groups in
-//! binding order, dispatches split over two dimensions, and synchronous readback.
+//! device's limits (and buffers that persist across frames, grown to a high-water mark),
+//! compute pipelines compiled once per (source, entry point), bind groups in binding order,
+//! dispatches split over two dimensions, and synchronous readback.
 
 use super::GpuError;
 use std::collections::HashMap;
@@ -24,6 +25,8 @@ pub struct Gpu {
     pub subgroups: bool,
     /// A CPU implementation (lavapipe, WARP, SwiftShader): correct but slow.
     pub software: bool,
+    /// Timestamp queries around compute passes (`TIMESTAMP_QUERY`): stage times on the GPU.
+    pub timestamps: bool,
     limits: wgpu::Limits,
     pipelines: Mutex<HashMap<u64, wgpu::ComputePipeline>>,
 }
@@ -52,8 +55,10 @@ impl Gpu {
         }))
         .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
         let info = adapter.get_info();
-        let features =
-            adapter.features() & (wgpu::Features::SHADER_FLOAT32_ATOMIC | wgpu::Features::SUBGROUP);
+        let features = adapter.features()
+            & (wgpu::Features::SHADER_FLOAT32_ATOMIC
+                | wgpu::Features::SUBGROUP
+                | wgpu::Features::TIMESTAMP_QUERY);
         let limits = adapter.limits();
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("splat"),
@@ -69,6 +74,7 @@ impl Gpu {
             float_atomics: features.contains(wgpu::Features::SHADER_FLOAT32_ATOMIC),
             subgroups: features.contains(wgpu::Features::SUBGROUP),
             software: info.device_type == wgpu::DeviceType::Cpu,
+            timestamps: features.contains(wgpu::Features::TIMESTAMP_QUERY),
             limits,
             pipelines: Mutex::new(HashMap::new()),
         })
@@ -117,6 +123,24 @@ impl Gpu {
                     | wgpu::BufferUsages::COPY_SRC
                     | wgpu::BufferUsages::COPY_DST,
             }))
+    }
+
+    /// A uniform block of `words` 32-bit words (a multiple of four), written per frame with
+    /// [`Gpu::write`].
+    pub fn uniform_buffer(&self, words: usize) -> wgpu::Buffer {
+        self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("uniform"),
+            size: 4 * words.div_ceil(4).max(1) as u64 * 4,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        })
+    }
+
+    /// Writes `words` at the start of `buffer`; the write lands before the next submission.
+    pub fn write(&self, buffer: &wgpu::Buffer, words: &[u32]) {
+        if !words.is_empty() {
+            self.queue.write_buffer(buffer, 0, as_bytes(words));
+        }
     }
 
     /// A uniform block of `words`, padded to 16 bytes.
@@ -185,9 +209,14 @@ impl Gpu {
         })
     }
 
-    /// Submits `encoder` and waits until the GPU is done (stages are timed one by one).
+    /// Submits `encoder` and waits until the GPU is done.
     pub fn finish(&self, encoder: wgpu::CommandEncoder) -> Result<(), GpuError> {
         self.queue.submit([encoder.finish()]);
+        self.wait()
+    }
+
+    /// Waits until the GPU has finished everything submitted so far.
+    pub fn wait(&self) -> Result<(), GpuError> {
         self.device
             .poll(wgpu::PollType::wait_indefinitely())
             .map_err(|e| GpuError::Readback(e.to_string()))?;
@@ -206,7 +235,12 @@ impl Gpu {
         let mut encoder = self.device.create_command_encoder(&Default::default());
         encoder.copy_buffer_to_buffer(buffer, 0, &readback, 0, size);
         self.queue.submit([encoder.finish()]);
-        let slice = readback.slice(..);
+        self.read_mappable(&readback, words)
+    }
+
+    /// Reads the first `words` words of a `MAP_READ` buffer, once the GPU is done with it.
+    pub fn read_mappable(&self, buffer: &wgpu::Buffer, words: usize) -> Result<Vec<u32>, GpuError> {
+        let slice = buffer.slice(..4 * words.max(1) as u64);
         let (tx, rx) = std::sync::mpsc::channel();
         slice.map_async(wgpu::MapMode::Read, move |r| {
             let _ = tx.send(r);
@@ -227,8 +261,49 @@ impl Gpu {
                 .take(words)
                 .collect()
         };
-        readback.unmap();
+        buffer.unmap();
         Ok(out)
+    }
+}
+
+/// A storage buffer that persists across frames: re-created only when a frame needs more
+/// words than it holds (then with a quarter to spare), so steady frames allocate nothing.
+pub struct Grown {
+    what: &'static str,
+    buffer: wgpu::Buffer,
+    words: usize,
+}
+
+impl Grown {
+    pub fn new(gpu: &Gpu, what: &'static str, words: usize) -> Result<Grown, GpuError> {
+        Ok(Grown {
+            what,
+            buffer: gpu.buffer(what, words)?,
+            words: words.max(1),
+        })
+    }
+
+    /// Makes room for `words` (contents are lost when it grows).
+    pub fn ensure(&mut self, gpu: &Gpu, words: usize) -> Result<(), GpuError> {
+        if words <= self.words {
+            return Ok(());
+        }
+        let limit = (gpu
+            .limits
+            .max_storage_buffer_binding_size
+            .min(gpu.limits.max_buffer_size)
+            / 4) as usize;
+        let spare = (words + words / 4).min(limit).max(words);
+        self.buffer = gpu.buffer(self.what, spare)?;
+        self.words = spare;
+        Ok(())
+    }
+}
+
+impl std::ops::Deref for Grown {
+    type Target = wgpu::Buffer;
+    fn deref(&self) -> &wgpu::Buffer {
+        &self.buffer
     }
 }
 

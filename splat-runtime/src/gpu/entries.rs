@@ -120,7 +120,7 @@ pub fn tiles<M: SplatMethod>(emit: bool, use_cull: bool) -> Result<String, GpuEr
 }
 
 /// Where the backward blend sums an entry's gradient over pixels before its global atomics.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Reduction {
     /// No reduction: one atomic per (pixel, entry, gradient word), the baseline.
     None,
@@ -132,11 +132,26 @@ pub enum Reduction {
 }
 
 /// How the backward blend adds its gradients to global memory.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct Accumulation {
     pub reduce: Reduction,
     /// `atomicAdd` on f32 (`SHADER_FLOAT32_ATOMIC`); otherwise a compare-exchange loop on u32.
     pub float_atomics: bool,
+}
+
+impl Accumulation {
+    /// Subgroup reduction where the adapter has subgroups (else workgroup reduction), with
+    /// f32 atomics where it has them (else compare-exchange).
+    pub fn default_for(gpu: &Gpu) -> Accumulation {
+        Accumulation {
+            reduce: if gpu.subgroups {
+                Reduction::Subgroup
+            } else {
+                Reduction::Workgroup
+            },
+            float_atomics: gpu.float_atomics,
+        }
+    }
 }
 
 /// Workgroup sizes and batch sizes of a blend pass.

@@ -5,17 +5,22 @@
 //! - [`sort`]: prefix sum, radix sort on (tile, depth) keys, tile ranges, trip-count binning.
 //! - [`entries`]: the method-specific entry points (project, count/emit with `tile_cull`,
 //!   per-tile shading, backward blend, `project`'s adjoint) around the generated WGSL.
-//! - [`render`] / [`backward`]: the forward and backward passes, stage by stage.
+//! - [`resident`]: the device-resident pipeline: [`GpuScene`] (parameters on the device) and
+//!   [`GpuRenderer`] (kernels built once, buffers kept across frames, forward and backward).
+//! - [`render`]: one-shot render and backward for parameters on the host, over `resident`.
+//! - [`timing`]: stage times from GPU timestamps.
 
-pub mod backward;
 pub mod device;
 pub mod dispatch;
 pub mod entries;
 pub mod kernel;
 pub mod render;
+pub mod resident;
 pub mod sort;
+pub mod timing;
 
 pub use device::Gpu;
+pub use resident::{GpuRenderError, GpuRenderer, GpuScene};
 
 /// The adapter for tests and tools that can do without one: `None` (with a line on stderr)
 /// when there is none, unless `SPLAT_REQUIRE_GPU=1` (set by CI), which makes that a panic.

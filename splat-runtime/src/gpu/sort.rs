@@ -1,8 +1,10 @@
 //! The method-independent GPU stages: exclusive prefix sum, stable radix sort of
-//! (depth bits, tile) keys, tile ranges and trip-count binning. Each records its dispatches
-//! into the caller's encoder; buffers are allocated here and checked against device limits.
+//! (depth bits, tile) keys, tile ranges and trip-count binning. Each stage owns the buffers it
+//! needs between frames (grown to the largest frame so far, never re-created for a steady
+//! one): `prepare` sizes them and writes the frame's uniforms, `record` adds the dispatches
+//! to the caller's encoder.
 
-use super::device::dispatch;
+use super::device::{Grown, dispatch};
 use super::{Gpu, GpuError};
 
 const SCAN: &str = include_str!("shaders/scan.wgsl");
@@ -14,109 +16,204 @@ const BINS: &str = include_str!("shaders/bins.wgsl");
 const SORT_BLOCK: u32 = 4096;
 /// Bits of the key sorted per pass (16 buckets).
 const DIGIT_BITS: u32 = 4;
+/// Words per prefix-sum block (shaders/scan.wgsl).
+const SCAN_BLOCK: u32 = 256;
 
-/// In-place exclusive prefix sum of the first `n` words of `data`.
-pub fn exclusive_scan(
-    gpu: &Gpu,
-    encoder: &mut wgpu::CommandEncoder,
-    data: &wgpu::Buffer,
-    n: u32,
-) -> Result<(), GpuError> {
-    let blocks = n.div_ceil(256).max(1);
-    let sums = gpu.buffer("prefix-sum block totals", blocks as usize)?;
-    let info = gpu.uniform(&[n]);
-    let scan = gpu.pipeline(SCAN, "scan_blocks")?;
-    dispatch(
-        encoder,
-        &scan,
-        &gpu.bind(&scan, &[data, &sums, &info]),
-        blocks,
-    );
-    if blocks > 1 {
-        exclusive_scan(gpu, encoder, &sums, blocks)?;
-        let add = gpu.pipeline(SCAN, "add_block_offsets")?;
-        dispatch(
-            encoder,
-            &add,
-            &gpu.bind(&add, &[data, &sums, &info]),
-            blocks,
-        );
+/// In-place exclusive prefix sum: one level per 256-fold reduction, each with its block
+/// totals and its uniform.
+pub struct Scan {
+    blocks: wgpu::ComputePipeline,
+    offsets: wgpu::ComputePipeline,
+    /// Per level: block totals, `[words]` uniform, words at this level.
+    levels: Vec<(Grown, wgpu::Buffer, u32)>,
+}
+
+impl Scan {
+    pub fn new(gpu: &Gpu) -> Result<Scan, GpuError> {
+        Ok(Scan {
+            blocks: gpu.pipeline(SCAN, "scan_blocks")?,
+            offsets: gpu.pipeline(SCAN, "add_block_offsets")?,
+            levels: vec![],
+        })
     }
-    Ok(())
-}
 
-/// Sorts `n` keys (`vec2(depth bits, tile)`) with their values by tile, then depth, keeping
-/// the input order among equal keys. Returns the sorted keys and values (ping-pong buffers).
-pub fn sort_by_tile_and_depth(
-    gpu: &Gpu,
-    encoder: &mut wgpu::CommandEncoder,
-    keys: wgpu::Buffer,
-    vals: wgpu::Buffer,
-    n: u32,
-    tiles: u32,
-) -> Result<(wgpu::Buffer, wgpu::Buffer), GpuError> {
-    let tile_bits = 32 - tiles.saturating_sub(1).leading_zeros();
-    let blocks = n.div_ceil(SORT_BLOCK).max(1);
-    let hist = gpu.buffer("radix-sort histograms", 16 * blocks as usize)?;
-    let (mut keys, mut vals) = (keys, vals);
-    let mut keys_out = gpu.buffer("sorted keys", 2 * n.max(1) as usize)?;
-    let mut vals_out = gpu.buffer("sorted values", n as usize)?;
-    let histogram = gpu.pipeline(RADIX, "radix_histogram")?;
-    let scatter = gpu.pipeline(RADIX, "radix_scatter")?;
-    // Least significant digit first: depth (word 0), then tile (word 1).
-    let digits = (0..32 / DIGIT_BITS)
-        .map(|d| (0, d * DIGIT_BITS))
-        .chain((0..tile_bits.div_ceil(DIGIT_BITS)).map(|d| (1, d * DIGIT_BITS)));
-    for (word, shift) in digits {
-        let info = gpu.uniform(&[n, shift, word, blocks]);
-        let bind = gpu.bind(&histogram, &[&keys, &hist, &info]);
-        dispatch(encoder, &histogram, &bind, blocks);
-        exclusive_scan(gpu, encoder, &hist, 16 * blocks)?;
-        let bind = gpu.bind(
-            &scatter,
-            &[&keys, &hist, &info, &vals, &keys_out, &vals_out],
-        );
-        dispatch(encoder, &scatter, &bind, blocks);
-        std::mem::swap(&mut keys, &mut keys_out);
-        std::mem::swap(&mut vals, &mut vals_out);
+    /// Sizes the levels for a scan of `n` words.
+    pub fn prepare(&mut self, gpu: &Gpu, n: u32) -> Result<(), GpuError> {
+        let mut words = n;
+        let mut level = 0;
+        loop {
+            let blocks = words.div_ceil(SCAN_BLOCK).max(1);
+            if self.levels.len() == level {
+                self.levels.push((
+                    Grown::new(gpu, "prefix-sum block totals", blocks as usize)?,
+                    gpu.uniform_buffer(4),
+                    0,
+                ));
+            }
+            let (sums, info, at) = &mut self.levels[level];
+            sums.ensure(gpu, blocks as usize)?;
+            gpu.write(info, &[words, 0, 0, 0]);
+            *at = words;
+            if blocks == 1 {
+                self.levels.truncate(level + 1);
+                return Ok(());
+            }
+            words = blocks;
+            level += 1;
+        }
     }
-    Ok((keys, vals))
+
+    /// Records the scan of `data` (the size given to [`Scan::prepare`]).
+    pub fn record(&self, gpu: &Gpu, encoder: &mut wgpu::CommandEncoder, data: &wgpu::Buffer) {
+        self.record_level(gpu, encoder, data, 0);
+    }
+
+    fn record_level(
+        &self,
+        gpu: &Gpu,
+        encoder: &mut wgpu::CommandEncoder,
+        data: &wgpu::Buffer,
+        level: usize,
+    ) {
+        let (sums, info, words) = &self.levels[level];
+        let blocks = words.div_ceil(SCAN_BLOCK).max(1);
+        let bind = |p| gpu.bind(p, &[data, sums, info]);
+        dispatch(encoder, &self.blocks, &bind(&self.blocks), blocks);
+        if blocks > 1 {
+            self.record_level(gpu, encoder, sums, level + 1);
+            dispatch(encoder, &self.offsets, &bind(&self.offsets), blocks);
+        }
+    }
 }
 
-/// `[start, end)` of each tile's entries in the sorted keys, two words per tile.
-pub fn tile_ranges(
-    gpu: &Gpu,
-    encoder: &mut wgpu::CommandEncoder,
-    keys: &wgpu::Buffer,
+/// Stable LSD radix sort of `vec2(depth bits, tile)` keys with their values, by tile then
+/// depth, only over the tile bits the frame has. Sorts in place: the keys end where they
+/// started (an odd pass count ends with a copy back).
+pub struct RadixSort {
+    histogram: wgpu::ComputePipeline,
+    scatter: wgpu::ComputePipeline,
+    hist: Grown,
+    keys_tmp: Grown,
+    vals_tmp: Grown,
+    scan: Scan,
+    /// `[n, shift, key word, blocks]` per pass.
+    passes: Vec<wgpu::Buffer>,
+    n: u32,
+    digits: Vec<(u32, u32)>,
+}
+
+impl RadixSort {
+    pub fn new(gpu: &Gpu) -> Result<RadixSort, GpuError> {
+        Ok(RadixSort {
+            histogram: gpu.pipeline(RADIX, "radix_histogram")?,
+            scatter: gpu.pipeline(RADIX, "radix_scatter")?,
+            hist: Grown::new(gpu, "radix-sort histograms", 16)?,
+            keys_tmp: Grown::new(gpu, "sorted keys", 2)?,
+            vals_tmp: Grown::new(gpu, "sorted values", 1)?,
+            scan: Scan::new(gpu)?,
+            passes: vec![],
+            n: 0,
+            digits: vec![],
+        })
+    }
+
+    /// Sizes the buffers for `n` keys over `tiles` tiles and writes each pass's uniform.
+    pub fn prepare(&mut self, gpu: &Gpu, n: u32, tiles: u32) -> Result<(), GpuError> {
+        let tile_bits = 32 - tiles.saturating_sub(1).leading_zeros();
+        let blocks = n.div_ceil(SORT_BLOCK).max(1);
+        self.hist.ensure(gpu, 16 * blocks as usize)?;
+        self.keys_tmp.ensure(gpu, 2 * n as usize)?;
+        self.vals_tmp.ensure(gpu, n as usize)?;
+        self.scan.prepare(gpu, 16 * blocks)?;
+        // Least significant digit first: depth (word 0), then tile (word 1).
+        self.digits = (0..32 / DIGIT_BITS)
+            .map(|d| (0, d * DIGIT_BITS))
+            .chain((0..tile_bits.div_ceil(DIGIT_BITS)).map(|d| (1, d * DIGIT_BITS)))
+            .collect();
+        while self.passes.len() < self.digits.len() {
+            self.passes.push(gpu.uniform_buffer(4));
+        }
+        for ((word, shift), info) in self.digits.iter().zip(&self.passes) {
+            gpu.write(info, &[n, *shift, *word, blocks]);
+        }
+        self.n = n;
+        Ok(())
+    }
+
+    /// Records the sort of the first `n` keys and values (as prepared) in place.
+    pub fn record(
+        &self,
+        gpu: &Gpu,
+        encoder: &mut wgpu::CommandEncoder,
+        keys: &wgpu::Buffer,
+        vals: &wgpu::Buffer,
+    ) {
+        let blocks = self.n.div_ceil(SORT_BLOCK).max(1);
+        let (mut from, mut to) = ((keys, vals), (&*self.keys_tmp, &*self.vals_tmp));
+        for info in &self.passes[..self.digits.len()] {
+            let bind = gpu.bind(&self.histogram, &[from.0, &self.hist, info]);
+            dispatch(encoder, &self.histogram, &bind, blocks);
+            self.scan.record(gpu, encoder, &self.hist);
+            let bind = gpu.bind(
+                &self.scatter,
+                &[from.0, &self.hist, info, from.1, to.0, to.1],
+            );
+            dispatch(encoder, &self.scatter, &bind, blocks);
+            std::mem::swap(&mut from, &mut to);
+        }
+        if self.digits.len() % 2 == 1 && self.n > 0 {
+            encoder.copy_buffer_to_buffer(from.0, 0, keys, 0, 8 * self.n as u64);
+            encoder.copy_buffer_to_buffer(from.1, 0, vals, 0, 4 * self.n as u64);
+        }
+    }
+}
+
+/// Per tile `[start, end)` of its entries in the sorted keys, then the tiles ordered by bin of
+/// list length (capped at `P_max`), longest first.
+pub struct TileRanges {
+    ranges_pipeline: wgpu::ComputePipeline,
+    bins_pipeline: wgpu::ComputePipeline,
+    pub ranges: Grown,
+    pub order: Grown,
+    ranges_info: wgpu::Buffer,
+    bins_info: wgpu::Buffer,
     n: u32,
     tiles: u32,
-) -> Result<wgpu::Buffer, GpuError> {
-    let ranges = gpu.buffer("tile ranges", 2 * tiles as usize)?;
-    encoder.clear_buffer(&ranges, 0, None);
-    let info = gpu.uniform(&[n]);
-    let p = gpu.pipeline(RANGES, "tile_ranges")?;
-    dispatch(
-        encoder,
-        &p,
-        &gpu.bind(&p, &[keys, &ranges, &info]),
-        n.div_ceil(256),
-    );
-    Ok(ranges)
 }
 
-/// Tile ids ordered by bin of list length (capped at `p_max`), longest first.
-pub fn bin_tiles(
-    gpu: &Gpu,
-    encoder: &mut wgpu::CommandEncoder,
-    ranges: &wgpu::Buffer,
-    tiles: u32,
-    p_max: u32,
-) -> Result<wgpu::Buffer, GpuError> {
-    let order = gpu.buffer("tile order", tiles as usize)?;
-    let info = gpu.uniform(&[tiles, p_max]);
-    let p = gpu.pipeline(BINS, "bin_tiles")?;
-    dispatch(encoder, &p, &gpu.bind(&p, &[ranges, &order, &info]), 1);
-    Ok(order)
+impl TileRanges {
+    pub fn new(gpu: &Gpu) -> Result<TileRanges, GpuError> {
+        Ok(TileRanges {
+            ranges_pipeline: gpu.pipeline(RANGES, "tile_ranges")?,
+            bins_pipeline: gpu.pipeline(BINS, "bin_tiles")?,
+            ranges: Grown::new(gpu, "tile ranges", 2)?,
+            order: Grown::new(gpu, "tile order", 1)?,
+            ranges_info: gpu.uniform_buffer(4),
+            bins_info: gpu.uniform_buffer(4),
+            n: 0,
+            tiles: 0,
+        })
+    }
+
+    pub fn prepare(&mut self, gpu: &Gpu, n: u32, tiles: u32, p_max: u32) -> Result<(), GpuError> {
+        self.ranges.ensure(gpu, 2 * tiles as usize)?;
+        self.order.ensure(gpu, tiles as usize)?;
+        gpu.write(&self.ranges_info, &[n, 0, 0, 0]);
+        gpu.write(&self.bins_info, &[tiles, p_max, 0, 0]);
+        (self.n, self.tiles) = (n, tiles);
+        Ok(())
+    }
+
+    /// Records the ranges of the sorted `keys` and the binned tile order.
+    pub fn record(&self, gpu: &Gpu, encoder: &mut wgpu::CommandEncoder, keys: &wgpu::Buffer) {
+        encoder.clear_buffer(&self.ranges, 0, Some(8 * self.tiles as u64));
+        let p = &self.ranges_pipeline;
+        let bind = gpu.bind(p, &[keys, &self.ranges, &self.ranges_info]);
+        dispatch(encoder, p, &bind, self.n.div_ceil(256));
+        let p = &self.bins_pipeline;
+        let bind = gpu.bind(p, &[&self.ranges, &self.order, &self.bins_info]);
+        dispatch(encoder, p, &bind, 1);
+    }
 }
 
 #[cfg(test)]
@@ -132,8 +229,12 @@ mod tests {
         // 70,000 words: 274 blocks of 256, whose sums need a second and a third level.
         let words: Vec<u32> = (0..70_000).map(|_| rng.u32(0..50)).collect();
         let buf = gpu.buffer_from("test", &words).unwrap();
+        let mut scan = Scan::new(&gpu).unwrap();
+        // Sized for a smaller scan first: the levels grow.
+        scan.prepare(&gpu, 300).unwrap();
+        scan.prepare(&gpu, words.len() as u32).unwrap();
         let mut enc = gpu.device.create_command_encoder(&Default::default());
-        exclusive_scan(&gpu, &mut enc, &buf, words.len() as u32).unwrap();
+        scan.record(&gpu, &mut enc, &buf);
         gpu.finish(enc).unwrap();
         let got = gpu.read(&buf, words.len()).unwrap();
         let mut acc = 0;
@@ -162,18 +263,19 @@ mod tests {
         let flat: Vec<u32> = keys.iter().flat_map(|(d, t)| [*d, *t]).collect();
         let vals: Vec<u32> = (0..keys.len() as u32).collect();
         let n = keys.len() as u32;
-        let mut enc = gpu.device.create_command_encoder(&Default::default());
-        let (k, v) = sort_by_tile_and_depth(
-            &gpu,
-            &mut enc,
+        let (k, v) = (
             gpu.buffer_from("keys", &flat).unwrap(),
             gpu.buffer_from("vals", &vals).unwrap(),
-            n,
-            tiles,
-        )
-        .unwrap();
-        let ranges = tile_ranges(&gpu, &mut enc, &k, n, tiles).unwrap();
+        );
+        let mut sort = RadixSort::new(&gpu).unwrap();
+        sort.prepare(&gpu, n, tiles).unwrap();
+        let mut ranges = TileRanges::new(&gpu).unwrap();
+        ranges.prepare(&gpu, n, tiles, u32::MAX).unwrap();
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        sort.record(&gpu, &mut enc, &k, &v);
+        ranges.record(&gpu, &mut enc, &k);
         gpu.finish(enc).unwrap();
+        let ranges = &ranges.ranges;
         let got_vals = gpu.read(&v, n as usize).unwrap();
         let got_keys = gpu.read(&k, 2 * n as usize).unwrap();
         let mut want: Vec<u32> = vals.clone();
@@ -183,7 +285,7 @@ mod tests {
             let (d, t) = keys[val as usize];
             assert_eq!((got_keys[2 * i], got_keys[2 * i + 1]), (d, t));
         }
-        let ranges = gpu.read(&ranges, 2 * tiles as usize).unwrap();
+        let ranges = gpu.read(ranges, 2 * tiles as usize).unwrap();
         for t in 0..tiles {
             let count = keys.iter().filter(|k| k.1 == t).count() as u32;
             let (s, e) = (ranges[2 * t as usize], ranges[2 * t as usize + 1]);
@@ -208,11 +310,15 @@ mod tests {
             ranges.extend([start, start + l]);
             start += l;
         }
-        let buf = gpu.buffer_from("ranges", &ranges).unwrap();
+        let mut bins = TileRanges::new(&gpu).unwrap();
+        bins.prepare(&gpu, start, lens.len() as u32, 100).unwrap();
+        gpu.write(&bins.ranges, &ranges);
         let mut enc = gpu.device.create_command_encoder(&Default::default());
-        let order = bin_tiles(&gpu, &mut enc, &buf, lens.len() as u32, 100).unwrap();
+        let p = &bins.bins_pipeline;
+        let bind = gpu.bind(p, &[&bins.ranges, &bins.order, &bins.bins_info]);
+        dispatch(&mut enc, p, &bind, 1);
         gpu.finish(enc).unwrap();
-        let order = gpu.read(&order, lens.len()).unwrap();
+        let order = gpu.read(&bins.order, lens.len()).unwrap();
         let mut sorted = order.clone();
         sorted.sort();
         assert_eq!(sorted, (0..lens.len() as u32).collect::<Vec<_>>());

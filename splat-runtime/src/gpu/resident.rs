@@ -1,0 +1,634 @@
+//! The device-resident GPU pipeline: a scene whose parameters live in a device buffer, and a
+//! renderer whose kernels are built once and whose buffers persist across frames (grown to
+//! the largest frame so far, never re-created for a steady one). A frame is two submissions
+//! with one small readback between them (the intersection count, which sizes the sort); the
+//! backward pass is one submission; images and gradients stay on the device until the caller
+//! downloads them. This is the loop a trainer runs: render, loss, backward, optimizer step,
+//! with no host transfer per step.
+//!
+//! Stages, as on the CPU: preprocess (`project`), rasterize (count kept tiles with
+//! `tile_cull`, prefix sum, emit (tile, depth) keys, radix sort, tile ranges, trip-count
+//! binning), shade (one workgroup per tile); backward blend, then `project`'s adjoint (and
+//! `pixel_info`'s for ray methods). Stage times come from GPU timestamps where the adapter has
+//! them.
+
+use super::device::{Grown, dispatch};
+use super::entries::{self, Accumulation, Layout, Reduction};
+use super::sort::{RadixSort, Scan, TileRanges};
+use super::timing::StageTimer;
+use super::{Gpu, GpuError};
+use crate::flat::Flat;
+use crate::method::SplatMethod;
+use crate::pipeline::grid::TileGrid;
+use crate::pipeline::rasterize::MAX_INTERSECTIONS;
+use crate::pipeline::{
+    BackwardStats, Frame, FrameGrad, Gradients, Image, RenderError, RenderOptions, Stats,
+};
+use crate::types::Camera;
+use std::collections::HashMap;
+use std::marker::PhantomData;
+
+#[derive(Debug, thiserror::Error)]
+pub enum GpuRenderError {
+    #[error(transparent)]
+    Render(#[from] RenderError),
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+    #[error("the backward pass needs a frame: render one first")]
+    NoFrame,
+    #[error("a depth gradient needs a frame rendered with depth sums (RenderOptions::depth)")]
+    DepthNotRendered,
+    #[error("the scene has {got} primitives, the frame was rendered with {want}")]
+    SceneChanged { got: usize, want: usize },
+}
+
+/// A method's primitives on the device: `Params` words per primitive, in order. An optimizer
+/// on the device updates [`GpuScene::buffer`] in place between frames.
+pub struct GpuScene<M: SplatMethod> {
+    params: Grown,
+    len: usize,
+    method: PhantomData<M>,
+}
+
+impl<M: SplatMethod> GpuScene<M> {
+    pub fn new(gpu: &Gpu, params: &[M::Params]) -> Result<GpuScene<M>, GpuRenderError> {
+        let mut scene = GpuScene {
+            params: Grown::new(gpu, "parameters", params.len() * M::Params::LEN)?,
+            len: 0,
+            method: PhantomData,
+        };
+        scene.upload(gpu, params)?;
+        Ok(scene)
+    }
+
+    /// Replaces the primitives (the buffer grows if there are more; no NaN or infinity).
+    pub fn upload(&mut self, gpu: &Gpu, params: &[M::Params]) -> Result<(), GpuRenderError> {
+        if let Some(i) = params.iter().position(|p| !p.is_finite()) {
+            return Err(RenderError::NonFinite(i).into());
+        }
+        u32::try_from(params.len()).map_err(|_| GpuError::TooLarge {
+            what: "the primitive count",
+            bytes: params.len() as u64,
+            limit: u32::MAX as u64,
+        })?;
+        self.params.ensure(gpu, params.len() * M::Params::LEN)?;
+        gpu.write(&self.params, &words_of(params));
+        self.len = params.len();
+        Ok(())
+    }
+
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// The parameter words, `M::Params::LEN` per primitive.
+    pub fn buffer(&self) -> &wgpu::Buffer {
+        &self.params
+    }
+
+    pub fn download(&self, gpu: &Gpu) -> Result<Vec<M::Params>, GpuError> {
+        let words = gpu.read(&self.params, self.len * M::Params::LEN)?;
+        let floats: Vec<f32> = words.into_iter().map(f32::from_bits).collect();
+        Ok(floats
+            .chunks_exact(M::Params::LEN.max(1))
+            .take(self.len)
+            .map(M::Params::read_words)
+            .collect())
+    }
+}
+
+/// 32-bit words of a sequence of `Flat` values, in order.
+pub(crate) fn words_of<T: Flat>(values: &[T]) -> Vec<u32> {
+    let mut w = vec![0.0f32; T::LEN * values.len()];
+    for (v, out) in values.iter().zip(w.chunks_exact_mut(T::LEN.max(1))) {
+        v.write_words(out);
+    }
+    w.into_iter().map(f32::to_bits).collect()
+}
+
+// The renderer's timed stages (two timestamps each).
+const PROJECT: u32 = 0;
+const COUNT: u32 = 1;
+const SORT: u32 = 2;
+const SHADE: u32 = 3;
+const BLEND: u32 = 4;
+const ADJOINT: u32 = 5;
+const STAGES: u32 = 6;
+
+/// What the last frame was: its tile grid and sizes.
+#[derive(Clone, Copy, Debug)]
+pub struct FrameInfo {
+    pub grid: TileGrid,
+    pub primitives: usize,
+    pub visible: usize,
+    pub intersections: usize,
+}
+
+/// Gradients, plus the number of global atomic adds the backward blend issued.
+pub struct GpuGradients<M: SplatMethod> {
+    pub gradients: Gradients<M>,
+    pub atomics: u64,
+}
+
+/// A renderer for one method and one set of options: kernels built once, buffers kept.
+pub struct GpuRenderer<'g, M: SplatMethod> {
+    gpu: &'g Gpu,
+    opts: RenderOptions,
+    /// Accumulate weight * depth per pixel (for the depth output or its gradient).
+    depth_sums: bool,
+    layout: Layout,
+    project: wgpu::ComputePipeline,
+    count: wgpu::ComputePipeline,
+    emit: wgpu::ComputePipeline,
+    shade: wgpu::ComputePipeline,
+    project_backward: wgpu::ComputePipeline,
+    /// Parameter float slots (gradient words per primitive).
+    param_floats: usize,
+    pixel_backward: Option<wgpu::ComputePipeline>,
+    /// Backward blends built on first use, per (depth gradient, accumulation).
+    blends: HashMap<(bool, Accumulation), wgpu::ComputePipeline>,
+    camera: wgpu::Buffer,
+    /// (primitives, width, height, tile size), (tiles_x, P_max, tiles, 0).
+    frame_info: wgpu::Buffer,
+    /// (primitives, 0, 0, 0).
+    count_info: wgpu::Buffer,
+    /// (width, height, 0, 0).
+    pixel_info: wgpu::Buffer,
+    projected: Grown,
+    counts: Grown,
+    /// Intersections (low, high word), primitives with a tile rectangle.
+    totals: wgpu::Buffer,
+    totals_staging: wgpu::Buffer,
+    scan: Scan,
+    keys: Grown,
+    prims: Grown,
+    sort: RadixSort,
+    tiles: TileRanges,
+    /// Per pixel: color, final T, sum of weight * depth.
+    pixels: Grown,
+    pixel_grad: Grown,
+    grads: Grown,
+    issued: wgpu::Buffer,
+    param_grads: Grown,
+    camera_partials: Grown,
+    pixel_cotangent: Grown,
+    ray_partials: Grown,
+    timer: StageTimer,
+    frame: Option<FrameInfo>,
+    method: PhantomData<M>,
+}
+
+impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
+    /// A renderer producing the outputs `opts` asks for.
+    pub fn new(gpu: &'g Gpu, opts: &RenderOptions) -> Result<Self, GpuRenderError> {
+        Self::build(gpu, opts, opts.depth)
+    }
+
+    /// A renderer whose frames accept a depth gradient even without the depth output.
+    pub fn with_depth_gradients(
+        gpu: &'g Gpu,
+        opts: &RenderOptions,
+    ) -> Result<Self, GpuRenderError> {
+        Self::build(gpu, opts, true)
+    }
+
+    fn build(gpu: &'g Gpu, opts: &RenderOptions, depth_sums: bool) -> Result<Self, GpuRenderError> {
+        if ![8, 16].contains(&opts.tile_size) {
+            return Err(GpuError::TileSize(opts.tile_size).into());
+        }
+        let layout = Layout::of::<M>();
+        let (source, param_floats) = entries::project_backward::<M>()?;
+        let pixel_backward = match M::HAS_PIXEL_INFO {
+            true => Some(gpu.pipeline(&entries::pixel_backward::<M>()?, "pixel_backward")?),
+            false => None,
+        };
+        let grown = |what, words| Grown::new(gpu, what, words);
+        let totals = gpu.buffer("intersection totals", 3)?;
+        let totals_staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("intersection totals readback"),
+            size: 12,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        Ok(GpuRenderer {
+            gpu,
+            opts: *opts,
+            depth_sums,
+            layout,
+            project: gpu.pipeline(&entries::project::<M>()?, "splat_harness")?,
+            count: gpu.pipeline(&entries::tiles::<M>(false, opts.tile_cull)?, "count_tiles")?,
+            emit: gpu.pipeline(&entries::tiles::<M>(true, opts.tile_cull)?, "emit_tiles")?,
+            shade: gpu.pipeline(
+                &entries::shade::<M>(gpu, opts.tile_size, depth_sums)?,
+                "shade_tiles",
+            )?,
+            project_backward: gpu.pipeline(&source, "project_backward")?,
+            param_floats,
+            pixel_backward,
+            blends: HashMap::new(),
+            camera: gpu.buffer("camera", Camera::LEN)?,
+            frame_info: gpu.uniform_buffer(8),
+            count_info: gpu.uniform_buffer(4),
+            pixel_info: gpu.uniform_buffer(4),
+            projected: grown("projected primitives", 1)?,
+            counts: grown("tiles per primitive", 1)?,
+            totals,
+            totals_staging,
+            scan: Scan::new(gpu)?,
+            keys: grown("intersection keys", 2)?,
+            prims: grown("intersection primitives", 1)?,
+            sort: RadixSort::new(gpu)?,
+            tiles: TileRanges::new(gpu)?,
+            pixels: grown("pixels", 1)?,
+            pixel_grad: grown("pixel gradients", 1)?,
+            grads: grown("primitive gradients", 1)?,
+            issued: gpu.buffer("atomic count", 2)?,
+            param_grads: grown("parameter gradients", 1)?,
+            camera_partials: grown("camera gradient partials", 1)?,
+            pixel_cotangent: grown("pixel data cotangents", 1)?,
+            ray_partials: grown("camera ray gradient partials", 1)?,
+            timer: StageTimer::new(gpu, STAGES),
+            frame: None,
+            method: PhantomData,
+        })
+    }
+
+    /// The last frame rendered, if any.
+    pub fn frame(&self) -> Option<FrameInfo> {
+        self.frame
+    }
+
+    /// Renders `scene` through `camera` into the renderer's buffers (download with
+    /// [`GpuRenderer::download_frame`]). Waits once, for the intersection count.
+    pub fn forward(
+        &mut self,
+        scene: &GpuScene<M>,
+        camera: &Camera,
+    ) -> Result<FrameInfo, GpuRenderError> {
+        self.frame = None;
+        let gpu = self.gpu;
+        let grid = crate::pipeline::check::<M>(camera, &self.opts)?;
+        let (n, layout) = (scene.len(), self.layout);
+        let n32 = n as u32;
+        let tiles = grid.tile_count() as u32;
+        let p_max = self
+            .opts
+            .p_max
+            .map_or(u32::MAX, |p| p.min(u32::MAX as usize) as u32);
+        self.projected.ensure(gpu, n * layout.stride)?;
+        self.counts.ensure(gpu, n)?;
+        self.scan.prepare(gpu, n32)?;
+        gpu.write(&self.camera, &words_of(std::slice::from_ref(camera)));
+        gpu.write(
+            &self.frame_info,
+            &[
+                n32,
+                grid.width,
+                grid.height,
+                grid.size,
+                grid.tiles_x,
+                p_max,
+                tiles,
+                0,
+            ],
+        );
+        gpu.write(&self.count_info, &[n32, 0, 0, 0]);
+
+        // Submission 1: project, count, prefix sum; the total comes back.
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        enc.clear_buffer(&self.totals, 0, None);
+        self.timer.start(&mut enc, PROJECT);
+        let bind = gpu.bind(
+            &self.project,
+            &[
+                scene.buffer(),
+                &self.camera,
+                &self.projected,
+                &self.count_info,
+            ],
+        );
+        dispatch(&mut enc, &self.project, &bind, n32.div_ceil(64));
+        self.timer.end(&mut enc, PROJECT);
+        self.timer.start(&mut enc, COUNT);
+        let bind = gpu.bind(
+            &self.count,
+            &[
+                &self.projected,
+                &self.counts,
+                &self.frame_info,
+                &self.totals,
+            ],
+        );
+        dispatch(&mut enc, &self.count, &bind, n32.div_ceil(256));
+        self.scan.record(gpu, &mut enc, &self.counts);
+        self.timer.end(&mut enc, COUNT);
+        enc.copy_buffer_to_buffer(&self.totals, 0, &self.totals_staging, 0, 12);
+        gpu.queue.submit([enc.finish()]);
+        let t = gpu.read_mappable(&self.totals_staging, 3)?;
+        let total = t[0] as u64 | (t[1] as u64) << 32;
+        if total > MAX_INTERSECTIONS {
+            return Err(RenderError::TooManyIntersections {
+                count: total,
+                limit: MAX_INTERSECTIONS,
+            }
+            .into());
+        }
+        let total32 = total as u32;
+
+        // Submission 2: emit, sort, ranges, bins, shade.
+        self.keys.ensure(gpu, 2 * total as usize)?;
+        self.prims.ensure(gpu, total as usize)?;
+        self.sort.prepare(gpu, total32, tiles)?;
+        self.tiles.prepare(gpu, total32, tiles, p_max)?;
+        let pixels = (grid.width * grid.height) as usize;
+        self.pixels.ensure(gpu, pixels * (layout.channels + 2))?;
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        self.timer.start(&mut enc, SORT);
+        let bind = gpu.bind(
+            &self.emit,
+            &[
+                &self.projected,
+                &self.counts,
+                &self.frame_info,
+                &self.keys,
+                &self.prims,
+            ],
+        );
+        dispatch(&mut enc, &self.emit, &bind, n32.div_ceil(256));
+        self.sort.record(gpu, &mut enc, &self.keys, &self.prims);
+        self.tiles.record(gpu, &mut enc, &self.keys);
+        self.timer.end(&mut enc, SORT);
+        self.timer.start(&mut enc, SHADE);
+        let mut inputs = vec![
+            &*self.projected,
+            &*self.prims,
+            &*self.tiles.ranges,
+            &*self.tiles.order,
+            &self.frame_info,
+            &*self.pixels,
+        ];
+        if M::HAS_PIXEL_INFO {
+            inputs.push(&self.camera);
+        }
+        dispatch(
+            &mut enc,
+            &self.shade,
+            &gpu.bind(&self.shade, &inputs),
+            tiles,
+        );
+        self.timer.end(&mut enc, SHADE);
+        self.timer.resolve(&mut enc, PROJECT..BLEND);
+        gpu.queue.submit([enc.finish()]);
+        let info = FrameInfo {
+            grid,
+            primitives: n,
+            visible: t[2] as usize,
+            intersections: total as usize,
+        };
+        self.frame = Some(info);
+        Ok(info)
+    }
+
+    /// The last frame's outputs (as `RenderOptions` asked) and stats.
+    pub fn download_frame(&self) -> Result<Frame, GpuRenderError> {
+        let info = self.frame.ok_or(GpuRenderError::NoFrame)?;
+        let (grid, channels) = (info.grid, self.layout.channels);
+        let pixels = (grid.width * grid.height) as usize;
+        let out = self.gpu.read(&self.pixels, pixels * (channels + 2))?;
+        let tiles = grid.tile_count();
+        let ranges = self.gpu.read(&self.tiles.ranges, 2 * tiles)?;
+        let f = f32::from_bits;
+        let mut color = Vec::with_capacity(pixels * channels);
+        let (mut t, mut dacc) = (Vec::with_capacity(pixels), Vec::with_capacity(pixels));
+        for px in out.chunks_exact(channels + 2) {
+            color.extend(px[..channels].iter().map(|w| f(*w)));
+            t.push(f(px[channels]));
+            dacc.push(f(px[channels + 1]));
+        }
+        let (alpha, depth) = crate::pipeline::alpha_and_depth(&grid, &self.opts, &t, &dacc);
+        let times = self.timer.read(self.gpu)?.unwrap_or_default();
+        let time = |s: u32| times.get(s as usize).copied().unwrap_or_default();
+        let stats = Stats {
+            primitives: info.primitives,
+            visible: info.visible,
+            intersections: info.intersections,
+            longest_list: ranges
+                .chunks_exact(2)
+                .map(|r| r[1] - r[0])
+                .max()
+                .unwrap_or(0) as usize,
+            pairs: 0,
+            preprocess: time(PROJECT),
+            rasterize: time(COUNT) + time(SORT),
+            shade: time(SHADE),
+        };
+        Ok(Frame {
+            color: Image {
+                width: grid.width,
+                height: grid.height,
+                channels,
+                data: color,
+            },
+            alpha,
+            depth,
+            stats,
+        })
+    }
+
+    /// The backward pass of the last frame of `scene` (unchanged since), given the gradient of
+    /// each output, with the gradient accumulation `acc`: one submission; the gradients stay
+    /// on the device until [`GpuRenderer::download_gradients`].
+    pub fn backward(
+        &mut self,
+        scene: &GpuScene<M>,
+        grad: &FrameGrad,
+        acc: Accumulation,
+    ) -> Result<(), GpuRenderError> {
+        let gpu = self.gpu;
+        let info = self.frame.ok_or(GpuRenderError::NoFrame)?;
+        if scene.len() != info.primitives {
+            return Err(GpuRenderError::SceneChanged {
+                got: scene.len(),
+                want: info.primitives,
+            });
+        }
+        let (grid, layout) = (info.grid, self.layout);
+        let (channels, pixels) = (layout.channels, (grid.width * grid.height) as usize);
+        let sizes = [
+            ("color", Some(grad.color.len()), pixels * channels),
+            ("alpha", grad.alpha.as_ref().map(Vec::len), pixels),
+            ("depth", grad.depth.as_ref().map(Vec::len), pixels),
+        ];
+        for (what, got, want) in sizes {
+            if let Some(got) = got.filter(|g| *g != want) {
+                return Err(RenderError::GradientSize { what, got, want }.into());
+            }
+        }
+        let want_depth = grad.depth.is_some();
+        if want_depth && !self.depth_sums {
+            return Err(GpuRenderError::DepthNotRendered);
+        }
+        let blend = self.blend(want_depth, acc)?;
+        let mut words = vec![0u32; pixels * (channels + 2)];
+        for (p, out) in words.chunks_exact_mut(channels + 2).enumerate() {
+            let color = &grad.color[p * channels..(p + 1) * channels];
+            for (o, c) in out.iter_mut().zip(color) {
+                *o = c.to_bits();
+            }
+            out[channels] = grad.alpha.as_ref().map_or(0.0, |a| a[p]).to_bits();
+            out[channels + 1] = grad.depth.as_ref().map_or(0.0, |d| d[p]).to_bits();
+        }
+        self.pixel_grad.ensure(gpu, words.len())?;
+        gpu.write(&self.pixel_grad, &words);
+        let n = info.primitives;
+        let groups = (n as u32).div_ceil(64).max(1);
+        let npx = M::PixelLanes::default().as_ref().len();
+        self.grads.ensure(gpu, n * layout.grad_words)?;
+        self.param_grads.ensure(gpu, n * self.param_floats)?;
+        self.camera_partials
+            .ensure(gpu, groups as usize * Camera::FLOAT_SLOTS)?;
+        if M::HAS_PIXEL_INFO {
+            self.pixel_cotangent.ensure(gpu, pixels * npx)?;
+            let ray_groups = (pixels as u32).div_ceil(64).max(1) as usize;
+            self.ray_partials
+                .ensure(gpu, ray_groups * Camera::FLOAT_SLOTS)?;
+            gpu.write(&self.pixel_info, &[grid.width, grid.height, 0, 0]);
+        }
+
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        enc.clear_buffer(
+            &self.grads,
+            0,
+            Some(4 * (n * layout.grad_words).max(1) as u64),
+        );
+        enc.clear_buffer(&self.issued, 0, None);
+        self.timer.start(&mut enc, BLEND);
+        let mut inputs = vec![
+            &*self.projected,
+            &*self.prims,
+            &*self.tiles.ranges,
+            &*self.tiles.order,
+            &self.frame_info,
+            &*self.pixels,
+            &*self.pixel_grad,
+            &*self.grads,
+            &self.issued,
+        ];
+        if M::HAS_PIXEL_INFO {
+            inputs.push(&self.camera);
+            inputs.push(&self.pixel_cotangent);
+        }
+        let tiles = grid.tile_count() as u32;
+        dispatch(&mut enc, &blend, &gpu.bind(&blend, &inputs), tiles);
+        self.timer.end(&mut enc, BLEND);
+        self.timer.start(&mut enc, ADJOINT);
+        let p = &self.project_backward;
+        let bind = gpu.bind(
+            p,
+            &[
+                scene.buffer(),
+                &self.camera,
+                &self.projected,
+                &self.grads,
+                &self.param_grads,
+                &self.camera_partials,
+                &self.count_info,
+            ],
+        );
+        dispatch(&mut enc, p, &bind, groups);
+        if let Some(p) = &self.pixel_backward {
+            let bind = gpu.bind(
+                p,
+                &[
+                    &self.camera,
+                    &self.pixel_cotangent,
+                    &self.ray_partials,
+                    &self.pixel_info,
+                ],
+            );
+            dispatch(&mut enc, p, &bind, (pixels as u32).div_ceil(64));
+        }
+        self.timer.end(&mut enc, ADJOINT);
+        self.timer.resolve(&mut enc, BLEND..STAGES);
+        gpu.queue.submit([enc.finish()]);
+        Ok(())
+    }
+
+    fn blend(
+        &mut self,
+        want_depth: bool,
+        acc: Accumulation,
+    ) -> Result<wgpu::ComputePipeline, GpuRenderError> {
+        let gpu = self.gpu;
+        if acc.float_atomics && !gpu.float_atomics {
+            return Err(GpuError::Shader("this adapter has no f32 atomics".into()).into());
+        }
+        if acc.reduce == Reduction::Subgroup && !gpu.subgroups {
+            return Err(GpuError::Shader("this adapter has no subgroup operations".into()).into());
+        }
+        if let Some(p) = self.blends.get(&(want_depth, acc)) {
+            return Ok(p.clone());
+        }
+        let source = entries::backward::<M>(gpu, self.opts.tile_size, want_depth, acc)?;
+        let p = gpu.pipeline(&source, "backward_tiles")?;
+        self.blends.insert((want_depth, acc), p.clone());
+        Ok(p)
+    }
+
+    /// The parameter gradient words on the device (`M::Params`' float slots per primitive),
+    /// for an optimizer on the device.
+    pub fn param_gradients(&self) -> &wgpu::Buffer {
+        &self.param_grads
+    }
+
+    /// The last backward pass's gradients, read back.
+    pub fn download_gradients(&self) -> Result<GpuGradients<M>, GpuRenderError> {
+        let gpu = self.gpu;
+        let info = self.frame.ok_or(GpuRenderError::NoFrame)?;
+        let (n, npf) = (info.primitives, self.param_floats);
+        let count = gpu.read(&self.issued, 2)?;
+        let floats: Vec<f32> = gpu
+            .read(&self.param_grads, n * npf)?
+            .into_iter()
+            .map(f32::from_bits)
+            .collect();
+        let params = floats
+            .chunks_exact(npf.max(1))
+            .take(n)
+            .map(M::params_from_float_slots)
+            .collect();
+        let groups = (n as u32).div_ceil(64).max(1) as usize;
+        let mut partials = gpu.read(&self.camera_partials, groups * Camera::FLOAT_SLOTS)?;
+        if M::HAS_PIXEL_INFO {
+            let pixels = info.grid.width * info.grid.height;
+            let ray_groups = pixels.div_ceil(64).max(1) as usize;
+            partials.extend(gpu.read(&self.ray_partials, ray_groups * Camera::FLOAT_SLOTS)?);
+        }
+        // Summed in f64, in order; the model word (last) stays zero: a cotangent has no model.
+        let mut cam = vec![0.0f64; Camera::LEN];
+        for group in partials.chunks_exact(Camera::FLOAT_SLOTS) {
+            for (c, w) in cam.iter_mut().zip(group) {
+                *c += f32::from_bits(*w) as f64;
+            }
+        }
+        let cam: Vec<f32> = cam.into_iter().map(|c| c as f32).collect();
+        let times = self.timer.read(gpu)?.unwrap_or_default();
+        let time = |s: u32| times.get(s as usize).copied().unwrap_or_default();
+        Ok(GpuGradients {
+            gradients: Gradients {
+                params,
+                camera: Camera::read_words(&cam),
+                stats: BackwardStats {
+                    blend: time(BLEND),
+                    reduce: Default::default(),
+                    project: time(ADJOINT),
+                },
+            },
+            atomics: count[0] as u64 | (count[1] as u64) << 32,
+        })
+    }
+}
