@@ -1,15 +1,16 @@
-//! Stage 3: tile lists. Count the tiles each visible primitive keeps (per tile, with atomic
-//! counters), prefix-sum the counts into tile ranges, emit every (primitive, tile) pair into its
-//! tile's range, then sort each tile's range by depth. Counting and emitting go through the
-//! same [`for_each_kept_tile`], so they cannot disagree. Bucketing by tile first replaces a
-//! global sort of all intersections by many small independent sorts.
+//! Stage 3: tile lists. Count the tiles each visible primitive keeps (per chunk of primitives,
+//! into the chunk's own tile histogram: no counter shared between threads), prefix-sum the
+//! counts into tile ranges and each chunk's slots in them, emit every (primitive, tile) pair
+//! into its chunk's slots, then sort each tile's range by depth. `tile_cull` runs once per
+//! candidate tile: emitting replays the tiles counting kept, so the two cannot disagree.
+//! Bucketing by tile first replaces a global sort of all intersections by many small
+//! independent sorts.
 
 use super::RenderError;
 use super::grid::{TileGrid, TileRect};
 use super::preprocess::Preprocessed;
 use crate::method::SplatMethod;
 use rayon::prelude::*;
-use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 
 /// Largest number of (primitive, tile) intersections a frame may have: lists are indexed
 /// with `u32`.
@@ -59,53 +60,74 @@ fn entry(depth: f32, prim: u32) -> u64 {
     ((depth.max(0.0).to_bits() as u64) << 32) | prim as u64
 }
 
+/// Visible primitives per chunk: each chunk counts and emits on its own tile histogram, so no
+/// counter is shared between threads, and the lists come out the same whatever the thread count.
+const CHUNK: usize = 4096;
+
 pub fn rasterize<M: SplatMethod>(
     pre: &Preprocessed<M>,
     grid: &TileGrid,
     use_cull: bool,
 ) -> Result<TileLists, RenderError> {
     let tiles = grid.tile_count();
-    let counts: Vec<AtomicU32> = (0..tiles).map(|_| AtomicU32::new(0)).collect();
-    let total = AtomicU64::new(0);
-    pre.visible.par_iter().for_each(|(i, rect)| {
-        let mut n = 0u64;
-        for_each_kept_tile::<M>(
-            grid,
-            rect,
-            &pre.projected[*i as usize].cull,
-            use_cull,
-            |t| {
-                counts[t as usize].fetch_add(1, Ordering::Relaxed);
-                n += 1;
-            },
-        );
-        total.fetch_add(n, Ordering::Relaxed);
-    });
-    let total = total.into_inner();
-    if total > MAX_INTERSECTIONS {
-        return Err(RenderError::TooManyIntersections {
-            count: total,
-            limit: MAX_INTERSECTIONS,
-        });
-    }
+    // Count: per chunk, the tiles each primitive keeps (`tile_cull` runs once per candidate
+    // tile) and the pairs of each tile.
+    let chunks: Vec<&[(u32, TileRect)]> = pre.visible.chunks(CHUNK).collect();
+    let (mut histograms, kept): (Vec<Vec<u32>>, Vec<Kept>) = chunks
+        .par_iter()
+        .map(|chunk| {
+            let mut h = vec![0u32; tiles];
+            let mut kept = Kept::default();
+            for (i, rect) in chunk.iter() {
+                let before = kept.tiles.len();
+                let cull = &pre.projected[*i as usize].cull;
+                for_each_kept_tile::<M>(grid, rect, cull, use_cull, |t| {
+                    h[t as usize] += 1;
+                    kept.tiles.push(t);
+                });
+                kept.counts.push((kept.tiles.len() - before) as u32);
+            }
+            (h, kept)
+        })
+        .unzip();
+    // Each tile's range, then each chunk's first slot in it (chunks in order), in place.
     let mut ranges = Vec::with_capacity(tiles + 1);
-    ranges.push(0u32);
-    for c in &counts {
-        ranges.push(ranges.last().unwrap() + c.load(Ordering::Relaxed));
+    ranges.push(0u64);
+    for t in 0..tiles {
+        let mut at = *ranges.last().unwrap();
+        for h in histograms.iter_mut() {
+            let n = h[t] as u64;
+            h[t] = at as u32;
+            at += n;
+        }
+        if at > MAX_INTERSECTIONS {
+            return Err(RenderError::TooManyIntersections {
+                count: at,
+                limit: MAX_INTERSECTIONS,
+            });
+        }
+        ranges.push(at);
     }
-    // Emit: each pair takes the next free slot of its tile.
-    let cursors: Vec<AtomicU32> = ranges[..tiles].iter().map(|&r| AtomicU32::new(r)).collect();
-    let slots: Vec<AtomicU64> = (0..total).map(|_| AtomicU64::new(0)).collect();
-    pre.visible.par_iter().for_each(|(i, rect)| {
-        let p = &pre.projected[*i as usize];
-        let e = entry(p.depth, *i);
-        for_each_kept_tile::<M>(grid, rect, &p.cull, use_cull, |t| {
-            let k = cursors[t as usize].fetch_add(1, Ordering::Relaxed);
-            slots[k as usize].store(e, Ordering::Relaxed);
+    let total = *ranges.last().unwrap() as usize;
+    // Emit: every chunk writes only its own slots of each tile.
+    let mut entries = vec![0u64; total];
+    let out = SharedSlots(entries.as_mut_ptr());
+    (chunks, kept, histograms.as_mut_slice())
+        .into_par_iter()
+        .for_each(|(chunk, kept, cursor)| {
+            let mut tiles = kept.tiles.iter();
+            for ((i, _), &count) in chunk.iter().zip(&kept.counts) {
+                let e = entry(pre.projected[*i as usize].depth, *i);
+                for &t in tiles.by_ref().take(count as usize) {
+                    let k = &mut cursor[t as usize];
+                    // SAFETY: slot k lies in this chunk's own part of tile t's range (the
+                    // counts above), which no other chunk writes, and below `total`.
+                    unsafe { out.write(*k as usize, e) };
+                    *k += 1;
+                }
+            }
         });
-    });
-    let mut entries: Vec<u64> = slots.into_iter().map(AtomicU64::into_inner).collect();
-    // Sort every tile's range (the slot order within a tile depended on thread timing).
+    // Sort every tile's range by depth (ties by index).
     let mut segments = Vec::with_capacity(tiles);
     let mut rest = entries.as_mut_slice();
     for t in 0..tiles {
@@ -115,5 +137,27 @@ pub fn rasterize<M: SplatMethod>(
     }
     segments.into_par_iter().for_each(|s| s.sort_unstable());
     let prims = entries.into_par_iter().map(|e| e as u32).collect();
+    let ranges = ranges.into_iter().map(|r| r as u32).collect();
     Ok(TileLists { prims, ranges })
+}
+
+/// The tiles a chunk's primitives keep, in order, and how many each keeps.
+#[derive(Default)]
+struct Kept {
+    tiles: Vec<u32>,
+    counts: Vec<u32>,
+}
+
+/// The entries buffer, written from several threads at disjoint indices.
+struct SharedSlots(*mut u64);
+
+// SAFETY: every write goes to an index no other thread writes (see `rasterize`).
+unsafe impl Sync for SharedSlots {}
+
+impl SharedSlots {
+    /// # Safety
+    /// `k` is in bounds and no other thread reads or writes it.
+    unsafe fn write(&self, k: usize, e: u64) {
+        unsafe { *self.0.add(k) = e };
+    }
 }
