@@ -237,6 +237,7 @@ fn tile_pass(layout: &Layout, tile: u32, b: &Blend) -> String {
             ("STRIDE", layout.stride.to_string()),
             ("SHADE_AT", layout.shade_at.to_string()),
             ("CHANNELS", layout.channels.to_string()),
+            ("T_MIN", format!("{:?}", crate::pipeline::shade::T_MIN)),
             (
                 "BATCH_WORDS",
                 (b.batch as usize * layout.shade_words.max(1)).to_string(),

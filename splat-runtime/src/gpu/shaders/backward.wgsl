@@ -73,7 +73,7 @@ fn backward_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
                 if (r.{{VALID}} != 0u) {
                     let alpha = r.{{ALPHA}};
                     let next = t * (1.0 - alpha);
-                    if (next <= 1e-4) {
+                    if (next <= T_MIN) {
                         done = true;
                         atomicAdd(&done_count, 1u);
                     } else {

@@ -1,4 +1,4 @@
-// The forward blend: front to back, stop once T would fall to 1e-4 or below (as on the CPU).
+// The forward blend: front to back, stop once T would fall to T_MIN or below (as on the CPU).
 
 // Per pixel: color (CHANNELS), final T, sum of weight * depth.
 @group(0) @binding(5) var<storage, read_write> pixel_out: array<u32>;
@@ -29,7 +29,7 @@ fn shade_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_
                 continue;
             }
             let next = t * (1.0 - r.{{ALPHA}});
-            if (next <= 1e-4) {
+            if (next <= T_MIN) {
                 done = true;
                 atomicAdd(&done_count, 1u);
                 break;
