@@ -10,6 +10,7 @@
 
 use codegen_tests::corpus::*;
 use splat_runtime::gpu::{Gpu, kernel};
+use splat_runtime::{WgslFunction, WgslScalar};
 
 /// |x - f64 twin| <= TOL * max(|twin|, 1): relative, absolute below 1.
 const TOL: f64 = 1e-5;
@@ -39,12 +40,12 @@ struct Row<const NF: usize, const NI: usize> {
 }
 
 /// Interleaves floats and ints back into WGSL argument order.
-fn words(kinds: &[naga::ScalarKind], floats: &[f32], ints: &[u32]) -> Vec<u32> {
+fn words(kinds: &[WgslScalar], floats: &[f32], ints: &[u32]) -> Vec<u32> {
     let (mut f, mut i) = (floats.iter(), ints.iter());
     kinds
         .iter()
         .map(|k| {
-            if *k == naga::ScalarKind::Float {
+            if *k == WgslScalar::F32 {
                 f.next().unwrap().to_bits()
             } else {
                 *i.next().unwrap()
@@ -76,7 +77,7 @@ struct Kernel<const NF: usize, const NI: usize, const MF: usize, const MI: usize
 
 fn check<const NF: usize, const NI: usize, const MF: usize, const MI: usize>(
     gpu: &Gpu,
-    wgsl: &str,
+    (wgsl, functions): (&str, &[WgslFunction]),
     k: Kernel<NF, NI, MF, MI>,
     (lo, hi, int_max): (f32, f32, u32),
 ) -> Errors {
@@ -87,19 +88,19 @@ fn check<const NF: usize, const NI: usize, const MF: usize, const MI: usize>(
             ints: std::array::from_fn(|_| rng.u32(0..=int_max)),
         })
         .collect();
-    let fwd_sig = kernel::signature(wgsl, k.name).unwrap();
+    let fwd_sig = kernel::function(functions, k.name).unwrap();
     let inputs: Vec<Vec<u32>> = rows
         .iter()
-        .map(|r| words(&fwd_sig.args, &r.floats, &r.ints))
+        .map(|r| words(fwd_sig.args, &r.floats, &r.ints))
         .collect();
-    let out = kernel::run(gpu, wgsl, k.name, &inputs).unwrap();
+    let out = kernel::run(gpu, wgsl, fwd_sig, &inputs).unwrap();
     let mut e = Errors::default();
     for (r, o) in rows.iter().zip(&out) {
         let (cf, ci) = (k.f)(&r.floats, &r.ints);
         let (tf, _) = (k.twin)(&widen(&r.floats), &r.ints);
         let (mut fi, mut ii) = (0, ci.iter());
         for ((_, kind), w) in fwd_sig.results.iter().zip(o) {
-            if *kind == naga::ScalarKind::Float {
+            if *kind == WgslScalar::F32 {
                 e.gpu = e.gpu.max(err(f32::from_bits(*w), tf[fi]));
                 e.cpu = e.cpu.max(err(cf[fi], tf[fi]));
                 fi += 1;
@@ -109,7 +110,7 @@ fn check<const NF: usize, const NI: usize, const MF: usize, const MI: usize>(
         }
     }
     let adj_name = format!("{}_adjoint", k.name);
-    let adj_sig = kernel::signature(wgsl, &adj_name).unwrap();
+    let adj_sig = kernel::function(functions, &adj_name).unwrap();
     assert_eq!(adj_sig.args.len(), fwd_sig.args.len() + MF);
     let bars: Vec<[f32; MF]> = rows
         .iter()
@@ -119,12 +120,12 @@ fn check<const NF: usize, const NI: usize, const MF: usize, const MI: usize>(
         .iter()
         .zip(&bars)
         .map(|(r, d)| {
-            let mut w = words(&fwd_sig.args, &r.floats, &r.ints);
+            let mut w = words(fwd_sig.args, &r.floats, &r.ints);
             w.extend(d.iter().map(|x| x.to_bits()));
             w
         })
         .collect();
-    let out = kernel::run(gpu, wgsl, &adj_name, &inputs).unwrap();
+    let out = kernel::run(gpu, wgsl, adj_sig, &inputs).unwrap();
     for ((r, d), o) in rows.iter().zip(&bars).zip(&out) {
         let c = (k.adj)(&r.floats, &r.ints, d);
         let t = (k.twin_adj)(&widen(&r.floats), &r.ints, &widen(d));
@@ -141,7 +142,7 @@ macro_rules! gpu_corpus {
         let mut failures = vec![];
         $(
             let k = Kernel { name: stringify!($f), f: $m::scalar::$f, adj: $m::scalar::$adj, twin: $m::twin::$f, twin_adj: $m::twin::$adj };
-            let e = check($gpu, $m::GENERATED_WGSL, k, ($lo, $hi, $imax));
+            let e = check($gpu, ($m::GENERATED_WGSL, $m::GENERATED_FUNCTIONS), k, ($lo, $hi, $imax));
             #[allow(unused_variables)]
             let tol = TOL;
             $(let tol = $tol;)?

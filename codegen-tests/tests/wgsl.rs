@@ -1,11 +1,25 @@
 //! The WGSL of every module (compiler corpus, examples, methods): it was validated by naga when
 //! the macro expanded; here the text naga wrote is parsed again (naga's WGSL front end) and
-//! validated again, since the validator alone does not catch every emit mistake. The WGSL of
-//! one small method is snapshot-tested.
+//! validated again, since the validator alone does not catch every emit mistake; the signature
+//! table the compiler emits beside it (what the GPU runtime builds its entry points from) is
+//! checked against the parsed functions. The WGSL of one small method is snapshot-tested.
 
 use codegen_tests::corpus;
+use splat_runtime::{WgslFunction, WgslScalar};
 
-fn reparse(name: &str, wgsl: &str, kernels: &[&str]) {
+fn scalar(module: &naga::Module, ty: naga::Handle<naga::Type>) -> WgslScalar {
+    match module.types[ty].inner {
+        naga::TypeInner::Scalar(s) => match s.kind {
+            naga::ScalarKind::Float => WgslScalar::F32,
+            naga::ScalarKind::Uint => WgslScalar::U32,
+            naga::ScalarKind::Sint => WgslScalar::I32,
+            _ => WgslScalar::Bool,
+        },
+        ref other => panic!("unexpected argument type {other:?}"),
+    }
+}
+
+fn reparse(name: &str, wgsl: &str, table: &[WgslFunction], kernels: &[&str]) {
     let module = naga::front::wgsl::parse_str(wgsl)
         .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(wgsl)));
     naga::valid::Validator::new(
@@ -26,55 +40,95 @@ fn reparse(name: &str, wgsl: &str, kernels: &[&str]) {
             names.contains(k) || names.contains(&renamed.as_str()),
             "{name}: no function `{k}` in {names:?}"
         );
+        assert!(
+            table.iter().any(|f| f.kernel == *k),
+            "{name}: `{k}` missing from the signature table"
+        );
+    }
+    assert_eq!(
+        table.len(),
+        module.functions.len(),
+        "{name}: one entry per function"
+    );
+    for entry in table {
+        let (_, f) = module
+            .functions
+            .iter()
+            .find(|(_, f)| f.name.as_deref() == Some(entry.name))
+            .unwrap_or_else(|| panic!("{name}: the table names `{}`, not in the WGSL", entry.name));
+        let args: Vec<WgslScalar> = f.arguments.iter().map(|a| scalar(&module, a.ty)).collect();
+        assert_eq!(args, entry.args, "{name}: arguments of `{}`", entry.name);
+        let result = f.result.as_ref().expect("a struct result");
+        let naga::TypeInner::Struct { members, .. } = &module.types[result.ty].inner else {
+            panic!("{name}: `{}` does not return a struct", entry.name);
+        };
+        let results: Vec<(&str, WgslScalar)> = members
+            .iter()
+            .map(|m| (m.name.as_deref().unwrap_or(""), scalar(&module, m.ty)))
+            .collect();
+        assert_eq!(
+            results, entry.results,
+            "{name}: results of `{}`",
+            entry.name
+        );
     }
 }
 
 #[test]
 fn every_module_reparses_and_validates() {
-    let modules: &[(&str, &str, &[&str])] = &[
+    let modules: &[(&str, &str, &[WgslFunction], &[&str])] = &[
         (
             "scalars",
             corpus::scalars::GENERATED_WGSL,
+            corpus::scalars::GENERATED_FUNCTIONS,
             &["arith", "arith_adjoint", "trig", "misc_adjoint", "sincos"],
         ),
         (
             "vectors",
             corpus::vectors::GENERATED_WGSL,
+            corpus::vectors::GENERATED_FUNCTIONS,
             &["geometry", "rotate_adjoint", "components"],
         ),
         (
             "matrices",
             corpus::matrices::GENERATED_WGSL,
+            corpus::matrices::GENERATED_FUNCTIONS,
             &["mat3", "mat2_adjoint", "covariance_adjoint"],
         ),
         (
             "control",
             corpus::control::GENERATED_WGSL,
+            corpus::control::GENERATED_FUNCTIONS,
             &["nested", "statements_adjoint", "array_loop", "flags"],
         ),
         (
             "structured",
             corpus::structured::GENERATED_WGSL,
+            corpus::structured::GENERATED_FUNCTIONS,
             &["sh_color", "splat_of_adjoint", "uses_custom_adjoint"],
         ),
         (
             "kinks",
             corpus::kinks::GENERATED_WGSL,
+            corpus::kinks::GENERATED_FUNCTIONS,
             &["nan_branch_adjoint", "inf_branch", "normalize_of_adjoint"],
         ),
         (
             "isotropic",
             splat_examples::isotropic::isotropic::GENERATED_WGSL,
+            splat_examples::isotropic::isotropic::GENERATED_FUNCTIONS,
             &["project", "tile_cull", "evaluate_adjoint"],
         ),
         (
             "features",
             splat_examples::features::features::GENERATED_WGSL,
+            splat_examples::features::features::GENERATED_FUNCTIONS,
             &["project_adjoint", "evaluate"],
         ),
         (
             "gs3d",
             splat_methods::gs3d::GENERATED_WGSL,
+            splat_methods::gs3d::GENERATED_FUNCTIONS,
             &[
                 "project",
                 "project_adjoint",
@@ -84,8 +138,8 @@ fn every_module_reparses_and_validates() {
             ],
         ),
     ];
-    for (name, wgsl, kernels) in modules {
-        reparse(name, wgsl, kernels);
+    for (name, wgsl, table, kernels) in modules {
+        reparse(name, wgsl, table, kernels);
     }
 }
 

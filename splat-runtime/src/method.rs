@@ -11,13 +11,45 @@ use crate::lanes::{LaneArray, M32x8};
 use crate::types::{Camera, Contribution, ContributionLanes, Projected, Tile};
 use glam::Vec2;
 
-/// The generated source of a method, for `splat inspect` and for review.
+/// The generated source of a method, for `splat inspect`, for review, and for the GPU
+/// backend, which assembles its entry points from `functions` (it never parses the WGSL).
 #[derive(Clone, Copy, Debug)]
 pub struct GeneratedSource {
     /// The pretty-printed Rust the macro emitted for the method's module.
     pub rust: &'static str,
     /// The WGSL of every kernel and adjoint, written by naga.
     pub wgsl: &'static str,
+    /// The signature of every function in `wgsl`.
+    pub functions: &'static [WgslFunction],
+}
+
+impl GeneratedSource {
+    /// The WGSL function generated for the kernel `name` (`project`, `evaluate_adjoint`, ...).
+    pub fn function(&self, name: &str) -> Option<&'static WgslFunction> {
+        self.functions.iter().find(|f| f.kernel == name)
+    }
+}
+
+/// The scalar type of a WGSL argument or result member (`bool` results travel as `u32`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WgslScalar {
+    F32,
+    U32,
+    I32,
+    Bool,
+}
+
+/// A generated WGSL function: one scalar argument per slot, a struct result with one member
+/// per slot, as the compiler wrote them (names after naga's renaming of reserved words).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct WgslFunction {
+    /// The kernel it was generated from, as named in Rust.
+    pub kernel: &'static str,
+    /// Its name in the WGSL.
+    pub name: &'static str,
+    pub args: &'static [WgslScalar],
+    /// Result members: name, scalar type.
+    pub results: &'static [(&'static str, WgslScalar)],
 }
 
 /// A point-based differentiable rendering method.

@@ -231,7 +231,7 @@ fn expand_module(kind: Kind, item: syn::ItemMod, diag: &Diag) -> Option<TokenStr
     if kind == Kind::Method {
         items.extend(emit::method::method_impl(&m.name, &kernels, diag)?);
     }
-    let wgsl = match emit::naga::wgsl(&wgsl_kernels(&kernels)) {
+    let (wgsl, signatures) = match emit::naga::wgsl(&wgsl_kernels(&kernels)) {
         Ok(w) => w,
         Err(e) => {
             diag.error_at(
@@ -242,6 +242,7 @@ fn expand_module(kind: Kind, item: syn::ItemMod, diag: &Diag) -> Option<TokenStr
         }
     };
     let source = emit::pretty(&items);
+    let functions = signatures.iter().map(function_literal);
     let (attrs, vis, name) = (&m.attrs, &m.vis, &m.name);
     Some(quote! {
         #(#attrs)*
@@ -251,8 +252,34 @@ fn expand_module(kind: Kind, item: syn::ItemMod, diag: &Diag) -> Option<TokenStr
             pub const GENERATED_RUST: &str = #source;
             /// WGSL of every kernel and adjoint (built as a naga module, validated, written by naga).
             pub const GENERATED_WGSL: &str = #wgsl;
+            /// The signature of every function in `GENERATED_WGSL`.
+            pub const GENERATED_FUNCTIONS: &[::splat_runtime::WgslFunction] = &[#(#functions),*];
         }
     })
+}
+
+/// A `splat_runtime::WgslFunction` literal.
+fn function_literal(f: &emit::naga::Signature) -> TokenStream {
+    let scalar = |s: &ir::Scalar| match s {
+        ir::Scalar::F32 => quote!(::splat_runtime::WgslScalar::F32),
+        ir::Scalar::U32 => quote!(::splat_runtime::WgslScalar::U32),
+        ir::Scalar::I32 => quote!(::splat_runtime::WgslScalar::I32),
+        ir::Scalar::Bool => quote!(::splat_runtime::WgslScalar::Bool),
+    };
+    let (kernel, name) = (&f.kernel, &f.name);
+    let args = f.args.iter().map(scalar);
+    let results = f.results.iter().map(|(m, s)| {
+        let s = scalar(s);
+        quote!((#m, #s))
+    });
+    quote! {
+        ::splat_runtime::WgslFunction {
+            kernel: #kernel,
+            name: #name,
+            args: &[#(#args),*],
+            results: &[#(#results),*],
+        }
+    }
 }
 
 /// Each kernel's IR with the names of its result slots (`alpha`, `color_x`, ...; the

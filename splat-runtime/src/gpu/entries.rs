@@ -2,13 +2,14 @@
 //!
 //! The templates in `shaders/` hold the runtime's logic; what depends on the method (how many
 //! words each type has, the calls to `project`, `tile_cull`, `pixel_info`, `evaluate` and the
-//! adjoints with one argument per slot) is filled in here from the signatures naga reads back
-//! out of the generated module. The method's source never changes between backends.
+//! adjoints with one argument per slot) is filled in here from the signatures the compiler
+//! emitted beside the WGSL (`SplatMethod::SOURCE.functions`). The method's source never
+//! changes between backends.
 
-use super::kernel::{self, Signature, load};
+use super::kernel::{self, load};
 use super::{Gpu, GpuError};
 use crate::flat::Flat;
-use crate::method::SplatMethod;
+use crate::method::{SplatMethod, WgslFunction};
 use crate::types::Camera;
 
 const TILES: &str = include_str!("shaders/tiles.wgsl");
@@ -61,8 +62,9 @@ impl Layout {
     }
 }
 
-fn sig(wgsl: &str, name: &str) -> Result<Signature, GpuError> {
-    kernel::signature(wgsl, name)
+/// The generated WGSL function of `M`'s kernel `name`.
+fn sig<M: SplatMethod>(name: &str) -> Result<&'static WgslFunction, GpuError> {
+    kernel::function(M::SOURCE.functions, name)
 }
 
 /// `project` over one primitive per invocation (the kernel harness: parameters per row, the
@@ -71,7 +73,7 @@ pub fn project<M: SplatMethod>() -> Result<String, GpuError> {
     let wgsl = M::SOURCE.wgsl;
     Ok(kernel::harness_source(
         wgsl,
-        &sig(wgsl, "project")?,
+        sig::<M>("project")?,
         M::Params::LEN,
     ))
 }
@@ -81,7 +83,7 @@ pub fn tiles<M: SplatMethod>(emit: bool, use_cull: bool) -> Result<String, GpuEr
     let wgsl = M::SOURCE.wgsl;
     let layout = Layout::of::<M>();
     let keep = if M::HAS_TILE_CULL && use_cull {
-        let cull = sig(wgsl, "tile_cull")?;
+        let cull = sig::<M>("tile_cull")?;
         let mut args: Vec<String> = ["lo.x", "lo.y", "hi.x", "hi.y"].map(String::from).into();
         for (k, kind) in cull.args.iter().enumerate().skip(4) {
             args.push(load(
@@ -197,7 +199,7 @@ fn pixel<M: SplatMethod>(camera_binding: u32) -> Result<(String, String, Vec<Str
     if !M::HAS_PIXEL_INFO {
         return Ok((String::new(), String::new(), vec!["px".into(), "py".into()]));
     }
-    let info = sig(M::SOURCE.wgsl, "pixel_info")?;
+    let info = sig::<M>("pixel_info")?;
     let cam: Vec<String> = info.args[2..]
         .iter()
         .enumerate()
@@ -216,8 +218,10 @@ fn pixel<M: SplatMethod>(camera_binding: u32) -> Result<(String, String, Vec<Str
 }
 
 /// `evaluate(pixel, staged shade words of entry j)`, and its signature.
-fn evaluate_call<M: SplatMethod>(pixel_args: &[String]) -> Result<(String, Signature), GpuError> {
-    let eval = sig(M::SOURCE.wgsl, "evaluate")?;
+fn evaluate_call<M: SplatMethod>(
+    pixel_args: &[String],
+) -> Result<(String, &'static WgslFunction), GpuError> {
+    let eval = sig::<M>("evaluate")?;
     let np = pixel_args.len();
     let mut args = pixel_args.to_vec();
     for (j, kind) in eval.args.iter().enumerate().skip(np) {
@@ -274,8 +278,8 @@ pub fn shade<M: SplatMethod>(gpu: &Gpu, tile: u32, want_depth: bool) -> Result<S
             ("WG", b.wg.to_string()),
             ("PIXEL", pixel_code),
             ("EVALUATE", call),
-            ("VALID", eval.results[nc + 1].0.clone()),
-            ("ALPHA", eval.results[0].0.clone()),
+            ("VALID", eval.results[nc + 1].0.to_string()),
+            ("ALPHA", eval.results[0].0.to_string()),
             ("ACCUMULATE", accumulate),
             ("DEPTH", depth.into()),
         ],
@@ -295,7 +299,7 @@ pub fn backward<M: SplatMethod>(
     let b = blend_sizes(gpu, tile, &layout, acc.reduce == Reduction::Workgroup)?;
     let (camera, pixel_code, pixel_args) = pixel::<M>(9)?;
     let (call, eval) = evaluate_call::<M>(&pixel_args)?;
-    let adj = sig(wgsl, "evaluate_adjoint")?;
+    let adj = sig::<M>("evaluate_adjoint")?;
     let (np, ns, nc) = (pixel_args.len(), layout.shade_words, layout.channels);
     if adj.args.len() != np + ns + 1 + nc {
         return Err(GpuError::Shader(format!(
@@ -459,8 +463,8 @@ pub fn backward<M: SplatMethod>(
             ("WG", b.wg.to_string()),
             ("PIXEL", pixel_code),
             ("EVALUATE", call),
-            ("VALID", eval.results[nc + 1].0.clone()),
-            ("ALPHA", eval.results[0].0.clone()),
+            ("VALID", eval.results[nc + 1].0.to_string()),
+            ("ALPHA", eval.results[0].0.to_string()),
             ("WANT_DEPTH", want_depth.to_string()),
             ("COLOR_TERMS", color_terms),
             (
@@ -479,7 +483,7 @@ pub fn backward<M: SplatMethod>(
 pub fn project_backward<M: SplatMethod>() -> Result<(String, usize), GpuError> {
     let wgsl = M::SOURCE.wgsl;
     let layout = Layout::of::<M>();
-    let adj = sig(wgsl, "project_adjoint")?;
+    let adj = sig::<M>("project_adjoint")?;
     let (np, ncam) = (M::Params::LEN, Camera::LEN);
     // Results: the parameters' float slots, then the camera's (its leading words).
     let npf = adj.results.len() - Camera::FLOAT_SLOTS;
@@ -535,7 +539,7 @@ pub fn project_backward<M: SplatMethod>() -> Result<(String, usize), GpuError> {
 /// for methods with `pixel_info`).
 pub fn pixel_backward<M: SplatMethod>() -> Result<String, GpuError> {
     let wgsl = M::SOURCE.wgsl;
-    let adj = sig(wgsl, "pixel_info_adjoint")?;
+    let adj = sig::<M>("pixel_info_adjoint")?;
     let ncam = Camera::LEN;
     // Arguments: the pixel centre, the camera, the pixel data's cotangent. Results: the
     // centre's cotangent (2), then the camera's float slots.

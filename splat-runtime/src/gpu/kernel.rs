@@ -1,94 +1,50 @@
 //! Runs one function of a generated WGSL module over a batch of inputs on the GPU.
 //!
-//! The harness reads the function's signature from the module (naga's WGSL front end), wraps
-//! it in a compute entry point that loads each argument from a storage buffer of 32-bit words
+//! The harness takes the function's signature from the compiler's table (a module's
+//! `GENERATED_FUNCTIONS`; the WGSL is never parsed here), wraps it in a compute entry point that loads each argument from a storage buffer of 32-bit words
 //! (floats and integers by bit pattern, `bool` as 0/1), calls it, and stores every member of
 //! its result struct back as words. One invocation per batch element.
 
 use super::{Gpu, GpuError};
+use crate::method::{WgslFunction, WgslScalar};
 use std::fmt::Write;
 
 /// A 32-bit word per argument or result member.
 pub type Word = u32;
 
-/// The scalar kind of each argument and result member of a WGSL function.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct Signature {
-    pub name: String,
-    pub args: Vec<naga::ScalarKind>,
-    pub results: Vec<(String, naga::ScalarKind)>,
-}
-
-fn kind_of(
-    module: &naga::Module,
-    ty: naga::Handle<naga::Type>,
-) -> Result<naga::ScalarKind, GpuError> {
-    match module.types[ty].inner {
-        naga::TypeInner::Scalar(s) => Ok(s.kind),
-        ref other => Err(GpuError::Shader(format!(
-            "unsupported argument type {other:?}"
-        ))),
-    }
-}
-
-/// The signature of function `name` (or `name_`, as naga renames built-in names) in `wgsl`.
-pub fn signature(wgsl: &str, name: &str) -> Result<Signature, GpuError> {
-    let module =
-        naga::front::wgsl::parse_str(wgsl).map_err(|e| GpuError::Shader(e.emit_to_string(wgsl)))?;
-    let renamed = format!("{name}_");
-    let (_, f) = module
-        .functions
+/// The generated function of kernel `name` in `functions` (a module's
+/// `GENERATED_FUNCTIONS`).
+pub fn function<'f>(
+    functions: &'f [WgslFunction],
+    name: &str,
+) -> Result<&'f WgslFunction, GpuError> {
+    functions
         .iter()
-        .find(|(_, f)| {
-            f.name.as_deref() == Some(name) || f.name.as_deref() == Some(renamed.as_str())
-        })
-        .ok_or_else(|| GpuError::Shader(format!("no function `{name}` in the module")))?;
-    let args = f
-        .arguments
-        .iter()
-        .map(|a| kind_of(&module, a.ty))
-        .collect::<Result<_, _>>()?;
-    let result = f
-        .result
-        .as_ref()
-        .ok_or_else(|| GpuError::Shader(format!("`{name}` returns nothing")))?;
-    let naga::TypeInner::Struct { members, .. } = &module.types[result.ty].inner else {
-        return Err(GpuError::Shader(format!(
-            "`{name}` does not return a struct"
-        )));
-    };
-    let results = members
-        .iter()
-        .map(|m| Ok((m.name.clone().unwrap_or_default(), kind_of(&module, m.ty)?)))
-        .collect::<Result<_, GpuError>>()?;
-    Ok(Signature {
-        name: f.name.clone().unwrap_or_default(),
-        args,
-        results,
-    })
+        .find(|f| f.kernel == name)
+        .ok_or_else(|| GpuError::Shader(format!("no generated function `{name}`")))
 }
 
 /// WGSL reading an argument of `kind` from the 32-bit word expression `word`.
-pub(crate) fn load(kind: naga::ScalarKind, word: &str) -> String {
+pub(crate) fn load(kind: WgslScalar, word: &str) -> String {
     match kind {
-        naga::ScalarKind::Float => format!("bitcast<f32>({word})"),
-        naga::ScalarKind::Sint => format!("bitcast<i32>({word})"),
-        naga::ScalarKind::Bool => format!("({word} != 0u)"),
-        _ => word.to_string(),
+        WgslScalar::F32 => format!("bitcast<f32>({word})"),
+        WgslScalar::I32 => format!("bitcast<i32>({word})"),
+        WgslScalar::Bool => format!("({word} != 0u)"),
+        WgslScalar::U32 => word.to_string(),
     }
 }
 
-fn store(kind: naga::ScalarKind, value: &str) -> String {
+fn store(kind: WgslScalar, value: &str) -> String {
     match kind {
-        naga::ScalarKind::Float | naga::ScalarKind::Sint => format!("bitcast<u32>({value})"),
-        naga::ScalarKind::Bool => format!("select(0u, 1u, {value})"),
+        WgslScalar::F32 | WgslScalar::I32 => format!("bitcast<u32>({value})"),
+        WgslScalar::Bool => format!("select(0u, 1u, {value})"),
         _ => value.to_string(),
     }
 }
 
 /// The module's WGSL with a compute entry point `splat_harness` calling `sig`: the first
 /// `per_row` arguments come from the row, the rest from the shared words (e.g. the camera).
-pub fn harness_source(wgsl: &str, sig: &Signature, per_row: usize) -> String {
+pub fn harness_source(wgsl: &str, sig: &WgslFunction, per_row: usize) -> String {
     let nr = sig.results.len();
     let shared = sig.args.len() > per_row;
     let mut s = String::from(wgsl);
@@ -143,7 +99,7 @@ pub fn harness_source(wgsl: &str, sig: &Signature, per_row: usize) -> String {
 pub fn run(
     gpu: &Gpu,
     wgsl: &str,
-    function: &str,
+    function: &WgslFunction,
     inputs: &[Vec<Word>],
 ) -> Result<Vec<Vec<Word>>, GpuError> {
     run_shared(gpu, wgsl, function, inputs, &[])
@@ -153,11 +109,11 @@ pub fn run(
 pub fn run_shared(
     gpu: &Gpu,
     wgsl: &str,
-    function: &str,
+    sig: &WgslFunction,
     rows: &[Vec<Word>],
     shared: &[Word],
 ) -> Result<Vec<Vec<Word>>, GpuError> {
-    let sig = signature(wgsl, function)?;
+    let function = sig.kernel;
     let per_row = sig.args.len().checked_sub(shared.len()).ok_or_else(|| {
         GpuError::Shader(format!(
             "`{function}` takes {} arguments, {} shared given",
@@ -174,7 +130,7 @@ pub fn run_shared(
     let n = rows.len();
     let nr = sig.results.len();
     let flat: Vec<Word> = rows.iter().flatten().copied().collect();
-    let source = harness_source(wgsl, &sig, per_row);
+    let source = harness_source(wgsl, sig, per_row);
     let inputs: Vec<&[Word]> = if shared.is_empty() {
         vec![&flat]
     } else {

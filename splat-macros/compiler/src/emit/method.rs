@@ -325,7 +325,7 @@ pub fn method_impl(module: &syn::Ident, kernels: &[Kernel], diag: &Diag) -> Opti
             const HAS_TILE_CULL: bool = #has_tc;
             const HAS_PIXEL_INFO: bool = #has_pi;
             const GENERIC_CAMERA: bool = #generic_camera;
-            const SOURCE: #rt::GeneratedSource = #rt::GeneratedSource { rust: GENERATED_RUST, wgsl: GENERATED_WGSL };
+            const SOURCE: #rt::GeneratedSource = #rt::GeneratedSource { rust: GENERATED_RUST, wgsl: GENERATED_WGSL, functions: GENERATED_FUNCTIONS };
             type Params = #p_t;
             type Cull = #c_t;
             type Shade = #s_t;

@@ -16,9 +16,20 @@ use naga::{
 };
 use std::collections::HashMap;
 
+/// A written WGSL function as the runtime calls it: the kernel it came from, its name in the
+/// WGSL, its argument types and its result members.
+pub struct Signature {
+    pub kernel: String,
+    pub name: String,
+    pub args: Vec<Scalar>,
+    pub results: Vec<(String, Scalar)>,
+}
+
 /// Builds, validates and writes the WGSL of `kernels` (each function with the names of its
-/// result slots) as one module.
-pub fn wgsl(kernels: &[(&Function, Vec<String>)]) -> Result<String, String> {
+/// result slots) as one module, and the signature of each function as written. The text is
+/// parsed back (the validator does not catch every emit mistake), which also gives the names
+/// naga's writer chose, so the runtime never has to parse it.
+pub fn wgsl(kernels: &[(&Function, Vec<String>)]) -> Result<(String, Vec<Signature>), String> {
     let mut module = naga::Module::default();
     for (f, names) in kernels {
         let func = FnBuilder::build(&mut module, f, names);
@@ -30,8 +41,48 @@ pub fn wgsl(kernels: &[(&Function, Vec<String>)]) -> Result<String, String> {
     )
     .validate(&module)
     .map_err(|e| format!("naga validation failed: {}", e.emit_to_string("")))?;
-    naga::back::wgsl::write_string(&module, &info, naga::back::wgsl::WriterFlags::empty())
-        .map_err(|e| format!("WGSL writer failed: {e}"))
+    let text =
+        naga::back::wgsl::write_string(&module, &info, naga::back::wgsl::WriterFlags::empty())
+            .map_err(|e| format!("WGSL writer failed: {e}"))?;
+    let written = naga::front::wgsl::parse_str(&text).map_err(|e| {
+        format!(
+            "the written WGSL does not parse: {}",
+            e.emit_to_string(&text)
+        )
+    })?;
+    let kind = |ty: Handle<Type>| match written.types[ty].inner {
+        TypeInner::Scalar(s) => Ok(match s.kind {
+            ScalarKind::Float => Scalar::F32,
+            ScalarKind::Uint => Scalar::U32,
+            ScalarKind::Sint => Scalar::I32,
+            _ => Scalar::Bool,
+        }),
+        ref other => Err(format!("unexpected WGSL type {other:?}")),
+    };
+    let mut signatures = vec![];
+    // The writer keeps the module's function order.
+    for ((f, _), (_, w)) in kernels.iter().zip(written.functions.iter()) {
+        let args = w
+            .arguments
+            .iter()
+            .map(|a| kind(a.ty))
+            .collect::<Result<_, _>>()?;
+        let result = w.result.as_ref().ok_or("a kernel returns nothing")?;
+        let TypeInner::Struct { members, .. } = &written.types[result.ty].inner else {
+            return Err("a kernel does not return a struct".into());
+        };
+        let results = members
+            .iter()
+            .map(|m| Ok((m.name.clone().unwrap_or_default(), kind(m.ty)?)))
+            .collect::<Result<_, String>>()?;
+        signatures.push(Signature {
+            kernel: f.name.clone(),
+            name: w.name.clone().unwrap_or_default(),
+            args,
+            results,
+        });
+    }
+    Ok((text, signatures))
 }
 
 fn scalar(s: Scalar) -> naga::Scalar {
