@@ -11,7 +11,9 @@
 //! - [`prelude`]: what a method module imports.
 //! - [`pipeline`]: the CPU pipeline (preprocess, rasterize, shade, backward).
 //! - [`io`]: PLY scenes, JSON cameras, PNG / EXR / NPY outputs (atomic writes).
-//! - [`gpu`]: the wgpu device and a harness running generated WGSL functions on batches.
+//! - [`gpu`]: the wgpu backend: the device-resident pipeline, one-shot render and backward, and
+//!   a harness running generated WGSL functions on batches.
+//! - [`train`]: what training shares across methods: the loss, metrics, Adam.
 
 pub mod flat;
 pub mod gpu;
@@ -21,6 +23,7 @@ pub mod math;
 pub mod method;
 pub mod pipeline;
 pub mod prelude;
+pub mod train;
 pub mod types;
 
 pub use flat::Flat;

@@ -1,0 +1,82 @@
+//! Adam (Kingma and Ba 2015) over a method's parameter words, with a learning rate per word
+//! of `Params` (each field its own rate, as 3DGS trains positions, scales, rotations,
+//! opacities and colors at different rates) and bias correction.
+
+/// Adam's state for `primitives` x `words` parameter words.
+pub struct Adam {
+    pub beta1: f32,
+    pub beta2: f32,
+    pub eps: f32,
+    words: usize,
+    step: i32,
+    m: Vec<f32>,
+    v: Vec<f32>,
+}
+
+impl Adam {
+    /// The usual constants of 3DGS: beta 0.9 / 0.999, epsilon 1e-15.
+    pub fn new(primitives: usize, words: usize) -> Adam {
+        Adam {
+            beta1: 0.9,
+            beta2: 0.999,
+            eps: 1e-15,
+            words,
+            step: 0,
+            m: vec![0.0; primitives * words],
+            v: vec![0.0; primitives * words],
+        }
+    }
+
+    /// One step: `params -= lr * m_hat / (sqrt(v_hat) + eps)`, where `lr[k]` is the rate of
+    /// word `k` of every primitive. `params` and `grads` hold `words` words per primitive.
+    pub fn step(&mut self, params: &mut [f32], grads: &[f32], lr: &[f32]) {
+        assert_eq!(lr.len(), self.words, "one learning rate per parameter word");
+        assert_eq!(params.len(), self.m.len(), "parameters and optimizer state");
+        assert_eq!(grads.len(), self.m.len(), "gradients and optimizer state");
+        self.step += 1;
+        let (b1, b2) = (self.beta1, self.beta2);
+        let (c1, c2) = (1.0 - b1.powi(self.step), 1.0 - b2.powi(self.step));
+        let words = self.words.max(1);
+        for (i, ((p, g), (m, v))) in params
+            .iter_mut()
+            .zip(grads)
+            .zip(self.m.iter_mut().zip(self.v.iter_mut()))
+            .enumerate()
+        {
+            *m = b1 * *m + (1.0 - b1) * g;
+            *v = b2 * *v + (1.0 - b2) * g * g;
+            *p -= lr[i % words] * (*m / c1) / ((*v / c2).sqrt() + self.eps);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_first_step_moves_each_word_by_its_rate_against_the_gradient() {
+        let mut adam = Adam::new(2, 2);
+        let mut p = vec![1.0, 1.0, 1.0, 1.0];
+        adam.step(&mut p, &[0.5, -2.0, 3.0, 0.0], &[0.1, 0.01]);
+        // Bias-corrected, the first step is lr * g / |g|.
+        let want = [0.9, 1.01, 0.9, 1.0];
+        for (a, b) in p.iter().zip(want) {
+            assert!((a - b).abs() < 1e-6, "{p:?}");
+        }
+    }
+
+    #[test]
+    fn adam_minimizes_a_quadratic() {
+        let target = [3.0f32, -1.0, 0.5];
+        let mut p = vec![0.0f32; 3];
+        let mut adam = Adam::new(1, 3);
+        for _ in 0..2000 {
+            let g: Vec<f32> = p.iter().zip(target).map(|(x, t)| 2.0 * (x - t)).collect();
+            adam.step(&mut p, &g, &[0.01; 3]);
+        }
+        for (x, t) in p.iter().zip(target) {
+            assert!((x - t).abs() < 1e-2, "{p:?}");
+        }
+    }
+}
