@@ -121,6 +121,41 @@ macro_rules! gaussians_3d {
             }
         }
 
+        /// 3DGS's learning rates (positions scaled by the scene's extent and decayed 100x, the
+        /// higher SH bands 20x slower than the DC term) and its initialization: an isotropic
+        /// Gaussian of opacity 0.1 with the point's color as the DC term.
+        impl splat_runtime::train::Trainable for $name::Method {
+            fn learning_rates(extent: f32) -> Vec<(f32, f32)> {
+                let fixed = |lr: f32, n: usize| std::iter::repeat_n((lr, lr), n);
+                std::iter::repeat_n((1.6e-4 * extent, 1.6e-6 * extent), 3)
+                    .chain(fixed(5e-3, 3))
+                    .chain(fixed(1e-3, 4))
+                    .chain(fixed(5e-2, 1))
+                    .chain(fixed(2.5e-3, 3))
+                    .chain(fixed(2.5e-3 / 20.0, 3 * ($n - 1)))
+                    .collect()
+            }
+
+            fn from_point(
+                point: splat_runtime::glam::Vec3,
+                color: splat_runtime::glam::Vec3,
+                scale: f32,
+            ) -> $name::Params {
+                use splat_runtime::glam::{Vec3, Vec4};
+                // The DC basis function's value (constant over directions).
+                let c0 = splat_runtime::prelude::spherical_harmonics([Vec3::ONE], Vec3::Z).x;
+                let mut sh = [Vec3::ZERO; $n];
+                sh[0] = (color - 0.5) / c0;
+                $name::Params {
+                    mean: point,
+                    log_scale: Vec3::splat(scale.max(1e-7).ln()),
+                    rotation: Vec4::new(1.0, 0.0, 0.0, 0.0),
+                    opacity_logit: (0.1f32 / 0.9).ln(),
+                    sh,
+                }
+            }
+        }
+
         impl crate::FromStored for $name::Params {
             fn from_stored(g: &splat_runtime::io::ply::StoredGaussian) -> Self {
                 $name::Params {

@@ -1,5 +1,6 @@
 //! `splat`: render scenes with a splatting method and inspect the kernels generated for it.
 
+mod fit;
 mod scene;
 
 use anyhow::{Context, Result, bail};
@@ -44,6 +45,8 @@ enum Command {
         #[arg(long, default_value_t = 240)]
         height: u32,
     },
+    /// Train 3DGS on posed images (Blender / NeRF-synthetic layout) on the CPU.
+    Fit(fit::FitArgs),
     /// Print the Rust or WGSL the #[splat_method] compiler generated for a method.
     Inspect {
         #[arg(long, value_enum, default_value_t = Method::Gs3d)]
@@ -172,6 +175,7 @@ fn main() {
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Render(args) => render_cmd(&args),
+        Command::Fit(args) => fit::fit_cmd(&args),
         Command::Scene { out, camera_out } => {
             ply::write(&out, &scene::planet())
                 .with_context(|| format!("writing {}", out.display()))?;

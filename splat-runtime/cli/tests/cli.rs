@@ -385,3 +385,82 @@ fn gpu_backend_renders_when_an_adapter_exists() {
         .fold(0.0f32, f32::max);
     assert!(worst < 0.02, "GPU and CPU renders differ by {worst}");
 }
+
+/// A minimal Blender-format dataset: `views` uniform gray RGBA images of 16 x 16 pixels, with
+/// cameras on a circle looking at the origin (OpenGL camera-to-world).
+fn tiny_dataset(dir: &Path, views: usize) {
+    let png = {
+        let mut bytes = vec![];
+        let img = image::RgbaImage::from_pixel(16, 16, image::Rgba([90, 120, 150, 255]));
+        img.write_to(
+            &mut std::io::Cursor::new(&mut bytes),
+            image::ImageFormat::Png,
+        )
+        .unwrap();
+        bytes
+    };
+    for split in ["train", "test"] {
+        std::fs::create_dir_all(dir.join(split)).unwrap();
+        let frames: Vec<String> = (0..views)
+            .map(|k| {
+                std::fs::write(dir.join(format!("{split}/r_{k}.png")), &png).unwrap();
+                let a = k as f32 * 0.6;
+                let (s, c) = a.sin_cos();
+                // OpenGL camera at radius 3 on the xz circle, its z axis pointing away from
+                // the origin.
+                format!(
+                    r#"{{"file_path": "./{split}/r_{k}", "transform_matrix": [[{c}, 0, {s}, {}], [0, 1, 0, 0], [{}, 0, {c}, {}], [0, 0, 0, 1]]}}"#,
+                    3.0 * s,
+                    -s,
+                    3.0 * c
+                )
+            })
+            .collect();
+        std::fs::write(
+            dir.join(format!("transforms_{split}.json")),
+            format!(
+                r#"{{"camera_angle_x": 0.7, "frames": [{}]}}"#,
+                frames.join(",")
+            ),
+        )
+        .unwrap();
+    }
+}
+
+#[test]
+fn fit_trains_on_a_dataset_and_writes_a_ply() {
+    let dir = tempfile::tempdir().unwrap();
+    tiny_dataset(&dir.path().join("data"), 3);
+    let out = splat(
+        &[
+            "fit", "--data", "data", "--steps", "20", "--points", "200", "--out", "fit.ply",
+        ],
+        dir.path(),
+    );
+    let stdout = ok(&out);
+    assert!(
+        stdout.contains("3 training and 3 test views of 16x16"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("PSNR"), "{stdout}");
+    let cloud = splat_runtime::io::ply::read(&dir.path().join("fit.ply")).unwrap();
+    assert_eq!((cloud.sh_degree, cloud.gaussians.len()), (3, 200));
+}
+
+#[test]
+fn fit_refuses_a_missing_or_broken_dataset_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = dir.path().join("fit.ply");
+    fails(
+        &splat(&["fit", "--data", "nowhere"], dir.path()),
+        "transforms_train.json",
+        &ply,
+    );
+    tiny_dataset(&dir.path().join("data"), 2);
+    std::fs::write(dir.path().join("data/transforms_test.json"), "{").unwrap();
+    fails(
+        &splat(&["fit", "--data", "data", "--steps", "2"], dir.path()),
+        "transforms_test.json is not valid JSON",
+        &ply,
+    );
+}

@@ -1,5 +1,9 @@
 //! What training shares across methods (DESIGN §10), built up step by step: the photometric
-//! loss with its gradient and the evaluation metrics ([`loss`]), and Adam ([`adam`]).
+//! loss with its gradient and the evaluation metrics ([`loss`]), Adam ([`adam`]), and the loop
+//! with the trait a method implements to take part ([`fit`]).
 
 pub mod adam;
+pub mod fit;
 pub mod loss;
+
+pub use fit::{FitOptions, Trainable};

@@ -1,0 +1,205 @@
+//! Posed images for training. The Blender / NeRF-synthetic layout: `transforms_train.json` and
+//! `transforms_test.json` in one folder, each with `camera_angle_x` (horizontal field of view,
+//! radians) and `frames[]` of `file_path` (relative, `.png` added when it has no extension)
+//! and `transform_matrix` (camera to world, OpenGL axes: x right, y up, z backwards). RGBA
+//! images are composited on the chosen background. Every error names the file and the field.
+
+use crate::pipeline::Image;
+use crate::types::Camera;
+use glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
+use std::path::{Path, PathBuf};
+
+/// One posed image.
+#[derive(Clone, Debug)]
+pub struct View {
+    /// The image's path, for reports.
+    pub name: String,
+    pub camera: Camera,
+    /// RGB, composited on the background.
+    pub image: Image,
+}
+
+/// The training and held-out views of a scene.
+#[derive(Clone, Debug)]
+pub struct Dataset {
+    pub train: Vec<View>,
+    pub test: Vec<View>,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum DatasetError {
+    #[error("cannot read {path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path} is not valid JSON: {source}")]
+    Json {
+        path: PathBuf,
+        source: serde_json::Error,
+    },
+    #[error("{path}: {field} {problem}")]
+    Field {
+        path: PathBuf,
+        field: String,
+        problem: String,
+    },
+    #[error("cannot decode the image {path}: {source}")]
+    Image {
+        path: PathBuf,
+        source: image::ImageError,
+    },
+    #[error("{path} is {got:?} pixels, the first image of {file} is {want:?}")]
+    Size {
+        path: PathBuf,
+        file: PathBuf,
+        got: (u32, u32),
+        want: (u32, u32),
+    },
+    #[error("{0} holds no frames")]
+    Empty(PathBuf),
+}
+
+fn field(path: &Path, field: impl Into<String>, problem: impl Into<String>) -> DatasetError {
+    DatasetError::Field {
+        path: path.to_path_buf(),
+        field: field.into(),
+        problem: problem.into(),
+    }
+}
+
+/// Reads a Blender-format dataset from `dir`, compositing RGBA images on `background`.
+pub fn read_blender(dir: &Path, background: Vec3) -> Result<Dataset, DatasetError> {
+    Ok(Dataset {
+        train: read_split(&dir.join("transforms_train.json"), background)?,
+        test: read_split(&dir.join("transforms_test.json"), background)?,
+    })
+}
+
+fn read_split(path: &Path, background: Vec3) -> Result<Vec<View>, DatasetError> {
+    let text = std::fs::read_to_string(path).map_err(|source| DatasetError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let json: serde_json::Value =
+        serde_json::from_str(&text).map_err(|source| DatasetError::Json {
+            path: path.to_path_buf(),
+            source,
+        })?;
+    let angle = json["camera_angle_x"]
+        .as_f64()
+        .filter(|a| a.is_finite() && *a > 0.0 && *a < std::f64::consts::PI)
+        .ok_or_else(|| {
+            field(
+                path,
+                "camera_angle_x",
+                "must be an angle in (0, pi) radians",
+            )
+        })?;
+    let frames = json["frames"]
+        .as_array()
+        .ok_or_else(|| field(path, "frames", "must be an array"))?;
+    if frames.is_empty() {
+        return Err(DatasetError::Empty(path.to_path_buf()));
+    }
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let mut views = Vec::with_capacity(frames.len());
+    let mut size = None;
+    for (k, frame) in frames.iter().enumerate() {
+        let at = |f: &str| format!("frames[{k}].{f}");
+        let file = frame["file_path"]
+            .as_str()
+            .ok_or_else(|| field(path, at("file_path"), "must be a string"))?;
+        let mut image_path = dir.join(file);
+        if image_path.extension().is_none() {
+            image_path.set_extension("png");
+        }
+        let c2w = matrix(&frame["transform_matrix"]).ok_or_else(|| {
+            field(
+                path,
+                at("transform_matrix"),
+                "must be 4 rows of 4 finite numbers",
+            )
+        })?;
+        let image = read_image(&image_path, background)?;
+        let dims = (image.width, image.height);
+        if let Some(want) = size.filter(|s| *s != dims) {
+            return Err(DatasetError::Size {
+                path: image_path,
+                file: path.to_path_buf(),
+                got: dims,
+                want,
+            });
+        }
+        size = Some(dims);
+        let camera = camera_of(&c2w, angle as f32, dims)
+            .ok_or_else(|| field(path, at("transform_matrix"), "has no inverse"))?;
+        views.push(View {
+            name: image_path.display().to_string(),
+            camera,
+            image,
+        });
+    }
+    Ok(views)
+}
+
+fn matrix(v: &serde_json::Value) -> Option<Mat4> {
+    let rows = v.as_array().filter(|r| r.len() == 4)?;
+    let mut m = [[0.0f32; 4]; 4];
+    for (i, row) in rows.iter().enumerate() {
+        let row = row.as_array().filter(|r| r.len() == 4)?;
+        for (j, x) in row.iter().enumerate() {
+            m[i][j] = x.as_f64().filter(|x| x.is_finite())? as f32;
+        }
+    }
+    // Row-major in the file; glam takes columns.
+    Some(Mat4::from_cols_array_2d(&m).transpose())
+}
+
+/// The OpenCV world-to-camera pinhole camera of an OpenGL camera-to-world matrix.
+fn camera_of(c2w_gl: &Mat4, angle_x: f32, (w, h): (u32, u32)) -> Option<Camera> {
+    // OpenGL to OpenCV camera axes: y and z flip.
+    let c2w = *c2w_gl * Mat4::from_diagonal(Vec4::new(1.0, -1.0, -1.0, 1.0));
+    if c2w.determinant().abs() < 1e-12 {
+        return None;
+    }
+    let w2c = c2w.inverse();
+    let focal = 0.5 * w as f32 / (0.5 * angle_x).tan();
+    Some(Camera {
+        rotation: Mat3::from_mat4(w2c),
+        translation: w2c.w_axis.truncate(),
+        focal: Vec2::splat(focal),
+        principal: Vec2::new(w as f32 / 2.0, h as f32 / 2.0),
+        size: Vec2::new(w as f32, h as f32),
+        ..Default::default()
+    })
+}
+
+/// An image as RGB in [0, 1], alpha composited on `background`.
+fn read_image(path: &Path, background: Vec3) -> Result<Image, DatasetError> {
+    let img = image::open(path).map_err(|source| match source {
+        image::ImageError::IoError(source) => DatasetError::Io {
+            path: path.to_path_buf(),
+            source,
+        },
+        source => DatasetError::Image {
+            path: path.to_path_buf(),
+            source,
+        },
+    })?;
+    let rgba = img.to_rgba32f();
+    let (width, height) = rgba.dimensions();
+    let mut data = Vec::with_capacity(width as usize * height as usize * 3);
+    for p in rgba.pixels() {
+        let a = p[3];
+        for (c, b) in p.0[..3].iter().zip(background.to_array()) {
+            data.push(c * a + b * (1.0 - a));
+        }
+    }
+    Ok(Image {
+        width,
+        height,
+        channels: 3,
+        data,
+    })
+}

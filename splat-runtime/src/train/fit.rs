@@ -1,0 +1,180 @@
+//! The training loop, the same for every method: pick a view, render, loss, backward, Adam
+//! step. A method takes part by implementing [`Trainable`] (its learning rates and how a
+//! primitive starts from a point) in its own file. This is the CPU loop; the device-resident
+//! GPU loop and densification come next (see the issue notes).
+
+use super::adam::Adam;
+use super::loss::{self, LossError, LossValue};
+use crate::flat::Flat;
+use crate::io::dataset::{Dataset, View};
+use crate::method::SplatMethod;
+use crate::pipeline::{FrameGrad, Image, RenderError, RenderOptions};
+use glam::Vec3;
+
+/// What a method declares to be trained.
+pub trait Trainable: SplatMethod {
+    /// `(first, last)` learning rate of each word of `Params`, decayed exponentially from
+    /// first to last over the run; `extent` is the scene's radius (3DGS scales positions by
+    /// it).
+    fn learning_rates(extent: f32) -> Vec<(f32, f32)>;
+
+    /// A primitive at `point` with linear RGB `color` and size `scale` (world units).
+    fn from_point(point: Vec3, color: Vec3, scale: f32) -> Self::Params;
+}
+
+#[derive(Clone, Debug)]
+pub struct FitOptions {
+    pub steps: usize,
+    /// λ of `(1 - λ) L1 + λ (1 - SSIM)`.
+    pub ssim_weight: f64,
+    /// What the images were composited on; the render is composited the same way.
+    pub background: Vec3,
+    pub render: RenderOptions,
+    pub seed: u64,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        FitOptions {
+            steps: 3000,
+            ssim_weight: 0.2,
+            background: Vec3::ZERO,
+            render: RenderOptions {
+                tile_size: 16,
+                alpha: true,
+                ..Default::default()
+            },
+            seed: 0,
+        }
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum FitError {
+    #[error(transparent)]
+    Render(#[from] RenderError),
+    #[error(transparent)]
+    Loss(#[from] LossError),
+    #[error("the dataset has no training views")]
+    NoViews,
+}
+
+/// PSNR, SSIM and loss over a set of views.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Evaluation {
+    pub psnr: f64,
+    pub ssim: f64,
+    pub views: usize,
+}
+
+/// Renders `view` with `params` composited on `background`.
+pub fn render_view<M: SplatMethod>(
+    params: &[M::Params],
+    view: &View,
+    opts: &FitOptions,
+) -> Result<Image, FitError> {
+    let frame = crate::pipeline::render::<M>(params, &view.camera, &with_alpha(&opts.render))?;
+    Ok(composite(
+        frame.color,
+        frame.alpha.as_ref(),
+        opts.background,
+    ))
+}
+
+fn with_alpha(r: &RenderOptions) -> RenderOptions {
+    RenderOptions { alpha: true, ..*r }
+}
+
+fn composite(mut color: Image, alpha: Option<&Image>, background: Vec3) -> Image {
+    if let Some(a) = alpha {
+        let b = background.to_array();
+        for (px, a) in color.data.chunks_exact_mut(3).zip(&a.data) {
+            for (c, b) in px.iter_mut().zip(b) {
+                *c += (1.0 - a) * b;
+            }
+        }
+    }
+    color
+}
+
+/// Mean PSNR and SSIM of `params` over `views`.
+pub fn evaluate<M: SplatMethod>(
+    params: &[M::Params],
+    views: &[View],
+    opts: &FitOptions,
+) -> Result<Evaluation, FitError> {
+    let mut e = Evaluation {
+        views: views.len(),
+        ..Default::default()
+    };
+    if views.is_empty() {
+        return Ok(e);
+    }
+    for v in views {
+        let img = render_view::<M>(params, v, opts)?;
+        e.psnr += loss::psnr(&img, &v.image)? / views.len() as f64;
+        e.ssim += loss::ssim(&img, &v.image)? / views.len() as f64;
+    }
+    Ok(e)
+}
+
+/// Trains `params` on the training views of `data` for `opts.steps` steps on the CPU;
+/// `progress(step, loss)` is called after every step.
+pub fn fit<M: Trainable>(
+    data: &Dataset,
+    params: &mut [M::Params],
+    extent: f32,
+    opts: &FitOptions,
+    mut progress: impl FnMut(usize, &LossValue),
+) -> Result<(), FitError> {
+    if data.train.is_empty() {
+        return Err(FitError::NoViews);
+    }
+    let words = M::Params::LEN;
+    let rates = M::learning_rates(extent);
+    assert_eq!(rates.len(), words, "one learning rate per parameter word");
+    let mut flat = vec![0.0f32; params.len() * words];
+    for (p, out) in params.iter().zip(flat.chunks_exact_mut(words)) {
+        p.write_words(out);
+    }
+    let mut adam = Adam::new(params.len(), words);
+    let mut grads = vec![0.0f32; flat.len()];
+    let mut rng = fastrand::Rng::with_seed(opts.seed);
+    let render_opts = with_alpha(&opts.render);
+    let b = opts.background.to_array();
+    for step in 0..opts.steps {
+        let view = &data.train[rng.usize(..data.train.len())];
+        let (frame, state) =
+            crate::pipeline::render_for_backward::<M>(params, &view.camera, &render_opts)?;
+        let image = composite(frame.color, frame.alpha.as_ref(), opts.background);
+        let (value, d_color) = loss::loss_and_gradient(&image, &view.image, opts.ssim_weight)?;
+        // The background term (1 - alpha) b: its gradient flows into alpha.
+        let d_alpha = d_color
+            .chunks_exact(3)
+            .map(|g| -(g[0] * b[0] + g[1] * b[1] + g[2] * b[2]))
+            .collect();
+        let grad = FrameGrad {
+            color: d_color,
+            alpha: Some(d_alpha),
+            depth: None,
+        };
+        let g = crate::pipeline::backward::<M>(&state, params, &view.camera, &grad)?;
+        for (p, out) in g.params.iter().zip(grads.chunks_exact_mut(words)) {
+            p.write_words(out);
+        }
+        let t = step as f32 / opts.steps.max(1) as f32;
+        let lr: Vec<f32> = rates
+            .iter()
+            .map(|&(first, last)| match first == last || first == 0.0 {
+                true => first,
+                false => first * (last / first).powf(t),
+            })
+            .collect();
+        adam.step(&mut flat, &grads, &lr);
+        for (p, w) in params.iter_mut().zip(flat.chunks_exact(words)) {
+            *p = M::Params::read_words(w);
+        }
+        progress(step, &value);
+    }
+    Ok(())
+}
