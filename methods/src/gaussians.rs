@@ -167,6 +167,20 @@ macro_rules! gaussians_3d {
                 }
             }
         }
+
+        impl crate::ToStored for $name::Params {
+            fn to_stored(&self) -> splat_runtime::io::ply::StoredGaussian {
+                let mut sh = [splat_runtime::glam::Vec3::ZERO; 16];
+                sh[..$n].copy_from_slice(&self.sh);
+                splat_runtime::io::ply::StoredGaussian {
+                    mean: self.mean,
+                    log_scale: self.log_scale,
+                    rotation: self.rotation,
+                    opacity_logit: self.opacity_logit,
+                    sh,
+                }
+            }
+        }
     };
 }
 

@@ -15,8 +15,14 @@ pub trait FromStored {
     fn from_stored(g: &splat_runtime::io::ply::StoredGaussian) -> Self;
 }
 
-/// `FromStored` for methods whose parameters are the stored Gaussian's fields as they are.
-macro_rules! from_stored_as_is {
+/// Parameters that can be stored as a Gaussian of an INRIA PLY file (what `splat fit` writes).
+pub trait ToStored {
+    fn to_stored(&self) -> splat_runtime::io::ply::StoredGaussian;
+}
+
+/// `FromStored` and `ToStored` for methods whose parameters are the stored Gaussian's fields as
+/// they are (degree-3 SH).
+macro_rules! stored_as_is {
     ($($params:path),*) => {$(
         impl FromStored for $params {
             fn from_stored(g: &splat_runtime::io::ply::StoredGaussian) -> Self {
@@ -29,7 +35,42 @@ macro_rules! from_stored_as_is {
                 }
             }
         }
+
+        impl ToStored for $params {
+            fn to_stored(&self) -> splat_runtime::io::ply::StoredGaussian {
+                splat_runtime::io::ply::StoredGaussian {
+                    mean: self.mean,
+                    log_scale: self.log_scale,
+                    rotation: self.rotation,
+                    opacity_logit: self.opacity_logit,
+                    sh: self.sh,
+                }
+            }
+        }
     )*};
 }
 
-from_stored_as_is!(gut::Params, geer::Params);
+stored_as_is!(gut::Params, geer::Params);
+
+/// 3DGUT and 3DGEER train like 3DGS (their parameters are the same Gaussian's): the same
+/// learning rates and initialization.
+macro_rules! trained_like_3dgs {
+    ($($m:ident),*) => {$(
+        impl splat_runtime::train::Trainable for $m::Method {
+            fn learning_rates(extent: f32) -> Vec<(f32, f32)> {
+                <gs3d::Method as splat_runtime::train::Trainable>::learning_rates(extent)
+            }
+
+            fn from_point(
+                point: splat_runtime::glam::Vec3,
+                color: splat_runtime::glam::Vec3,
+                scale: f32,
+            ) -> $m::Params {
+                let g = <gs3d::Method as splat_runtime::train::Trainable>::from_point(point, color, scale);
+                $m::Params::from_stored(&g.to_stored())
+            }
+        }
+    )*};
+}
+
+trained_like_3dgs!(gut, geer);

@@ -1,23 +1,39 @@
-//! `splat fit`: train 3DGS on a Blender-format dataset on the CPU, with a progress bar, the
-//! held-out views' PSNR and SSIM before and after, and the result written as an INRIA PLY.
+//! `splat fit`: train a Gaussian method (3DGS, 3DGUT, 3DGEER) on posed images on the CPU,
+//! with a progress bar, the held-out views' PSNR and SSIM before and after, and the result
+//! written as an INRIA PLY.
 
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
-use splat_methods::gs3d::{Method, Params};
+use splat_methods::{ToStored, geer, gs3d, gut};
 use splat_runtime::glam::Vec3;
-use splat_runtime::io::dataset::read_blender;
-use splat_runtime::io::ply::{self, GaussianCloud, StoredGaussian};
+use splat_runtime::io::dataset::{self, Dataset};
+use splat_runtime::io::ply::{self, GaussianCloud};
 use splat_runtime::train::Trainable;
 use splat_runtime::train::fit::{FitOptions, evaluate, fit};
 use std::path::PathBuf;
 use std::time::Instant;
 
+#[derive(Clone, Copy, clap::ValueEnum, PartialEq, Eq)]
+pub enum FitMethod {
+    /// 3D Gaussian Splatting; pinhole cameras only.
+    #[value(name = "3dgs")]
+    Gs3d,
+    /// 3DGUT; every camera model (fisheye images train as they are).
+    #[value(name = "3dgut")]
+    Gut,
+    /// 3DGEER; every camera model.
+    #[value(name = "3dgeer")]
+    Geer,
+}
+
 #[derive(clap::Args)]
 pub struct FitArgs {
-    /// Dataset folder holding transforms_train.json and transforms_test.json (Blender /
-    /// NeRF-synthetic layout).
+    /// Dataset folder: Blender / NeRF-synthetic (transforms_train.json, transforms_test.json)
+    /// or nerfstudio (transforms.json; every 8th view held out).
     #[arg(long)]
     data: PathBuf,
+    #[arg(long, value_enum, default_value_t = FitMethod::Gs3d)]
+    method: FitMethod,
     #[arg(long, default_value_t = 3000)]
     steps: usize,
     /// Random initial points in a cube around the cameras' target (Blender scenes have no
@@ -36,10 +52,13 @@ pub struct FitArgs {
 
 pub fn fit_cmd(args: &FitArgs) -> Result<()> {
     let background = if args.white { Vec3::ONE } else { Vec3::ZERO };
-    let t = Instant::now();
-    let data = read_blender(&args.data, background)?;
     if args.points == 0 {
         bail!("--points must be at least 1");
+    }
+    let t = Instant::now();
+    let data = dataset::read(&args.data, background)?;
+    if data.train.is_empty() {
+        bail!("{}: no training views", args.data.display());
     }
     let first = &data.train[0];
     println!(
@@ -56,21 +75,37 @@ pub fn fit_cmd(args: &FitArgs) -> Result<()> {
     let mid = centres.iter().copied().sum::<Vec3>() / centres.len() as f32;
     let extent = 1.1 * centres.iter().map(|c| c.distance(mid)).fold(0.0, f32::max);
     let extent = if extent > 0.0 { extent } else { 1.0 };
-    let params = initial_points(args.points, mid, extent / 2.0, args.seed);
     let opts = FitOptions {
         steps: args.steps,
         background,
         seed: args.seed,
         ..Default::default()
     };
-    let before = evaluate::<Method>(&params, &data.test, &opts)?;
+    match args.method {
+        FitMethod::Gs3d => train::<gs3d::Method>(args, &data, mid, extent, &opts),
+        FitMethod::Gut => train::<gut::Method>(args, &data, mid, extent, &opts),
+        FitMethod::Geer => train::<geer::Method>(args, &data, mid, extent, &opts),
+    }
+}
+
+fn train<M: Trainable>(
+    args: &FitArgs,
+    data: &Dataset,
+    mid: Vec3,
+    extent: f32,
+    opts: &FitOptions,
+) -> Result<()>
+where
+    M::Params: ToStored,
+{
+    let mut params = initial_points::<M>(args.points, mid, extent / 2.0, args.seed);
+    let before = evaluate::<M>(&params, &data.test, opts)?;
     let bar = ProgressBar::new(args.steps as u64).with_style(
         ProgressStyle::with_template("{bar:40} {pos}/{len} steps, {elapsed} (eta {eta}) {msg}")
             .expect("a valid template"),
     );
-    let mut params = params;
     let t = Instant::now();
-    fit::<Method>(&data, &mut params, extent, &opts, |step, v| {
+    fit::<M>(data, &mut params, extent, opts, |step, v| {
         bar.inc(1);
         if step % 10 == 0 {
             bar.set_message(format!(
@@ -81,7 +116,7 @@ pub fn fit_cmd(args: &FitArgs) -> Result<()> {
     })?;
     bar.finish();
     let per_step = t.elapsed().as_secs_f64() / args.steps.max(1) as f64;
-    let after = evaluate::<Method>(&params, &data.test, &opts)?;
+    let after = evaluate::<M>(&params, &data.test, opts)?;
     println!(
         "{} steps on the CPU, {:.1} ms per step; {} test views: PSNR {:.2} -> {:.2} dB, SSIM {:.3} -> {:.3}",
         args.steps,
@@ -94,7 +129,7 @@ pub fn fit_cmd(args: &FitArgs) -> Result<()> {
     );
     let cloud = GaussianCloud {
         sh_degree: 3,
-        gaussians: params.iter().map(stored).collect(),
+        gaussians: params.iter().map(ToStored::to_stored).collect(),
     };
     ply::write(&args.out, &cloud).with_context(|| format!("writing {}", args.out.display()))?;
     println!("wrote {}", args.out.display());
@@ -103,24 +138,14 @@ pub fn fit_cmd(args: &FitArgs) -> Result<()> {
 
 /// `n` Gaussians at random points of the cube of half-side `half` around `centre`, random
 /// colors, sized to the points' mean spacing.
-fn initial_points(n: usize, centre: Vec3, half: f32, seed: u64) -> Vec<Params> {
+fn initial_points<M: Trainable>(n: usize, centre: Vec3, half: f32, seed: u64) -> Vec<M::Params> {
     let mut rng = fastrand::Rng::with_seed(seed);
     let mut unit = || Vec3::new(rng.f32(), rng.f32(), rng.f32());
     let spacing = 2.0 * half / (n as f32).cbrt();
     (0..n)
         .map(|_| {
             let p = centre + (unit() * 2.0 - 1.0) * half;
-            Method::from_point(p, unit(), spacing)
+            M::from_point(p, unit(), spacing)
         })
         .collect()
-}
-
-fn stored(p: &Params) -> StoredGaussian {
-    StoredGaussian {
-        mean: p.mean,
-        log_scale: p.log_scale,
-        rotation: p.rotation,
-        opacity_logit: p.opacity_logit,
-        sh: p.sh,
-    }
 }

@@ -1,11 +1,18 @@
-//! Posed images for training. The Blender / NeRF-synthetic layout: `transforms_train.json` and
-//! `transforms_test.json` in one folder, each with `camera_angle_x` (horizontal field of view,
-//! radians) and `frames[]` of `file_path` (relative, `.png` added when it has no extension)
-//! and `transform_matrix` (camera to world, OpenGL axes: x right, y up, z backwards). RGBA
-//! images are composited on the chosen background. Every error names the file and the field.
+//! Posed images for training, in two layouts (both with camera-to-world `transform_matrix`
+//! rows in OpenGL axes: x right, y up, z backwards), read by [`read`] from a folder:
+//! - Blender / NeRF-synthetic: `transforms_train.json` and `transforms_test.json`, each with
+//!   `camera_angle_x` (horizontal field of view, radians) and `frames[]` of `file_path`
+//!   (relative; `.png` added when it has no extension) and `transform_matrix`.
+//! - nerfstudio: one `transforms.json` with intrinsics `fl_x fl_y cx cy w h` given globally or
+//!   per frame, and `camera_model` `PINHOLE`, `OPENCV` (without distortion) or
+//!   `OPENCV_FISHEYE` (`k1..k4`: our Kannala-Brandt camera, so fisheye images train as they
+//!   are); every 8th frame is held out for testing.
+//!
+//! RGBA images are composited on the chosen background. Every error names the file and the
+//! field.
 
 use crate::pipeline::Image;
-use crate::types::Camera;
+use crate::types::{Camera, CameraModel};
 use glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
 use std::path::{Path, PathBuf};
 
@@ -68,6 +75,16 @@ fn field(path: &Path, field: impl Into<String>, problem: impl Into<String>) -> D
     }
 }
 
+/// Reads the dataset in `dir` (Blender if it holds `transforms_train.json`, else nerfstudio),
+/// compositing RGBA images on `background`.
+pub fn read(dir: &Path, background: Vec3) -> Result<Dataset, DatasetError> {
+    if dir.join("transforms_train.json").exists() {
+        read_blender(dir, background)
+    } else {
+        read_nerfstudio(dir, background)
+    }
+}
+
 /// Reads a Blender-format dataset from `dir`, compositing RGBA images on `background`.
 pub fn read_blender(dir: &Path, background: Vec3) -> Result<Dataset, DatasetError> {
     Ok(Dataset {
@@ -76,16 +93,129 @@ pub fn read_blender(dir: &Path, background: Vec3) -> Result<Dataset, DatasetErro
     })
 }
 
-fn read_split(path: &Path, background: Vec3) -> Result<Vec<View>, DatasetError> {
+fn read_json(path: &Path) -> Result<serde_json::Value, DatasetError> {
     let text = std::fs::read_to_string(path).map_err(|source| DatasetError::Io {
         path: path.to_path_buf(),
         source,
     })?;
-    let json: serde_json::Value =
-        serde_json::from_str(&text).map_err(|source| DatasetError::Json {
-            path: path.to_path_buf(),
-            source,
+    serde_json::from_str(&text).map_err(|source| DatasetError::Json {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// Reads a nerfstudio `transforms.json` in `dir`; every 8th frame (from the first) is a test
+/// view.
+pub fn read_nerfstudio(dir: &Path, background: Vec3) -> Result<Dataset, DatasetError> {
+    let path = dir.join("transforms.json");
+    let json = read_json(&path)?;
+    let frames = json["frames"]
+        .as_array()
+        .ok_or_else(|| field(&path, "frames", "must be an array"))?;
+    if frames.is_empty() {
+        return Err(DatasetError::Empty(path));
+    }
+    let mut data = Dataset {
+        train: vec![],
+        test: vec![],
+    };
+    for (k, frame) in frames.iter().enumerate() {
+        let at = |f: &str| format!("frames[{k}].{f}");
+        // A per-frame value overrides the global one.
+        let number = |name: &str| -> Result<Option<f64>, DatasetError> {
+            match frame.get(name).or_else(|| json.get(name)) {
+                None => Ok(None),
+                Some(v) => v
+                    .as_f64()
+                    .filter(|x| x.is_finite())
+                    .map(Some)
+                    .ok_or_else(|| field(&path, name, "must be a finite number")),
+            }
+        };
+        let required = |name: &str| {
+            number(name)?
+                .ok_or_else(|| field(&path, name, "is missing (globally and in the frame)"))
+        };
+        let file = frame["file_path"]
+            .as_str()
+            .ok_or_else(|| field(&path, at("file_path"), "must be a string"))?;
+        let c2w = matrix(&frame["transform_matrix"]).ok_or_else(|| {
+            field(
+                &path,
+                at("transform_matrix"),
+                "must be 4 rows of 4 finite numbers",
+            )
         })?;
+        let image_path = dir.join(file);
+        let image = read_image(&image_path, background)?;
+        let (w, h) = (required("w")?, required("h")?);
+        if (w as u32, h as u32) != (image.width, image.height) {
+            return Err(DatasetError::Size {
+                path: image_path,
+                file: path.clone(),
+                got: (image.width, image.height),
+                want: (w as u32, h as u32),
+            });
+        }
+        let model = frame
+            .get("camera_model")
+            .or_else(|| json.get("camera_model"))
+            .map_or(Some("PINHOLE"), |m| m.as_str())
+            .ok_or_else(|| field(&path, "camera_model", "must be a string"))?;
+        let coefficient = |name: &str| Ok::<f32, DatasetError>(number(name)?.unwrap_or(0.0) as f32);
+        let (camera_model, distortion) = match model {
+            "PINHOLE" => (CameraModel::Pinhole, Vec4::ZERO),
+            "OPENCV" => {
+                for name in ["k1", "k2", "p1", "p2"] {
+                    if coefficient(name)? != 0.0 {
+                        return Err(field(
+                            &path,
+                            name,
+                            "is not zero: OPENCV distortion is not supported (undistort the images, or calibrate as OPENCV_FISHEYE)",
+                        ));
+                    }
+                }
+                (CameraModel::Pinhole, Vec4::ZERO)
+            }
+            "OPENCV_FISHEYE" => (
+                CameraModel::KannalaBrandt,
+                Vec4::new(
+                    coefficient("k1")?,
+                    coefficient("k2")?,
+                    coefficient("k3")?,
+                    coefficient("k4")?,
+                ),
+            ),
+            other => {
+                return Err(field(
+                    &path,
+                    "camera_model",
+                    format!("`{other}` is not supported (PINHOLE, OPENCV, OPENCV_FISHEYE)"),
+                ));
+            }
+        };
+        let mut camera = camera_of(&c2w, 1.0, (image.width, image.height))
+            .ok_or_else(|| field(&path, at("transform_matrix"), "has no inverse"))?;
+        camera.focal = Vec2::new(required("fl_x")? as f32, required("fl_y")? as f32);
+        camera.principal = Vec2::new(required("cx")? as f32, required("cy")? as f32);
+        camera.model = camera_model;
+        camera.distortion = distortion;
+        let view = View {
+            name: image_path.display().to_string(),
+            camera,
+            image,
+        };
+        if k % 8 == 0 {
+            data.test.push(view);
+        } else {
+            data.train.push(view);
+        }
+    }
+    Ok(data)
+}
+
+fn read_split(path: &Path, background: Vec3) -> Result<Vec<View>, DatasetError> {
+    let json = read_json(path)?;
     let angle = json["camera_angle_x"]
         .as_f64()
         .filter(|a| a.is_finite() && *a > 0.0 && *a < std::f64::consts::PI)
