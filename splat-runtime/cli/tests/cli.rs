@@ -453,7 +453,13 @@ fn fit_refuses_a_missing_or_broken_dataset_by_name() {
     let ply = dir.path().join("fit.ply");
     fails(
         &splat(&["fit", "--data", "nowhere"], dir.path()),
-        "transforms_train.json",
+        "cannot read nowhere: no such folder",
+        &ply,
+    );
+    std::fs::create_dir(dir.path().join("empty")).unwrap();
+    fails(
+        &splat(&["fit", "--data", "empty"], dir.path()),
+        "neither transforms_train.json (Blender) nor transforms.json (nerfstudio)",
         &ply,
     );
     tiny_dataset(&dir.path().join("data"), 2);

@@ -35,26 +35,30 @@ pub struct Dataset {
 
 #[derive(Debug, thiserror::Error)]
 pub enum DatasetError {
-    #[error("cannot read {path}: {source}")]
+    #[error("cannot read {path}: {error}")]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        error: std::io::Error,
     },
-    #[error("{path} is not valid JSON: {source}")]
+    #[error("{path} is not valid JSON: {error}")]
     Json {
         path: PathBuf,
-        source: serde_json::Error,
+        error: serde_json::Error,
     },
+    #[error(
+        "{0} is not a dataset: it holds neither transforms_train.json (Blender) nor transforms.json (nerfstudio)"
+    )]
+    NotADataset(PathBuf),
     #[error("{path}: {field} {problem}")]
     Field {
         path: PathBuf,
         field: String,
         problem: String,
     },
-    #[error("cannot decode the image {path}: {source}")]
+    #[error("cannot decode the image {path}: {error}")]
     Image {
         path: PathBuf,
-        source: image::ImageError,
+        error: image::ImageError,
     },
     #[error("{path} is {got:?} pixels, the first image of {file} is {want:?}")]
     Size {
@@ -78,10 +82,18 @@ fn field(path: &Path, field: impl Into<String>, problem: impl Into<String>) -> D
 /// Reads the dataset in `dir` (Blender if it holds `transforms_train.json`, else nerfstudio),
 /// compositing RGBA images on `background`.
 pub fn read(dir: &Path, background: Vec3) -> Result<Dataset, DatasetError> {
+    if !dir.is_dir() {
+        return Err(DatasetError::Io {
+            path: dir.to_path_buf(),
+            error: std::io::Error::new(std::io::ErrorKind::NotFound, "no such folder"),
+        });
+    }
     if dir.join("transforms_train.json").exists() {
         read_blender(dir, background)
-    } else {
+    } else if dir.join("transforms.json").exists() {
         read_nerfstudio(dir, background)
+    } else {
+        Err(DatasetError::NotADataset(dir.to_path_buf()))
     }
 }
 
@@ -94,13 +106,13 @@ pub fn read_blender(dir: &Path, background: Vec3) -> Result<Dataset, DatasetErro
 }
 
 fn read_json(path: &Path) -> Result<serde_json::Value, DatasetError> {
-    let text = std::fs::read_to_string(path).map_err(|source| DatasetError::Io {
+    let text = std::fs::read_to_string(path).map_err(|error| DatasetError::Io {
         path: path.to_path_buf(),
-        source,
+        error,
     })?;
-    serde_json::from_str(&text).map_err(|source| DatasetError::Json {
+    serde_json::from_str(&text).map_err(|error| DatasetError::Json {
         path: path.to_path_buf(),
-        source,
+        error,
     })
 }
 
@@ -307,14 +319,14 @@ fn camera_of(c2w_gl: &Mat4, angle_x: f32, (w, h): (u32, u32)) -> Option<Camera> 
 
 /// An image as RGB in [0, 1], alpha composited on `background`.
 fn read_image(path: &Path, background: Vec3) -> Result<Image, DatasetError> {
-    let img = image::open(path).map_err(|source| match source {
-        image::ImageError::IoError(source) => DatasetError::Io {
+    let img = image::open(path).map_err(|error| match error {
+        image::ImageError::IoError(error) => DatasetError::Io {
             path: path.to_path_buf(),
-            source,
+            error,
         },
-        source => DatasetError::Image {
+        error => DatasetError::Image {
             path: path.to_path_buf(),
-            source,
+            error,
         },
     })?;
     let rgba = img.to_rgba32f();
