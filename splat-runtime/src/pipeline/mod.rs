@@ -5,8 +5,8 @@
 //! 2. [`rasterize`]: per-tile depth-sorted lists (count, prefix sum, emit, sort, ranges).
 //! 3. [`shade`]: front-to-back blending per tile (rayon over tiles, 8 SIMD lanes over pixels),
 //!    tiles scheduled longest list first (trip-count binning).
-//! 4. [`backward`]: the front-to-back backward blend, a per-primitive reduction, then
-//!    `project`'s adjoint per primitive.
+//! 4. [`backward`](mod@backward): the front-to-back backward blend, a per-primitive
+//!    reduction, then `project`'s adjoint per primitive.
 
 pub mod backward;
 pub mod grid;
@@ -199,7 +199,7 @@ pub fn render<M: SplatMethod>(
     forward::<M>(params, camera, opts, false).map(|(f, _)| f)
 }
 
-/// Renders and keeps what [`backward`] needs.
+/// Renders and keeps what [`backward()`] needs.
 pub fn render_for_backward<M: SplatMethod>(
     params: &[M::Params],
     camera: &Camera,
