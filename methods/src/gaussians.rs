@@ -122,17 +122,35 @@ macro_rules! gaussians_3d {
         }
 
         /// 3DGS's learning rates (positions scaled by the scene's extent and decayed 100x, the
-        /// higher SH bands 20x slower than the DC term) and its initialization: an isotropic
-        /// Gaussian of opacity 0.1 with the point's color as the DC term.
+        /// higher SH bands 20x slower than the DC term, band b trained from step 1,000 b) and
+        /// its initialization: an isotropic Gaussian of opacity 0.1 with the point's color as
+        /// the DC term.
         impl splat_runtime::train::Trainable for $name::Method {
-            fn learning_rates(extent: f32) -> Vec<(f32, f32)> {
-                let fixed = |lr: f32, n: usize| std::iter::repeat_n((lr, lr), n);
-                std::iter::repeat_n((1.6e-4 * extent, 1.6e-6 * extent), 3)
+            fn learning_rates(extent: f32) -> Vec<splat_runtime::train::Rate> {
+                use splat_runtime::train::Rate;
+                let fixed = |lr: f32, n: usize| std::iter::repeat_n(Rate::fixed(lr), n);
+                let position = Rate {
+                    first: 1.6e-4 * extent,
+                    last: 1.6e-6 * extent,
+                    from_step: 0,
+                };
+                // Coefficient i (after the DC term) belongs to band floor(sqrt(i)).
+                let bands = (1..$n).flat_map(|i: usize| {
+                    let band = (i as f32).sqrt() as usize;
+                    std::iter::repeat_n(
+                        Rate {
+                            from_step: 1000 * band,
+                            ..Rate::fixed(2.5e-3 / 20.0)
+                        },
+                        3,
+                    )
+                });
+                std::iter::repeat_n(position, 3)
                     .chain(fixed(5e-3, 3))
                     .chain(fixed(1e-3, 4))
                     .chain(fixed(5e-2, 1))
                     .chain(fixed(2.5e-3, 3))
-                    .chain(fixed(2.5e-3 / 20.0, 3 * ($n - 1)))
+                    .chain(bands)
                     .collect()
             }
 

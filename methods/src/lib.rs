@@ -57,7 +57,7 @@ stored_as_is!(gut::Params, geer::Params);
 macro_rules! trained_like_3dgs {
     ($($m:ident),*) => {$(
         impl splat_runtime::train::Trainable for $m::Method {
-            fn learning_rates(extent: f32) -> Vec<(f32, f32)> {
+            fn learning_rates(extent: f32) -> Vec<splat_runtime::train::Rate> {
                 <gs3d::Method as splat_runtime::train::Trainable>::learning_rates(extent)
             }
 

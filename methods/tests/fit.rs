@@ -176,6 +176,33 @@ fn three_dgs_fits_a_blender_dataset_of_a_known_scene() {
         "held-out views get closer to the truth"
     );
     assert!(after.ssim > before.ssim);
+    // 300 steps train only the DC term of the colors: the higher SH bands are still zero.
+    assert!(
+        params
+            .iter()
+            .all(|p| p.sh[1..].iter().all(|c| *c == Vec3::ZERO))
+    );
+    assert!(
+        params
+            .iter()
+            .any(|p| p.sh[0] != Method::from_point(p.mean, Vec3::splat(0.5), 0.05).sh[0])
+    );
+}
+
+#[test]
+fn sh_bands_unlock_every_thousand_steps() {
+    let rates = Method::learning_rates(2.0);
+    assert_eq!(rates.len(), 59);
+    // Words 11..14: the DC term; then 3 words per coefficient, band floor(sqrt(i)).
+    let band_of_word = |k: usize| ((((k - 14) / 3 + 1) as f32).sqrt()) as usize;
+    for (k, r) in rates.iter().enumerate().skip(14) {
+        assert_eq!(r.from_step, 1000 * band_of_word(k), "word {k}");
+        assert_eq!(r.at(r.from_step - 1, 30_000), 0.0);
+        assert!(r.at(r.from_step, 30_000) > 0.0);
+    }
+    let position = rates[0];
+    assert!((position.at(0, 100) - 3.2e-4).abs() < 1e-9);
+    assert!((position.at(100, 100) - 3.2e-6).abs() < 1e-11);
 }
 
 #[test]

@@ -11,12 +11,45 @@ use crate::method::SplatMethod;
 use crate::pipeline::{FrameGrad, Image, RenderError, RenderOptions};
 use glam::Vec3;
 
+/// How one parameter word is trained: its learning rate decays exponentially from `first` to
+/// `last` over the run, and it stays fixed (no gradient, no moment) before step `from_step`
+/// (3DGS unlocks one SH band every 1,000 steps).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Rate {
+    pub first: f32,
+    pub last: f32,
+    pub from_step: usize,
+}
+
+impl Rate {
+    /// A rate that neither decays nor waits.
+    pub const fn fixed(lr: f32) -> Rate {
+        Rate {
+            first: lr,
+            last: lr,
+            from_step: 0,
+        }
+    }
+
+    /// The rate at `step` of `steps`.
+    pub fn at(&self, step: usize, steps: usize) -> f32 {
+        let t = step as f32 / steps.max(1) as f32;
+        match (
+            step < self.from_step,
+            self.first == self.last || self.first == 0.0,
+        ) {
+            (true, _) => 0.0,
+            (false, true) => self.first,
+            (false, false) => self.first * (self.last / self.first).powf(t),
+        }
+    }
+}
+
 /// What a method declares to be trained.
 pub trait Trainable: SplatMethod {
-    /// `(first, last)` learning rate of each word of `Params`, decayed exponentially from
-    /// first to last over the run; `extent` is the scene's radius (3DGS scales positions by
-    /// it).
-    fn learning_rates(extent: f32) -> Vec<(f32, f32)>;
+    /// How each word of `Params` is trained; `extent` is the scene's radius (3DGS scales
+    /// position rates by it).
+    fn learning_rates(extent: f32) -> Vec<Rate>;
 
     /// A primitive at `point` with linear RGB `color` and size `scale` (world units).
     fn from_point(point: Vec3, color: Vec3, scale: f32) -> Self::Params;
@@ -162,14 +195,13 @@ pub fn fit<M: Trainable>(
         for (p, out) in g.params.iter().zip(grads.chunks_exact_mut(words)) {
             p.write_words(out);
         }
-        let t = step as f32 / opts.steps.max(1) as f32;
-        let lr: Vec<f32> = rates
-            .iter()
-            .map(|&(first, last)| match first == last || first == 0.0 {
-                true => first,
-                false => first * (last / first).powf(t),
-            })
-            .collect();
+        let lr: Vec<f32> = rates.iter().map(|r| r.at(step, opts.steps)).collect();
+        // Words not trained yet get no gradient, so their moments start from zero.
+        for (k, g) in grads.iter_mut().enumerate() {
+            if step < rates[k % words].from_step {
+                *g = 0.0;
+            }
+        }
         adam.step(&mut flat, &grads, &lr);
         for (p, w) in params.iter_mut().zip(flat.chunks_exact(words)) {
             *p = M::Params::read_words(w);

@@ -6,4 +6,4 @@ pub mod adam;
 pub mod fit;
 pub mod loss;
 
-pub use fit::{FitOptions, Trainable};
+pub use fit::{FitOptions, Rate, Trainable};
