@@ -1,6 +1,6 @@
 //! The device, and the small vocabulary every stage is written in: buffers checked against the
 //! device's limits (and buffers that persist across frames, grown to a high-water mark),
-//! compute pipelines compiled once per (source, entry point), bind groups in binding order,
+//! compute pipelines compiled once per (source, entry point) with their bindings bound by name,
 //! dispatches split over two dimensions, and synchronous readback.
 
 use super::GpuError;
@@ -187,26 +187,43 @@ impl Gpu {
         Ok(pipeline)
     }
 
-    /// A bind group for `pipeline` with `buffers` at bindings 0, 1, ... (the layout derived from
-    /// the entry point holds exactly the bindings it uses).
-    pub fn bind(
-        &self,
-        pipeline: &wgpu::ComputePipeline,
-        buffers: &[&wgpu::Buffer],
-    ) -> wgpu::BindGroup {
-        let entries: Vec<wgpu::BindGroupEntry> = buffers
-            .iter()
-            .enumerate()
-            .map(|(i, b)| wgpu::BindGroupEntry {
-                binding: i as u32,
-                resource: b.as_entire_binding(),
-            })
-            .collect();
-        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: None,
-            layout: &pipeline.get_bind_group_layout(0),
-            entries: &entries,
+    /// The pipeline of `entry` in `source` (compiled on first use), with the binding slot of
+    /// every variable the source declares, so its buffers are bound by name.
+    pub fn kernel(&self, source: &str, entry: &str) -> Result<Kernel, GpuError> {
+        Ok(Kernel {
+            pipeline: self.pipeline(source, entry)?,
+            slots: binding_slots(source),
+            entry: entry.to_string(),
         })
+    }
+
+    /// A bind group for `kernel` with each buffer at the slot its name is declared with (name
+    /// exactly the bindings the entry point uses: its derived layout holds no others).
+    pub fn bind_named(
+        &self,
+        kernel: &Kernel,
+        buffers: &[(&str, &wgpu::Buffer)],
+    ) -> Result<wgpu::BindGroup, GpuError> {
+        let mut entries = Vec::with_capacity(buffers.len());
+        for (name, buffer) in buffers {
+            let slot = kernel
+                .slots
+                .iter()
+                .find(|(n, _)| n == name)
+                .map(|(_, slot)| *slot)
+                .ok_or_else(|| {
+                    GpuError::Shader(format!("`{}` declares no binding `{name}`", kernel.entry))
+                })?;
+            entries.push(wgpu::BindGroupEntry {
+                binding: slot,
+                resource: buffer.as_entire_binding(),
+            });
+        }
+        Ok(self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(&kernel.entry),
+            layout: &kernel.pipeline.get_bind_group_layout(0),
+            entries: &entries,
+        }))
     }
 
     /// Submits `encoder` and waits until the GPU is done.
@@ -264,6 +281,34 @@ impl Gpu {
         buffer.unmap();
         Ok(out)
     }
+}
+
+/// A compute pipeline whose buffers are bound by the names its source declares them with.
+#[derive(Clone)]
+pub struct Kernel {
+    pub pipeline: wgpu::ComputePipeline,
+    /// (variable name, binding slot) of every `@group(0) @binding(N) var<...> name` line.
+    slots: Vec<(String, u32)>,
+    entry: String,
+}
+
+/// The binding declarations of a runtime shader: `@binding(N) var<...> name: ...` lines.
+fn binding_slots(source: &str) -> Vec<(String, u32)> {
+    source
+        .lines()
+        .filter_map(|line| {
+            let rest = line.split("@binding(").nth(1)?;
+            let (slot, rest) = rest.split_once(')')?;
+            let decl = rest.split_once("var")?.1;
+            let decl = decl.trim_start();
+            let decl = match decl.strip_prefix('<') {
+                Some(d) => d.split_once('>')?.1,
+                None => decl,
+            };
+            let name = decl.split(':').next()?.trim();
+            Some((name.to_string(), slot.trim().parse().ok()?))
+        })
+        .collect()
 }
 
 /// A storage buffer that persists across frames: re-created only when a frame needs more
@@ -351,5 +396,21 @@ mod tests {
         assert_eq!(grid_of(65_535), (65_535, 1));
         assert_eq!(grid_of(65_536), (65_535, 2));
         assert_eq!(grid_of(0), (1, 1));
+    }
+
+    #[test]
+    fn binding_slots_are_read_from_the_declarations() {
+        let source = "@group(0) @binding(0) var<storage, read> keys: array<vec2<u32>>;
+@group(0) @binding(2) var<uniform> info: vec4<u32>; // n
+// @binding is mentioned here without a declaration
+@group(0) @binding(8) var<storage, read_write> issued: array<atomic<u32>, 2>;";
+        assert_eq!(
+            binding_slots(source),
+            [
+                ("keys".to_string(), 0),
+                ("info".into(), 2),
+                ("issued".into(), 8)
+            ]
+        );
     }
 }

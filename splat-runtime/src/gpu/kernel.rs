@@ -131,18 +131,17 @@ pub fn run_shared(
     let nr = sig.results.len();
     let flat: Vec<Word> = rows.iter().flatten().copied().collect();
     let source = harness_source(wgsl, sig, per_row);
-    let inputs: Vec<&[Word]> = if shared.is_empty() {
-        vec![&flat]
-    } else {
-        vec![&flat, shared]
-    };
+    let mut inputs: Vec<(&str, &[Word])> = vec![("harness_rows", &flat)];
+    if !shared.is_empty() {
+        inputs.push(("harness_shared", shared));
+    }
     let out = super::dispatch::run(
         gpu,
         &source,
         "splat_harness",
         &inputs,
-        &[n as u32],
-        n * nr,
+        ("harness_out", n * nr),
+        ("harness_count", &[n as u32]),
         (n as u32).div_ceil(64),
     )?;
     Ok((0..n).map(|i| out[i * nr..(i + 1) * nr].to_vec()).collect())

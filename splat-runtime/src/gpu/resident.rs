@@ -12,7 +12,7 @@
 //! `pixel_info`'s for ray methods). Stage times come from GPU timestamps where the adapter has
 //! them.
 
-use super::device::{Grown, dispatch};
+use super::device::{Grown, Kernel, dispatch};
 use super::entries::{self, Accumulation, Layout, Reduction};
 use super::sort::{RadixSort, Scan, TileRanges};
 use super::timing::StageTimer;
@@ -141,16 +141,16 @@ pub struct GpuRenderer<'g, M: SplatMethod> {
     /// Accumulate weight * depth per pixel (for the depth output or its gradient).
     depth_sums: bool,
     layout: Layout,
-    project: wgpu::ComputePipeline,
-    count: wgpu::ComputePipeline,
-    emit: wgpu::ComputePipeline,
-    shade: wgpu::ComputePipeline,
-    project_backward: wgpu::ComputePipeline,
+    project: Kernel,
+    count: Kernel,
+    emit: Kernel,
+    shade: Kernel,
+    project_backward: Kernel,
     /// Parameter float slots (gradient words per primitive).
     param_floats: usize,
-    pixel_backward: Option<wgpu::ComputePipeline>,
+    pixel_backward: Option<Kernel>,
     /// Backward blends built on first use, per (depth gradient, accumulation).
-    blends: HashMap<(bool, Accumulation), wgpu::ComputePipeline>,
+    blends: HashMap<(bool, Accumulation), Kernel>,
     camera: wgpu::Buffer,
     /// (primitives, width, height, tile size), (tiles_x, P_max, tiles, 0).
     frame_info: wgpu::Buffer,
@@ -203,7 +203,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         let layout = Layout::of::<M>();
         let (source, param_floats) = entries::project_backward::<M>()?;
         let pixel_backward = match M::HAS_PIXEL_INFO {
-            true => Some(gpu.pipeline(&entries::pixel_backward::<M>()?, "pixel_backward")?),
+            true => Some(gpu.kernel(&entries::pixel_backward::<M>()?, "pixel_backward")?),
             false => None,
         };
         let grown = |what, words| Grown::new(gpu, what, words);
@@ -219,14 +219,14 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             opts: *opts,
             depth_sums,
             layout,
-            project: gpu.pipeline(&entries::project::<M>()?, "splat_harness")?,
-            count: gpu.pipeline(&entries::tiles::<M>(false, opts.tile_cull)?, "count_tiles")?,
-            emit: gpu.pipeline(&entries::tiles::<M>(true, opts.tile_cull)?, "emit_tiles")?,
-            shade: gpu.pipeline(
+            project: gpu.kernel(&entries::project::<M>()?, "splat_harness")?,
+            count: gpu.kernel(&entries::tiles::<M>(false, opts.tile_cull)?, "count_tiles")?,
+            emit: gpu.kernel(&entries::tiles::<M>(true, opts.tile_cull)?, "emit_tiles")?,
+            shade: gpu.kernel(
                 &entries::shade::<M>(gpu, opts.tile_size, depth_sums)?,
                 "shade_tiles",
             )?,
-            project_backward: gpu.pipeline(&source, "project_backward")?,
+            project_backward: gpu.kernel(&source, "project_backward")?,
             param_floats,
             pixel_backward,
             blends: HashMap::new(),
@@ -302,29 +302,29 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         enc.clear_buffer(&self.totals, 0, None);
         self.timer.start(&mut enc, PROJECT);
-        let bind = gpu.bind(
+        let bind = gpu.bind_named(
             &self.project,
             &[
-                scene.buffer(),
-                &self.camera,
-                &self.projected,
-                &self.count_info,
+                ("harness_rows", scene.buffer()),
+                ("harness_shared", &self.camera),
+                ("harness_out", &self.projected),
+                ("harness_count", &self.count_info),
             ],
-        );
-        dispatch(&mut enc, &self.project, &bind, n32.div_ceil(64));
+        )?;
+        dispatch(&mut enc, &self.project.pipeline, &bind, n32.div_ceil(64));
         self.timer.end(&mut enc, PROJECT);
         self.timer.start(&mut enc, COUNT);
-        let bind = gpu.bind(
+        let bind = gpu.bind_named(
             &self.count,
             &[
-                &self.projected,
-                &self.counts,
-                &self.frame_info,
-                &self.totals,
+                ("projected", &self.projected),
+                ("counts", &self.counts),
+                ("frame", &self.frame_info),
+                ("totals", &self.totals),
             ],
-        );
-        dispatch(&mut enc, &self.count, &bind, n32.div_ceil(256));
-        self.scan.record(gpu, &mut enc, &self.counts);
+        )?;
+        dispatch(&mut enc, &self.count.pipeline, &bind, n32.div_ceil(256));
+        self.scan.record(gpu, &mut enc, &self.counts)?;
         self.timer.end(&mut enc, COUNT);
         enc.copy_buffer_to_buffer(&self.totals, 0, &self.totals_staging, 0, 12);
         gpu.queue.submit([enc.finish()]);
@@ -348,38 +348,28 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         self.pixels.ensure(gpu, pixels * (layout.channels + 2))?;
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         self.timer.start(&mut enc, SORT);
-        let bind = gpu.bind(
+        let bind = gpu.bind_named(
             &self.emit,
             &[
-                &self.projected,
-                &self.counts,
-                &self.frame_info,
-                &self.keys,
-                &self.prims,
+                ("projected", &self.projected),
+                ("counts", &self.counts),
+                ("frame", &self.frame_info),
+                ("keys", &self.keys),
+                ("vals", &self.prims),
             ],
-        );
-        dispatch(&mut enc, &self.emit, &bind, n32.div_ceil(256));
-        self.sort.record(gpu, &mut enc, &self.keys, &self.prims);
-        self.tiles.record(gpu, &mut enc, &self.keys);
+        )?;
+        dispatch(&mut enc, &self.emit.pipeline, &bind, n32.div_ceil(256));
+        self.sort.record(gpu, &mut enc, &self.keys, &self.prims)?;
+        self.tiles.record(gpu, &mut enc, &self.keys)?;
         self.timer.end(&mut enc, SORT);
         self.timer.start(&mut enc, SHADE);
-        let mut inputs = vec![
-            &*self.projected,
-            &*self.prims,
-            &*self.tiles.ranges,
-            &*self.tiles.order,
-            &self.frame_info,
-            &*self.pixels,
-        ];
+        let mut inputs = self.tile_pass_inputs();
+        inputs.push(("pixel_out", &self.pixels));
         if M::HAS_PIXEL_INFO {
-            inputs.push(&self.camera);
+            inputs.push(("camera_words", &self.camera));
         }
-        dispatch(
-            &mut enc,
-            &self.shade,
-            &gpu.bind(&self.shade, &inputs),
-            tiles,
-        );
+        let bind = gpu.bind_named(&self.shade, &inputs)?;
+        dispatch(&mut enc, &self.shade.pipeline, &bind, tiles);
         self.timer.end(&mut enc, SHADE);
         self.timer.resolve(&mut enc, PROJECT..BLEND);
         gpu.queue.submit([enc.finish()]);
@@ -507,50 +497,47 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         );
         enc.clear_buffer(&self.issued, 0, None);
         self.timer.start(&mut enc, BLEND);
-        let mut inputs = vec![
-            &*self.projected,
-            &*self.prims,
-            &*self.tiles.ranges,
-            &*self.tiles.order,
-            &self.frame_info,
-            &*self.pixels,
-            &*self.pixel_grad,
-            &*self.grads,
-            &self.issued,
-        ];
+        let mut inputs = self.tile_pass_inputs();
+        inputs.extend([
+            ("pixel_state", &*self.pixels),
+            ("pixel_grad", &self.pixel_grad),
+            ("grads", &self.grads),
+            ("issued", &self.issued),
+        ]);
         if M::HAS_PIXEL_INFO {
-            inputs.push(&self.camera);
-            inputs.push(&self.pixel_cotangent);
+            inputs.push(("camera_words", &self.camera));
+            inputs.push(("pixel_cotangent", &self.pixel_cotangent));
         }
         let tiles = grid.tile_count() as u32;
-        dispatch(&mut enc, &blend, &gpu.bind(&blend, &inputs), tiles);
+        let bind = gpu.bind_named(&blend, &inputs)?;
+        dispatch(&mut enc, &blend.pipeline, &bind, tiles);
         self.timer.end(&mut enc, BLEND);
         self.timer.start(&mut enc, ADJOINT);
-        let p = &self.project_backward;
-        let bind = gpu.bind(
-            p,
+        let k = &self.project_backward;
+        let bind = gpu.bind_named(
+            k,
             &[
-                scene.buffer(),
-                &self.camera,
-                &self.projected,
-                &self.grads,
-                &self.param_grads,
-                &self.camera_partials,
-                &self.count_info,
+                ("params", scene.buffer()),
+                ("camera_words", &self.camera),
+                ("projected", &self.projected),
+                ("grads", &self.grads),
+                ("param_grads", &self.param_grads),
+                ("camera_partials", &self.camera_partials),
+                ("info", &self.count_info),
             ],
-        );
-        dispatch(&mut enc, p, &bind, groups);
-        if let Some(p) = &self.pixel_backward {
-            let bind = gpu.bind(
-                p,
+        )?;
+        dispatch(&mut enc, &k.pipeline, &bind, groups);
+        if let Some(k) = &self.pixel_backward {
+            let bind = gpu.bind_named(
+                k,
                 &[
-                    &self.camera,
-                    &self.pixel_cotangent,
-                    &self.ray_partials,
-                    &self.pixel_info,
+                    ("camera_words", &self.camera),
+                    ("pixel_cotangent", &self.pixel_cotangent),
+                    ("camera_partials", &self.ray_partials),
+                    ("info", &self.pixel_info),
                 ],
-            );
-            dispatch(&mut enc, p, &bind, (pixels as u32).div_ceil(64));
+            )?;
+            dispatch(&mut enc, &k.pipeline, &bind, (pixels as u32).div_ceil(64));
         }
         self.timer.end(&mut enc, ADJOINT);
         self.timer.resolve(&mut enc, BLEND..STAGES);
@@ -558,11 +545,18 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         Ok(())
     }
 
-    fn blend(
-        &mut self,
-        want_depth: bool,
-        acc: Accumulation,
-    ) -> Result<wgpu::ComputePipeline, GpuRenderError> {
+    /// The bindings every tile pass (forward and backward blend) shares (`tile_pass.wgsl`).
+    fn tile_pass_inputs(&self) -> Vec<(&'static str, &wgpu::Buffer)> {
+        vec![
+            ("projected", &*self.projected),
+            ("tile_prims", &*self.prims),
+            ("tile_ranges", &*self.tiles.ranges),
+            ("tile_order", &*self.tiles.order),
+            ("frame", &self.frame_info),
+        ]
+    }
+
+    fn blend(&mut self, want_depth: bool, acc: Accumulation) -> Result<Kernel, GpuRenderError> {
         let gpu = self.gpu;
         if acc.float_atomics && !gpu.float_atomics {
             return Err(GpuError::Shader("this adapter has no f32 atomics".into()).into());
@@ -574,9 +568,9 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             return Ok(p.clone());
         }
         let source = entries::backward::<M>(gpu, self.opts.tile_size, want_depth, acc)?;
-        let p = gpu.pipeline(&source, "backward_tiles")?;
-        self.blends.insert((want_depth, acc), p.clone());
-        Ok(p)
+        let k = gpu.kernel(&source, "backward_tiles")?;
+        self.blends.insert((want_depth, acc), k.clone());
+        Ok(k)
     }
 
     /// The parameter gradient words on the device (`M::Params`' float slots per primitive),

@@ -4,7 +4,7 @@
 //! one): `prepare` sizes them and writes the frame's uniforms, `record` adds the dispatches
 //! to the caller's encoder.
 
-use super::device::{Grown, dispatch};
+use super::device::{Grown, Kernel, dispatch};
 use super::{Gpu, GpuError};
 
 const SCAN: &str = include_str!("shaders/scan.wgsl");
@@ -22,8 +22,8 @@ const SCAN_BLOCK: u32 = 256;
 /// In-place exclusive prefix sum: one level per 256-fold reduction, each with its block
 /// totals and its uniform.
 pub struct Scan {
-    blocks: wgpu::ComputePipeline,
-    offsets: wgpu::ComputePipeline,
+    blocks: Kernel,
+    offsets: Kernel,
     /// Per level: block totals, `[words]` uniform, words at this level.
     levels: Vec<(Grown, wgpu::Buffer, u32)>,
 }
@@ -31,8 +31,8 @@ pub struct Scan {
 impl Scan {
     pub fn new(gpu: &Gpu) -> Result<Scan, GpuError> {
         Ok(Scan {
-            blocks: gpu.pipeline(SCAN, "scan_blocks")?,
-            offsets: gpu.pipeline(SCAN, "add_block_offsets")?,
+            blocks: gpu.kernel(SCAN, "scan_blocks")?,
+            offsets: gpu.kernel(SCAN, "add_block_offsets")?,
             levels: vec![],
         })
     }
@@ -64,8 +64,13 @@ impl Scan {
     }
 
     /// Records the scan of `data` (the size given to [`Scan::prepare`]).
-    pub fn record(&self, gpu: &Gpu, encoder: &mut wgpu::CommandEncoder, data: &wgpu::Buffer) {
-        self.record_level(gpu, encoder, data, 0);
+    pub fn record(
+        &self,
+        gpu: &Gpu,
+        encoder: &mut wgpu::CommandEncoder,
+        data: &wgpu::Buffer,
+    ) -> Result<(), GpuError> {
+        self.record_level(gpu, encoder, data, 0)
     }
 
     fn record_level(
@@ -74,15 +79,21 @@ impl Scan {
         encoder: &mut wgpu::CommandEncoder,
         data: &wgpu::Buffer,
         level: usize,
-    ) {
+    ) -> Result<(), GpuError> {
         let (sums, info, words) = &self.levels[level];
         let blocks = words.div_ceil(SCAN_BLOCK).max(1);
-        let bind = |p| gpu.bind(p, &[data, sums, info]);
-        dispatch(encoder, &self.blocks, &bind(&self.blocks), blocks);
+        let bind = |k| gpu.bind_named(k, &[("data", data), ("sums", sums), ("info", info)]);
+        dispatch(encoder, &self.blocks.pipeline, &bind(&self.blocks)?, blocks);
         if blocks > 1 {
-            self.record_level(gpu, encoder, sums, level + 1);
-            dispatch(encoder, &self.offsets, &bind(&self.offsets), blocks);
+            self.record_level(gpu, encoder, sums, level + 1)?;
+            dispatch(
+                encoder,
+                &self.offsets.pipeline,
+                &bind(&self.offsets)?,
+                blocks,
+            );
         }
+        Ok(())
     }
 }
 
@@ -90,8 +101,8 @@ impl Scan {
 /// depth, only over the tile bits the frame has. Sorts in place: the keys end where they
 /// started (an odd pass count ends with a copy back).
 pub struct RadixSort {
-    histogram: wgpu::ComputePipeline,
-    scatter: wgpu::ComputePipeline,
+    histogram: Kernel,
+    scatter: Kernel,
     hist: Grown,
     keys_tmp: Grown,
     vals_tmp: Grown,
@@ -105,8 +116,8 @@ pub struct RadixSort {
 impl RadixSort {
     pub fn new(gpu: &Gpu) -> Result<RadixSort, GpuError> {
         Ok(RadixSort {
-            histogram: gpu.pipeline(RADIX, "radix_histogram")?,
-            scatter: gpu.pipeline(RADIX, "radix_scatter")?,
+            histogram: gpu.kernel(RADIX, "radix_histogram")?,
+            scatter: gpu.kernel(RADIX, "radix_scatter")?,
             hist: Grown::new(gpu, "radix-sort histograms", 16)?,
             keys_tmp: Grown::new(gpu, "sorted keys", 2)?,
             vals_tmp: Grown::new(gpu, "sorted values", 1)?,
@@ -147,32 +158,44 @@ impl RadixSort {
         encoder: &mut wgpu::CommandEncoder,
         keys: &wgpu::Buffer,
         vals: &wgpu::Buffer,
-    ) {
+    ) -> Result<(), GpuError> {
         let blocks = self.n.div_ceil(SORT_BLOCK).max(1);
         let (mut from, mut to) = ((keys, vals), (&*self.keys_tmp, &*self.vals_tmp));
         for info in &self.passes[..self.digits.len()] {
-            let bind = gpu.bind(&self.histogram, &[from.0, &self.hist, info]);
-            dispatch(encoder, &self.histogram, &bind, blocks);
-            self.scan.record(gpu, encoder, &self.hist);
-            let bind = gpu.bind(
-                &self.scatter,
-                &[from.0, &self.hist, info, from.1, to.0, to.1],
-            );
-            dispatch(encoder, &self.scatter, &bind, blocks);
+            let (h, s) = (&self.histogram, &self.scatter);
+            let bind = gpu.bind_named(
+                h,
+                &[("keys_in", from.0), ("hist", &self.hist), ("info", info)],
+            )?;
+            dispatch(encoder, &h.pipeline, &bind, blocks);
+            self.scan.record(gpu, encoder, &self.hist)?;
+            let bind = gpu.bind_named(
+                s,
+                &[
+                    ("keys_in", from.0),
+                    ("hist", &self.hist),
+                    ("info", info),
+                    ("vals_in", from.1),
+                    ("keys_out", to.0),
+                    ("vals_out", to.1),
+                ],
+            )?;
+            dispatch(encoder, &s.pipeline, &bind, blocks);
             std::mem::swap(&mut from, &mut to);
         }
         if self.digits.len() % 2 == 1 && self.n > 0 {
             encoder.copy_buffer_to_buffer(from.0, 0, keys, 0, 8 * self.n as u64);
             encoder.copy_buffer_to_buffer(from.1, 0, vals, 0, 4 * self.n as u64);
         }
+        Ok(())
     }
 }
 
 /// Per tile `[start, end)` of its entries in the sorted keys, then the tiles ordered by bin of
 /// list length (capped at `P_max`), longest first.
 pub struct TileRanges {
-    ranges_pipeline: wgpu::ComputePipeline,
-    bins_pipeline: wgpu::ComputePipeline,
+    ranges_kernel: Kernel,
+    bins_kernel: Kernel,
     pub ranges: Grown,
     pub order: Grown,
     ranges_info: wgpu::Buffer,
@@ -184,8 +207,8 @@ pub struct TileRanges {
 impl TileRanges {
     pub fn new(gpu: &Gpu) -> Result<TileRanges, GpuError> {
         Ok(TileRanges {
-            ranges_pipeline: gpu.pipeline(RANGES, "tile_ranges")?,
-            bins_pipeline: gpu.pipeline(BINS, "bin_tiles")?,
+            ranges_kernel: gpu.kernel(RANGES, "tile_ranges")?,
+            bins_kernel: gpu.kernel(BINS, "bin_tiles")?,
             ranges: Grown::new(gpu, "tile ranges", 2)?,
             order: Grown::new(gpu, "tile order", 1)?,
             ranges_info: gpu.uniform_buffer(4),
@@ -205,14 +228,34 @@ impl TileRanges {
     }
 
     /// Records the ranges of the sorted `keys` and the binned tile order.
-    pub fn record(&self, gpu: &Gpu, encoder: &mut wgpu::CommandEncoder, keys: &wgpu::Buffer) {
+    pub fn record(
+        &self,
+        gpu: &Gpu,
+        encoder: &mut wgpu::CommandEncoder,
+        keys: &wgpu::Buffer,
+    ) -> Result<(), GpuError> {
         encoder.clear_buffer(&self.ranges, 0, Some(8 * self.tiles as u64));
-        let p = &self.ranges_pipeline;
-        let bind = gpu.bind(p, &[keys, &self.ranges, &self.ranges_info]);
-        dispatch(encoder, p, &bind, self.n.div_ceil(256));
-        let p = &self.bins_pipeline;
-        let bind = gpu.bind(p, &[&self.ranges, &self.order, &self.bins_info]);
-        dispatch(encoder, p, &bind, 1);
+        let k = &self.ranges_kernel;
+        let named = [
+            ("keys", keys),
+            ("ranges", &self.ranges),
+            ("info", &self.ranges_info),
+        ];
+        let bind = gpu.bind_named(k, &named)?;
+        dispatch(encoder, &k.pipeline, &bind, self.n.div_ceil(256));
+        self.record_bins(gpu, encoder)
+    }
+
+    fn record_bins(&self, gpu: &Gpu, encoder: &mut wgpu::CommandEncoder) -> Result<(), GpuError> {
+        let k = &self.bins_kernel;
+        let named = [
+            ("ranges", &*self.ranges),
+            ("order", &self.order),
+            ("info", &self.bins_info),
+        ];
+        let bind = gpu.bind_named(k, &named)?;
+        dispatch(encoder, &k.pipeline, &bind, 1);
+        Ok(())
     }
 }
 
@@ -234,7 +277,7 @@ mod tests {
         scan.prepare(&gpu, 300).unwrap();
         scan.prepare(&gpu, words.len() as u32).unwrap();
         let mut enc = gpu.device.create_command_encoder(&Default::default());
-        scan.record(&gpu, &mut enc, &buf);
+        scan.record(&gpu, &mut enc, &buf).unwrap();
         gpu.finish(enc).unwrap();
         let got = gpu.read(&buf, words.len()).unwrap();
         let mut acc = 0;
@@ -272,8 +315,8 @@ mod tests {
         let mut ranges = TileRanges::new(&gpu).unwrap();
         ranges.prepare(&gpu, n, tiles, u32::MAX).unwrap();
         let mut enc = gpu.device.create_command_encoder(&Default::default());
-        sort.record(&gpu, &mut enc, &k, &v);
-        ranges.record(&gpu, &mut enc, &k);
+        sort.record(&gpu, &mut enc, &k, &v).unwrap();
+        ranges.record(&gpu, &mut enc, &k).unwrap();
         gpu.finish(enc).unwrap();
         let ranges = &ranges.ranges;
         let got_vals = gpu.read(&v, n as usize).unwrap();
@@ -314,9 +357,7 @@ mod tests {
         bins.prepare(&gpu, start, lens.len() as u32, 100).unwrap();
         gpu.write(&bins.ranges, &ranges);
         let mut enc = gpu.device.create_command_encoder(&Default::default());
-        let p = &bins.bins_pipeline;
-        let bind = gpu.bind(p, &[&bins.ranges, &bins.order, &bins.bins_info]);
-        dispatch(&mut enc, p, &bind, 1);
+        bins.record_bins(&gpu, &mut enc).unwrap();
         gpu.finish(enc).unwrap();
         let order = gpu.read(&bins.order, lens.len()).unwrap();
         let mut sorted = order.clone();
