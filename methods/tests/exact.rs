@@ -12,7 +12,7 @@ use common::checks::{
     invalid_pairs_leave_no_trace, tile_cull_is_conservative,
 };
 use common::{
-    CAMERA_GROUPS, GAUSSIAN_GROUPS, as_method, covering_gaussians, gaussian_toward,
+    GAUSSIAN_GROUPS, as_method, camera_groups, covering_gaussians, gaussian_toward,
     spread_gaussians, wide_camera,
 };
 use splat_methods::geer::{Method, Params};
@@ -56,11 +56,7 @@ fn the_tile_association_is_conservative() {
 fn render_gradients_match_finite_differences() {
     for model in CameraModel::ALL {
         let cam = wide_camera(24, 16, model);
-        let cameras = if model == CameraModel::KannalaBrandt {
-            &CAMERA_GROUPS[..]
-        } else {
-            &CAMERA_GROUPS[..4]
-        };
+        let cameras = camera_groups(model);
         let params = covering_scene(&cam);
         let label = format!("3dgeer {model}");
         forward_matches_reference::<Method>(&label, &twin(), &params, &cam);
@@ -190,14 +186,6 @@ fn rays_do_not_pick_up_particles_behind_the_camera() {
         "backward ray: alpha {}",
         backward.alpha
     );
-}
-
-fn camera_groups(model: CameraModel) -> &'static [(&'static str, std::ops::Range<usize>)] {
-    if model == CameraModel::KannalaBrandt {
-        &CAMERA_GROUPS[..]
-    } else {
-        &CAMERA_GROUPS[..4]
-    }
 }
 
 /// Realistic scenes: pairs below 1/255 at the footprints' edges, lists that end at the T-stop.

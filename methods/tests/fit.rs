@@ -119,6 +119,37 @@ fn truth() -> Vec<Params> {
         .collect()
 }
 
+/// The pose read back equals the one written, up to the f32 round trip through the file.
+fn assert_same_pose(got: &Camera, want: &Camera) {
+    let close = |a: &[f32], b: &[f32]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-4);
+    let rotation = (got.rotation.to_cols_array(), want.rotation.to_cols_array());
+    assert!(close(&rotation.0, &rotation.1), "{rotation:?}");
+    let translation = (got.translation.to_array(), want.translation.to_array());
+    assert!(close(&translation.0, &translation.1), "{translation:?}");
+}
+
+/// The true centres, moved, as gray isotropic primitives of method `M`.
+fn moved_start<M: Trainable>(truth: &[Params]) -> Vec<M::Params> {
+    let mut rng = fastrand::Rng::with_seed(3);
+    let mut jitter = || Vec3::new(rng.f32(), rng.f32(), rng.f32()) - 0.5;
+    truth
+        .iter()
+        .map(|g| M::from_point(g.mean + 0.1 * jitter(), Vec3::splat(0.5), 0.05))
+        .collect()
+}
+
+/// `steps` steps at tile 8 (the test images are 40 x 40).
+fn options(steps: usize) -> FitOptions {
+    FitOptions {
+        steps,
+        render: RenderOptions {
+            tile_size: 8,
+            ..FitOptions::default().render
+        },
+        ..Default::default()
+    }
+}
+
 #[test]
 fn three_dgs_fits_a_blender_dataset_of_a_known_scene() {
     let dir = tempfile::tempdir().unwrap();
@@ -133,33 +164,12 @@ fn three_dgs_fits_a_blender_dataset_of_a_known_scene() {
     let data = read_blender(dir.path(), Vec3::ZERO).unwrap();
     assert_eq!((data.train.len(), data.test.len()), (10, 3));
     for (view, cam) in data.train.iter().zip(&train_cams) {
-        let close = |a: &[f32], b: &[f32]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-4);
-        assert!(close(
-            &view.camera.rotation.to_cols_array(),
-            &cam.rotation.to_cols_array()
-        ));
-        assert!(close(
-            &view.camera.translation.to_array(),
-            &cam.translation.to_array()
-        ));
-        assert!(close(&view.camera.focal.to_array(), &cam.focal.to_array()));
+        assert_same_pose(&view.camera, cam);
+        assert_eq!(view.camera.focal, cam.focal);
     }
 
-    // Start from the true centres, moved, as gray isotropic Gaussians.
-    let mut rng = fastrand::Rng::with_seed(3);
-    let jitter = |rng: &mut fastrand::Rng| Vec3::new(rng.f32(), rng.f32(), rng.f32()) - 0.5;
-    let mut params: Vec<Params> = scene
-        .iter()
-        .map(|g| Method::from_point(g.mean + 0.1 * jitter(&mut rng), Vec3::splat(0.5), 0.05))
-        .collect();
-    let opts = FitOptions {
-        steps: 300,
-        render: RenderOptions {
-            tile_size: 8,
-            ..FitOptions::default().render
-        },
-        ..Default::default()
-    };
+    let mut params: Vec<Params> = moved_start::<Method>(&scene);
+    let opts = options(300);
     let before = evaluate::<Method>(&params, &data.test, &opts).unwrap();
     let mut losses = vec![];
     fit::<Method>(&data, &mut params, 1.0, &opts, |_, v| losses.push(v.loss)).unwrap();
@@ -299,32 +309,12 @@ fn three_dgut_fits_a_nerfstudio_fisheye_dataset() {
         assert_eq!(view.camera.distortion, k);
         assert_eq!(view.camera.focal, cam.focal);
         assert_eq!(view.camera.principal, cam.principal);
-        let close = |a: &[f32], b: &[f32]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-4);
-        assert!(close(
-            &view.camera.rotation.to_cols_array(),
-            &cam.rotation.to_cols_array()
-        ));
-        assert!(close(
-            &view.camera.translation.to_array(),
-            &cam.translation.to_array()
-        ));
+        assert_same_pose(&view.camera, cam);
     }
 
-    let mut rng = fastrand::Rng::with_seed(3);
-    let jitter = |rng: &mut fastrand::Rng| Vec3::new(rng.f32(), rng.f32(), rng.f32()) - 0.5;
     type Gut = splat_methods::gut::Method;
-    let mut params: Vec<splat_methods::gut::Params> = truth()
-        .iter()
-        .map(|g| Gut::from_point(g.mean + 0.1 * jitter(&mut rng), Vec3::splat(0.5), 0.05))
-        .collect();
-    let opts = FitOptions {
-        steps: 150,
-        render: RenderOptions {
-            tile_size: 8,
-            ..FitOptions::default().render
-        },
-        ..Default::default()
-    };
+    let mut params = moved_start::<Gut>(&truth());
+    let opts = options(150);
     let before = evaluate::<Gut>(&params, &data.test, &opts).unwrap();
     fit::<Gut>(&data, &mut params, 1.0, &opts, |_, _| {}).unwrap();
     let after = evaluate::<Gut>(&params, &data.test, &opts).unwrap();

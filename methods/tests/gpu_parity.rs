@@ -14,7 +14,7 @@
 
 mod common;
 
-use common::{camera, camera_words, gaussian_at, group_error, words};
+use common::{camera, camera_words, gaussian_at, group_error, spread_gaussians, words};
 use splat_methods::gs3d::{Method, Params};
 use splat_runtime::glam::Vec2;
 use splat_runtime::gpu::entries::{Accumulation, Reduction};
@@ -283,7 +283,7 @@ fn the_resident_renderer_matches_one_shot_frames_as_scenes_change() {
     for (k, (w, h, count, seed)) in frames.into_iter().enumerate() {
         let mut cam = camera(w, h);
         cam.translation.x = 0.05 * k as f32;
-        let params = scene_for(seed, count, &cam);
+        let params = spread_gaussians(&cam, count, seed);
         scene.upload(&gpu, &params).unwrap();
         let info = renderer.forward(&scene, &cam).unwrap();
         let got = renderer.download_frame().unwrap();
@@ -313,8 +313,7 @@ fn the_resident_renderer_matches_one_shot_frames_as_scenes_change() {
         let want = splat_runtime::gpu::render::backward(&mut state, &grad, acc)
             .unwrap()
             .gradients;
-        let flat = |ps: &[Params]| -> Vec<f64> { ps.iter().flat_map(words).collect() };
-        let err = group_error(&flat(&got.params), &flat(&want.params));
+        let err = group_error(&flat_words(&got.params), &flat_words(&want.params));
         let cam_err = group_error(&camera_words(&got.camera), &camera_words(&want.camera));
         assert!(err <= 1e-5 && cam_err <= 1e-5, "frame {k}: {err} {cam_err}");
         if k == 1 || k == 3 {
@@ -323,20 +322,9 @@ fn the_resident_renderer_matches_one_shot_frames_as_scenes_change() {
         last_intersections = info.intersections;
     }
     // The scene on the device is what was uploaded last.
-    let params = scene_for(4, 320, &camera(72, 56));
+    let params = spread_gaussians(&camera(72, 56), 320, 4);
     let back = scene.download(&gpu).unwrap();
     assert_eq!(flat_words(&back), flat_words(&params));
-}
-
-fn scene_for(seed: u64, count: usize, cam: &Camera) -> Vec<Params> {
-    let mut rng = fastrand::Rng::with_seed(seed);
-    (0..count)
-        .map(|_| {
-            let px = Vec2::new(rng.f32() * 1.2 - 0.1, rng.f32() * 1.2 - 0.1) * cam.size;
-            let z = 2.0 + rng.f32() * 6.0;
-            gaussian_at(&mut rng, cam, px, z, -2.0)
-        })
-        .collect()
 }
 
 fn flat_words(ps: &[Params]) -> Vec<f64> {

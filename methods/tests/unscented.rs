@@ -10,7 +10,7 @@ use common::checks::{
     invalid_pairs_leave_no_trace,
 };
 use common::{
-    CAMERA_GROUPS, GAUSSIAN_GROUPS, as_method, covering_gaussians, gaussian_toward,
+    GAUSSIAN_GROUPS, as_method, camera_groups, covering_gaussians, gaussian_toward,
     spread_gaussians, wide_camera,
 };
 use splat_methods::gut::{Method, Params};
@@ -49,11 +49,7 @@ fn covering_scene(cam: &Camera) -> Vec<Params> {
 fn render_gradients_match_finite_differences() {
     for model in CameraModel::ALL {
         let cam = wide_camera(24, 16, model);
-        let cameras = if model == CameraModel::KannalaBrandt {
-            &CAMERA_GROUPS[..]
-        } else {
-            &CAMERA_GROUPS[..4]
-        };
+        let cameras = camera_groups(model);
         let label = format!("3dgut {model} covering");
         forward_matches_reference::<Method>(&label, &twin(), &covering_scene(&cam), &cam);
         gradients_match_finite_differences::<Method>(
@@ -105,14 +101,6 @@ fn the_pinhole_only_method_refuses_a_fisheye_by_name() {
         panic!("3DGS rendered with a fisheye");
     };
     assert!(err.to_string().contains("pinhole camera only"), "{err}");
-}
-
-fn camera_groups(model: CameraModel) -> &'static [(&'static str, std::ops::Range<usize>)] {
-    if model == CameraModel::KannalaBrandt {
-        &CAMERA_GROUPS[..]
-    } else {
-        &CAMERA_GROUPS[..4]
-    }
 }
 
 /// Realistic scenes: pairs below 1/255 at the footprints' edges, lists that end at the T-stop.

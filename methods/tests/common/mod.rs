@@ -268,6 +268,15 @@ pub const CAMERA_GROUPS: [(&str, std::ops::Range<usize>); 5] = [
     ("distortion", 18..22),
 ];
 
+/// The camera groups a model's gradient has: the distortion coefficients only on the fisheye.
+pub fn camera_groups(model: CameraModel) -> &'static [(&'static str, std::ops::Range<usize>)] {
+    if model == CameraModel::KannalaBrandt {
+        &CAMERA_GROUPS[..]
+    } else {
+        &CAMERA_GROUPS[..4]
+    }
+}
+
 /// The same Gaussians as another method's parameters, through the method's own `FromStored`
 /// (what the CLI does with a PLY scene).
 pub fn as_method<P: splat_methods::FromStored>(gaussians: Vec<Params>) -> Vec<P> {

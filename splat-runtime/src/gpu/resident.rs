@@ -448,16 +448,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         }
         let (grid, layout) = (info.grid, self.layout);
         let (channels, pixels) = (layout.channels, (grid.width * grid.height) as usize);
-        let sizes = [
-            ("color", Some(grad.color.len()), pixels * channels),
-            ("alpha", grad.alpha.as_ref().map(Vec::len), pixels),
-            ("depth", grad.depth.as_ref().map(Vec::len), pixels),
-        ];
-        for (what, got, want) in sizes {
-            if let Some(got) = got.filter(|g| *g != want) {
-                return Err(RenderError::GradientSize { what, got, want }.into());
-            }
-        }
+        grad.check(pixels, channels)?;
         let want_depth = grad.depth.is_some();
         if want_depth && !self.depth_sums {
             return Err(GpuRenderError::DepthNotRendered);

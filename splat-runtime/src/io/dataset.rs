@@ -206,12 +206,14 @@ pub fn read_nerfstudio(dir: &Path, background: Vec3) -> Result<Dataset, DatasetE
                 ));
             }
         };
-        let mut camera = camera_of(&c2w, 1.0, (image.width, image.height))
-            .ok_or_else(|| field(&path, at("transform_matrix"), "has no inverse"))?;
-        camera.focal = Vec2::new(required("fl_x")? as f32, required("fl_y")? as f32);
-        camera.principal = Vec2::new(required("cx")? as f32, required("cy")? as f32);
-        camera.model = camera_model;
-        camera.distortion = distortion;
+        let focal = Vec2::new(required("fl_x")? as f32, required("fl_y")? as f32);
+        let camera = Camera {
+            principal: Vec2::new(required("cx")? as f32, required("cy")? as f32),
+            model: camera_model,
+            distortion,
+            ..posed_camera(&c2w, focal, &image)
+                .ok_or_else(|| field(&path, at("transform_matrix"), "has no inverse"))?
+        };
         let view = View {
             name: image_path.display().to_string(),
             camera,
@@ -274,7 +276,8 @@ fn read_split(path: &Path, background: Vec3) -> Result<Vec<View>, DatasetError> 
             });
         }
         size = Some(dims);
-        let camera = camera_of(&c2w, angle as f32, dims)
+        let focal = 0.5 * image.width as f32 / (0.5 * angle as f32).tan();
+        let camera = posed_camera(&c2w, Vec2::splat(focal), &image)
             .ok_or_else(|| field(path, at("transform_matrix"), "has no inverse"))?;
         views.push(View {
             name: image_path.display().to_string(),
@@ -298,21 +301,22 @@ fn matrix(v: &serde_json::Value) -> Option<Mat4> {
     Some(Mat4::from_cols_array_2d(&m).transpose())
 }
 
-/// The OpenCV world-to-camera pinhole camera of an OpenGL camera-to-world matrix.
-fn camera_of(c2w_gl: &Mat4, angle_x: f32, (w, h): (u32, u32)) -> Option<Camera> {
+/// The OpenCV world-to-camera pose of an OpenGL camera-to-world matrix, in a pinhole camera
+/// with the principal point at the centre of `image` (its size).
+fn posed_camera(c2w_gl: &Mat4, focal: Vec2, image: &Image) -> Option<Camera> {
     // OpenGL to OpenCV camera axes: y and z flip.
     let c2w = *c2w_gl * Mat4::from_diagonal(Vec4::new(1.0, -1.0, -1.0, 1.0));
     if c2w.determinant().abs() < 1e-12 {
         return None;
     }
     let w2c = c2w.inverse();
-    let focal = 0.5 * w as f32 / (0.5 * angle_x).tan();
+    let size = Vec2::new(image.width as f32, image.height as f32);
     Some(Camera {
         rotation: Mat3::from_mat4(w2c),
         translation: w2c.w_axis.truncate(),
-        focal: Vec2::splat(focal),
-        principal: Vec2::new(w as f32 / 2.0, h as f32 / 2.0),
-        size: Vec2::new(w as f32, h as f32),
+        focal,
+        principal: size / 2.0,
+        size,
         ..Default::default()
     })
 }

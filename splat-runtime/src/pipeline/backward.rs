@@ -7,6 +7,7 @@
 //! buffers are summed afterwards.
 
 use super::ForwardState;
+use super::RenderError;
 use super::shade::{group_pixels, step};
 use crate::flat::Flat;
 use crate::lanes::{F32x8, LANES, M32x8};
@@ -19,6 +20,23 @@ pub struct FrameGrad {
     pub color: Vec<f32>,
     pub alpha: Option<Vec<f32>>,
     pub depth: Option<Vec<f32>>,
+}
+
+impl FrameGrad {
+    /// Checks that every given gradient has one value per pixel (`channels` for the color).
+    pub fn check(&self, pixels: usize, channels: usize) -> Result<(), RenderError> {
+        let sizes = [
+            ("color", Some(self.color.len()), pixels * channels),
+            ("alpha", self.alpha.as_ref().map(Vec::len), pixels),
+            ("depth", self.depth.as_ref().map(Vec::len), pixels),
+        ];
+        for (what, got, want) in sizes {
+            if let Some(got) = got.filter(|g| *g != want) {
+                return Err(RenderError::GradientSize { what, got, want });
+            }
+        }
+        Ok(())
+    }
 }
 
 /// One worker's gradient sums per primitive: `shade[i * Shade::LEN..]` and `depth[i]`; and

@@ -357,17 +357,10 @@ pub fn backward<M: SplatMethod>(
     camera: &Camera,
     grad: &FrameGrad,
 ) -> Result<Gradients<M>, RenderError> {
-    let pixels = (state.grid.width * state.grid.height) as usize;
-    let sizes = [
-        ("color", Some(grad.color.len()), pixels * M::Color::LEN),
-        ("alpha", grad.alpha.as_ref().map(Vec::len), pixels),
-        ("depth", grad.depth.as_ref().map(Vec::len), pixels),
-    ];
-    for (what, got, want) in sizes {
-        if let Some(got) = got.filter(|g| *g != want) {
-            return Err(RenderError::GradientSize { what, got, want });
-        }
-    }
+    grad.check(
+        (state.grid.width * state.grid.height) as usize,
+        M::Color::LEN,
+    )?;
     let n = state.pre.projected.len();
     let words = M::Shade::LEN;
     let t0 = Instant::now();
