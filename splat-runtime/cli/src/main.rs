@@ -1,11 +1,13 @@
 //! `splat`: render scenes with a splatting method and inspect the kernels generated for it.
 
+mod bench;
 mod fit;
 mod scene;
 
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand, ValueEnum};
 use splat_methods::{FromStored, geer, gs3d, gs3d_sh0, gs3d_sh1, gs3d_sh2, gut, linprim};
+use splat_runtime::gpu::Gpu;
 use splat_runtime::io::ply::GaussianCloud;
 use splat_runtime::io::{camera as camera_io, image as image_io, ply};
 use splat_runtime::{Camera, CameraModel, Frame, Image, RenderOptions, SplatMethod, render};
@@ -45,6 +47,9 @@ enum Command {
         #[arg(long, default_value_t = 240)]
         height: u32,
     },
+    /// Time forward and forward + backward frames on one scene (GPU: the device-resident
+    /// pipeline; CPU: per thread count), with per-stage medians.
+    Bench(bench::BenchArgs),
     /// Train 3DGS on posed images (Blender / NeRF-synthetic layout) on the CPU.
     Fit(fit::FitArgs),
     /// Print the Rust or WGSL the #[splat_method] compiler generated for a method.
@@ -176,6 +181,7 @@ fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Render(args) => render_cmd(&args),
         Command::Fit(args) => fit::fit_cmd(&args),
+        Command::Bench(args) => bench::bench_cmd(&args),
         Command::Scene { out, camera_out } => {
             ply::write(&out, &scene::planet())
                 .with_context(|| format!("writing {}", out.display()))?;
@@ -203,33 +209,75 @@ fn run(cli: Cli) -> Result<()> {
     }
 }
 
-/// Renders with method `M` on the chosen backend; returns the frame and where it ran.
-fn render_with<M: SplatMethod>(
-    cloud: &GaussianCloud,
-    camera: &Camera,
-    opts: &RenderOptions,
-    backend: Backend,
-) -> Result<(Frame, String)>
-where
-    M::Params: FromStored,
-{
-    let params: Vec<M::Params> = cloud.gaussians.iter().map(M::Params::from_stored).collect();
-    let gpu = match backend {
+/// Work generic over a method's types: run by [`with_method`] with the method chosen at run
+/// time.
+trait MethodTask {
+    type Output;
+    fn run<M: SplatMethod>(self) -> Result<Self::Output>
+    where
+        M::Params: FromStored;
+}
+
+/// Runs `task` with `method`. 3DGS runs the instance matching the scene's SH degree
+/// (higher-order terms cost nothing when the scene has none); the others carry degree 3.
+fn with_method<T: MethodTask>(method: Method, sh_degree: u32, task: T) -> Result<T::Output> {
+    match (method, sh_degree) {
+        (Method::Gs3d, 0) => task.run::<gs3d_sh0::Method>(),
+        (Method::Gs3d, 1) => task.run::<gs3d_sh1::Method>(),
+        (Method::Gs3d, 2) => task.run::<gs3d_sh2::Method>(),
+        (Method::Gs3d, _) => task.run::<gs3d::Method>(),
+        (Method::Gut, _) => task.run::<gut::Method>(),
+        (Method::Linprim, _) => task.run::<linprim::Method>(),
+        (Method::Geer, _) => task.run::<geer::Method>(),
+    }
+}
+
+/// The GPU `backend` asks for: none for the CPU; for `auto`, a hardware adapter if there is one.
+fn pick_gpu(backend: Backend) -> Result<Option<Gpu>> {
+    Ok(match backend {
         Backend::Cpu => None,
-        Backend::Gpu => Some(splat_runtime::gpu::Gpu::new()?),
-        Backend::Auto => splat_runtime::gpu::Gpu::new().ok().filter(|g| !g.software),
-    };
-    Ok(match gpu {
-        None => (render::<M>(&params, camera, opts)?, "CPU".to_string()),
-        Some(gpu) => {
-            let frame = splat_runtime::gpu::render::render::<M>(&gpu, &params, camera, opts)?;
-            (frame, format!("GPU, {}", gpu.adapter))
-        }
+        Backend::Gpu => Some(Gpu::new()?),
+        Backend::Auto => Gpu::new().ok().filter(|g| !g.software),
     })
 }
 
-/// Renders `cloud` with `method`. 3DGS runs the instance matching the scene's SH degree
-/// (higher-order terms cost nothing when the scene has none); the others carry degree 3.
+/// Renders a scene with the chosen method on the chosen backend.
+struct Render<'a> {
+    cloud: &'a GaussianCloud,
+    camera: &'a Camera,
+    opts: &'a RenderOptions,
+    backend: Backend,
+}
+
+impl MethodTask for Render<'_> {
+    /// The frame and where it ran.
+    type Output = (Frame, String);
+
+    fn run<M: SplatMethod>(self) -> Result<(Frame, String)>
+    where
+        M::Params: FromStored,
+    {
+        let params: Vec<M::Params> = self
+            .cloud
+            .gaussians
+            .iter()
+            .map(M::Params::from_stored)
+            .collect();
+        Ok(match pick_gpu(self.backend)? {
+            None => (
+                render::<M>(&params, self.camera, self.opts)?,
+                "CPU".to_string(),
+            ),
+            Some(gpu) => {
+                let frame =
+                    splat_runtime::gpu::render::render::<M>(&gpu, &params, self.camera, self.opts)?;
+                (frame, format!("GPU, {}", gpu.adapter))
+            }
+        })
+    }
+}
+
+/// Renders `cloud` with `method` on `backend`; returns the frame and where it ran.
 fn render_method(
     method: Method,
     cloud: &GaussianCloud,
@@ -237,15 +285,13 @@ fn render_method(
     opts: &RenderOptions,
     backend: Backend,
 ) -> Result<(Frame, String)> {
-    match (method, cloud.sh_degree) {
-        (Method::Gs3d, 0) => render_with::<gs3d_sh0::Method>(cloud, camera, opts, backend),
-        (Method::Gs3d, 1) => render_with::<gs3d_sh1::Method>(cloud, camera, opts, backend),
-        (Method::Gs3d, 2) => render_with::<gs3d_sh2::Method>(cloud, camera, opts, backend),
-        (Method::Gs3d, _) => render_with::<gs3d::Method>(cloud, camera, opts, backend),
-        (Method::Gut, _) => render_with::<gut::Method>(cloud, camera, opts, backend),
-        (Method::Linprim, _) => render_with::<linprim::Method>(cloud, camera, opts, backend),
-        (Method::Geer, _) => render_with::<geer::Method>(cloud, camera, opts, backend),
-    }
+    let task = Render {
+        cloud,
+        camera,
+        opts,
+        backend,
+    };
+    with_method(method, cloud.sh_degree, task)
 }
 
 /// Every method on every camera model, panels in a grid; a method that does not support a

@@ -470,3 +470,39 @@ fn fit_refuses_a_missing_or_broken_dataset_by_name() {
         &ply,
     );
 }
+
+#[test]
+fn bench_times_both_passes_and_writes_the_raw_image_render_would() {
+    let dir = temp();
+    let size = ["--width", "64", "--height", "48"];
+    let mut args = vec!["bench", "--backend", "cpu", "--iters", "1", "--threads", "1,2"];
+    args.extend(size);
+    args.extend(["--raw-out", "ours.f32"]);
+    let stdout = ok(&splat(&args, dir.path()));
+    for needle in ["CPU, 1 threads", "CPU, 2 threads", "speed-up", "forward + backward"] {
+        assert!(stdout.contains(needle), "no `{needle}` in:\n{stdout}");
+    }
+    let mut args = vec!["render", "--backend", "cpu", "--out", "ref.npy"];
+    args.extend(size);
+    ok(&splat(&args, dir.path()));
+    let raw: Vec<f32> = std::fs::read(dir.path().join("ours.f32"))
+        .unwrap()
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+        .collect();
+    let (shape, reference) = read_npy(&dir.path().join("ref.npy"));
+    assert_eq!(shape, [48, 64, 3]);
+    assert_eq!(raw, reference, "bench's raw image differs from render's");
+
+    let out = dir.path().join("never.f32");
+    let bad: [(&[&str], &str); 3] = [
+        (&["--iters", "0"], "--iters"),
+        (&["--threads", "2,0"], "--threads 0"),
+        (&["--scene", "missing.ply"], "missing.ply"),
+    ];
+    for (extra, needle) in bad {
+        let mut args = vec!["bench", "--backend", "cpu", "--raw-out", "never.f32"];
+        args.extend(extra);
+        fails(&splat(&args, dir.path()), needle, &out);
+    }
+}
