@@ -172,6 +172,36 @@ macro_rules! gaussians_3d {
                     sh,
                 }
             }
+
+            fn shape(p: &$name::Params) -> splat_runtime::train::Shape {
+                let r = p.rotation;
+                splat_runtime::train::Shape {
+                    position: p.mean,
+                    scale: p.log_scale.exp(),
+                    rotation: splat_runtime::glam::Quat::from_xyzw(r.y, r.z, r.w, r.x).normalize(),
+                    opacity: 1.0 / (1.0 + (-p.opacity_logit).exp()),
+                }
+            }
+
+            fn with_shape(p: &$name::Params, s: &splat_runtime::train::Shape) -> $name::Params {
+                let o = s.opacity.clamp(1e-6, 1.0 - 1e-6);
+                $name::Params {
+                    mean: s.position,
+                    log_scale: s.scale.max(splat_runtime::glam::Vec3::splat(1e-12)).ln(),
+                    rotation: splat_runtime::glam::Vec4::new(
+                        s.rotation.w,
+                        s.rotation.x,
+                        s.rotation.y,
+                        s.rotation.z,
+                    ),
+                    opacity_logit: (o / (1.0 - o)).ln(),
+                    ..*p
+                }
+            }
+
+            fn position_gradient(g: &$name::Params) -> splat_runtime::glam::Vec3 {
+                g.mean
+            }
         }
 
         impl crate::FromStored for $name::Params {

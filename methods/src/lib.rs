@@ -69,8 +69,26 @@ macro_rules! trained_like_3dgs {
                 let g = <gs3d::Method as splat_runtime::train::Trainable>::from_point(point, color, scale);
                 $m::Params::from_stored(&g.to_stored())
             }
+
+            fn shape(p: &$m::Params) -> splat_runtime::train::Shape {
+                <gs3d::Method as splat_runtime::train::Trainable>::shape(&as_3dgs(p))
+            }
+
+            fn with_shape(p: &$m::Params, s: &splat_runtime::train::Shape) -> $m::Params {
+                let g = <gs3d::Method as splat_runtime::train::Trainable>::with_shape(&as_3dgs(p), s);
+                $m::Params::from_stored(&g.to_stored())
+            }
+
+            fn position_gradient(g: &$m::Params) -> splat_runtime::glam::Vec3 {
+                g.mean
+            }
         }
     )*};
 }
 
 trained_like_3dgs!(gut, geer);
+
+/// The 3DGS primitive with the same stored fields.
+fn as_3dgs(p: &impl ToStored) -> gs3d::Params {
+    gs3d::Params::from_stored(&p.to_stored())
+}

@@ -172,7 +172,7 @@ fn three_dgs_fits_a_blender_dataset_of_a_known_scene() {
     let opts = options(300);
     let before = evaluate::<Method>(&params, &data.test, &opts).unwrap();
     let mut losses = vec![];
-    fit::<Method>(&data, &mut params, 1.0, &opts, |_, v| losses.push(v.loss)).unwrap();
+    fit::<Method>(&data, &mut params, 1.0, &opts, |r| losses.push(r.loss.loss)).unwrap();
     let after = evaluate::<Method>(&params, &data.test, &opts).unwrap();
     let mean = |l: &[f64]| l.iter().sum::<f64>() / l.len() as f64;
     let (first, last) = (mean(&losses[..30]), mean(&losses[losses.len() - 30..]));
@@ -316,7 +316,7 @@ fn three_dgut_fits_a_nerfstudio_fisheye_dataset() {
     let mut params = moved_start::<Gut>(&truth());
     let opts = options(150);
     let before = evaluate::<Gut>(&params, &data.test, &opts).unwrap();
-    fit::<Gut>(&data, &mut params, 1.0, &opts, |_, _| {}).unwrap();
+    fit::<Gut>(&data, &mut params, 1.0, &opts, |_| {}).unwrap();
     let after = evaluate::<Gut>(&params, &data.test, &opts).unwrap();
     println!(
         "3DGUT fisheye: test PSNR {:.2} -> {:.2} dB",
@@ -325,5 +325,134 @@ fn three_dgut_fits_a_nerfstudio_fisheye_dataset() {
     assert!(
         after.psnr > before.psnr + 5.0,
         "held-out fisheye views get closer"
+    );
+}
+
+/// Density control on hand-made statistics: a small primitive under a strong screen-space pull
+/// is cloned, a large one split into two drawn from it (scales / 1.6), a faint one pruned,
+/// a quiet one kept; the cap on the count holds; the opacity reset lowers opacities to twice
+/// the pruning threshold.
+#[test]
+fn density_control_clones_splits_prunes_and_resets_as_3dgs_does() {
+    use splat_runtime::train::densify::{Densifier, DensifyOptions};
+    let cam = common::camera(SIZE, SIZE);
+    let at = |x: f32, scale: f32, opacity: f32| {
+        let mut p = Method::from_point(Vec3::new(x, 0.0, 2.0), Vec3::splat(0.5), scale);
+        p.opacity_logit = (opacity / (1.0 - opacity)).ln();
+        p
+    };
+    // Extent 1: clone up to scale 0.01, split above.
+    let mut params = vec![
+        at(-0.2, 0.005, 0.5),  // small, pulled: cloned
+        at(0.0, 0.05, 0.5),    // large, pulled: split
+        at(0.1, 0.005, 0.001), // faint, quiet: pruned
+        at(0.2, 0.005, 0.5),   // quiet: kept
+    ];
+    // A pull along x of 0.01 per unit of position: on screen (z = 2, f = 40, NDC half-width
+    // 20), 0.01 * 2 / 40 * 20 = 0.01, far above the threshold of 0.0002.
+    let pull = |x: f32| Params {
+        mean: Vec3::new(x, 0.0, 0.0),
+        ..Method::from_point(Vec3::ZERO, Vec3::ZERO, 1.0)
+    };
+    let grads = [pull(0.01), pull(0.01), pull(1e-6), pull(1e-6)];
+    let mut d = Densifier::new(DensifyOptions::default(), params.len());
+    d.observe::<Method>(&params, &grads, 0..4, &cam);
+    let mut rng = fastrand::Rng::with_seed(5);
+    let parent = Method::shape(&params[1]);
+    let r = d.refine::<Method>(&mut params, 600, 1.0, &mut rng);
+    assert_eq!((r.cloned, r.split, r.pruned), (1, 1, 1));
+    assert_eq!(r.origin, [Some(0), None, None, None, Some(3)]);
+    assert_eq!(params.len(), 5);
+    assert_eq!(params[1], params[0], "the clone sits where its original is");
+    for child in &params[2..4] {
+        let s = Method::shape(child);
+        assert!((s.scale - parent.scale / 1.6).abs().max_element() < 1e-6);
+        assert!((s.position - parent.position).length() < 5.0 * parent.scale.x);
+        assert_eq!(s.opacity.to_bits(), parent.opacity.to_bits());
+    }
+    assert_ne!(
+        params[2].mean, params[3].mean,
+        "the two halves are drawn apart"
+    );
+
+    // The statistics were cleared: nothing grows at the next refinement.
+    let r = d.refine::<Method>(&mut params, 700, 1.0, &mut rng);
+    assert_eq!((r.cloned, r.split, r.pruned), (0, 0, 0));
+
+    // The cap: no growth past max_primitives.
+    let capped = DensifyOptions {
+        max_primitives: 5,
+        ..Default::default()
+    };
+    let mut d = Densifier::new(capped, params.len());
+    let grads = vec![pull(0.01); params.len()];
+    d.observe::<Method>(&params, &grads, 0..params.len(), &cam);
+    let r = d.refine::<Method>(&mut params, 800, 1.0, &mut rng);
+    assert_eq!((r.cloned, r.split, params.len()), (0, 0, 5));
+
+    d.reset_opacity::<Method>(&mut params);
+    for p in &params {
+        assert!((Method::shape(p).opacity - 0.01).abs() < 1e-6);
+    }
+    assert!(d.refines_at(600) && !d.refines_at(500) && !d.refines_at(650));
+    assert!(d.resets_at(3000) && !d.resets_at(0));
+}
+
+/// Training from a few large primitives: density control splits and clones them until the
+/// held-out views come out clearly better than the same run with a fixed count.
+#[test]
+fn density_control_beats_a_fixed_count_from_a_sparse_start() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = truth();
+    let train_eyes: Vec<Vec3> = (0..10)
+        .map(|k| eye(k, 10, 0.8 * (k % 3) as f32 - 0.8))
+        .collect();
+    let test_eyes = [eye(1, 20, 0.3), eye(7, 20, -0.4), eye(13, 20, 0.1)];
+    write_split(dir.path(), "train", &scene, &train_eyes);
+    write_split(dir.path(), "test", &scene, &test_eyes);
+    let data = read_blender(dir.path(), Vec3::ZERO).unwrap();
+    let start: Vec<Params> = scene
+        .iter()
+        .step_by(8)
+        .map(|g| Method::from_point(g.mean, Vec3::splat(0.5), 0.3))
+        .collect();
+    let run = |densify: Option<splat_runtime::train::DensifyOptions>| {
+        let mut params = start.clone();
+        let opts = FitOptions {
+            densify,
+            ..options(1200)
+        };
+        let (mut grown, mut split) = (0, 0);
+        // The scene's radius as 3DGS takes it: 1.1 times the cameras' distance from the centre.
+        fit::<Method>(&data, &mut params, 3.5, &opts, |r| {
+            if let Some(r) = r.refinement {
+                (grown, split) = (grown + r.cloned, split + r.split);
+            }
+        })
+        .unwrap();
+        let e = evaluate::<Method>(&params, &data.test, &opts).unwrap();
+        (e.psnr, params.len(), grown, split)
+    };
+    let fixed = run(None);
+    let densified = run(Some(splat_runtime::train::DensifyOptions {
+        start: 100,
+        every: 100,
+        ..Default::default()
+    }));
+    println!(
+        "from {} primitives: fixed count {:.2} dB; density control {:.2} dB with {} primitives ({} cloned, {} split)",
+        start.len(),
+        fixed.0,
+        densified.0,
+        densified.1,
+        densified.2,
+        densified.3
+    );
+    assert_eq!(fixed.1, start.len());
+    assert!(densified.1 > 3 * start.len(), "the count grows");
+    assert!(densified.3 > 0, "large primitives split");
+    assert!(
+        densified.0 > fixed.0 + 3.0,
+        "density control fits the held-out views better"
     );
 }

@@ -8,8 +8,8 @@ use splat_methods::{ToStored, geer, gs3d, gut};
 use splat_runtime::glam::Vec3;
 use splat_runtime::io::dataset::{self, Dataset};
 use splat_runtime::io::ply::{self, GaussianCloud};
-use splat_runtime::train::Trainable;
 use splat_runtime::train::fit::{FitOptions, evaluate, fit};
+use splat_runtime::train::{Trainable, init};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -28,16 +28,19 @@ pub enum FitMethod {
 
 #[derive(clap::Args)]
 pub struct FitArgs {
-    /// Dataset folder: Blender / NeRF-synthetic (transforms_train.json, transforms_test.json)
-    /// or nerfstudio (transforms.json; every 8th view held out).
+    /// Dataset folder: Blender / NeRF-synthetic (transforms_train.json, transforms_test.json),
+    /// nerfstudio (transforms.json; every 8th view held out) or COLMAP (a sparse model in
+    /// sparse/0 or sparse, the pictures in images; every 8th view by name held out; training
+    /// starts from the model's points).
     #[arg(long)]
     data: PathBuf,
     #[arg(long, value_enum, default_value_t = FitMethod::Gs3d)]
     method: FitMethod,
     #[arg(long, default_value_t = 3000)]
     steps: usize,
-    /// Random initial points in a cube around the cameras' target (Blender scenes have no
-    /// point cloud).
+    /// How many points to start from: at most this many of the dataset's points (evenly
+    /// spaced), or as many random ones in a cube around the cameras' target when it has none
+    /// (Blender and nerfstudio scenes).
     #[arg(long, default_value_t = 100_000)]
     points: usize,
     /// Composite the images on white instead of black.
@@ -45,6 +48,10 @@ pub struct FitArgs {
     white: bool,
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Keep the primitive count fixed (no adaptive density control: cloning, splitting,
+    /// pruning, opacity resets).
+    #[arg(long)]
+    no_densify: bool,
     /// The trained scene, as an INRIA 3DGS PLY.
     #[arg(long, default_value = "fit.ply")]
     out: PathBuf,
@@ -79,6 +86,7 @@ pub fn fit_cmd(args: &FitArgs) -> Result<()> {
         steps: args.steps,
         background,
         seed: args.seed,
+        densify: (!args.no_densify).then(Default::default),
         ..Default::default()
     };
     match args.method {
@@ -98,19 +106,30 @@ fn train<M: Trainable>(
 where
     M::Params: ToStored,
 {
-    let mut params = initial_points::<M>(args.points, mid, extent / 2.0, args.seed);
+    let mut params = if data.points.is_empty() {
+        init::in_cube::<M>(args.points, mid, extent / 2.0, args.seed)
+    } else {
+        let params = init::from_points::<M>(&data.points, args.points);
+        println!(
+            "starting from {} of the dataset's {} points",
+            params.len(),
+            data.points.len()
+        );
+        params
+    };
     let before = evaluate::<M>(&params, &data.test, opts)?;
     let bar = ProgressBar::new(args.steps as u64).with_style(
         ProgressStyle::with_template("{bar:40} {pos}/{len} steps, {elapsed} (eta {eta}) {msg}")
             .expect("a valid template"),
     );
     let t = Instant::now();
-    fit::<M>(data, &mut params, extent, opts, |step, v| {
+    fit::<M>(data, &mut params, extent, opts, |r| {
         bar.inc(1);
-        if step % 10 == 0 {
+        if r.step % 10 == 0 || r.refinement.is_some() {
+            let v = r.loss;
             bar.set_message(format!(
-                "loss {:.4} (L1 {:.4}, SSIM {:.3})",
-                v.loss, v.l1, v.ssim
+                "loss {:.4} (L1 {:.4}, SSIM {:.3}), {} primitives",
+                v.loss, v.l1, v.ssim, r.primitives
             ));
         }
     })?;
@@ -118,9 +137,10 @@ where
     let per_step = t.elapsed().as_secs_f64() / args.steps.max(1) as f64;
     let after = evaluate::<M>(&params, &data.test, opts)?;
     println!(
-        "{} steps on the CPU, {:.1} ms per step; {} test views: PSNR {:.2} -> {:.2} dB, SSIM {:.3} -> {:.3}",
+        "{} steps on the CPU, {:.1} ms per step, {} primitives; {} test views: PSNR {:.2} -> {:.2} dB, SSIM {:.3} -> {:.3}",
         args.steps,
         per_step * 1e3,
+        params.len(),
         after.views,
         before.psnr,
         after.psnr,
@@ -134,18 +154,4 @@ where
     ply::write(&args.out, &cloud).with_context(|| format!("writing {}", args.out.display()))?;
     println!("wrote {}", args.out.display());
     Ok(())
-}
-
-/// `n` Gaussians at random points of the cube of half-side `half` around `centre`, random
-/// colors, sized to the points' mean spacing.
-fn initial_points<M: Trainable>(n: usize, centre: Vec3, half: f32, seed: u64) -> Vec<M::Params> {
-    let mut rng = fastrand::Rng::with_seed(seed);
-    let mut unit = || Vec3::new(rng.f32(), rng.f32(), rng.f32());
-    let spacing = 2.0 * half / (n as f32).cbrt();
-    (0..n)
-        .map(|_| {
-            let p = centre + (unit() * 2.0 - 1.0) * half;
-            M::from_point(p, unit(), spacing)
-        })
-        .collect()
 }

@@ -50,7 +50,7 @@ enum Command {
     /// Time forward and forward + backward frames on one scene (GPU: the device-resident
     /// pipeline; CPU: per thread count), with per-stage medians.
     Bench(bench::BenchArgs),
-    /// Train 3DGS on posed images (Blender / NeRF-synthetic layout) on the CPU.
+    /// Train a Gaussian method on posed images (Blender, nerfstudio or COLMAP) on the CPU.
     Fit(fit::FitArgs),
     /// Print the Rust or WGSL the #[splat_method] compiler generated for a method.
     Inspect {
@@ -171,6 +171,7 @@ struct RenderArgs {
 }
 
 fn main() {
+    quiet_device_select_layer();
     if let Err(e) = run(Cli::parse()) {
         eprintln!("error: {e:#}");
         std::process::exit(1);
@@ -232,12 +233,38 @@ fn with_method<T: MethodTask>(method: Method, sh_degree: u32, task: T) -> Result
     }
 }
 
-/// The GPU `backend` asks for: none for the CPU; for `auto`, a hardware adapter if there is one.
+/// Mesa's Vulkan device-selection layer looks for a Wayland display to pick the GPU driving
+/// it, and without `XDG_RUNTIME_DIR` libwayland prints an error line on stderr. wgpu picks the
+/// adapter itself, so the layer has nothing to do here: it is switched off (its documented
+/// `NODEVICE_SELECT`) unless the user set either variable.
+fn quiet_device_select_layer() {
+    let set = |k| std::env::var_os(k).is_some();
+    if !set("XDG_RUNTIME_DIR") && !set("NODEVICE_SELECT") {
+        // SAFETY: the first statement of main, before any thread exists.
+        unsafe { std::env::set_var("NODEVICE_SELECT", "1") };
+    }
+}
+
+/// The GPU `backend` asks for: none for the CPU; for `auto`, a hardware adapter if there is
+/// one (and a line saying why not when there is none).
 fn pick_gpu(backend: Backend) -> Result<Option<Gpu>> {
     Ok(match backend {
         Backend::Cpu => None,
         Backend::Gpu => Some(Gpu::new()?),
-        Backend::Auto => Gpu::new().ok().filter(|g| !g.software),
+        Backend::Auto => match Gpu::new() {
+            Ok(g) if !g.software => Some(g),
+            Ok(g) => {
+                println!(
+                    "backend auto: the CPU, since the only GPU adapter is a software one ({}), slower than the CPU backend",
+                    g.adapter
+                );
+                None
+            }
+            Err(e) => {
+                println!("backend auto: the CPU, since there is no GPU ({e})");
+                None
+            }
+        },
     })
 }
 

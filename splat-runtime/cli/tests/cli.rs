@@ -8,6 +8,9 @@ fn splat(args: &[&str], dir: &Path) -> Output {
     Command::new(env!("CARGO_BIN_EXE_splat"))
         .args(args)
         .current_dir(dir)
+        // As on a bare server: no session variables (the Vulkan layers must stay quiet).
+        .env_remove("XDG_RUNTIME_DIR")
+        .env_remove("NODEVICE_SELECT")
         .output()
         .expect("run splat")
 }
@@ -81,6 +84,10 @@ fn renders_the_default_scene() {
         stdout.contains("primitives")
             && stdout.contains("intersections")
             && stdout.contains("shade")
+    );
+    assert!(
+        stdout.contains("on GPU") || stdout.contains("backend auto: the CPU, since"),
+        "auto must say why it chose the CPU:\n{stdout}"
     );
     let png = dir.path().join("render.png");
     let bytes = std::fs::read(&png).unwrap();
@@ -369,6 +376,8 @@ fn gpu_backend_renders_when_an_adapter_exists() {
         return;
     }
     assert!(String::from_utf8_lossy(&out.stdout).contains("on GPU"));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("XDG_RUNTIME_DIR"), "{stderr}");
     ok(&splat(
         &[
             "render", "--width", "96", "--height", "64", "--out", "c.npy",
@@ -475,11 +484,24 @@ fn fit_refuses_a_missing_or_broken_dataset_by_name() {
 fn bench_times_both_passes_and_writes_the_raw_image_render_would() {
     let dir = temp();
     let size = ["--width", "64", "--height", "48"];
-    let mut args = vec!["bench", "--backend", "cpu", "--iters", "1", "--threads", "1,2"];
+    let mut args = vec![
+        "bench",
+        "--backend",
+        "cpu",
+        "--iters",
+        "1",
+        "--threads",
+        "1,2",
+    ];
     args.extend(size);
     args.extend(["--raw-out", "ours.f32"]);
     let stdout = ok(&splat(&args, dir.path()));
-    for needle in ["CPU, 1 threads", "CPU, 2 threads", "speed-up", "forward + backward"] {
+    for needle in [
+        "CPU, 1 threads",
+        "CPU, 2 threads",
+        "speed-up",
+        "forward + backward",
+    ] {
         assert!(stdout.contains(needle), "no `{needle}` in:\n{stdout}");
     }
     let mut args = vec!["render", "--backend", "cpu", "--out", "ref.npy"];
@@ -505,4 +527,70 @@ fn bench_times_both_passes_and_writes_the_raw_image_render_would() {
         args.extend(extra);
         fails(&splat(&args, dir.path()), needle, &out);
     }
+}
+
+/// A COLMAP dataset in text format: 3 views of 16x16 by a pinhole camera looking down +z
+/// from z = -3, and 40 sparse points around the origin.
+fn tiny_colmap_dataset(dir: &Path) {
+    std::fs::create_dir_all(dir.join("sparse/0")).unwrap();
+    std::fs::create_dir_all(dir.join("images")).unwrap();
+    std::fs::write(
+        dir.join("sparse/0/cameras.txt"),
+        "# CAMERA_ID MODEL WIDTH HEIGHT PARAMS[]\n1 PINHOLE 16 16 20 20 8 8\n",
+    )
+    .unwrap();
+    let mut images = String::from("# IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME\n");
+    for k in 0..3 {
+        let name = format!("frame_{k}.png");
+        images += &format!(
+            "{} 1 0 0 0 {} 0 3 1 {name}\n\n",
+            k + 1,
+            0.2 * k as f32 - 0.2
+        );
+        image::RgbImage::from_pixel(16, 16, image::Rgb([90, 120, 150]))
+            .save(dir.join("images").join(name))
+            .unwrap();
+    }
+    std::fs::write(dir.join("sparse/0/images.txt"), images).unwrap();
+    let points: String = (0..40)
+        .map(|k| {
+            let (x, y, z) = (k % 4, k / 4 % 5, k / 20);
+            format!(
+                "{k} {} {} {} 90 120 150 0.5\n",
+                0.2 * x as f32,
+                0.2 * y as f32,
+                0.2 * z as f32
+            )
+        })
+        .collect();
+    std::fs::write(dir.join("sparse/0/points3D.txt"), points).unwrap();
+}
+
+#[test]
+fn fit_starts_from_a_colmap_datasets_points() {
+    let dir = tempfile::tempdir().unwrap();
+    tiny_colmap_dataset(&dir.path().join("data"));
+    let args = ["fit", "--data", "data", "--steps", "5", "--out", "fit.ply"];
+    let stdout = ok(&splat(&args, dir.path()));
+    assert!(
+        stdout.contains("2 training and 1 test views of 16x16"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("starting from 40 of the dataset's 40 points"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("wrote fit.ply"), "{stdout}");
+    let cloud = splat_runtime::io::ply::read(&dir.path().join("fit.ply")).unwrap();
+    assert_eq!(cloud.gaussians.len(), 40);
+
+    // --points caps the count.
+    let args = [
+        "fit", "--data", "data", "--steps", "1", "--points", "10", "--out", "fit.ply",
+    ];
+    let stdout = ok(&splat(&args, dir.path()));
+    assert!(
+        stdout.contains("starting from 10 of the dataset's 40 points"),
+        "{stdout}"
+    );
 }

@@ -1,5 +1,5 @@
-//! Posed images for training, in two layouts (both with camera-to-world `transform_matrix`
-//! rows in OpenGL axes: x right, y up, z backwards), read by [`read`] from a folder:
+//! Posed images for training, in three layouts, read by [`read`] from a folder. Two have
+//! camera-to-world `transform_matrix` rows in OpenGL axes (x right, y up, z backwards):
 //! - Blender / NeRF-synthetic: `transforms_train.json` and `transforms_test.json`, each with
 //!   `camera_angle_x` (horizontal field of view, radians) and `frames[]` of `file_path`
 //!   (relative; `.png` added when it has no extension) and `transform_matrix`.
@@ -8,9 +8,14 @@
 //!   `OPENCV_FISHEYE` (`k1..k4`: our Kannala-Brandt camera, so fisheye images train as they
 //!   are); every 8th frame is held out for testing.
 //!
+//! The third is a COLMAP sparse model (`sparse/0/` or `sparse/`, binary or text) with its
+//! pictures in `images/`, read by [`colmap::read_colmap`]; it also gives the dataset an
+//! initial point cloud.
+//!
 //! RGBA images are composited on the chosen background. Every error names the file and the
 //! field.
 
+use super::colmap;
 use crate::pipeline::Image;
 use crate::types::{Camera, CameraModel};
 use glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
@@ -31,6 +36,17 @@ pub struct View {
 pub struct Dataset {
     pub train: Vec<View>,
     pub test: Vec<View>,
+    /// Points to start training from (COLMAP's sparse points); empty when the layout has
+    /// none (Blender, nerfstudio).
+    pub points: Vec<Point>,
+}
+
+/// A point of a dataset's initial point cloud.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Point {
+    pub position: Vec3,
+    /// RGB in [0, 1].
+    pub color: Vec3,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -46,7 +62,7 @@ pub enum DatasetError {
         error: serde_json::Error,
     },
     #[error(
-        "{0} is not a dataset: it holds neither transforms_train.json (Blender) nor transforms.json (nerfstudio)"
+        "{0} is not a dataset: it holds neither transforms_train.json (Blender) nor transforms.json (nerfstudio) nor a COLMAP model in sparse/0 or sparse (cameras, images and points3D, .bin or .txt)"
     )]
     NotADataset(PathBuf),
     #[error("{path}: {field} {problem}")]
@@ -71,7 +87,11 @@ pub enum DatasetError {
     Empty(PathBuf),
 }
 
-fn field(path: &Path, field: impl Into<String>, problem: impl Into<String>) -> DatasetError {
+pub(super) fn field(
+    path: &Path,
+    field: impl Into<String>,
+    problem: impl Into<String>,
+) -> DatasetError {
     DatasetError::Field {
         path: path.to_path_buf(),
         field: field.into(),
@@ -79,8 +99,9 @@ fn field(path: &Path, field: impl Into<String>, problem: impl Into<String>) -> D
     }
 }
 
-/// Reads the dataset in `dir` (Blender if it holds `transforms_train.json`, else nerfstudio),
-/// compositing RGBA images on `background`.
+/// Reads the dataset in `dir` (Blender if it holds `transforms_train.json`, else nerfstudio
+/// if it holds `transforms.json`, else COLMAP with the pictures in `images/`), compositing
+/// RGBA images on `background`.
 pub fn read(dir: &Path, background: Vec3) -> Result<Dataset, DatasetError> {
     if !dir.is_dir() {
         return Err(DatasetError::Io {
@@ -92,6 +113,8 @@ pub fn read(dir: &Path, background: Vec3) -> Result<Dataset, DatasetError> {
         read_blender(dir, background)
     } else if dir.join("transforms.json").exists() {
         read_nerfstudio(dir, background)
+    } else if colmap::is_colmap(dir) {
+        colmap::read_colmap(dir, background, None)
     } else {
         Err(DatasetError::NotADataset(dir.to_path_buf()))
     }
@@ -102,6 +125,7 @@ pub fn read_blender(dir: &Path, background: Vec3) -> Result<Dataset, DatasetErro
     Ok(Dataset {
         train: read_split(&dir.join("transforms_train.json"), background)?,
         test: read_split(&dir.join("transforms_test.json"), background)?,
+        points: Vec::new(),
     })
 }
 
@@ -130,6 +154,7 @@ pub fn read_nerfstudio(dir: &Path, background: Vec3) -> Result<Dataset, DatasetE
     let mut data = Dataset {
         train: vec![],
         test: vec![],
+        points: Vec::new(),
     };
     for (k, frame) in frames.iter().enumerate() {
         let at = |f: &str| format!("frames[{k}].{f}");
@@ -322,7 +347,7 @@ fn posed_camera(c2w_gl: &Mat4, focal: Vec2, image: &Image) -> Option<Camera> {
 }
 
 /// An image as RGB in [0, 1], alpha composited on `background`.
-fn read_image(path: &Path, background: Vec3) -> Result<Image, DatasetError> {
+pub(super) fn read_image(path: &Path, background: Vec3) -> Result<Image, DatasetError> {
     let img = image::open(path).map_err(|error| match error {
         image::ImageError::IoError(error) => DatasetError::Io {
             path: path.to_path_buf(),

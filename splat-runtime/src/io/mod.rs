@@ -1,7 +1,9 @@
-//! File formats: INRIA 3DGS PLY scenes, JSON cameras, posed-image datasets, and image outputs
-//! (PNG, EXR, NPY), all written atomically (a temporary file in the target's folder, then a rename).
+//! File formats: INRIA 3DGS PLY scenes, JSON cameras, posed-image datasets (Blender,
+//! nerfstudio, COLMAP), and image outputs (PNG, EXR, NPY), all written atomically (a temporary
+//! file in the target's folder, then a rename).
 
 pub mod camera;
+pub mod colmap;
 pub mod dataset;
 pub mod image;
 pub mod ply;

@@ -50,6 +50,35 @@ impl Adam {
     }
 }
 
+impl Adam {
+    /// Follows a change of the primitive set: new primitive `i` keeps the moments of old
+    /// primitive `origin[i]`, or starts from zero moments where it is `None`.
+    pub fn remap(&mut self, origin: &[Option<usize>]) {
+        let w = self.words;
+        let pick = |old: &[f32]| {
+            let mut out = vec![0.0; origin.len() * w];
+            for (dst, src) in out.chunks_exact_mut(w.max(1)).zip(origin) {
+                if let Some(i) = src {
+                    dst.copy_from_slice(&old[i * w..(i + 1) * w]);
+                }
+            }
+            out
+        };
+        self.m = pick(&self.m);
+        self.v = pick(&self.v);
+    }
+
+    /// Clears the moments of the words where `changed` (per word, as `params`) is true: a
+    /// value reset from outside starts its optimization afresh.
+    pub fn forget(&mut self, changed: impl Fn(usize) -> bool) {
+        for (k, (m, v)) in self.m.iter_mut().zip(self.v.iter_mut()).enumerate() {
+            if changed(k) {
+                (*m, *v) = (0.0, 0.0);
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -78,5 +107,20 @@ mod tests {
         for (x, t) in p.iter().zip(target) {
             assert!((x - t).abs() < 1e-2, "{p:?}");
         }
+    }
+
+    #[test]
+    fn moments_follow_the_primitives_and_reset_words_forget_theirs() {
+        let mut adam = Adam::new(2, 2);
+        let mut p = vec![0.0; 4];
+        adam.step(&mut p, &[1.0, 1.0, 2.0, 2.0], &[0.1, 0.1]);
+        // Primitive 0 is dropped, 1 kept (now first), one new one appended.
+        adam.remap(&[Some(1), None]);
+        adam.forget(|k| k == 1);
+        let mut p = vec![0.0; 4];
+        adam.step(&mut p, &[0.0; 4], &[0.1, 0.1]);
+        // With a zero gradient only remembered moments move a word.
+        assert!(p[0] < 0.0, "{p:?}");
+        assert_eq!(&p[1..], [0.0; 3], "forgotten and new words stay");
     }
 }

@@ -1,9 +1,11 @@
 //! The training loop, the same for every method: pick a view, render, loss, backward, Adam
-//! step. A method takes part by implementing [`Trainable`] (its learning rates and how a
-//! primitive starts from a point) in its own file. This is the CPU loop; the device-resident
-//! GPU loop and densification come next (see the issue notes).
+//! step, and every so often adaptive density control. A method takes part by implementing
+//! [`Trainable`] (its learning rates, how a primitive starts from a point, and where its
+//! shape is) in its own file. This is the CPU loop; the device-resident GPU loop comes next
+//! (see the issue notes).
 
 use super::adam::Adam;
+use super::densify::{Densifier, DensifyOptions, Refinement, Shape};
 use super::loss::{self, LossError, LossValue};
 use crate::flat::Flat;
 use crate::io::dataset::{Dataset, View};
@@ -53,6 +55,15 @@ pub trait Trainable: SplatMethod {
 
     /// A primitive at `point` with linear RGB `color` and size `scale` (world units).
     fn from_point(point: Vec3, color: Vec3, scale: f32) -> Self::Params;
+
+    /// Where the primitive is, how large, how turned and how opaque (for density control).
+    fn shape(p: &Self::Params) -> Shape;
+
+    /// `p` with its shape replaced, everything else (color) kept.
+    fn with_shape(p: &Self::Params, shape: &Shape) -> Self::Params;
+
+    /// The gradient of the position, read from a gradient of `Params`.
+    fn position_gradient(g: &Self::Params) -> Vec3;
 }
 
 #[derive(Clone, Debug)]
@@ -64,6 +75,8 @@ pub struct FitOptions {
     pub background: Vec3,
     pub render: RenderOptions,
     pub seed: u64,
+    /// Adaptive density control, or none (the primitive count stays fixed).
+    pub densify: Option<DensifyOptions>,
 }
 
 impl Default for FitOptions {
@@ -78,6 +91,7 @@ impl Default for FitOptions {
                 ..Default::default()
             },
             seed: 0,
+            densify: Some(DensifyOptions::default()),
         }
     }
 }
@@ -151,14 +165,24 @@ pub fn evaluate<M: SplatMethod>(
     Ok(e)
 }
 
-/// Trains `params` on the training views of `data` for `opts.steps` steps on the CPU;
-/// `progress(step, loss)` is called after every step.
+/// What a step reports to the caller's progress callback.
+pub struct StepReport<'a> {
+    pub step: usize,
+    pub loss: &'a LossValue,
+    pub primitives: usize,
+    /// Set on the steps that refined the primitive set.
+    pub refinement: Option<&'a Refinement>,
+}
+
+/// Trains `params` on the training views of `data` for `opts.steps` steps on the CPU (with
+/// density control, `params` grows and shrinks); `extent` is the scene's radius; `progress` is
+/// called after every step.
 pub fn fit<M: Trainable>(
     data: &Dataset,
-    params: &mut [M::Params],
+    params: &mut Vec<M::Params>,
     extent: f32,
     opts: &FitOptions,
-    mut progress: impl FnMut(usize, &LossValue),
+    mut progress: impl FnMut(&StepReport),
 ) -> Result<(), FitError> {
     if data.train.is_empty() {
         return Err(FitError::NoViews);
@@ -166,12 +190,13 @@ pub fn fit<M: Trainable>(
     let words = M::Params::LEN;
     let rates = M::learning_rates(extent);
     assert_eq!(rates.len(), words, "one learning rate per parameter word");
-    let mut flat = vec![0.0f32; params.len() * words];
-    for (p, out) in params.iter().zip(flat.chunks_exact_mut(words)) {
-        p.write_words(out);
-    }
+    let mut flat = flatten::<M>(params);
     let mut adam = Adam::new(params.len(), words);
     let mut grads = vec![0.0f32; flat.len()];
+    let mut densifier = opts
+        .densify
+        .clone()
+        .map(|d| Densifier::new(d, params.len()));
     let mut rng = fastrand::Rng::with_seed(opts.seed);
     let render_opts = with_alpha(&opts.render);
     let b = opts.background.to_array();
@@ -206,7 +231,41 @@ pub fn fit<M: Trainable>(
         for (p, w) in params.iter_mut().zip(flat.chunks_exact(words)) {
             *p = M::Params::read_words(w);
         }
-        progress(step, &value);
+        let mut refinement = None;
+        if let Some(d) = densifier.as_mut().filter(|d| step < d.opts.stop) {
+            let visible = state.pre.visible.iter().map(|(i, _)| *i as usize);
+            d.observe::<M>(params, &g.params, visible, &view.camera);
+            if d.refines_at(step) {
+                let r = d.refine::<M>(params, step, extent, &mut rng);
+                adam.remap(&r.origin);
+                flat = flatten::<M>(params);
+                grads = vec![0.0; flat.len()];
+                refinement = Some(r);
+            }
+            if d.resets_at(step) {
+                d.reset_opacity::<M>(params);
+                let after = flatten::<M>(params);
+                // Only the words the reset moved (opacities) forget their moments.
+                adam.forget(|k| flat[k] != after[k]);
+                flat = after;
+            }
+        }
+        progress(&StepReport {
+            step,
+            loss: &value,
+            primitives: params.len(),
+            refinement: refinement.as_ref(),
+        });
     }
     Ok(())
+}
+
+/// The parameter words of every primitive, one after another.
+fn flatten<M: SplatMethod>(params: &[M::Params]) -> Vec<f32> {
+    let words = M::Params::LEN;
+    let mut flat = vec![0.0f32; params.len() * words];
+    for (p, out) in params.iter().zip(flat.chunks_exact_mut(words)) {
+        p.write_words(out);
+    }
+    flat
 }

@@ -1,9 +1,12 @@
 //! What training shares across methods (DESIGN §10), built up step by step: the photometric
-//! loss with its gradient and the evaluation metrics ([`loss`]), Adam ([`adam`]), and the loop
-//! with the trait a method implements to take part ([`fit`]).
+//! loss with its gradient and the evaluation metrics ([`loss`]), Adam ([`adam`]), adaptive density
+//! control ([`densify`]), and the loop with the trait a method implements to take part ([`fit`]).
 
 pub mod adam;
+pub mod densify;
 pub mod fit;
+pub mod init;
 pub mod loss;
 
+pub use densify::{DensifyOptions, Shape};
 pub use fit::{FitOptions, Rate, Trainable};

@@ -1,0 +1,212 @@
+//! Adaptive density control (Kerbl et al. 2023, §5), with the defaults of gsplat's
+//! `DefaultStrategy`: primitives whose position keeps being pulled across the screen are
+//! cloned (when small) or split in two (when large), faint ones and (after the first opacity
+//! reset) huge ones are pruned, and every few thousand steps opacities are lowered so that
+//! occluders must earn their opacity again.
+//!
+//! It reads a method's primitives through [`Trainable::shape`], so any method whose primitives
+//! have a position, an oriented scale and an opacity densifies without code of its own.
+
+use super::fit::Trainable;
+use crate::types::Camera;
+use glam::{Quat, Vec3};
+
+/// A primitive as density control sees it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Shape {
+    pub position: Vec3,
+    /// Extent along each local axis (a Gaussian's standard deviations), world units.
+    pub scale: Vec3,
+    pub rotation: Quat,
+    /// In [0, 1].
+    pub opacity: f32,
+}
+
+/// When and how density control acts; scales are relative to the scene's extent.
+#[derive(Clone, Debug)]
+pub struct DensifyOptions {
+    /// Refine every `every` steps from `start` until `stop`.
+    pub start: usize,
+    pub stop: usize,
+    pub every: usize,
+    /// Lower every opacity to `2 * prune_opacity` every `reset_every` steps (before `stop`).
+    pub reset_every: usize,
+    pub prune_opacity: f32,
+    /// Grow where the mean screen-space position gradient (in NDC units) passes this.
+    pub grow_grad2d: f32,
+    /// Clone up to this largest scale (times the extent), split above it.
+    pub grow_scale3d: f32,
+    /// After the first reset, prune above this largest scale (times the extent).
+    pub prune_scale3d: f32,
+    /// No growth past this many primitives.
+    pub max_primitives: usize,
+}
+
+impl Default for DensifyOptions {
+    fn default() -> Self {
+        DensifyOptions {
+            start: 500,
+            stop: 15_000,
+            every: 100,
+            reset_every: 3000,
+            prune_opacity: 0.005,
+            grow_grad2d: 0.0002,
+            grow_scale3d: 0.01,
+            prune_scale3d: 0.1,
+            max_primitives: 4_000_000,
+        }
+    }
+}
+
+/// What one refinement did; `origin[i]` is the index before it of new primitive `i`, or `None`
+/// for a primitive created by it (whose optimizer state starts from zero).
+#[derive(Clone, Debug, Default)]
+pub struct Refinement {
+    pub origin: Vec<Option<usize>>,
+    pub cloned: usize,
+    pub split: usize,
+    pub pruned: usize,
+}
+
+/// The statistics density control gathers between refinements.
+pub struct Densifier {
+    pub opts: DensifyOptions,
+    /// Per primitive: the sum over views of the screen-space position gradient's norm, and
+    /// the number of views that saw it.
+    grad2d: Vec<f32>,
+    count: Vec<u32>,
+}
+
+impl Densifier {
+    pub fn new(opts: DensifyOptions, primitives: usize) -> Densifier {
+        Densifier {
+            opts,
+            grad2d: vec![0.0; primitives],
+            count: vec![0; primitives],
+        }
+    }
+
+    /// Adds one view's screen-space position gradient of each primitive in `visible`, given
+    /// the gradient of every primitive's parameters.
+    ///
+    /// A method's projection is its own, so the screen-space gradient is recovered from the
+    /// world-space one through the pinhole Jacobian: for x_cam = R p + t and u = f x/z + c,
+    /// dL/dx_cam = (f / z) dL/du exactly (the x column of the Jacobian has no other term), so
+    /// dL/du = (z / f) dL/dx_cam. What reaches the position through the shape's projection
+    /// (EWA's Jacobian, view-dependent color) is counted too; 3DGS counts only the mean.
+    pub fn observe<M: Trainable>(
+        &mut self,
+        params: &[M::Params],
+        grads: &[M::Params],
+        visible: impl Iterator<Item = usize>,
+        camera: &Camera,
+    ) {
+        let half = camera.size / 2.0;
+        for i in visible {
+            let x = camera.rotation * M::shape(&params[i]).position + camera.translation;
+            let g = camera.rotation * M::position_gradient(&grads[i]);
+            let z = x.z.max(1e-6);
+            let du = g.x * z / camera.focal.x * half.x;
+            let dv = g.y * z / camera.focal.y * half.y;
+            self.grad2d[i] += (du * du + dv * dv).sqrt();
+            self.count[i] += 1;
+        }
+    }
+
+    /// Whether step `step` (0-based, after its optimizer step) refines.
+    pub fn refines_at(&self, step: usize) -> bool {
+        let o = &self.opts;
+        step > o.start && step < o.stop && step.is_multiple_of(o.every.max(1))
+    }
+
+    /// Whether step `step` resets opacities.
+    pub fn resets_at(&self, step: usize) -> bool {
+        let o = &self.opts;
+        step > 0 && step < o.stop && step.is_multiple_of(o.reset_every.max(1))
+    }
+
+    /// Grows then prunes `params` from the statistics since the last refinement (then
+    /// cleared); `extent` is the scene's radius; `step` decides whether huge primitives go.
+    pub fn refine<M: Trainable>(
+        &mut self,
+        params: &mut Vec<M::Params>,
+        step: usize,
+        extent: f32,
+        rng: &mut fastrand::Rng,
+    ) -> Refinement {
+        let o = self.opts.clone();
+        let n = params.len();
+        let mut r = Refinement::default();
+        let mut grown: Vec<(M::Params, Option<usize>)> = Vec::with_capacity(n);
+        let mut room = o.max_primitives.saturating_sub(n);
+        for (i, p) in params.iter().enumerate() {
+            let shape = M::shape(p);
+            let pulled = self.grad2d[i] / self.count[i].max(1) as f32 > o.grow_grad2d;
+            let small = shape.scale.max_element() <= o.grow_scale3d * extent;
+            match (pulled && room > 0, small) {
+                (false, _) => grown.push((*p, Some(i))),
+                // Small under a strong pull: a copy where it is (the next steps' gradients
+                // move the two apart).
+                (true, true) => {
+                    grown.extend([(*p, Some(i)), (*p, None)]);
+                    r.cloned += 1;
+                    room -= 1;
+                }
+                // Large: two smaller ones drawn from it, in its place.
+                (true, false) => {
+                    for _ in 0..2 {
+                        let local = shape.scale * normal3(rng);
+                        let child = Shape {
+                            position: shape.position + shape.rotation * local,
+                            scale: shape.scale / 1.6,
+                            ..shape
+                        };
+                        grown.push((M::with_shape(p, &child), None));
+                    }
+                    r.split += 1;
+                    room -= 1;
+                }
+            }
+        }
+        // Huge primitives go only once an opacity reset has given them a chance to fade.
+        let huge = (step > o.reset_every).then_some(o.prune_scale3d * extent);
+        let before = grown.len();
+        grown.retain(|(p, _)| {
+            let s = M::shape(p);
+            s.opacity >= o.prune_opacity
+                && huge.is_none_or(|h| s.scale.max_element() <= h)
+                && s.position.is_finite()
+        });
+        r.pruned = before - grown.len();
+        (*params, r.origin) = grown.into_iter().unzip();
+        self.grad2d = vec![0.0; params.len()];
+        self.count = vec![0; params.len()];
+        r
+    }
+
+    /// Lowers every opacity above `2 * prune_opacity` to it.
+    pub fn reset_opacity<M: Trainable>(&self, params: &mut [M::Params]) {
+        let ceiling = 2.0 * self.opts.prune_opacity;
+        for p in params.iter_mut() {
+            let shape = M::shape(p);
+            if shape.opacity > ceiling {
+                *p = M::with_shape(
+                    p,
+                    &Shape {
+                        opacity: ceiling,
+                        ..shape
+                    },
+                );
+            }
+        }
+    }
+}
+
+/// Three independent standard normal samples (Box-Muller).
+fn normal3(rng: &mut fastrand::Rng) -> Vec3 {
+    let mut normal = || {
+        let u = 1.0 - rng.f32(); // in (0, 1]: ln(u) is finite
+        (-2.0 * u.ln()).sqrt() * (std::f32::consts::TAU * rng.f32()).cos()
+    };
+    Vec3::new(normal(), normal(), normal())
+}
