@@ -1,4 +1,5 @@
-//! `splat fit`: train a Gaussian method (3DGS, 3DGUT, 3DGEER) on posed images on the CPU,
+//! `splat fit`: train a Gaussian method (3DGS, 3DGUT, 3DGEER) on posed images, on the GPU or the
+//! CPU,
 //! with a progress bar, the held-out views' PSNR and SSIM before and after, and the result
 //! written as an INRIA PLY.
 
@@ -8,7 +9,8 @@ use splat_methods::{ToStored, geer, gs3d, gut};
 use splat_runtime::glam::Vec3;
 use splat_runtime::io::dataset::{self, Dataset};
 use splat_runtime::io::ply::{self, GaussianCloud};
-use splat_runtime::train::fit::{FitOptions, evaluate, fit};
+use splat_runtime::train::fit::{FitOptions, StepReport, evaluate, fit};
+use splat_runtime::train::gpu_fit::fit_gpu;
 use splat_runtime::train::{Trainable, init};
 use std::path::PathBuf;
 use std::time::Instant;
@@ -52,6 +54,10 @@ pub struct FitArgs {
     /// pruning, opacity resets).
     #[arg(long)]
     no_densify: bool,
+    /// Where to train: the GPU (the device-resident loop), the CPU, or `auto` (a hardware
+    /// GPU when there is one).
+    #[arg(long, value_enum, default_value_t = crate::Backend::Auto)]
+    backend: crate::Backend,
     /// The trained scene, as an INRIA 3DGS PLY.
     #[arg(long, default_value = "fit.ply")]
     out: PathBuf,
@@ -122,22 +128,33 @@ where
         ProgressStyle::with_template("{bar:40} {pos}/{len} steps, {elapsed} (eta {eta}) {msg}")
             .expect("a valid template"),
     );
-    let t = Instant::now();
-    fit::<M>(data, &mut params, extent, opts, |r| {
+    let report = |r: &StepReport| {
         bar.inc(1);
-        if r.step % 10 == 0 || r.refinement.is_some() {
+        if r.step.is_multiple_of(10) || r.refinement.is_some() {
             let v = r.loss;
             bar.set_message(format!(
                 "loss {:.4} (L1 {:.4}, SSIM {:.3}), {} primitives",
                 v.loss, v.l1, v.ssim, r.primitives
             ));
         }
-    })?;
+    };
+    let gpu = crate::pick_gpu(args.backend)?;
+    let t = Instant::now();
+    let place = match &gpu {
+        Some(gpu) => {
+            fit_gpu::<M>(gpu, data, &mut params, extent, opts, report)?;
+            format!("the GPU ({})", gpu.adapter)
+        }
+        None => {
+            fit::<M>(data, &mut params, extent, opts, report)?;
+            "the CPU".to_string()
+        }
+    };
     bar.finish();
     let per_step = t.elapsed().as_secs_f64() / args.steps.max(1) as f64;
     let after = evaluate::<M>(&params, &data.test, opts)?;
     println!(
-        "{} steps on the CPU, {:.1} ms per step, {} primitives; {} test views: PSNR {:.2} -> {:.2} dB, SSIM {:.3} -> {:.3}",
+        "{} steps on {place}, {:.1} ms per step, {} primitives; {} test views: PSNR {:.2} -> {:.2} dB, SSIM {:.3} -> {:.3}",
         args.steps,
         per_step * 1e3,
         params.len(),

@@ -50,7 +50,8 @@ enum Command {
     /// Time forward and forward + backward frames on one scene (GPU: the device-resident
     /// pipeline; CPU: per thread count), with per-stage medians.
     Bench(bench::BenchArgs),
-    /// Train a Gaussian method on posed images (Blender, nerfstudio or COLMAP) on the CPU.
+    /// Train a Gaussian method on posed images (Blender, nerfstudio or COLMAP), on the GPU or
+    /// the CPU.
     Fit(fit::FitArgs),
     /// Print the Rust or WGSL the #[splat_method] compiler generated for a method.
     Inspect {

@@ -454,6 +454,34 @@ fn fit_trains_on_a_dataset_and_writes_a_ply() {
     assert!(stdout.contains("PSNR"), "{stdout}");
     let cloud = splat_runtime::io::ply::read(&dir.path().join("fit.ply")).unwrap();
     assert_eq!((cloud.sh_degree, cloud.gaussians.len()), (3, 200));
+
+    // The same on the GPU loop, where there is an adapter (lavapipe in CI).
+    let gpu = splat(
+        &[
+            "fit",
+            "--data",
+            "data",
+            "--steps",
+            "20",
+            "--points",
+            "200",
+            "--out",
+            "gpu.ply",
+            "--backend",
+            "gpu",
+        ],
+        dir.path(),
+    );
+    if gpu.status.success() {
+        let stdout = String::from_utf8_lossy(&gpu.stdout);
+        assert!(stdout.contains("20 steps on the GPU"), "{stdout}");
+        let cloud = splat_runtime::io::ply::read(&dir.path().join("gpu.ply")).unwrap();
+        assert_eq!(cloud.gaussians.len(), 200);
+    } else {
+        let stderr = String::from_utf8_lossy(&gpu.stderr);
+        assert!(stderr.contains("no GPU adapter"), "{stderr}");
+        assert!(std::env::var("SPLAT_REQUIRE_GPU").map_or(true, |v| v != "1"));
+    }
 }
 
 #[test]

@@ -9,6 +9,7 @@
 //!   [`GpuRenderer`] (kernels built once, buffers kept across frames, forward and backward).
 //! - [`render`]: one-shot render and backward for parameters on the host, over `resident`.
 //! - [`timing`]: stage times from GPU timestamps.
+//! - [`train`]: the loss, Adam and density control's statistics on the device.
 
 pub mod device;
 pub mod dispatch;
@@ -18,6 +19,7 @@ pub mod render;
 pub mod resident;
 pub mod sort;
 pub mod timing;
+pub mod train;
 
 pub use device::Gpu;
 pub use resident::{GpuRenderError, GpuRenderer, GpuScene};

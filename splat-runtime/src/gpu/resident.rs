@@ -438,22 +438,14 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         grad: &FrameGrad,
         acc: Accumulation,
     ) -> Result<(), GpuRenderError> {
-        let gpu = self.gpu;
         let info = self.frame.ok_or(GpuRenderError::NoFrame)?;
-        if scene.len() != info.primitives {
-            return Err(GpuRenderError::SceneChanged {
-                got: scene.len(),
-                want: info.primitives,
-            });
-        }
-        let (grid, layout) = (info.grid, self.layout);
-        let (channels, pixels) = (layout.channels, (grid.width * grid.height) as usize);
+        let channels = self.layout.channels;
+        let pixels = (info.grid.width * info.grid.height) as usize;
         grad.check(pixels, channels)?;
         let want_depth = grad.depth.is_some();
         if want_depth && !self.depth_sums {
             return Err(GpuRenderError::DepthNotRendered);
         }
-        let blend = self.blend(want_depth, acc)?;
         let mut words = vec![0u32; pixels * (channels + 2)];
         for (p, out) in words.chunks_exact_mut(channels + 2).enumerate() {
             let color = &grad.color[p * channels..(p + 1) * channels];
@@ -463,8 +455,69 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             out[channels] = grad.alpha.as_ref().map_or(0.0, |a| a[p]).to_bits();
             out[channels + 1] = grad.depth.as_ref().map_or(0.0, |d| d[p]).to_bits();
         }
-        self.pixel_grad.ensure(gpu, words.len())?;
-        gpu.write(&self.pixel_grad, &words);
+        self.gpu.write(self.pixel_gradients()?, &words);
+        self.backward_recorded(scene, want_depth, acc)
+    }
+
+    /// The backward pass of the last frame of `scene`, with the output gradients already in
+    /// [`GpuRenderer::pixel_gradients`] (written there by a loss on the device; depth's
+    /// ignored): no host transfer.
+    pub fn backward_on_device(
+        &mut self,
+        scene: &GpuScene<M>,
+        acc: Accumulation,
+    ) -> Result<(), GpuRenderError> {
+        self.backward_recorded(scene, false, acc)
+    }
+
+    /// The buffer of the last frame's output gradients: per pixel the color channels, alpha,
+    /// depth.
+    pub fn pixel_gradients(&mut self) -> Result<&wgpu::Buffer, GpuRenderError> {
+        let info = self.frame.ok_or(GpuRenderError::NoFrame)?;
+        let pixels = (info.grid.width * info.grid.height) as usize;
+        self.pixel_grad
+            .ensure(self.gpu, pixels * (self.layout.channels + 2))?;
+        Ok(&self.pixel_grad)
+    }
+
+    /// The last frame's per-pixel state: the color channels, final T, sum of weight * depth.
+    pub fn pixel_state(&self) -> &wgpu::Buffer {
+        &self.pixels
+    }
+
+    /// `project`'s results of the last frame, [`Layout`]'s stride per primitive (the first
+    /// word nonzero where the primitive is visible).
+    pub fn projected(&self) -> (&wgpu::Buffer, usize) {
+        (&self.projected, self.layout.stride)
+    }
+
+    /// The last frame's camera, as its words.
+    pub fn camera_buffer(&self) -> &wgpu::Buffer {
+        &self.camera
+    }
+
+    /// Float slots of `M::Params` (the gradient words per primitive).
+    pub fn param_floats(&self) -> usize {
+        self.param_floats
+    }
+
+    fn backward_recorded(
+        &mut self,
+        scene: &GpuScene<M>,
+        want_depth: bool,
+        acc: Accumulation,
+    ) -> Result<(), GpuRenderError> {
+        let gpu = self.gpu;
+        let info = self.frame.ok_or(GpuRenderError::NoFrame)?;
+        if scene.len() != info.primitives {
+            return Err(GpuRenderError::SceneChanged {
+                got: scene.len(),
+                want: info.primitives,
+            });
+        }
+        let (grid, layout) = (info.grid, self.layout);
+        let pixels = (grid.width * grid.height) as usize;
+        let blend = self.blend(want_depth, acc)?;
         let n = info.primitives;
         let groups = (n as u32).div_ceil(64).max(1);
         let npx = M::PixelLanes::default().as_ref().len();

@@ -54,18 +54,8 @@ impl Adam {
     /// Follows a change of the primitive set: new primitive `i` keeps the moments of old
     /// primitive `origin[i]`, or starts from zero moments where it is `None`.
     pub fn remap(&mut self, origin: &[Option<usize>]) {
-        let w = self.words;
-        let pick = |old: &[f32]| {
-            let mut out = vec![0.0; origin.len() * w];
-            for (dst, src) in out.chunks_exact_mut(w.max(1)).zip(origin) {
-                if let Some(i) = src {
-                    dst.copy_from_slice(&old[i * w..(i + 1) * w]);
-                }
-            }
-            out
-        };
-        self.m = pick(&self.m);
-        self.v = pick(&self.v);
+        self.m = remap_rows(&self.m, self.words, origin);
+        self.v = remap_rows(&self.v, self.words, origin);
     }
 
     /// Clears the moments of the words where `changed` (per word, as `params`) is true: a
@@ -77,6 +67,17 @@ impl Adam {
             }
         }
     }
+}
+
+/// Rows of `words` values, new row `i` a copy of old row `origin[i]` or zeros where `None`.
+pub fn remap_rows(old: &[f32], words: usize, origin: &[Option<usize>]) -> Vec<f32> {
+    let mut out = vec![0.0; origin.len() * words];
+    for (dst, src) in out.chunks_exact_mut(words.max(1)).zip(origin) {
+        if let Some(i) = src {
+            dst.copy_from_slice(&old[i * words..(i + 1) * words]);
+        }
+    }
+    out
 }
 
 #[cfg(test)]

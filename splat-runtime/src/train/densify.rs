@@ -113,6 +113,17 @@ impl Densifier {
         }
     }
 
+    /// Adds statistics gathered elsewhere (on the device), per primitive: the summed
+    /// screen-space gradient norms and the views that saw it.
+    pub fn add_observations(&mut self, grad2d: &[f32], seen: &[u32]) {
+        for (a, g) in self.grad2d.iter_mut().zip(grad2d) {
+            *a += g;
+        }
+        for (a, s) in self.count.iter_mut().zip(seen) {
+            *a += s;
+        }
+    }
+
     /// Whether step `step` (0-based, after its optimizer step) refines.
     pub fn refines_at(&self, step: usize) -> bool {
         let o = &self.opts;

@@ -104,6 +104,10 @@ pub enum FitError {
     Loss(#[from] LossError),
     #[error("the dataset has no training views")]
     NoViews,
+    #[error("GPU: {0}")]
+    Gpu(String),
+    #[error("{0}")]
+    Unsupported(String),
 }
 
 /// PSNR, SSIM and loss over a set of views.
@@ -128,7 +132,7 @@ pub fn render_view<M: SplatMethod>(
     ))
 }
 
-fn with_alpha(r: &RenderOptions) -> RenderOptions {
+pub(crate) fn with_alpha(r: &RenderOptions) -> RenderOptions {
     RenderOptions { alpha: true, ..*r }
 }
 
@@ -261,7 +265,7 @@ pub fn fit<M: Trainable>(
 }
 
 /// The parameter words of every primitive, one after another.
-fn flatten<M: SplatMethod>(params: &[M::Params]) -> Vec<f32> {
+pub(crate) fn flatten<M: SplatMethod>(params: &[M::Params]) -> Vec<f32> {
     let words = M::Params::LEN;
     let mut flat = vec![0.0f32; params.len() * words];
     for (p, out) in params.iter().zip(flat.chunks_exact_mut(words)) {

@@ -33,7 +33,8 @@ pub enum LossError {
     TooSmall(u32, u32),
 }
 
-fn window() -> [f64; WINDOW] {
+/// The normalized Gaussian taps of the SSIM window.
+pub(crate) fn window() -> [f64; WINDOW] {
     let g: [f64; WINDOW] = std::array::from_fn(|i| {
         let d = i as f64 - (WINDOW / 2) as f64;
         (-d * d / (2.0 * SIGMA * SIGMA)).exp()

@@ -1,10 +1,12 @@
 //! What training shares across methods (DESIGN §10), built up step by step: the photometric
 //! loss with its gradient and the evaluation metrics ([`loss`]), Adam ([`adam`]), adaptive density
-//! control ([`densify`]), and the loop with the trait a method implements to take part ([`fit`]).
+//! control ([`densify`]), and the loop with the trait a method implements to take part ([`fit`]),
+//! also on the GPU ([`gpu_fit`]).
 
 pub mod adam;
 pub mod densify;
 pub mod fit;
+pub mod gpu_fit;
 pub mod init;
 pub mod loss;
 

@@ -1,0 +1,44 @@
+// Density control's statistics on the device (as `train::densify::Densifier::observe`): for
+// each primitive `project` saw, the norm of its screen-space position gradient in NDC units,
+// recovered from the world-space one through the pinhole Jacobian (dL/du = z / f dL/dx_cam),
+// summed, and the number of views that saw it.
+
+struct ObserveInfo {
+    // primitives, projected words per primitive, parameter words per primitive, unused
+    size: vec4<u32>,
+    // the position's first word in `Params` (its 3 words are consecutive), unused...
+    position: vec4<u32>,
+}
+
+@group(0) @binding(0) var<storage, read> projected: array<u32>;
+@group(0) @binding(1) var<storage, read> params: array<f32>;
+@group(0) @binding(2) var<storage, read> param_grads: array<f32>;
+@group(0) @binding(3) var<storage, read> camera_words: array<f32>;
+@group(0) @binding(4) var<storage, read_write> grad2d: array<f32>;
+@group(0) @binding(5) var<storage, read_write> seen: array<u32>;
+@group(0) @binding(6) var<uniform> info: ObserveInfo;
+
+fn vec_at(a: u32) -> vec3<f32> {
+    return vec3<f32>(camera_words[a], camera_words[a + 1u], camera_words[a + 2u]);
+}
+
+@compute @workgroup_size(256)
+fn observe(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let i = (wid.y * 65535u + wid.x) * 256u + lid;
+    if (i >= info.size.x || projected[i * info.size.y] == 0u) {
+        return;
+    }
+    // Camera words: rotation by columns (0..9), translation, focal, principal, size.
+    let r = mat3x3<f32>(vec_at(0u), vec_at(3u), vec_at(6u));
+    let at = i * info.size.z + info.position.x;
+    let p = vec3<f32>(params[at], params[at + 1u], params[at + 2u]);
+    let g = vec3<f32>(param_grads[at], param_grads[at + 1u], param_grads[at + 2u]);
+    let x = r * p + vec_at(9u);
+    let gc = r * g;
+    let z = max(x.z, 1e-6);
+    let focal = vec2<f32>(camera_words[12], camera_words[13]);
+    let half = vec2<f32>(camera_words[16], camera_words[17]) * 0.5;
+    let d = gc.xy * z / focal * half;
+    grad2d[i] += length(d);
+    seen[i] += 1u;
+}

@@ -1,0 +1,470 @@
+//! What a training step runs on the device besides the renderer: the photometric loss and its
+//! gradient ([`GpuLoss`], `loss.wgsl`), Adam ([`GpuAdam`], `adam.wgsl`) and density control's
+//! statistics ([`GpuObserver`], `observe.wgsl`). Each records into the caller's encoder; the
+//! data stays on the device, and the host reads back only what it asks for (the loss value,
+//! and the state density control refines from every hundred steps).
+
+use super::device::{Grown, Kernel, dispatch};
+use super::{Gpu, GpuError};
+use crate::pipeline::Image;
+use crate::train::adam::remap_rows;
+use crate::train::loss::{LossValue, WINDOW, window};
+use glam::Vec3;
+
+const LOSS: &str = include_str!("shaders/loss.wgsl");
+const ADAM: &str = include_str!("shaders/adam.wgsl");
+const OBSERVE: &str = include_str!("shaders/observe.wgsl");
+
+/// The loss of the renderer's frame against one of a set of target images, all kept on the
+/// device.
+pub struct GpuLoss {
+    terms_kernel: Kernel,
+    gradient_kernel: Kernel,
+    /// Every target image, RGB f32, one after another; each one's offset (words) and size.
+    targets: wgpu::Buffer,
+    views: Vec<(u32, u32, u32)>,
+    taps: wgpu::Buffer,
+    terms: Grown,
+    sums: Grown,
+    info: wgpu::Buffer,
+    background: Vec3,
+    ssim_weight: f32,
+    /// The last loss recorded: its image size (for reading its value back).
+    last: Option<(u32, u32)>,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum GpuTrainError {
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+    #[error("target {view} is {got:?} pixels, the frame {want:?}")]
+    Size {
+        view: usize,
+        got: (u32, u32),
+        want: (u32, u32),
+    },
+    #[error("the loss needs RGB images of at least {WINDOW} x {WINDOW} pixels; target {0} is not")]
+    Target(usize),
+    #[error("no loss recorded yet")]
+    NoLoss,
+}
+
+impl GpuLoss {
+    /// Uploads `targets` (RGB) once; renders are composited on `background`; the loss weighs
+    /// D-SSIM by `ssim_weight`.
+    pub fn new(
+        gpu: &Gpu,
+        targets: &[&Image],
+        background: Vec3,
+        ssim_weight: f32,
+    ) -> Result<GpuLoss, GpuTrainError> {
+        let mut words = vec![];
+        let mut views = vec![];
+        for (k, t) in targets.iter().enumerate() {
+            let small = (t.width as usize) < WINDOW || (t.height as usize) < WINDOW;
+            if t.channels != 3 || small {
+                return Err(GpuTrainError::Target(k));
+            }
+            views.push((words.len() as u32, t.width, t.height));
+            words.extend(t.data.iter().map(|v| v.to_bits()));
+        }
+        let taps: Vec<u32> = window().iter().map(|g| (*g as f32).to_bits()).collect();
+        Ok(GpuLoss {
+            terms_kernel: gpu.kernel(LOSS, "ssim_terms")?,
+            gradient_kernel: gpu.kernel(LOSS, "loss_gradient")?,
+            targets: gpu.buffer_from("target images", &words)?,
+            views,
+            taps: gpu.buffer_from("SSIM window", &taps)?,
+            terms: Grown::new(gpu, "SSIM cotangents", 1)?,
+            sums: Grown::new(gpu, "loss partial sums", 1)?,
+            info: gpu.uniform_buffer(12),
+            background,
+            ssim_weight,
+            last: None,
+        })
+    }
+
+    /// Records the loss of the frame in `pixel_state` (per pixel: 3 colors, T, depth sum)
+    /// against target `view`, writing its gradient into `pixel_grad` (per pixel: 3 colors,
+    /// alpha, depth).
+    pub fn record(
+        &mut self,
+        gpu: &Gpu,
+        encoder: &mut wgpu::CommandEncoder,
+        view: usize,
+        size: (u32, u32),
+        pixel_state: &wgpu::Buffer,
+        pixel_grad: &wgpu::Buffer,
+    ) -> Result<(), GpuTrainError> {
+        let (offset, w, h) = self.views[view];
+        if (w, h) != size {
+            return Err(GpuTrainError::Size {
+                view,
+                got: (w, h),
+                want: size,
+            });
+        }
+        let (vw, vh) = (w + 1 - WINDOW as u32, h + 1 - WINDOW as u32);
+        let (pixels, valid) = (w * h, vw * vh);
+        let groups = pixels.div_ceil(64);
+        self.terms.ensure(gpu, valid as usize * 9)?;
+        self.sums.ensure(gpu, 2 * groups as usize)?;
+        let b = self.background;
+        let floats = [b.x, b.y, b.z, self.ssim_weight].map(f32::to_bits);
+        let ints = [w, h, 5, offset, vw, vh, valid, 0];
+        gpu.write(&self.info, &[&ints[..], &floats].concat());
+        encoder.clear_buffer(&self.sums, 0, None);
+        let mut inputs = vec![
+            ("pixel_state", pixel_state),
+            ("targets", &self.targets),
+            ("taps", &self.taps),
+            ("terms", &self.terms),
+            ("sums", &self.sums),
+            ("info", &self.info),
+        ];
+        let bind = gpu.bind_named(&self.terms_kernel, &inputs)?;
+        dispatch(
+            encoder,
+            &self.terms_kernel.pipeline,
+            &bind,
+            valid.div_ceil(64),
+        );
+        inputs.push(("pixel_grad", pixel_grad));
+        let bind = gpu.bind_named(&self.gradient_kernel, &inputs)?;
+        dispatch(encoder, &self.gradient_kernel.pipeline, &bind, groups);
+        self.last = Some((w, h));
+        Ok(())
+    }
+
+    /// The value of the last loss recorded (reads a few words back).
+    pub fn value(&self, gpu: &Gpu) -> Result<LossValue, GpuTrainError> {
+        let (w, h) = self.last.ok_or(GpuTrainError::NoLoss)?;
+        let groups = (w * h).div_ceil(64) as usize;
+        let sums = gpu.read(&self.sums, 2 * groups)?;
+        let total = |slot: usize| -> f64 {
+            sums.iter()
+                .skip(slot)
+                .step_by(2)
+                .map(|s| f32::from_bits(*s) as f64)
+                .sum()
+        };
+        let valid = ((w + 1 - WINDOW as u32) * (h + 1 - WINDOW as u32)) as f64;
+        let l1 = total(0) / (3.0 * (w * h) as f64);
+        let ssim = total(1) / (3.0 * valid);
+        let lambda = self.ssim_weight as f64;
+        Ok(LossValue {
+            loss: (1.0 - lambda) * l1 + lambda * (1.0 - ssim),
+            l1,
+            ssim,
+        })
+    }
+}
+
+/// Adam's moments on the device, for parameters with `words` float words per primitive.
+pub struct GpuAdam {
+    kernel: Kernel,
+    m: Grown,
+    v: Grown,
+    rates: wgpu::Buffer,
+    info: wgpu::Buffer,
+    words: usize,
+    step: i32,
+    pub beta1: f32,
+    pub beta2: f32,
+    pub eps: f32,
+}
+
+impl GpuAdam {
+    /// 3DGS's constants, as `train::adam::Adam`.
+    pub fn new(gpu: &Gpu, words: usize) -> Result<GpuAdam, GpuError> {
+        Ok(GpuAdam {
+            kernel: gpu.kernel(ADAM, "adam_step")?,
+            m: Grown::new(gpu, "Adam first moments", 1)?,
+            v: Grown::new(gpu, "Adam second moments", 1)?,
+            rates: gpu.buffer("learning rates", words)?,
+            info: gpu.uniform_buffer(12),
+            words,
+            step: 0,
+            beta1: 0.9,
+            beta2: 0.999,
+            eps: 1e-15,
+        })
+    }
+
+    /// Records one step of the `primitives` primitives' words in `params` against `grads`;
+    /// `rates` per word of a primitive, negative for words not trained yet.
+    pub fn record(
+        &mut self,
+        gpu: &Gpu,
+        encoder: &mut wgpu::CommandEncoder,
+        params: &wgpu::Buffer,
+        grads: &wgpu::Buffer,
+        primitives: usize,
+        rates: &[f32],
+    ) -> Result<(), GpuError> {
+        assert_eq!(
+            rates.len(),
+            self.words,
+            "one learning rate per parameter word"
+        );
+        let total = primitives * self.words;
+        self.m.ensure(gpu, total)?;
+        self.v.ensure(gpu, total)?;
+        self.step += 1;
+        let (b1, b2) = (self.beta1, self.beta2);
+        let (c1, c2) = (1.0 - b1.powi(self.step), 1.0 - b2.powi(self.step));
+        let floats = [b1, b2, c1, c2, self.eps, 0.0, 0.0, 0.0].map(f32::to_bits);
+        gpu.write(
+            &self.info,
+            &[&[total as u32, self.words as u32, 0, 0], &floats[..]].concat(),
+        );
+        let rate_words: Vec<u32> = rates.iter().map(|r| r.to_bits()).collect();
+        gpu.write(&self.rates, &rate_words);
+        let bind = gpu.bind_named(
+            &self.kernel,
+            &[
+                ("params", params),
+                ("grads", grads),
+                ("m", &self.m),
+                ("v", &self.v),
+                ("rates", &self.rates),
+                ("info", &self.info),
+            ],
+        )?;
+        dispatch(
+            encoder,
+            &self.kernel.pipeline,
+            &bind,
+            (total as u32).div_ceil(256),
+        );
+        Ok(())
+    }
+
+    /// Follows a change of the primitive set (see `train::adam::Adam::remap`), from
+    /// `primitives` before it; then clears the moments of the words where `forget` is true.
+    pub fn remap(
+        &mut self,
+        gpu: &Gpu,
+        primitives: usize,
+        origin: &[Option<usize>],
+        forget: impl Fn(usize) -> bool,
+    ) -> Result<(), GpuError> {
+        let total = primitives * self.words;
+        for moments in [&mut self.m, &mut self.v] {
+            let old: Vec<f32> = if total == 0 {
+                vec![]
+            } else {
+                gpu.read(moments, total)?
+                    .into_iter()
+                    .map(f32::from_bits)
+                    .collect()
+            };
+            let mut new = remap_rows(&old, self.words, origin);
+            for (k, x) in new.iter_mut().enumerate() {
+                if forget(k) {
+                    *x = 0.0;
+                }
+            }
+            moments.ensure(gpu, new.len())?;
+            gpu.write(
+                moments,
+                &new.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+            );
+        }
+        Ok(())
+    }
+}
+
+/// Density control's per-primitive statistics, gathered on the device.
+pub struct GpuObserver {
+    kernel: Kernel,
+    grad2d: Grown,
+    seen: Grown,
+    info: wgpu::Buffer,
+}
+
+impl GpuObserver {
+    pub fn new(gpu: &Gpu) -> Result<GpuObserver, GpuError> {
+        Ok(GpuObserver {
+            kernel: gpu.kernel(OBSERVE, "observe")?,
+            grad2d: Grown::new(gpu, "screen-space gradient sums", 1)?,
+            seen: Grown::new(gpu, "view counts", 1)?,
+            info: gpu.uniform_buffer(8),
+        })
+    }
+
+    /// Records the statistics of one frame: `projected` (`stride` words per primitive, the
+    /// first nonzero when `project` saw it), the parameters (`words` per primitive, the
+    /// position at `position`) and their gradients (the same layout), the frame's camera.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record(
+        &mut self,
+        gpu: &Gpu,
+        encoder: &mut wgpu::CommandEncoder,
+        frame: [&wgpu::Buffer; 4],
+        primitives: usize,
+        stride: usize,
+        words: usize,
+        position: usize,
+    ) -> Result<(), GpuError> {
+        self.grad2d.ensure(gpu, primitives)?;
+        self.seen.ensure(gpu, primitives)?;
+        let n = primitives as u32;
+        gpu.write(
+            &self.info,
+            &[n, stride as u32, words as u32, 0, position as u32, 0, 0, 0],
+        );
+        let [projected, params, grads, camera] = frame;
+        let bind = gpu.bind_named(
+            &self.kernel,
+            &[
+                ("projected", projected),
+                ("params", params),
+                ("param_grads", grads),
+                ("camera_words", camera),
+                ("grad2d", &self.grad2d),
+                ("seen", &self.seen),
+                ("info", &self.info),
+            ],
+        )?;
+        dispatch(encoder, &self.kernel.pipeline, &bind, n.div_ceil(256));
+        Ok(())
+    }
+
+    /// The statistics of the `primitives` primitives since the last call, then cleared.
+    pub fn take(&mut self, gpu: &Gpu, primitives: usize) -> Result<(Vec<f32>, Vec<u32>), GpuError> {
+        if primitives == 0 {
+            return Ok((vec![], vec![]));
+        }
+        let grad2d = gpu.read(&self.grad2d, primitives)?;
+        let seen = gpu.read(&self.seen, primitives)?;
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        enc.clear_buffer(&self.grad2d, 0, None);
+        enc.clear_buffer(&self.seen, 0, None);
+        gpu.queue.submit([enc.finish()]);
+        Ok((grad2d.into_iter().map(f32::from_bits).collect(), seen))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::train::adam::Adam;
+    use crate::train::loss::loss_and_gradient;
+
+    fn image(w: u32, h: u32, data: Vec<f32>) -> Image {
+        Image {
+            width: w,
+            height: h,
+            channels: 3,
+            data,
+        }
+    }
+
+    /// The device loss and gradient against the CPU's (f64) on a random frame composited on a
+    /// colored background: value within 1e-5, gradient within 1e-4 of its largest word, alpha's
+    /// included.
+    #[test]
+    fn the_device_loss_and_gradient_match_the_cpu() {
+        let Some(gpu) = crate::gpu::adapter_or_skip() else {
+            return;
+        };
+        let (w, h) = (23u32, 17u32);
+        let pixels = (w * h) as usize;
+        let mut rng = fastrand::Rng::with_seed(2);
+        let state: Vec<f32> = (0..pixels * 5).map(|_| rng.f32()).collect();
+        let target = image(w, h, (0..pixels * 3).map(|_| rng.f32()).collect());
+        let other = image(w, h, vec![0.5; pixels * 3]);
+        let bg = Vec3::new(0.2, 0.7, 0.4);
+        let mut loss = GpuLoss::new(&gpu, &[&other, &target], bg, 0.2).unwrap();
+        let words = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<u32>>();
+        let state_buf = gpu.buffer_from("state", &words(&state)).unwrap();
+        let grad_buf = gpu.buffer("grad", pixels * 5).unwrap();
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        loss.record(&gpu, &mut enc, 1, (w, h), &state_buf, &grad_buf)
+            .unwrap();
+        gpu.queue.submit([enc.finish()]);
+        let got = loss.value(&gpu).unwrap();
+        let grad: Vec<f32> = gpu
+            .read(&grad_buf, pixels * 5)
+            .unwrap()
+            .into_iter()
+            .map(f32::from_bits)
+            .collect();
+
+        let composited: Vec<f32> = state
+            .chunks_exact(5)
+            .flat_map(|s| [0, 1, 2].map(|c| s[c] + s[3] * bg[c]))
+            .collect();
+        let (want, d) = loss_and_gradient(&image(w, h, composited), &target, 0.2).unwrap();
+        assert!((got.loss - want.loss).abs() < 1e-5, "{got:?} vs {want:?}");
+        assert!((got.ssim - want.ssim).abs() < 1e-5, "{got:?} vs {want:?}");
+        let largest = d.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        for p in 0..pixels {
+            let dc = &d[p * 3..p * 3 + 3];
+            let alpha = -(dc[0] * bg.x + dc[1] * bg.y + dc[2] * bg.z);
+            for (k, want) in dc.iter().chain([&alpha, &0.0]).enumerate() {
+                let g = grad[p * 5 + k];
+                assert!(
+                    (g - want).abs() <= 1e-4 * largest,
+                    "pixel {p} word {k}: {g} vs {want}"
+                );
+            }
+        }
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        let err = loss
+            .record(&gpu, &mut enc, 0, (w + 1, h), &state_buf, &grad_buf)
+            .unwrap_err();
+        assert!(matches!(err, GpuTrainError::Size { view: 0, .. }), "{err}");
+    }
+
+    /// Three device Adam steps equal the CPU's, a word not trained yet (negative rate) and its
+    /// moments stay put; after a remap the moments follow the rows.
+    #[test]
+    fn device_adam_matches_the_cpu() {
+        let Some(gpu) = crate::gpu::adapter_or_skip() else {
+            return;
+        };
+        let (prims, words) = (70, 3);
+        let mut rng = fastrand::Rng::with_seed(4);
+        let mut cpu: Vec<f32> = (0..prims * words).map(|_| rng.f32()).collect();
+        let to_words = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<u32>>();
+        let params = gpu.buffer_from("params", &to_words(&cpu)).unwrap();
+        let mut adam = GpuAdam::new(&gpu, words).unwrap();
+        let mut host = Adam::new(prims, words);
+        let rates = [0.01, 0.05, -1.0];
+        for _ in 0..3 {
+            let g: Vec<f32> = (0..prims * words).map(|_| rng.f32() - 0.5).collect();
+            let grads = gpu.buffer_from("grads", &to_words(&g)).unwrap();
+            let mut enc = gpu.device.create_command_encoder(&Default::default());
+            adam.record(&gpu, &mut enc, &params, &grads, prims, &rates)
+                .unwrap();
+            gpu.queue.submit([enc.finish()]);
+            let locked: Vec<f32> = g
+                .iter()
+                .enumerate()
+                .map(|(k, g)| if k % words == 2 { 0.0 } else { *g })
+                .collect();
+            host.step(&mut cpu, &locked, &rates.map(|r: f32| r.max(0.0)));
+        }
+        let got: Vec<f32> = gpu
+            .read(&params, prims * words)
+            .unwrap()
+            .into_iter()
+            .map(f32::from_bits)
+            .collect();
+        for (k, (a, b)) in got.iter().zip(&cpu).enumerate() {
+            assert!((a - b).abs() <= 1e-6, "word {k}: {a} vs {b}");
+        }
+        // Keep row 5 as row 0 and add a fresh row: the moments move with them.
+        adam.remap(&gpu, prims, &[Some(5), None], |_| false)
+            .unwrap();
+        let m: Vec<f32> = gpu
+            .read(&adam.m, 2 * words)
+            .unwrap()
+            .into_iter()
+            .map(f32::from_bits)
+            .collect();
+        assert!(m[0] != 0.0 && m[words..].iter().all(|v| *v == 0.0), "{m:?}");
+    }
+}

@@ -1,0 +1,154 @@
+//! The training loop on the GPU, step for step the CPU loop of [`super::fit`]: the scene, the
+//! target images, the loss, the gradients and Adam's moments live on the device. A step is
+//! the renderer's forward (which reads back the intersection count), the loss and backward,
+//! Adam and density control's statistics, and a read-back of the loss value (a few words).
+//! Every hundred steps density control refines on the host: the scene and the moments go
+//! down and back up.
+
+use super::densify::Densifier;
+use super::fit::{FitError, FitOptions, StepReport, Trainable, flatten, with_alpha};
+use crate::flat::Flat;
+use crate::gpu::entries::Accumulation;
+use crate::gpu::train::{GpuAdam, GpuLoss, GpuObserver, GpuTrainError};
+use crate::gpu::{Gpu, GpuRenderError, GpuRenderer, GpuScene};
+use crate::io::dataset::Dataset;
+use glam::Vec3;
+
+impl From<GpuTrainError> for FitError {
+    fn from(e: GpuTrainError) -> FitError {
+        FitError::Gpu(e.to_string())
+    }
+}
+
+impl From<GpuRenderError> for FitError {
+    fn from(e: GpuRenderError) -> FitError {
+        FitError::Gpu(e.to_string())
+    }
+}
+
+impl From<crate::gpu::GpuError> for FitError {
+    fn from(e: crate::gpu::GpuError) -> FitError {
+        FitError::Gpu(e.to_string())
+    }
+}
+
+/// Trains `params` as [`super::fit::fit`] does, on `gpu`.
+pub fn fit_gpu<M: Trainable>(
+    gpu: &Gpu,
+    data: &Dataset,
+    params: &mut Vec<M::Params>,
+    extent: f32,
+    opts: &FitOptions,
+    mut progress: impl FnMut(&StepReport),
+) -> Result<(), FitError> {
+    if data.train.is_empty() {
+        return Err(FitError::NoViews);
+    }
+    let words = M::Params::LEN;
+    let rates = M::learning_rates(extent);
+    assert_eq!(rates.len(), words, "one learning rate per parameter word");
+    let position = position_word::<M>().ok_or_else(|| {
+        FitError::Unsupported(format!(
+            "{}: its position is not three consecutive parameter words",
+            M::NAME
+        ))
+    })?;
+    let mut renderer = GpuRenderer::<M>::new(gpu, &with_alpha(&opts.render))?;
+    if renderer.param_floats() != words || M::Color::LEN != 3 {
+        return Err(FitError::Unsupported(format!(
+            "{}: GPU training needs all-float parameters and RGB color",
+            M::NAME
+        )));
+    }
+    let targets: Vec<_> = data.train.iter().map(|v| &v.image).collect();
+    let mut loss = GpuLoss::new(gpu, &targets, opts.background, opts.ssim_weight as f32)?;
+    let mut scene = GpuScene::<M>::new(gpu, params)?;
+    let mut adam = GpuAdam::new(gpu, words)?;
+    let mut observer = GpuObserver::new(gpu)?;
+    let mut densifier = opts
+        .densify
+        .clone()
+        .map(|d| Densifier::new(d, params.len()));
+    let acc = Accumulation::default_for(gpu);
+    let mut rng = fastrand::Rng::with_seed(opts.seed);
+    for step in 0..opts.steps {
+        let k = rng.usize(..data.train.len());
+        let camera = &data.train[k].camera;
+        let frame = renderer.forward(&scene, camera)?;
+        let size = (frame.grid.width, frame.grid.height);
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        let grad = renderer.pixel_gradients()?.clone();
+        loss.record(gpu, &mut enc, k, size, renderer.pixel_state(), &grad)?;
+        gpu.queue.submit([enc.finish()]);
+        renderer.backward_on_device(&scene, acc)?;
+
+        let lr: Vec<f32> = rates
+            .iter()
+            .map(|r| match step < r.from_step {
+                true => -1.0,
+                false => r.at(step, opts.steps),
+            })
+            .collect();
+        let n = scene.len();
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        let param_grads = renderer.param_gradients();
+        adam.record(gpu, &mut enc, scene.buffer(), param_grads, n, &lr)?;
+        let observing = densifier.as_ref().filter(|d| step < d.opts.stop);
+        if observing.is_some() {
+            let (projected, stride) = renderer.projected();
+            let frame = [
+                projected,
+                scene.buffer(),
+                param_grads,
+                renderer.camera_buffer(),
+            ];
+            observer.record(gpu, &mut enc, frame, n, stride, words, position)?;
+        }
+        gpu.queue.submit([enc.finish()]);
+        let value = loss.value(gpu)?;
+
+        let mut refinement = None;
+        if let Some(d) = densifier.as_mut().filter(|d| step < d.opts.stop)
+            && (d.refines_at(step) || d.resets_at(step))
+        {
+            let mut host = scene.download(gpu)?;
+            let mut origin: Vec<Option<usize>> = (0..n).map(Some).collect();
+            if d.refines_at(step) {
+                let (grad2d, seen) = observer.take(gpu, n)?;
+                d.add_observations(&grad2d, &seen);
+                let r = d.refine::<M>(&mut host, step, extent, &mut rng);
+                origin = r.origin.clone();
+                refinement = Some(r);
+            }
+            let before = flatten::<M>(&host);
+            if d.resets_at(step) {
+                d.reset_opacity::<M>(&mut host);
+            }
+            // Only the words the reset moved (opacities) forget their moments.
+            let after = flatten::<M>(&host);
+            adam.remap(gpu, n, &origin, |k| before[k] != after[k])?;
+            scene.upload(gpu, &host)?;
+        }
+        progress(&StepReport {
+            step,
+            loss: &value,
+            primitives: scene.len(),
+            refinement: refinement.as_ref(),
+        });
+    }
+    *params = scene.download(gpu)?;
+    Ok(())
+}
+
+/// The first of the three consecutive parameter words that hold the position: the slots whose
+/// unit gradient reads as a unit position gradient along x, y, z.
+fn position_word<M: Trainable>() -> Option<usize> {
+    let words = M::Params::LEN;
+    let unit = |k: usize| {
+        let mut w = vec![0.0; words];
+        w[k] = 1.0;
+        M::position_gradient(&M::Params::read_words(&w))
+    };
+    let first = (0..words).find(|&k| unit(k) == Vec3::X)?;
+    (first + 2 < words && unit(first + 1) == Vec3::Y && unit(first + 2) == Vec3::Z).then_some(first)
+}
