@@ -48,6 +48,10 @@ pub struct FitArgs {
     /// Composite the images on white instead of black.
     #[arg(long)]
     white: bool,
+    /// A random background color per step (transparent parts of the images re-composited on
+    /// it), so the scene cannot paint the background in; evaluation stays on black or white.
+    #[arg(long)]
+    random_background: bool,
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// Keep the primitive count fixed (no adaptive density control: cloning, splitting,
@@ -93,6 +97,7 @@ pub fn fit_cmd(args: &FitArgs) -> Result<()> {
         background,
         seed: args.seed,
         densify: (!args.no_densify).then(Default::default),
+        random_background: args.random_background,
         ..Default::default()
     };
     match args.method {

@@ -6,7 +6,7 @@
 
 use super::device::{Grown, Kernel, dispatch};
 use super::{Gpu, GpuError};
-use crate::pipeline::Image;
+use crate::io::dataset::View;
 use crate::train::adam::remap_rows;
 use crate::train::loss::{LossValue, WINDOW, window};
 use glam::Vec3;
@@ -20,14 +20,15 @@ const OBSERVE: &str = include_str!("shaders/observe.wgsl");
 pub struct GpuLoss {
     terms_kernel: Kernel,
     gradient_kernel: Kernel,
-    /// Every target image, RGB f32, one after another; each one's offset (words) and size.
+    /// Every target image, RGB f32, one after another, and the coverage of those that have
+    /// one; each one's offsets (words; coverage `u32::MAX` when opaque), size and background.
     targets: wgpu::Buffer,
-    views: Vec<(u32, u32, u32)>,
+    coverage: wgpu::Buffer,
+    views: Vec<Target>,
     taps: wgpu::Buffer,
     terms: Grown,
     sums: Grown,
     info: wgpu::Buffer,
-    background: Vec3,
     ssim_weight: f32,
     /// The last loss recorded: its image size (for reading its value back).
     last: Option<(u32, u32)>,
@@ -49,54 +50,73 @@ pub enum GpuTrainError {
     NoLoss,
 }
 
+/// Where one target lives in the loss's buffers.
+struct Target {
+    offset: u32,
+    coverage: u32,
+    width: u32,
+    height: u32,
+    background: Vec3,
+}
+
 impl GpuLoss {
-    /// Uploads `targets` (RGB) once; renders are composited on `background`; the loss weighs
-    /// D-SSIM by `ssim_weight`.
-    pub fn new(
-        gpu: &Gpu,
-        targets: &[&Image],
-        background: Vec3,
-        ssim_weight: f32,
-    ) -> Result<GpuLoss, GpuTrainError> {
-        let mut words = vec![];
-        let mut views = vec![];
-        for (k, t) in targets.iter().enumerate() {
+    /// Uploads the views' images (RGB) and coverages once; the loss weighs D-SSIM by
+    /// `ssim_weight`.
+    pub fn new(gpu: &Gpu, targets: &[&View], ssim_weight: f32) -> Result<GpuLoss, GpuTrainError> {
+        let (mut words, mut alphas, mut views) = (vec![], vec![], vec![]);
+        for (k, view) in targets.iter().enumerate() {
+            let t = &view.image;
             let small = (t.width as usize) < WINDOW || (t.height as usize) < WINDOW;
             if t.channels != 3 || small {
                 return Err(GpuTrainError::Target(k));
             }
-            views.push((words.len() as u32, t.width, t.height));
+            views.push(Target {
+                offset: words.len() as u32,
+                coverage: view
+                    .coverage
+                    .as_ref()
+                    .map_or(u32::MAX, |_| alphas.len() as u32),
+                width: t.width,
+                height: t.height,
+                background: view.background,
+            });
             words.extend(t.data.iter().map(|v| v.to_bits()));
+            if let Some(a) = &view.coverage {
+                alphas.extend(a.iter().map(|v| v.to_bits()));
+            }
         }
         let taps: Vec<u32> = window().iter().map(|g| (*g as f32).to_bits()).collect();
         Ok(GpuLoss {
             terms_kernel: gpu.kernel(LOSS, "ssim_terms")?,
             gradient_kernel: gpu.kernel(LOSS, "loss_gradient")?,
             targets: gpu.buffer_from("target images", &words)?,
+            coverage: gpu.buffer_from("target coverage", &alphas)?,
             views,
             taps: gpu.buffer_from("SSIM window", &taps)?,
             terms: Grown::new(gpu, "SSIM cotangents", 1)?,
             sums: Grown::new(gpu, "loss partial sums", 1)?,
-            info: gpu.uniform_buffer(12),
-            background,
+            info: gpu.uniform_buffer(16),
             ssim_weight,
             last: None,
         })
     }
 
     /// Records the loss of the frame in `pixel_state` (per pixel: 3 colors, T, depth sum)
-    /// against target `view`, writing its gradient into `pixel_grad` (per pixel: 3 colors,
-    /// alpha, depth).
+    /// against target `view`, both composited on `background`, writing its gradient into
+    /// `pixel_grad` (per pixel: 3 colors, alpha, depth).
+    #[allow(clippy::too_many_arguments)]
     pub fn record(
         &mut self,
         gpu: &Gpu,
         encoder: &mut wgpu::CommandEncoder,
         view: usize,
+        background: Vec3,
         size: (u32, u32),
         pixel_state: &wgpu::Buffer,
         pixel_grad: &wgpu::Buffer,
     ) -> Result<(), GpuTrainError> {
-        let (offset, w, h) = self.views[view];
+        let t = &self.views[view];
+        let (w, h) = (t.width, t.height);
         if (w, h) != size {
             return Err(GpuTrainError::Size {
                 view,
@@ -109,9 +129,9 @@ impl GpuLoss {
         let groups = pixels.div_ceil(64);
         self.terms.ensure(gpu, valid as usize * 9)?;
         self.sums.ensure(gpu, 2 * groups as usize)?;
-        let b = self.background;
-        let floats = [b.x, b.y, b.z, self.ssim_weight].map(f32::to_bits);
-        let ints = [w, h, 5, offset, vw, vh, valid, 0];
+        let (b, b0) = (background, t.background);
+        let floats = [b.x, b.y, b.z, self.ssim_weight, b0.x, b0.y, b0.z, 0.0].map(f32::to_bits);
+        let ints = [w, h, 5, t.offset, vw, vh, valid, t.coverage];
         gpu.write(&self.info, &[&ints[..], &floats].concat());
         encoder.clear_buffer(&self.sums, 0, None);
         let mut inputs = vec![
@@ -121,6 +141,7 @@ impl GpuLoss {
             ("terms", &self.terms),
             ("sums", &self.sums),
             ("info", &self.info),
+            ("coverage", &self.coverage),
         ];
         let bind = gpu.bind_named(&self.terms_kernel, &inputs)?;
         dispatch(
@@ -349,6 +370,7 @@ impl GpuObserver {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::pipeline::Image;
     use crate::train::adam::Adam;
     use crate::train::loss::loss_and_gradient;
 
@@ -361,9 +383,20 @@ mod tests {
         }
     }
 
+    fn view(image: Image, coverage: Option<Vec<f32>>, background: Vec3) -> View {
+        View {
+            name: "target".into(),
+            camera: Default::default(),
+            image,
+            coverage,
+            background,
+        }
+    }
+
     /// The device loss and gradient against the CPU's (f64) on a random frame composited on a
-    /// colored background: value within 1e-5, gradient within 1e-4 of its largest word, alpha's
-    /// included.
+    /// colored background, the target (partly transparent, stored on another background)
+    /// re-composited on it: value within 1e-5, gradient within 1e-4 of its largest word,
+    /// alpha's included.
     #[test]
     fn the_device_loss_and_gradient_match_the_cpu() {
         let Some(gpu) = crate::gpu::adapter_or_skip() else {
@@ -373,15 +406,21 @@ mod tests {
         let pixels = (w * h) as usize;
         let mut rng = fastrand::Rng::with_seed(2);
         let state: Vec<f32> = (0..pixels * 5).map(|_| rng.f32()).collect();
-        let target = image(w, h, (0..pixels * 3).map(|_| rng.f32()).collect());
-        let other = image(w, h, vec![0.5; pixels * 3]);
+        let coverage: Vec<f32> = (0..pixels).map(|_| rng.f32()).collect();
+        let stored = Vec3::new(1.0, 0.9, 0.0);
+        let target = view(
+            image(w, h, (0..pixels * 3).map(|_| rng.f32()).collect()),
+            Some(coverage),
+            stored,
+        );
+        let other = view(image(w, h, vec![0.5; pixels * 3]), None, Vec3::ZERO);
         let bg = Vec3::new(0.2, 0.7, 0.4);
-        let mut loss = GpuLoss::new(&gpu, &[&other, &target], bg, 0.2).unwrap();
+        let mut loss = GpuLoss::new(&gpu, &[&other, &target], 0.2).unwrap();
         let words = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<u32>>();
         let state_buf = gpu.buffer_from("state", &words(&state)).unwrap();
         let grad_buf = gpu.buffer("grad", pixels * 5).unwrap();
         let mut enc = gpu.device.create_command_encoder(&Default::default());
-        loss.record(&gpu, &mut enc, 1, (w, h), &state_buf, &grad_buf)
+        loss.record(&gpu, &mut enc, 1, bg, (w, h), &state_buf, &grad_buf)
             .unwrap();
         gpu.queue.submit([enc.finish()]);
         let got = loss.value(&gpu).unwrap();
@@ -396,7 +435,7 @@ mod tests {
             .chunks_exact(5)
             .flat_map(|s| [0, 1, 2].map(|c| s[c] + s[3] * bg[c]))
             .collect();
-        let (want, d) = loss_and_gradient(&image(w, h, composited), &target, 0.2).unwrap();
+        let (want, d) = loss_and_gradient(&image(w, h, composited), &target.on(bg), 0.2).unwrap();
         assert!((got.loss - want.loss).abs() < 1e-5, "{got:?} vs {want:?}");
         assert!((got.ssim - want.ssim).abs() < 1e-5, "{got:?} vs {want:?}");
         let largest = d.iter().fold(0.0f32, |m, v| m.max(v.abs()));
@@ -413,7 +452,7 @@ mod tests {
         }
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         let err = loss
-            .record(&gpu, &mut enc, 0, (w + 1, h), &state_buf, &grad_buf)
+            .record(&gpu, &mut enc, 0, bg, (w + 1, h), &state_buf, &grad_buf)
             .unwrap_err();
         assert!(matches!(err, GpuTrainError::Size { view: 0, .. }), "{err}");
     }

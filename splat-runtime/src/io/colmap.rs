@@ -227,7 +227,7 @@ impl Shot {
     /// (`cameras` names the cameras file, for errors).
     fn view(&self, folder: &Path, background: Vec3, cameras: &str) -> Result<View, DatasetError> {
         let path = folder.join(&self.name);
-        let image = read_image(&path, background)?;
+        let (image, coverage) = read_image(&path, background)?;
         let camera = rescaled(&self.camera, image.width, image.height).ok_or_else(|| {
             let want = self.camera.size;
             field(
@@ -243,6 +243,8 @@ impl Shot {
             name: path.display().to_string(),
             camera,
             image,
+            coverage,
+            background,
         })
     }
 }

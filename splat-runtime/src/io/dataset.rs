@@ -27,8 +27,33 @@ pub struct View {
     /// The image's path, for reports.
     pub name: String,
     pub camera: Camera,
-    /// RGB, composited on the background.
+    /// RGB, composited on `background`.
     pub image: Image,
+    /// Per pixel, the coverage (alpha) of an RGBA image that is not opaque everywhere.
+    pub coverage: Option<Vec<f32>>,
+    pub background: Vec3,
+}
+
+impl View {
+    /// The image composited on `background` instead (the same image when it is opaque or the
+    /// background is the same).
+    pub fn on(&self, background: Vec3) -> std::borrow::Cow<'_, Image> {
+        let Some(alpha) = self
+            .coverage
+            .as_ref()
+            .filter(|_| background != self.background)
+        else {
+            return std::borrow::Cow::Borrowed(&self.image);
+        };
+        let shift = (background - self.background).to_array();
+        let mut image = self.image.clone();
+        for (px, a) in image.data.chunks_exact_mut(3).zip(alpha) {
+            for (c, d) in px.iter_mut().zip(shift) {
+                *c += (1.0 - a) * d;
+            }
+        }
+        std::borrow::Cow::Owned(image)
+    }
 }
 
 /// The training and held-out views of a scene.
@@ -184,7 +209,7 @@ pub fn read_nerfstudio(dir: &Path, background: Vec3) -> Result<Dataset, DatasetE
             )
         })?;
         let image_path = dir.join(file);
-        let image = read_image(&image_path, background)?;
+        let (image, coverage) = read_image(&image_path, background)?;
         let (w, h) = (required("w")?, required("h")?);
         if (w as u32, h as u32) != (image.width, image.height) {
             return Err(DatasetError::Size {
@@ -243,6 +268,8 @@ pub fn read_nerfstudio(dir: &Path, background: Vec3) -> Result<Dataset, DatasetE
             name: image_path.display().to_string(),
             camera,
             image,
+            coverage,
+            background,
         };
         if k % 8 == 0 {
             data.test.push(view);
@@ -290,7 +317,7 @@ fn read_split(path: &Path, background: Vec3) -> Result<Vec<View>, DatasetError> 
                 "must be 4 rows of 4 finite numbers",
             )
         })?;
-        let image = read_image(&image_path, background)?;
+        let (image, coverage) = read_image(&image_path, background)?;
         let dims = (image.width, image.height);
         if let Some(want) = size.filter(|s| *s != dims) {
             return Err(DatasetError::Size {
@@ -308,6 +335,8 @@ fn read_split(path: &Path, background: Vec3) -> Result<Vec<View>, DatasetError> 
             name: image_path.display().to_string(),
             camera,
             image,
+            coverage,
+            background,
         });
     }
     Ok(views)
@@ -346,8 +375,11 @@ fn posed_camera(c2w_gl: &Mat4, focal: Vec2, image: &Image) -> Option<Camera> {
     })
 }
 
-/// An image as RGB in [0, 1], alpha composited on `background`.
-pub(super) fn read_image(path: &Path, background: Vec3) -> Result<Image, DatasetError> {
+/// An image as RGB in [0, 1], alpha composited on `background`, and its alpha unless opaque.
+pub(super) fn read_image(
+    path: &Path,
+    background: Vec3,
+) -> Result<(Image, Option<Vec<f32>>), DatasetError> {
     let img = image::open(path).map_err(|error| match error {
         image::ImageError::IoError(error) => DatasetError::Io {
             path: path.to_path_buf(),
@@ -361,16 +393,19 @@ pub(super) fn read_image(path: &Path, background: Vec3) -> Result<Image, Dataset
     let rgba = img.to_rgba32f();
     let (width, height) = rgba.dimensions();
     let mut data = Vec::with_capacity(width as usize * height as usize * 3);
+    let mut alpha = Vec::with_capacity(width as usize * height as usize);
     for p in rgba.pixels() {
         let a = p[3];
         for (c, b) in p.0[..3].iter().zip(background.to_array()) {
             data.push(c * a + b * (1.0 - a));
         }
+        alpha.push(a);
     }
-    Ok(Image {
+    let image = Image {
         width,
         height,
         channels: 3,
         data,
-    })
+    };
+    Ok((image, alpha.iter().any(|a| *a < 1.0).then_some(alpha)))
 }

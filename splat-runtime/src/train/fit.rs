@@ -75,6 +75,9 @@ pub struct FitOptions {
     pub background: Vec3,
     pub render: RenderOptions,
     pub seed: u64,
+    /// A random background color per step instead of `background` (the targets' transparent
+    /// parts re-composited on it), so that the scene cannot paint the background in.
+    pub random_background: bool,
     /// Adaptive density control, or none (the primitive count stays fixed).
     pub densify: Option<DensifyOptions>,
 }
@@ -91,6 +94,7 @@ impl Default for FitOptions {
                 ..Default::default()
             },
             seed: 0,
+            random_background: false,
             densify: Some(DensifyOptions::default()),
         }
     }
@@ -203,14 +207,16 @@ pub fn fit<M: Trainable>(
         .map(|d| Densifier::new(d, params.len()));
     let mut rng = fastrand::Rng::with_seed(opts.seed);
     let render_opts = with_alpha(&opts.render);
-    let b = opts.background.to_array();
     for step in 0..opts.steps {
         let view = &data.train[rng.usize(..data.train.len())];
+        let background = step_background(opts, &mut rng);
         let (frame, state) =
             crate::pipeline::render_for_backward::<M>(params, &view.camera, &render_opts)?;
-        let image = composite(frame.color, frame.alpha.as_ref(), opts.background);
-        let (value, d_color) = loss::loss_and_gradient(&image, &view.image, opts.ssim_weight)?;
+        let image = composite(frame.color, frame.alpha.as_ref(), background);
+        let (value, d_color) =
+            loss::loss_and_gradient(&image, &view.on(background), opts.ssim_weight)?;
         // The background term (1 - alpha) b: its gradient flows into alpha.
+        let b = background.to_array();
         let d_alpha = d_color
             .chunks_exact(3)
             .map(|g| -(g[0] * b[0] + g[1] * b[1] + g[2] * b[2]))
@@ -262,6 +268,14 @@ pub fn fit<M: Trainable>(
         });
     }
     Ok(())
+}
+
+/// This step's background: `opts.background`, or a random color.
+pub(crate) fn step_background(opts: &FitOptions, rng: &mut fastrand::Rng) -> Vec3 {
+    match opts.random_background {
+        true => Vec3::new(rng.f32(), rng.f32(), rng.f32()),
+        false => opts.background,
+    }
 }
 
 /// The parameter words of every primitive, one after another.

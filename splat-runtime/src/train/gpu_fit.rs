@@ -6,7 +6,9 @@
 //! down and back up.
 
 use super::densify::Densifier;
-use super::fit::{FitError, FitOptions, StepReport, Trainable, flatten, with_alpha};
+use super::fit::{
+    FitError, FitOptions, StepReport, Trainable, flatten, step_background, with_alpha,
+};
 use crate::flat::Flat;
 use crate::gpu::entries::Accumulation;
 use crate::gpu::train::{GpuAdam, GpuLoss, GpuObserver, GpuTrainError};
@@ -60,8 +62,8 @@ pub fn fit_gpu<M: Trainable>(
             M::NAME
         )));
     }
-    let targets: Vec<_> = data.train.iter().map(|v| &v.image).collect();
-    let mut loss = GpuLoss::new(gpu, &targets, opts.background, opts.ssim_weight as f32)?;
+    let targets: Vec<_> = data.train.iter().collect();
+    let mut loss = GpuLoss::new(gpu, &targets, opts.ssim_weight as f32)?;
     let mut scene = GpuScene::<M>::new(gpu, params)?;
     let mut adam = GpuAdam::new(gpu, words)?;
     let mut observer = GpuObserver::new(gpu)?;
@@ -74,11 +76,13 @@ pub fn fit_gpu<M: Trainable>(
     for step in 0..opts.steps {
         let k = rng.usize(..data.train.len());
         let camera = &data.train[k].camera;
+        let background = step_background(opts, &mut rng);
         let frame = renderer.forward(&scene, camera)?;
         let size = (frame.grid.width, frame.grid.height);
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         let grad = renderer.pixel_gradients()?.clone();
-        loss.record(gpu, &mut enc, k, size, renderer.pixel_state(), &grad)?;
+        let state = renderer.pixel_state();
+        loss.record(gpu, &mut enc, k, background, size, state, &grad)?;
         gpu.queue.submit([enc.finish()]);
         renderer.backward_on_device(&scene, acc)?;
 

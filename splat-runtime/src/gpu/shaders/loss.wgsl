@@ -2,7 +2,8 @@
 // `train::loss` defines it on the CPU: (1 - λ) L1 + λ (1 - SSIM), SSIM with an 11 x 11 Gaussian
 // window over the window positions inside the image ("valid"), C1 = 0.01², C2 = 0.03², means
 // over pixels (L1) and positions (SSIM) and the 3 channels. The render is composited on the
-// background first (x = color + T b). Its gradient becomes the backward pass's output gradient:
+// step's background first (x = color + T b), and so is the target where it has a coverage
+// (alpha): stored on its own background b0, it becomes target + (1 - alpha)(b - b0). Its gradient becomes the backward pass's output gradient:
 // per pixel the color channels, then alpha (-Σ g_c b_c), then depth (zero).
 //
 // Two passes: `ssim_terms`, per window position, the cotangents of the window's filtered
@@ -12,10 +13,13 @@
 struct LossInfo {
     // width, height, pixel state words per pixel (3 colors, T, depth sum), target offset
     size: vec4<u32>,
-    // valid window positions: width, height, count; unused
+    // valid window positions: width, height, count; the target's coverage offset (or
+    // 0xffffffff: opaque)
     valid: vec4<u32>,
-    // background rgb, λ
+    // the step's background rgb, λ
     background: vec4<f32>,
+    // the target's own background rgb, unused
+    base: vec4<f32>,
 }
 
 @group(0) @binding(0) var<storage, read> pixel_state: array<f32>;
@@ -25,6 +29,7 @@ struct LossInfo {
 @group(0) @binding(4) var<storage, read_write> pixel_grad: array<f32>;
 @group(0) @binding(5) var<storage, read_write> sums: array<f32>;
 @group(0) @binding(6) var<uniform> info: LossInfo;
+@group(0) @binding(7) var<storage, read> coverage: array<f32>;
 
 const C1: f32 = 0.0001;
 const C2: f32 = 0.0009;
@@ -38,7 +43,11 @@ fn render(p: u32, c: u32) -> f32 {
 }
 
 fn target_at(p: u32, c: u32) -> f32 {
-    return targets[info.size.w + p * 3u + c];
+    let t = targets[info.size.w + p * 3u + c];
+    if (info.valid.w == 0xffffffffu) {
+        return t;
+    }
+    return t + (1.0 - coverage[info.valid.w + p]) * (info.background[c] - info.base[c]);
 }
 
 // Sums `v` over the workgroup into sums[2 * group + slot].
