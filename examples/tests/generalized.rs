@@ -1,18 +1,19 @@
-//! Generalized exponential splats: CPU renders against an f64 brute-force reference built from
-//! the method's twin, full-render gradients (β included) against central differences of that
-//! reference, and the falloff itself (β = 2 is the Gaussian; a larger β is flatter inside and
-//! sharper at the edge; the box holds every pixel the alpha threshold keeps), and the GPU
-//! backend against the CPU backend.
+//! Generalized exponential splats, tested as a method author would with `splat_runtime::checks`:
+//! CPU renders against the f64 brute-force reference built from the method's twins, on a
+//! simple and a realistic scene; full-render gradients (β included) against central
+//! differences of the reference, and on the realistic scene against its analytic adjoint; the
+//! GPU against the CPU, forward and backward; and the falloff itself (β = 2 is the Gaussian; a
+//! larger β is flatter inside and sharper at the edge; the box holds every pixel the alpha
+//! threshold keeps).
 
 use splat_examples::generalized::generalized::{self, Method, Params, Shade};
-use splat_runtime::glam::{Mat3, Quat, Vec2, Vec3, Vec4};
-use splat_runtime::{
-    Camera, Contribution, F32x8, Flat, FrameGrad, RenderOptions, backward, render,
-    render_for_backward,
+use splat_runtime::checks::forward::{forward_matches_reference, gpu_forward_matches_cpu};
+use splat_runtime::checks::gradients::{
+    gpu_gradients_match_cpu, gradients_match_finite_differences, gradients_match_reference_adjoint,
 };
-
-/// The blend stops before transmittance falls to this (the runtime's rule).
-const T_MIN: f64 = 1e-4;
+use splat_runtime::checks::reference;
+use splat_runtime::glam::{Mat3, Quat, Vec2, Vec3, Vec4};
+use splat_runtime::{Camera, Contribution, F32x8, Flat};
 
 fn camera(w: f32, h: f32, rotation: Mat3, translation: Vec3) -> Camera {
     Camera {
@@ -53,67 +54,6 @@ fn splat_at(
     }
 }
 
-fn param_words(p: &Params) -> Vec<f64> {
-    let mut w = vec![0.0f32; Params::LEN];
-    p.write_words(&mut w);
-    w.into_iter().map(f64::from).collect()
-}
-
-struct Reference {
-    color: Vec<f64>,
-    alpha: Vec<f64>,
-}
-
-/// Every visible primitive (parameter words) at every pixel in depth order, with the f64 twin
-/// of `project` and `evaluate`: no tiles, boxes or tile culls; only the method's thresholds and
-/// the blend's stopping rule.
-fn reference(params: &[Vec<f64>], cam: &Camera) -> Reference {
-    let cam_words = cam.float_slots().map(f64::from);
-    let ints = [cam.model as u32];
-    let mut prims = vec![];
-    for p in params {
-        let input: Vec<f64> = p.iter().chain(&cam_words).copied().collect();
-        let (out, flags) = generalized::twin::project(input.as_slice().try_into().unwrap(), &ints);
-        if flags[0] != 0 {
-            // Outputs: depth, box (4), cull data, then the shade.
-            prims.push((out[0], out[5 + generalized::Cull::LEN..].to_vec()));
-        }
-    }
-    prims.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let (w, h) = (cam.size.x as usize, cam.size.y as usize);
-    let mut r = Reference {
-        color: vec![0.0; w * h * 3],
-        alpha: vec![0.0; w * h],
-    };
-    for y in 0..h {
-        for x in 0..w {
-            let mut t = 1.0f64;
-            for (_, shade) in &prims {
-                let input: Vec<f64> = [x as f64 + 0.5, y as f64 + 0.5]
-                    .iter()
-                    .chain(shade)
-                    .copied()
-                    .collect();
-                let (o, valid) =
-                    generalized::twin::evaluate(input.as_slice().try_into().unwrap(), &[]);
-                if valid[0] == 0 {
-                    continue;
-                }
-                let next = t * (1.0 - o[0]);
-                if next <= T_MIN {
-                    break;
-                }
-                for ch in 0..3 {
-                    r.color[(y * w + x) * 3 + ch] += o[0] * t * o[1 + ch];
-                }
-                t = next;
-            }
-            r.alpha[y * w + x] = 1.0 - t;
-        }
-    }
-    r
-}
-
 /// Twelve splats with shapes from 1 to 6 in front of a 48 x 32 camera.
 fn scene() -> (Camera, Vec<Params>) {
     let cam = camera(
@@ -144,81 +84,51 @@ fn scene() -> (Camera, Vec<Params>) {
     (cam, params)
 }
 
+/// A realistic scene: 600 splats of shapes 1 to 6 over a 64 x 48 image and past its edges,
+/// dense enough that pairs fall below the threshold mid-list and pixels reach the T-stop.
+fn realistic_scene() -> (Camera, Vec<Params>) {
+    let cam = camera(64.0, 48.0, Mat3::IDENTITY, Vec3::ZERO);
+    let mut rng = fastrand::Rng::with_seed(5);
+    let params = (0..600)
+        .map(|_| {
+            let px = Vec2::new(rng.f32() * 72.0 - 4.0, rng.f32() * 56.0 - 4.0);
+            let (beta, z) = (1.0 + 5.0 * rng.f32(), 2.0 + 4.0 * rng.f32());
+            splat_at(&mut rng, &cam, px, z, -1.8, beta)
+        })
+        .collect();
+    (cam, params)
+}
+
+/// Word ranges of `Params`.
+const GROUPS: [(&str, std::ops::Range<usize>); 6] = [
+    ("mean", 0..3),
+    ("log_scale", 3..6),
+    ("rotation", 6..10),
+    ("opacity", 10..11),
+    ("shape", 11..12),
+    ("sh", 12..24),
+];
+
+/// Camera groups (ranges of its float slots).
+const CAMERA: [(&str, std::ops::Range<usize>); 4] = [
+    ("rotation", 0..9),
+    ("translation", 9..12),
+    ("focal", 12..14),
+    ("principal", 14..16),
+];
+
 #[test]
-fn renders_match_an_f64_reference() {
+fn renders_match_the_f64_reference_on_cpu_and_gpu() {
     let (cam, params) = scene();
-    let opts = RenderOptions {
-        tile_size: 8,
-        alpha: true,
-        ..Default::default()
-    };
-    let frame = render::<Method>(&params, &cam, &opts).unwrap();
-    let want = reference(&params.iter().map(param_words).collect::<Vec<_>>(), &cam);
-    let got_alpha = &frame.alpha.as_ref().unwrap().data;
-    let (mut worst, mut worst_rel) = (0.0f64, 0.0f64);
-    for (got, want) in frame
-        .color
-        .data
-        .iter()
-        .chain(got_alpha)
-        .zip(want.color.iter().chain(&want.alpha))
-    {
-        let err = (*got as f64 - want).abs();
-        assert!(err <= 1e-4 + 0.01 * want.abs(), "{got} vs {want}");
-        worst = worst.max(err);
-        worst_rel = worst_rel.max(err / want.abs().max(1e-3));
-    }
-    let covered = want.alpha.iter().filter(|a| **a > 0.1).count();
-    println!(
-        "forward: worst abs error {worst:.2e} (relative {worst_rel:.2e}), {covered} of {} pixels covered, {} tile intersections",
-        want.alpha.len(),
-        frame.stats.intersections
-    );
+    let coverage = forward_matches_reference::<Method>("ges", &params, &cam);
     assert!(
-        covered > want.alpha.len() / 3,
-        "the scene should cover the image"
+        coverage > 0.2,
+        "the scene should cover the image ({coverage})"
     );
-}
-
-#[test]
-fn the_gpu_renders_what_the_cpu_renders() {
-    let Some(gpu) = splat_runtime::gpu::adapter_or_skip() else {
-        return;
-    };
-    let (cam, params) = scene();
-    for tile_size in [8, 16] {
-        let opts = RenderOptions {
-            tile_size,
-            alpha: true,
-            ..Default::default()
-        };
-        let cpu = render::<Method>(&params, &cam, &opts).unwrap();
-        let g = splat_runtime::gpu::render::render::<Method>(&gpu, &params, &cam, &opts).unwrap();
-        assert_eq!(cpu.stats.intersections, g.stats.intersections);
-        let cpu_alpha = &cpu.alpha.as_ref().unwrap().data;
-        let gpu_alpha = &g.alpha.as_ref().unwrap().data;
-        for (a, b) in cpu
-            .color
-            .data
-            .iter()
-            .chain(cpu_alpha)
-            .zip(g.color.data.iter().chain(gpu_alpha))
-        {
-            assert!(
-                (a - b).abs() <= 1e-4 + 0.01 * a.abs(),
-                "tile {tile_size}: cpu {a} gpu {b}"
-            );
-        }
-    }
-}
-
-/// max |a - b| / max |b| over a group of gradients.
-fn group_error(got: &[f64], want: &[f64]) -> f64 {
-    let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(1e-12);
-    got.iter()
-        .zip(want)
-        .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()))
-        / scale
+    gpu_forward_matches_cpu::<Method>("ges", &params, &cam);
+    let (cam, params) = realistic_scene();
+    forward_matches_reference::<Method>("ges realistic", &params, &cam);
+    gpu_forward_matches_cpu::<Method>("ges realistic", &params, &cam);
 }
 
 #[test]
@@ -236,73 +146,32 @@ fn render_gradients_match_finite_differences() {
             p
         })
         .collect();
-    let words: Vec<Vec<f64>> = params.iter().map(param_words).collect();
-
+    assert_eq!(Params::LEN, 24);
     // Clear of the thresholds: every splat above 1/255 at every pixel, transmittance high.
-    assert!(reference(&words, &cam).alpha.iter().all(|a| *a < 0.99));
-    for p in &words {
-        let solo = reference(std::slice::from_ref(p), &cam);
+    assert!(
+        reference::render::<Method>(&params, &cam)
+            .alpha
+            .iter()
+            .all(|a| *a < 0.99)
+    );
+    for p in &params {
+        let solo = reference::render::<Method>(std::slice::from_ref(p), &cam);
         let min_alpha = solo.alpha.iter().fold(1.0f64, |m, a| m.min(*a));
         assert!(
             min_alpha > 2.0 / 255.0,
             "each splat covers the image (min alpha {min_alpha})"
         );
     }
+    gradients_match_finite_differences::<Method>("ges", &params, &cam, &GROUPS, &CAMERA, 1e-4);
+}
 
-    let n = (cam.size.x * cam.size.y) as usize;
-    let mut wr = fastrand::Rng::with_seed(10);
-    let mut random = |k: usize| (0..k).map(|_| wr.f64() * 2.0 - 1.0).collect::<Vec<f64>>();
-    let (w_color, w_alpha) = (random(n * 3), random(n));
-    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-    let loss = |ws: &[Vec<f64>]| {
-        let r = reference(ws, &cam);
-        dot(&r.color, &w_color) + dot(&r.alpha, &w_alpha)
-    };
-
-    let opts = RenderOptions {
-        tile_size: 8,
-        alpha: true,
-        ..Default::default()
-    };
-    let (_, state) = render_for_backward::<Method>(&params, &cam, &opts).unwrap();
-    let f32s = |v: &[f64]| v.iter().map(|x| *x as f32).collect::<Vec<f32>>();
-    let grad = FrameGrad {
-        color: f32s(&w_color),
-        alpha: Some(f32s(&w_alpha)),
-        depth: None,
-    };
-    let g = backward::<Method>(&state, &params, &cam, &grad).unwrap();
-
-    // Word ranges of Params.
-    let groups = [
-        ("mean", 0..3),
-        ("log_scale", 3..6),
-        ("rotation", 6..10),
-        ("opacity", 10..11),
-        ("shape", 11..12),
-        ("sh", 12..24),
-    ];
-    assert_eq!(Params::LEN, 24);
-    for (name, range) in groups {
-        let (mut got, mut want) = (vec![], vec![]);
-        for (i, p) in g.params.iter().enumerate() {
-            let gw = param_words(p);
-            for k in range.clone() {
-                let x = words[i][k];
-                let h = 1e-5 * x.abs().max(1.0);
-                let at = |v: f64| {
-                    let mut ws = words.clone();
-                    ws[i][k] = v;
-                    loss(&ws)
-                };
-                got.push(gw[k]);
-                want.push((at(x + h) - at(x - h)) / (2.0 * h));
-            }
-        }
-        let err = group_error(&got, &want);
-        println!("gradient {name}: max error {err:.2e} of the largest gradient");
-        assert!(err <= 1e-4, "{name}: {got:?} vs {want:?}");
-    }
+/// On a realistic scene (thresholds crossed, T-stops reached) the backward pass matches the
+/// reference's analytic adjoint, on the CPU and the GPU.
+#[test]
+fn realistic_gradients_match_the_reference_adjoint_on_cpu_and_gpu() {
+    let (cam, params) = realistic_scene();
+    gradients_match_reference_adjoint::<Method>("ges", &params, &cam, &GROUPS, &CAMERA, 1e-4);
+    gpu_gradients_match_cpu::<Method>("ges", &params, &cam);
 }
 
 fn alpha_at(shade: &Shade, d: Vec2) -> f32 {

@@ -6,22 +6,21 @@
 
 mod common;
 
-use common::checks::{
-    boxes_hold_every_contributing_pixel, forward_matches_reference, gpu_forward_matches_cpu,
-    gpu_gradients_match_cpu, gradients_match_finite_differences, gradients_match_reference_adjoint,
-    invalid_pairs_leave_no_trace, tile_cull_is_conservative,
-};
 use common::{
     GAUSSIAN_GROUPS, as_method, camera_groups, covering_gaussians, gaussian_toward,
     spread_gaussians, wide_camera,
 };
 use splat_methods::geer::{Method, Params};
+use splat_runtime::checks::forward::{
+    boxes_hold_every_contributing_pixel, forward_matches_reference, gpu_forward_matches_cpu,
+    tile_cull_is_conservative,
+};
+use splat_runtime::checks::gradients::{
+    gpu_gradients_match_cpu, gradients_match_finite_differences, gradients_match_reference_adjoint,
+    invalid_pairs_leave_no_trace,
+};
 use splat_runtime::glam::{Vec2, Vec3};
 use splat_runtime::{Camera, CameraModel, RenderOptions, render};
-
-fn twin() -> common::Twin {
-    twin!(splat_methods::geer, pixel_info)
-}
 
 fn scene(cam: &Camera, count: usize) -> Vec<Params> {
     as_method(spread_gaussians(cam, count, 51))
@@ -36,7 +35,7 @@ fn forward_matches_the_reference_on_every_camera_model() {
     for model in CameraModel::ALL {
         let cam = wide_camera(64, 48, model);
         let label = format!("3dgeer {model}");
-        let coverage = forward_matches_reference::<Method>(&label, &twin(), &scene(&cam, 60), &cam);
+        let coverage = forward_matches_reference::<Method>(&label, &scene(&cam, 60), &cam);
         assert!(
             coverage > 0.2,
             "{model}: the scene should cover the image ({coverage})"
@@ -59,10 +58,9 @@ fn render_gradients_match_finite_differences() {
         let cameras = camera_groups(model);
         let params = covering_scene(&cam);
         let label = format!("3dgeer {model}");
-        forward_matches_reference::<Method>(&label, &twin(), &params, &cam);
+        forward_matches_reference::<Method>(&label, &params, &cam);
         gradients_match_finite_differences::<Method>(
             &label,
-            &twin(),
             &params,
             &cam,
             &GAUSSIAN_GROUPS,
@@ -138,7 +136,7 @@ fn hard_cases_stay_finite_and_exact() {
             frame.color.data.iter().all(|v| v.is_finite()),
             "{name}: non-finite color"
         );
-        forward_matches_reference::<Method>(name, &twin(), &params, &cam);
+        forward_matches_reference::<Method>(name, &params, &cam);
     }
 }
 
@@ -150,7 +148,6 @@ fn the_boxes_hold_every_contributing_pixel() {
         let label = format!("3dgeer {model}");
         let checked = boxes_hold_every_contributing_pixel::<Method>(
             &label,
-            &twin(),
             &scene(&cam, 120),
             &cam,
             1.0 / 255.0,
@@ -195,7 +192,6 @@ fn gradients_match_the_reference_adjoint_on_realistic_scenes() {
         let cam = wide_camera(64, 48, model);
         gradients_match_reference_adjoint::<Method>(
             &format!("3dgeer {model}"),
-            &twin(),
             &scene(&cam, 1000),
             &cam,
             &GAUSSIAN_GROUPS,
@@ -213,14 +209,8 @@ fn a_particle_leaves_no_trace_where_it_is_invalid() {
         let extra = gaussian_toward(&mut rng, &cam, Vec2::new(5.0, 4.0), 2.5, -2.0);
         let extra = as_method::<Params>(vec![extra])[0];
         let label = format!("3dgeer {model}");
-        let valid = invalid_pairs_leave_no_trace::<Method>(
-            &label,
-            &twin(),
-            &scene(&cam, 40),
-            extra,
-            &cam,
-            16,
-        );
+        let valid =
+            invalid_pairs_leave_no_trace::<Method>(&label, &scene(&cam, 40), extra, &cam, 16);
         println!("{label}: the extra particle is valid on {valid} pixels");
     }
 }

@@ -14,8 +14,9 @@
 
 mod common;
 
-use common::{camera, camera_words, gaussian_at, group_error, spread_gaussians, words};
+use common::{camera, gaussian_at, spread_gaussians};
 use splat_methods::gs3d::{Method, Params};
+use splat_runtime::checks::{camera_words, group_error, words};
 use splat_runtime::glam::Vec2;
 use splat_runtime::gpu::entries::{Accumulation, Reduction};
 use splat_runtime::gpu::{GpuRenderer, GpuScene, adapter_or_skip};

@@ -6,11 +6,13 @@
 
 mod common;
 
-use common::checks::{
+use common::{CAMERA_GROUPS, GAUSSIAN_GROUPS, camera, gaussian_at, spread_gaussians};
+use splat_methods::gs3d::{Method, Params};
+use splat_runtime::CameraModel::Pinhole;
+use splat_runtime::checks::gradients::{
     gpu_gradients_match_cpu, gradients_match_reference_adjoint, invalid_pairs_leave_no_trace,
 };
-use common::{CAMERA_GROUPS, GAUSSIAN_GROUPS, camera, gaussian_at, group_error, spread_gaussians};
-use splat_methods::gs3d::{Method, Params};
+use splat_runtime::checks::{self, group_error};
 use splat_runtime::glam::Vec2;
 use splat_runtime::{Flat, FrameGrad, RenderOptions, backward, render_for_backward};
 
@@ -24,7 +26,7 @@ struct Weights {
 }
 
 fn loss(params: &[Vec<f64>], cam: &[f64], w: &Weights) -> f64 {
-    let r = common::render(params, cam);
+    let r = checks::reference::render_words::<Method>(params, cam, Pinhole);
     let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
     dot(&r.color, &w.color) + dot(&r.alpha, &w.alpha) + dot(&r.depth, &w.depth)
 }
@@ -46,17 +48,18 @@ fn render_gradients_match_finite_differences() {
             p
         })
         .collect();
-    let words: Vec<Vec<f64>> = params.iter().map(common::words).collect();
-    let cam_words = common::camera_words(&cam);
+    let words: Vec<Vec<f64>> = params.iter().map(checks::words).collect();
+    let cam_words = checks::camera_words(&cam);
 
     // Clear of the thresholds: alpha of every Gaussian above 1/255 at every pixel, T high.
-    let reference = common::render(&words, &cam_words);
+    let reference = checks::reference::render_words::<Method>(&words, &cam_words, Pinhole);
     assert!(
         reference.alpha.iter().all(|a| *a < 0.99),
         "transmittance stays far from 1e-4"
     );
     for p in &words {
-        let solo = common::render(std::slice::from_ref(p), &cam_words);
+        let solo =
+            checks::reference::render_words::<Method>(std::slice::from_ref(p), &cam_words, Pinhole);
         let min_alpha = solo.alpha.iter().fold(1.0f64, |m, a| m.min(*a));
         assert!(
             min_alpha > 2.0 / 255.0,
@@ -119,7 +122,7 @@ fn render_gradients_match_finite_differences() {
     }
 
     // Camera: rotation (9), translation (3), focal (2), principal (2).
-    let cam_grad = common::camera_words(&g.camera);
+    let cam_grad = checks::camera_words(&g.camera);
     let cam_groups = [
         ("camera rotation", 0..9),
         ("camera translation", 9..12),
@@ -157,7 +160,6 @@ fn gradients_match_the_reference_adjoint_on_a_realistic_scene() {
     let cam = camera(64, 48);
     gradients_match_reference_adjoint::<Method>(
         "3dgs",
-        &common::gs3d(),
         &realistic_scene(&cam, 1000),
         &cam,
         &GAUSSIAN_GROUPS,
@@ -173,14 +175,7 @@ fn a_gaussian_leaves_no_trace_where_it_is_invalid() {
         let params = realistic_scene(&cam, 40);
         let mut rng = fastrand::Rng::with_seed(3);
         let extra = gaussian_at(&mut rng, &cam, Vec2::new(5.0, 4.0), 2.5, -2.8);
-        let valid = invalid_pairs_leave_no_trace::<Method>(
-            "3dgs",
-            &common::gs3d(),
-            &params,
-            extra,
-            &cam,
-            tile_size,
-        );
+        let valid = invalid_pairs_leave_no_trace::<Method>("3dgs", &params, extra, &cam, tile_size);
         println!("tile {tile_size}: the extra Gaussian is valid on {valid} pixels");
     }
 }

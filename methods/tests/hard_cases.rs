@@ -5,6 +5,8 @@
 
 mod common;
 
+use splat_runtime::checks;
+
 use common::{camera, gaussian_at};
 use splat_methods::gs3d::{Method, Params};
 use splat_runtime::glam::{Vec2, Vec3, Vec4};
@@ -60,8 +62,7 @@ fn hard_scene() -> Vec<Params> {
 fn hard_cases_match_the_reference_and_stay_finite() {
     let cam = camera(40, 32);
     let ps = hard_scene();
-    let words: Vec<Vec<f64>> = ps.iter().map(common::words).collect();
-    let reference = common::render(&words, &common::camera_words(&cam));
+    let reference = checks::reference::render::<splat_methods::gs3d::Method>(&ps, &cam);
     for tile_size in [8, 16] {
         let opts = RenderOptions {
             tile_size,

@@ -4,13 +4,18 @@
 
 mod common;
 
-use common::checks::{
-    boxes_hold_every_contributing_pixel, forward_matches_reference, gpu_forward_matches_cpu,
-    gpu_gradients_match_cpu, gradients_match_finite_differences, gradients_match_reference_adjoint,
-    invalid_pairs_leave_no_trace, tile_cull_is_conservative,
-};
+use splat_runtime::checks;
+
 use common::{CAMERA_GROUPS, GAUSSIAN_GROUPS, camera, gaussian_at, wide_camera};
 use splat_methods::linprim::{Method, Params};
+use splat_runtime::checks::forward::{
+    boxes_hold_every_contributing_pixel, forward_matches_reference, gpu_forward_matches_cpu,
+    tile_cull_is_conservative,
+};
+use splat_runtime::checks::gradients::{
+    gpu_gradients_match_cpu, gradients_match_finite_differences, gradients_match_reference_adjoint,
+    invalid_pairs_leave_no_trace,
+};
 use splat_runtime::glam::Vec2;
 use splat_runtime::{Camera, CameraModel, render};
 
@@ -22,10 +27,6 @@ fn to_linprim(p: splat_methods::gs3d::Params) -> Params {
         opacity_logit: p.opacity_logit,
         sh: p.sh,
     }
-}
-
-fn twin() -> common::Twin {
-    twin!(splat_methods::linprim)
 }
 
 /// Octahedra spread over the image (and past its edges), 2 to 8 units away.
@@ -65,7 +66,7 @@ fn narrow_camera() -> Camera {
 #[test]
 fn forward_matches_the_reference() {
     let cam = camera(64, 48);
-    let coverage = forward_matches_reference::<Method>("linprim", &twin(), &scene(&cam, 80), &cam);
+    let coverage = forward_matches_reference::<Method>("linprim", &scene(&cam, 80), &cam);
     assert!(
         coverage > 0.2,
         "the scene should cover the image ({coverage})"
@@ -78,7 +79,6 @@ fn the_boxes_hold_every_contributing_pixel() {
     let cam = camera(96, 64);
     let checked = boxes_hold_every_contributing_pixel::<Method>(
         "linprim",
-        &twin(),
         &scene(&cam, 120),
         &cam,
         1.0 / 255.0,
@@ -98,11 +98,10 @@ fn the_tile_cull_is_conservative() {
 fn render_gradients_match_finite_differences() {
     let cam = narrow_camera();
     let params = covering_scene(&cam);
-    forward_matches_reference::<Method>("linprim covering", &twin(), &params, &cam);
-    let solo = common::render_with(
-        &twin(),
-        &[common::words(&params[3])],
-        &common::camera_words(&cam),
+    forward_matches_reference::<Method>("linprim covering", &params, &cam);
+    let solo = checks::reference::render_words::<Method>(
+        &[checks::words(&params[3])],
+        &checks::camera_words(&cam),
         cam.model,
     );
     let min_alpha = solo.alpha.iter().fold(1.0f64, |m, a| m.min(*a));
@@ -112,7 +111,6 @@ fn render_gradients_match_finite_differences() {
     );
     gradients_match_finite_differences::<Method>(
         "linprim",
-        &twin(),
         &params,
         &cam,
         &GAUSSIAN_GROUPS,
@@ -148,7 +146,6 @@ fn gradients_match_the_reference_adjoint_on_a_realistic_scene() {
     let cam = camera(64, 48);
     gradients_match_reference_adjoint::<Method>(
         "linprim",
-        &twin(),
         &scene(&cam, 1000),
         &cam,
         &GAUSSIAN_GROUPS,
@@ -162,14 +159,8 @@ fn an_octahedron_leaves_no_trace_where_it_is_invalid() {
     let cam = camera(16, 16);
     let mut rng = fastrand::Rng::with_seed(3);
     let extra = to_linprim(gaussian_at(&mut rng, &cam, Vec2::new(5.0, 4.0), 2.5, -2.0));
-    let valid = invalid_pairs_leave_no_trace::<Method>(
-        "linprim",
-        &twin(),
-        &scene(&cam, 40),
-        extra,
-        &cam,
-        16,
-    );
+    let valid =
+        invalid_pairs_leave_no_trace::<Method>("linprim", &scene(&cam, 40), extra, &cam, 16);
     println!("the extra octahedron is valid on {valid} pixels");
 }
 

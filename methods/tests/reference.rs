@@ -3,14 +3,14 @@
 
 mod common;
 
-use common::checks::forward_matches_reference;
 use common::{camera, gaussian_at};
 use splat_methods::gs3d::{Method, Params};
+use splat_runtime::checks::forward::forward_matches_reference;
 use splat_runtime::glam::Vec2;
 use splat_runtime::{Camera, RenderOptions, render};
 
 fn compare(name: &str, params: &[Params], cam: &Camera) {
-    let coverage = forward_matches_reference::<Method>(name, &common::gs3d(), params, cam);
+    let coverage = forward_matches_reference::<Method>(name, params, cam);
     assert!(coverage > 0.2, "{name}: the scene should cover the image");
 }
 

@@ -4,25 +4,23 @@
 
 mod common;
 
-use common::checks::{
-    boxes_hold_every_contributing_pixel, forward_matches_reference, gpu_forward_matches_cpu,
-    gpu_gradients_match_cpu, gradients_match_finite_differences, gradients_match_reference_adjoint,
-    invalid_pairs_leave_no_trace,
-};
 use common::{
     GAUSSIAN_GROUPS, as_method, camera_groups, covering_gaussians, gaussian_toward,
     spread_gaussians, wide_camera,
 };
 use splat_methods::gut::{Method, Params};
+use splat_runtime::checks::forward::{
+    boxes_hold_every_contributing_pixel, forward_matches_reference, gpu_forward_matches_cpu,
+};
+use splat_runtime::checks::gradients::{
+    gpu_gradients_match_cpu, gradients_match_finite_differences, gradients_match_reference_adjoint,
+    invalid_pairs_leave_no_trace,
+};
 use splat_runtime::glam::Vec2;
 use splat_runtime::{Camera, CameraModel};
 
 fn scene(cam: &Camera, count: usize) -> Vec<Params> {
     as_method(spread_gaussians(cam, count, 31))
-}
-
-fn twin() -> common::Twin {
-    twin!(splat_methods::gut, pixel_info)
 }
 
 #[test]
@@ -31,7 +29,7 @@ fn forward_matches_the_reference_on_every_camera_model() {
         let cam = wide_camera(64, 48, model);
         let params = scene(&cam, 60);
         let coverage =
-            forward_matches_reference::<Method>(&format!("3dgut {model}"), &twin(), &params, &cam);
+            forward_matches_reference::<Method>(&format!("3dgut {model}"), &params, &cam);
         assert!(
             coverage > 0.2,
             "{model}: the scene should cover the image ({coverage})"
@@ -51,10 +49,9 @@ fn render_gradients_match_finite_differences() {
         let cam = wide_camera(24, 16, model);
         let cameras = camera_groups(model);
         let label = format!("3dgut {model} covering");
-        forward_matches_reference::<Method>(&label, &twin(), &covering_scene(&cam), &cam);
+        forward_matches_reference::<Method>(&label, &covering_scene(&cam), &cam);
         gradients_match_finite_differences::<Method>(
             &format!("3dgut {model}"),
-            &twin(),
             &covering_scene(&cam),
             &cam,
             &GAUSSIAN_GROUPS,
@@ -83,7 +80,6 @@ fn the_box_holds_every_contributing_pixel_on_every_camera_model() {
         let label = format!("3dgut {model}");
         let checked = boxes_hold_every_contributing_pixel::<Method>(
             &label,
-            &twin(),
             &scene(&cam, 120),
             &cam,
             1.0 / 255.0,
@@ -110,7 +106,6 @@ fn gradients_match_the_reference_adjoint_on_realistic_scenes() {
         let cam = wide_camera(64, 48, model);
         gradients_match_reference_adjoint::<Method>(
             &format!("3dgut {model}"),
-            &twin(),
             &scene(&cam, 1000),
             &cam,
             &GAUSSIAN_GROUPS,
@@ -128,14 +123,8 @@ fn a_particle_leaves_no_trace_where_it_is_invalid() {
         let extra = gaussian_toward(&mut rng, &cam, Vec2::new(5.0, 4.0), 2.5, -2.0);
         let extra = as_method::<Params>(vec![extra])[0];
         let label = format!("3dgut {model}");
-        let valid = invalid_pairs_leave_no_trace::<Method>(
-            &label,
-            &twin(),
-            &scene(&cam, 40),
-            extra,
-            &cam,
-            16,
-        );
+        let valid =
+            invalid_pairs_leave_no_trace::<Method>(&label, &scene(&cam, 40), extra, &cam, 16);
         println!("{label}: the extra particle is valid on {valid} pixels");
     }
 }

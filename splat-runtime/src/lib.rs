@@ -15,6 +15,7 @@
 //!   a harness running generated WGSL functions on batches.
 //! - [`train`]: what training shares across methods: the loss, metrics, Adam.
 
+pub mod checks;
 pub mod flat;
 pub mod gpu;
 pub mod io;

@@ -66,6 +66,9 @@ pub trait SplatMethod: Send + Sync + 'static {
     const GENERIC_CAMERA: bool;
     /// What the macro generated, as text.
     const SOURCE: GeneratedSource;
+    /// The f64 twins of the method's functions and their adjoints, for the reference renderer
+    /// and the checks of [`crate::checks`].
+    const TWIN: crate::checks::Twin;
 
     /// Per-primitive parameters (what is optimized).
     type Params: Flat;

@@ -56,6 +56,55 @@ fn check_params(def: &FnDef, want: &[(&str, Option<&Ty>)], diag: &Diag) -> Resul
     Ok(())
 }
 
+/// The `checks::Twin` of the method: its f64 twins (module `twin`) behind slice signatures.
+fn twin_const(has_pixel_info: bool) -> TokenStream {
+    let rt = quote!(::splat_runtime);
+    let f = |name: &str| {
+        let id = syn::Ident::new(name, proc_macro2::Span::call_site());
+        quote! {
+            |x: &[f64], i: &[u32]| {
+                let (a, b) = twin::#id(
+                    x.try_into().expect("the twin's float inputs"),
+                    i.try_into().expect("the twin's integer inputs"),
+                );
+                (a.to_vec(), b.to_vec())
+            }
+        }
+    };
+    let adjoint = |name: &str| {
+        let id = syn::Ident::new(name, proc_macro2::Span::call_site());
+        quote! {
+            |x: &[f64], i: &[u32], d: &[f64]| {
+                twin::#id(
+                    x.try_into().expect("the twin's float inputs"),
+                    i.try_into().expect("the twin's integer inputs"),
+                    d.try_into().expect("the twin's output cotangents"),
+                )
+                .to_vec()
+            }
+        }
+    };
+    let (pixel_info, pixel_info_adjoint) = match has_pixel_info {
+        true => {
+            let (p, a) = (f("pixel_info"), adjoint("pixel_info_adjoint"));
+            (quote!(Some(#p)), quote!(Some(#a)))
+        }
+        false => (quote!(None), quote!(None)),
+    };
+    let (project, project_adjoint) = (f("project"), adjoint("project_adjoint"));
+    let (evaluate, evaluate_adjoint) = (f("evaluate"), adjoint("evaluate_adjoint"));
+    quote! {
+        #rt::checks::Twin {
+            project: #project,
+            project_adjoint: #project_adjoint,
+            pixel_info: #pixel_info,
+            pixel_info_adjoint: #pixel_info_adjoint,
+            evaluate: #evaluate,
+            evaluate_adjoint: #evaluate_adjoint,
+        }
+    }
+}
+
 /// Arguments for calling the user's function from the trait method, whose parameters are
 /// all references except `pixel_info`'s pixel (`by_value` names those passed by value).
 fn call_args(def: &FnDef, names: &[TokenStream], by_value: &[bool]) -> Vec<TokenStream> {
@@ -313,6 +362,7 @@ pub fn method_impl(module: &syn::Ident, kernels: &[Kernel], diag: &Diag) -> Opti
     };
     let (has_tc, has_pi) = (tile_cull.is_some(), pixel_info.is_some());
     let generic_camera = kernels.iter().any(|k| k.camera_model);
+    let twin = twin_const(has_pi);
     let (np, nc) = (idx(np), idx(nc));
     Some(quote! {
         /// The method as the runtime sees it.
@@ -326,6 +376,7 @@ pub fn method_impl(module: &syn::Ident, kernels: &[Kernel], diag: &Diag) -> Opti
             const HAS_PIXEL_INFO: bool = #has_pi;
             const GENERIC_CAMERA: bool = #generic_camera;
             const SOURCE: #rt::GeneratedSource = #rt::GeneratedSource { rust: GENERATED_RUST, wgsl: GENERATED_WGSL, functions: GENERATED_FUNCTIONS };
+            const TWIN: #rt::checks::Twin = #twin;
             type Params = #p_t;
             type Cull = #c_t;
             type Shade = #s_t;

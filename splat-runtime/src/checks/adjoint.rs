@@ -12,10 +12,12 @@
 //! pair whose alpha sits within rounding of 1/255 flips, and the gradients differ by that
 //! pair's whole term, which says nothing about the blend.
 
-use super::{Twin, camera_words, words};
-use splat_runtime::glam::Vec2;
-use splat_runtime::pipeline::shade::T_MIN;
-use splat_runtime::{Camera, Flat, SplatMethod};
+use super::{camera_words, words};
+use crate::flat::Flat;
+use crate::method::SplatMethod;
+use crate::pipeline::shade::T_MIN;
+use crate::types::Camera;
+use glam::Vec2;
 
 /// Cotangents of a linear loss `<w_color, color> + <w_alpha, alpha> + <w_depth, depth>`.
 pub struct ReferenceGrad {
@@ -40,17 +42,17 @@ struct Taken {
 }
 
 /// The gradient of the loss with weights `w = [color, alpha, depth]` (H x W x channels, H x W,
-/// H x W) for the method `M` (its f64 `twin`) rendering `params` through `cam`.
-pub fn backward_with<M: SplatMethod>(
-    twin: &Twin,
+/// H x W) for the method `M` (its f64 twins) rendering `params` through `cam`.
+pub fn backward<M: SplatMethod>(
     params: &[M::Params],
     cam: &Camera,
     w: &[Vec<f64>; 3],
 ) -> ReferenceGrad {
+    let twin = &M::TWIN;
     let camera = &camera_words(cam)[..];
     let (width, height) = (cam.size.x as usize, cam.size.y as usize);
     let ints = [cam.model as u32];
-    let shade_at = 5 + twin.cull_words;
+    let shade_at = 5 + <M::Cull as Flat>::LEN;
     // Every primitive visible in f32: its f32 projection, index, project's f64 inputs and
     // outputs.
     let mut prims = vec![];
@@ -68,7 +70,7 @@ pub fn backward_with<M: SplatMethod>(
     let mut d_projected: Vec<Vec<f64>> = prims.iter().map(|p| vec![0.0; p.3.len()]).collect();
     let mut d_camera = vec![0.0; camera.len()];
     let (mut skipped_before_a_take, mut stopped_pixels) = (0, 0);
-    let channels = twin.channels;
+    let channels = <M::Color as Flat>::LEN;
     let depth = |k: usize| prims[k].3[0];
     for y in 0..height {
         for x in 0..width {

@@ -1,176 +1,16 @@
-//! The checks every method gets, written once over `SplatMethod`: the CPU render against the
-//! f64 brute-force reference, render gradients against its finite differences (smooth scenes)
-//! and against its analytic adjoint (realistic scenes), and the GPU backend against the CPU
-//! backend.
+//! Gradient checks: the backward pass against finite differences of the f64 reference (smooth
+//! scenes), against the reference's analytic adjoint (realistic scenes), the no-trace property
+//! of invalid pairs, and the GPU backward against the CPU's.
 
-use super::adjoint::{ReferenceGrad, backward_with};
-use super::{Twin, camera_words, group_error, render_with, words};
-use splat_runtime::gpu::entries::Accumulation;
-use splat_runtime::{
-    Camera, Flat, FrameGrad, RenderOptions, SplatMethod, backward, render, render_for_backward,
-};
+use super::adjoint::{self, ReferenceGrad};
+use super::reference::render_words;
+use super::{camera_words, channels, frame_grad, group_error, options, weights, words};
+use crate::flat::Flat;
+use crate::gpu::entries::Accumulation;
+use crate::method::SplatMethod;
+use crate::pipeline::{backward, render_for_backward};
+use crate::types::Camera;
 use std::ops::Range;
-
-fn options(tile_size: u32) -> RenderOptions {
-    RenderOptions {
-        tile_size,
-        alpha: true,
-        depth: true,
-        ..Default::default()
-    }
-}
-
-/// CPU renders (tiles 8 and 16) within 1e-5 absolute + 1% relative of the reference, per
-/// element of color, alpha and depth; returns the mean alpha (how much the scene covers).
-pub fn forward_matches_reference<M: SplatMethod>(
-    label: &str,
-    twin: &Twin,
-    params: &[M::Params],
-    cam: &Camera,
-) -> f64 {
-    let ws: Vec<Vec<f64>> = params.iter().map(words).collect();
-    let reference = render_with(twin, &ws, &camera_words(cam), cam.model);
-    for tile_size in [8, 16] {
-        let frame = render::<M>(params, cam, &options(tile_size)).expect("render");
-        let mut worst = 0.0f64;
-        let outputs = [
-            ("color", &frame.color.data, &reference.color),
-            (
-                "alpha",
-                &frame.alpha.as_ref().unwrap().data,
-                &reference.alpha,
-            ),
-            (
-                "depth",
-                &frame.depth.as_ref().unwrap().data,
-                &reference.depth,
-            ),
-        ];
-        for (what, got, want) in outputs {
-            assert_eq!(got.len(), want.len());
-            for (i, (g, w)) in got.iter().zip(want.iter()).enumerate() {
-                let err = (*g as f64 - w).abs();
-                let bound = 1e-5 + 0.01 * w.abs();
-                worst = worst.max(err / bound);
-                assert!(
-                    err <= bound,
-                    "{label}, tile {tile_size}, {what}[{i}] (pixel {}): {g} vs reference {w}",
-                    if what == "color" {
-                        i / twin.channels
-                    } else {
-                        i
-                    }
-                );
-            }
-        }
-        println!(
-            "{label}, tile {tile_size}: {} visible, {} intersections; worst error {worst:.3} of the bound",
-            frame.stats.visible, frame.stats.intersections
-        );
-    }
-    reference.alpha.iter().sum::<f64>() / reference.alpha.len() as f64
-}
-
-/// Every pixel outside a primitive's box gets alpha below `alpha_min` from it (the reference,
-/// one primitive at a time): the box, however approximate its construction, cuts nothing off.
-/// Returns how many (primitive, pixel) pairs were checked outside the boxes.
-pub fn boxes_hold_every_contributing_pixel<M: SplatMethod>(
-    label: &str,
-    twin: &Twin,
-    params: &[M::Params],
-    cam: &Camera,
-    alpha_min: f64,
-) -> usize {
-    let (w, h) = (cam.size.x as usize, cam.size.y as usize);
-    let mut outside = 0;
-    for (i, p) in params.iter().enumerate() {
-        let projected = M::project(p, cam);
-        if !projected.visible {
-            continue;
-        }
-        let solo = render_with(twin, &[words(p)], &camera_words(cam), cam.model);
-        let (lo, hi) = (projected.bbox_min, projected.bbox_max);
-        for y in 0..h {
-            for x in 0..w {
-                let (cx, cy) = (x as f32 + 0.5, y as f32 + 0.5);
-                if cx >= lo.x && cx <= hi.x && cy >= lo.y && cy <= hi.y {
-                    continue;
-                }
-                outside += 1;
-                let a = solo.alpha[y * w + x];
-                assert!(
-                    a < alpha_min,
-                    "{label}: primitive {i} reaches alpha {a} at ({cx}, {cy}), outside its box {lo} .. {hi}"
-                );
-            }
-        }
-    }
-    outside
-}
-
-/// Rendering with and without the method's `tile_cull` (tiles 8 and 16) gives the same color,
-/// alpha and depth within 1e-6: the cull drops only pairs the alpha threshold would skip.
-/// Returns the intersection counts (with the cull, without) per tile size.
-pub fn tile_cull_is_conservative<M: SplatMethod>(
-    label: &str,
-    params: &[M::Params],
-    cam: &Camera,
-) -> Vec<(usize, usize)> {
-    let mut counts = vec![];
-    for tile_size in [8, 16] {
-        let opts = |tile_cull| RenderOptions {
-            tile_cull,
-            ..options(tile_size)
-        };
-        let culled = render::<M>(params, cam, &opts(true)).unwrap();
-        let all = render::<M>(params, cam, &opts(false)).unwrap();
-        let outputs = [
-            ("color", &culled.color.data, &all.color.data),
-            (
-                "alpha",
-                &culled.alpha.as_ref().unwrap().data,
-                &all.alpha.as_ref().unwrap().data,
-            ),
-            (
-                "depth",
-                &culled.depth.as_ref().unwrap().data,
-                &all.depth.as_ref().unwrap().data,
-            ),
-        ];
-        let mut worst = 0.0f32;
-        for (what, a, b) in outputs {
-            for (i, (x, y)) in a.iter().zip(b.iter()).enumerate() {
-                worst = worst.max((x - y).abs());
-                assert!(
-                    (x - y).abs() <= 1e-6,
-                    "{label}, tile {tile_size}, {what}[{i}]: {x} with the cull, {y} without"
-                );
-            }
-        }
-        let (with, without) = (culled.stats.intersections, all.stats.intersections);
-        println!(
-            "{label}, tile {tile_size}: {with} intersections with the cull, {without} without; largest difference {worst:e}"
-        );
-        counts.push((with, without));
-    }
-    counts
-}
-
-/// Random loss weights on color, alpha and depth for a `width x height` frame.
-fn weights(n: usize, channels: usize) -> [Vec<f64>; 3] {
-    let mut rng = fastrand::Rng::with_seed(10);
-    let mut random = |k: usize| (0..k).map(|_| rng.f64() * 2.0 - 1.0).collect::<Vec<f64>>();
-    [random(n * channels), random(n), random(n)]
-}
-
-fn frame_grad(w: &[Vec<f64>; 3]) -> FrameGrad {
-    let f32s = |v: &[f64]| v.iter().map(|x| *x as f32).collect::<Vec<f32>>();
-    FrameGrad {
-        color: f32s(&w[0]),
-        alpha: Some(f32s(&w[1])),
-        depth: Some(f32s(&w[2])),
-    }
-}
 
 fn central_difference(f: impl Fn(f64) -> f64, x: f64) -> f64 {
     let h = 1e-5 * x.abs().max(1.0);
@@ -183,7 +23,6 @@ fn central_difference(f: impl Fn(f64) -> f64, x: f64) -> f64 {
 /// gradient. The scene must stay clear of the thresholds (the caller checks).
 pub fn gradients_match_finite_differences<M: SplatMethod>(
     label: &str,
-    twin: &Twin,
     params: &[M::Params],
     cam: &Camera,
     groups: &[(&str, Range<usize>)],
@@ -193,10 +32,10 @@ pub fn gradients_match_finite_differences<M: SplatMethod>(
     let ws: Vec<Vec<f64>> = params.iter().map(words).collect();
     let cw = camera_words(cam);
     let n = (cam.size.x * cam.size.y) as usize;
-    let w = weights(n, twin.channels);
+    let w = weights(n, channels::<M>());
     let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
     let loss = |ps: &[Vec<f64>], c: &[f64]| {
-        let r = render_with(twin, ps, c, cam.model);
+        let r = render_words::<M>(ps, c, cam.model);
         dot(&r.color, &w[0]) + dot(&r.alpha, &w[1]) + dot(&r.depth, &w[2])
     };
     let (_, state) = render_for_backward::<M>(params, cam, &options(8)).unwrap();
@@ -247,7 +86,6 @@ pub fn gradients_match_finite_differences<M: SplatMethod>(
 /// check fails if the scene has neither (returns the reference's counts of both).
 pub fn gradients_match_reference_adjoint<M: SplatMethod>(
     label: &str,
-    twin: &Twin,
     params: &[M::Params],
     cam: &Camera,
     groups: &[(&str, Range<usize>)],
@@ -255,8 +93,8 @@ pub fn gradients_match_reference_adjoint<M: SplatMethod>(
     tol: f64,
 ) -> ReferenceGrad {
     let n = (cam.size.x * cam.size.y) as usize;
-    let w = weights(n, twin.channels);
-    let reference = backward_with::<M>(twin, params, cam, &w);
+    let w = weights(n, channels::<M>());
+    let reference = adjoint::backward::<M>(params, cam, &w);
     assert!(
         reference.skipped_before_a_take > 0 && reference.stopped_pixels > 0,
         "{label}: the scene should skip pairs mid-list ({}) and stop pixels at the T-stop ({})",
@@ -312,7 +150,6 @@ pub fn gradients_match_reference_adjoint<M: SplatMethod>(
 /// primitive changes). Returns how many pixels it is valid on.
 pub fn invalid_pairs_leave_no_trace<M: SplatMethod>(
     label: &str,
-    twin: &Twin,
     params: &[M::Params],
     extra: M::Params,
     cam: &Camera,
@@ -322,6 +159,7 @@ pub fn invalid_pairs_leave_no_trace<M: SplatMethod>(
         cam.size.x as u32 <= tile_size && cam.size.y as u32 <= tile_size,
         "{label}: one tile"
     );
+    let twin = &M::TWIN;
     let cw = camera_words(cam);
     let ints = [cam.model as u32];
     let (f, b) = (twin.project)(
@@ -329,9 +167,9 @@ pub fn invalid_pairs_leave_no_trace<M: SplatMethod>(
         &ints,
     );
     assert!(b[0] != 0, "{label}: the extra primitive is visible");
-    let shade = &f[5 + twin.cull_words..];
+    let shade = &f[5 + <M::Cull as Flat>::LEN..];
     let (width, n) = (cam.size.x as usize, (cam.size.x * cam.size.y) as usize);
-    let mut w = weights(n, twin.channels);
+    let mut w = weights(n, channels::<M>());
     let mut valid_pixels = 0;
     for px in 0..n {
         let centre = [(px % width) as f64 + 0.5, (px / width) as f64 + 0.5];
@@ -348,7 +186,7 @@ pub fn invalid_pairs_leave_no_trace<M: SplatMethod>(
         let input: Vec<f64> = pixel.iter().chain(shade).copied().collect();
         if (twin.evaluate)(&input, &[]).1[0] != 0 {
             valid_pixels += 1;
-            w[0][px * twin.channels..(px + 1) * twin.channels].fill(0.0);
+            w[0][px * channels::<M>()..(px + 1) * channels::<M>()].fill(0.0);
             w[1][px] = 0.0;
             w[2][px] = 0.0;
         }
@@ -384,55 +222,13 @@ pub fn invalid_pairs_leave_no_trace<M: SplatMethod>(
     valid_pixels
 }
 
-/// The GPU backend's forward against the CPU backend's: color, alpha and depth within
-/// 1e-4 + 1% per element, equal intersection counts (tiles 8 and 16).
-pub fn gpu_forward_matches_cpu<M: SplatMethod>(label: &str, params: &[M::Params], cam: &Camera) {
-    let Some(gpu) = splat_runtime::gpu::adapter_or_skip() else {
-        return;
-    };
-    for tile_size in [8, 16] {
-        let opts = options(tile_size);
-        let cpu = render::<M>(params, cam, &opts).unwrap();
-        let frame = splat_runtime::gpu::render::render::<M>(&gpu, params, cam, &opts).unwrap();
-        assert_eq!(
-            cpu.stats.intersections, frame.stats.intersections,
-            "{label}"
-        );
-        let mut worst = 0.0f32;
-        let outputs = [
-            ("color", &cpu.color.data, &frame.color.data),
-            (
-                "alpha",
-                &cpu.alpha.as_ref().unwrap().data,
-                &frame.alpha.as_ref().unwrap().data,
-            ),
-            (
-                "depth",
-                &cpu.depth.as_ref().unwrap().data,
-                &frame.depth.as_ref().unwrap().data,
-            ),
-        ];
-        for (what, c, g) in outputs {
-            for (i, (a, b)) in c.iter().zip(g.iter()).enumerate() {
-                let bound = 1e-4 + 0.01 * a.abs();
-                worst = worst.max((a - b).abs() / bound);
-                assert!(
-                    (a - b).abs() <= bound,
-                    "{label}, tile {tile_size}, {what}[{i}]: cpu {a} gpu {b}"
-                );
-            }
-        }
-        println!("{label}, tile {tile_size}: GPU forward worst {worst:.3} of the bound");
-    }
-}
-
 /// The GPU backward against the CPU backward (the device's default accumulation, tiles 8 and
 /// 16): every parameter word and the camera within 1e-3 of the largest gradient. Measured
 /// near 1e-6; the bound leaves room for a pair whose alpha sits within an ulp of the cutoff,
 /// which the two backends' `exp` can decide differently (3DGUT on the equiangular camera, 400
 /// particles: one such pair, 6e-4).
 pub fn gpu_gradients_match_cpu<M: SplatMethod>(label: &str, params: &[M::Params], cam: &Camera) {
-    let Some(gpu) = splat_runtime::gpu::adapter_or_skip() else {
+    let Some(gpu) = crate::gpu::adapter_or_skip() else {
         return;
     };
     let n = (cam.size.x * cam.size.y) as usize;
@@ -441,14 +237,10 @@ pub fn gpu_gradients_match_cpu<M: SplatMethod>(label: &str, params: &[M::Params]
         let opts = options(tile_size);
         let (_, state) = render_for_backward::<M>(params, cam, &opts).unwrap();
         let (_, mut gstate) =
-            splat_runtime::gpu::render::render_for_backward::<M>(&gpu, params, cam, &opts).unwrap();
+            crate::gpu::render::render_for_backward::<M>(&gpu, params, cam, &opts).unwrap();
         let want = backward::<M>(&state, params, cam, &grad).unwrap();
-        let got = splat_runtime::gpu::render::backward(
-            &mut gstate,
-            &grad,
-            Accumulation::default_for(&gpu),
-        )
-        .unwrap();
+        let got = crate::gpu::render::backward(&mut gstate, &grad, Accumulation::default_for(&gpu))
+            .unwrap();
         let flat = |ps: &[M::Params]| -> Vec<f64> { ps.iter().flat_map(words).collect() };
         let err = group_error(&flat(&got.gradients.params), &flat(&want.params));
         let cam_err = group_error(

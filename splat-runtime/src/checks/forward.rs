@@ -1,0 +1,184 @@
+//! Forward checks: the CPU render against the f64 reference, boxes that hold every pixel a
+//! primitive reaches, a conservative `tile_cull`, and the GPU render against the CPU's.
+
+use super::reference::render_words;
+use super::{camera_words, channels, options, words};
+use crate::method::SplatMethod;
+use crate::pipeline::{RenderOptions, render};
+use crate::types::Camera;
+
+/// CPU renders (tiles 8 and 16) within 1e-5 absolute + 1% relative of the reference, per
+/// element of color, alpha and depth; returns the mean alpha (how much the scene covers).
+pub fn forward_matches_reference<M: SplatMethod>(
+    label: &str,
+    params: &[M::Params],
+    cam: &Camera,
+) -> f64 {
+    let ws: Vec<Vec<f64>> = params.iter().map(words).collect();
+    let reference = render_words::<M>(&ws, &camera_words(cam), cam.model);
+    for tile_size in [8, 16] {
+        let frame = render::<M>(params, cam, &options(tile_size)).expect("render");
+        let mut worst = 0.0f64;
+        let outputs = [
+            ("color", &frame.color.data, &reference.color),
+            (
+                "alpha",
+                &frame.alpha.as_ref().unwrap().data,
+                &reference.alpha,
+            ),
+            (
+                "depth",
+                &frame.depth.as_ref().unwrap().data,
+                &reference.depth,
+            ),
+        ];
+        for (what, got, want) in outputs {
+            assert_eq!(got.len(), want.len());
+            for (i, (g, w)) in got.iter().zip(want.iter()).enumerate() {
+                let err = (*g as f64 - w).abs();
+                let bound = 1e-5 + 0.01 * w.abs();
+                worst = worst.max(err / bound);
+                assert!(
+                    err <= bound,
+                    "{label}, tile {tile_size}, {what}[{i}] (pixel {}): {g} vs reference {w}",
+                    if what == "color" {
+                        i / channels::<M>()
+                    } else {
+                        i
+                    }
+                );
+            }
+        }
+        println!(
+            "{label}, tile {tile_size}: {} visible, {} intersections; worst error {worst:.3} of the bound",
+            frame.stats.visible, frame.stats.intersections
+        );
+    }
+    reference.alpha.iter().sum::<f64>() / reference.alpha.len() as f64
+}
+
+/// Every pixel outside a primitive's box gets alpha below `alpha_min` from it (the reference,
+/// one primitive at a time): the box, however approximate its construction, cuts nothing off.
+/// Returns how many (primitive, pixel) pairs were checked outside the boxes.
+pub fn boxes_hold_every_contributing_pixel<M: SplatMethod>(
+    label: &str,
+    params: &[M::Params],
+    cam: &Camera,
+    alpha_min: f64,
+) -> usize {
+    let (w, h) = (cam.size.x as usize, cam.size.y as usize);
+    let mut outside = 0;
+    for (i, p) in params.iter().enumerate() {
+        let projected = M::project(p, cam);
+        if !projected.visible {
+            continue;
+        }
+        let solo = render_words::<M>(&[words(p)], &camera_words(cam), cam.model);
+        let (lo, hi) = (projected.bbox_min, projected.bbox_max);
+        for y in 0..h {
+            for x in 0..w {
+                let (cx, cy) = (x as f32 + 0.5, y as f32 + 0.5);
+                if cx >= lo.x && cx <= hi.x && cy >= lo.y && cy <= hi.y {
+                    continue;
+                }
+                outside += 1;
+                let a = solo.alpha[y * w + x];
+                assert!(
+                    a < alpha_min,
+                    "{label}: primitive {i} reaches alpha {a} at ({cx}, {cy}), outside its box {lo} .. {hi}"
+                );
+            }
+        }
+    }
+    outside
+}
+
+/// Rendering with and without the method's `tile_cull` (tiles 8 and 16) gives the same color,
+/// alpha and depth within 1e-6: the cull drops only pairs the alpha threshold would skip.
+/// Returns the intersection counts (with the cull, without) per tile size.
+pub fn tile_cull_is_conservative<M: SplatMethod>(
+    label: &str,
+    params: &[M::Params],
+    cam: &Camera,
+) -> Vec<(usize, usize)> {
+    let mut counts = vec![];
+    for tile_size in [8, 16] {
+        let opts = |tile_cull| RenderOptions {
+            tile_cull,
+            ..options(tile_size)
+        };
+        let culled = render::<M>(params, cam, &opts(true)).unwrap();
+        let all = render::<M>(params, cam, &opts(false)).unwrap();
+        let outputs = [
+            ("color", &culled.color.data, &all.color.data),
+            (
+                "alpha",
+                &culled.alpha.as_ref().unwrap().data,
+                &all.alpha.as_ref().unwrap().data,
+            ),
+            (
+                "depth",
+                &culled.depth.as_ref().unwrap().data,
+                &all.depth.as_ref().unwrap().data,
+            ),
+        ];
+        let mut worst = 0.0f32;
+        for (what, a, b) in outputs {
+            for (i, (x, y)) in a.iter().zip(b.iter()).enumerate() {
+                worst = worst.max((x - y).abs());
+                assert!(
+                    (x - y).abs() <= 1e-6,
+                    "{label}, tile {tile_size}, {what}[{i}]: {x} with the cull, {y} without"
+                );
+            }
+        }
+        let (with, without) = (culled.stats.intersections, all.stats.intersections);
+        println!(
+            "{label}, tile {tile_size}: {with} intersections with the cull, {without} without; largest difference {worst:e}"
+        );
+        counts.push((with, without));
+    }
+    counts
+}
+
+/// The GPU backend's forward against the CPU backend's: color, alpha and depth within
+/// 1e-4 + 1% per element, equal intersection counts (tiles 8 and 16).
+pub fn gpu_forward_matches_cpu<M: SplatMethod>(label: &str, params: &[M::Params], cam: &Camera) {
+    let Some(gpu) = crate::gpu::adapter_or_skip() else {
+        return;
+    };
+    for tile_size in [8, 16] {
+        let opts = options(tile_size);
+        let cpu = render::<M>(params, cam, &opts).unwrap();
+        let frame = crate::gpu::render::render::<M>(&gpu, params, cam, &opts).unwrap();
+        assert_eq!(
+            cpu.stats.intersections, frame.stats.intersections,
+            "{label}"
+        );
+        let mut worst = 0.0f32;
+        let outputs = [
+            ("color", &cpu.color.data, &frame.color.data),
+            (
+                "alpha",
+                &cpu.alpha.as_ref().unwrap().data,
+                &frame.alpha.as_ref().unwrap().data,
+            ),
+            (
+                "depth",
+                &cpu.depth.as_ref().unwrap().data,
+                &frame.depth.as_ref().unwrap().data,
+            ),
+        ];
+        for (what, c, g) in outputs {
+            for (i, (a, b)) in c.iter().zip(g.iter()).enumerate() {
+                let bound = 1e-4 + 0.01 * a.abs();
+                worst = worst.max((a - b).abs() / bound);
+                assert!(
+                    (a - b).abs() <= bound,
+                    "{label}, tile {tile_size}, {what}[{i}]: cpu {a} gpu {b}"
+                );
+            }
+        }
+        println!("{label}, tile {tile_size}: GPU forward worst {worst:.3} of the bound");
+    }
+}

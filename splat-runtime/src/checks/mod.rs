@@ -1,0 +1,112 @@
+//! The checks a method author runs on a new primitive, written once over [`SplatMethod`]:
+//!
+//! - [`reference`]: an f64 brute-force renderer built from the method's f64 twins (every
+//!   primitive at every pixel, in depth order; no tiles, boxes or culling), and
+//!   [`adjoint`]: its analytic backward pass;
+//! - [`forward`]: the CPU render against the reference, boxes that hold every pixel a primitive
+//!   reaches, a conservative `tile_cull`, the GPU render against the CPU's;
+//! - [`gradients`]: the backward pass against finite differences of the reference (on smooth
+//!   scenes, away from thresholds), against the reference's analytic adjoint (on realistic
+//!   scenes, with thresholds crossed and lists stopped at the T-stop), invalid pairs leaving no
+//!   trace, and the GPU backward against the CPU's.
+//!
+//! Each check panics with a message naming the pixel, primitive or parameter group that is
+//! off, so it reads as a test:
+//!
+//! ```ignore
+//! use splat_runtime::checks::{forward, gradients};
+//! #[test]
+//! fn my_primitive_renders_and_differentiates() {
+//!     let (scene, camera) = (my_scene(), my_camera());
+//!     forward::forward_matches_reference::<my_method::Method>("mine", &scene, &camera);
+//!     let groups = [("mean", 0..3), ("scale", 3..6), ("opacity", 6..7)];
+//!     gradients::gradients_match_reference_adjoint::<my_method::Method>(
+//!         "mine", &scene, &camera, &groups, &[], 1e-4,
+//!     );
+//!     forward::gpu_forward_matches_cpu::<my_method::Method>("mine", &scene, &camera);
+//! }
+//! ```
+//!
+//! The GPU checks skip (with a line on stderr) where there is no adapter, unless
+//! `SPLAT_REQUIRE_GPU=1`.
+
+pub mod adjoint;
+pub mod forward;
+pub mod gradients;
+pub mod reference;
+
+use crate::flat::Flat;
+use crate::method::SplatMethod;
+use crate::pipeline::{FrameGrad, RenderOptions};
+use crate::types::Camera;
+
+/// A generated flat f64 function (`module::twin::f`) taking and returning slices: float and
+/// integer inputs to float and integer results.
+pub type Flat64 = fn(&[f64], &[u32]) -> (Vec<f64>, Vec<u32>);
+
+/// A generated flat f64 adjoint (`module::twin::f_adjoint`): inputs, integer inputs and the
+/// cotangent of the float results to the cotangent of the float inputs.
+pub type Adjoint64 = fn(&[f64], &[u32], &[f64]) -> Vec<f64>;
+
+/// A method's f64 twins: its flat `project`, `pixel_info` and `evaluate` and their adjoints
+/// (`#[splat_method]` fills [`SplatMethod::TWIN`]).
+#[derive(Clone, Copy)]
+pub struct Twin {
+    pub project: Flat64,
+    pub project_adjoint: Adjoint64,
+    pub pixel_info: Option<Flat64>,
+    pub pixel_info_adjoint: Option<Adjoint64>,
+    pub evaluate: Flat64,
+    pub evaluate_adjoint: Adjoint64,
+}
+
+/// A value's words as f64.
+pub fn words<P: Flat>(p: &P) -> Vec<f64> {
+    let mut w = vec![0.0f32; P::LEN];
+    p.write_words(&mut w);
+    w.into_iter().map(f64::from).collect()
+}
+
+/// A camera's float slots as f64 (its model is passed separately, as the integer slot).
+pub fn camera_words(c: &Camera) -> Vec<f64> {
+    c.float_slots().map(f64::from).to_vec()
+}
+
+/// max |a - b| / max |b| over a group of gradients.
+pub fn group_error(got: &[f64], want: &[f64]) -> f64 {
+    let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(1e-12);
+    got.iter()
+        .zip(want)
+        .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()))
+        / scale
+}
+
+fn channels<M: SplatMethod>() -> usize {
+    <M::Color as Flat>::LEN
+}
+
+/// Every output, at `tile_size`.
+fn options(tile_size: u32) -> RenderOptions {
+    RenderOptions {
+        tile_size,
+        alpha: true,
+        depth: true,
+        ..Default::default()
+    }
+}
+
+/// Random loss weights on color, alpha and depth for a frame of `n` pixels.
+fn weights(n: usize, channels: usize) -> [Vec<f64>; 3] {
+    let mut rng = fastrand::Rng::with_seed(10);
+    let mut random = |k: usize| (0..k).map(|_| rng.f64() * 2.0 - 1.0).collect::<Vec<f64>>();
+    [random(n * channels), random(n), random(n)]
+}
+
+fn frame_grad(w: &[Vec<f64>; 3]) -> FrameGrad {
+    let f32s = |v: &[f64]| v.iter().map(|x| *x as f32).collect::<Vec<f32>>();
+    FrameGrad {
+        color: f32s(&w[0]),
+        alpha: Some(f32s(&w[1])),
+        depth: Some(f32s(&w[2])),
+    }
+}

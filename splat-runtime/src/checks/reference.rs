@@ -1,0 +1,87 @@
+//! The f64 brute-force reference renderer: every visible primitive evaluated at every pixel in
+//! depth order with the f64 twins of the method's functions; no tiles, no bounding boxes, no
+//! tile culling; only the method's own thresholds and the blend's stopping rule. It shares no
+//! code with the pipeline, so agreeing with it means something.
+
+use super::{camera_words, words};
+use crate::flat::Flat;
+use crate::method::SplatMethod;
+use crate::pipeline::shade::T_MIN;
+use crate::types::{Camera, CameraModel};
+
+/// An f64 render: color (H x W x channels), alpha and depth (H x W), row-major.
+pub struct Reference {
+    pub width: usize,
+    pub height: usize,
+    pub color: Vec<f64>,
+    pub alpha: Vec<f64>,
+    pub depth: Vec<f64>,
+}
+
+/// Renders `params` with method `M` through `camera`.
+pub fn render<M: SplatMethod>(params: &[M::Params], camera: &Camera) -> Reference {
+    let words: Vec<Vec<f64>> = params.iter().map(words).collect();
+    render_words::<M>(&words, &camera_words(camera), camera.model)
+}
+
+/// Renders parameters given as f64 words (`M::Params`' words per primitive) through a camera
+/// given as its float slots (`Camera::float_slots`) and its model: the form finite
+/// differences perturb.
+pub fn render_words<M: SplatMethod>(
+    params: &[Vec<f64>],
+    camera: &[f64],
+    model: CameraModel,
+) -> Reference {
+    let twin = &M::TWIN;
+    let (cull_words, channels) = (<M::Cull as Flat>::LEN, <M::Color as Flat>::LEN);
+    let (width, height) = (camera[16] as usize, camera[17] as usize);
+    let ints = [model as u32];
+    let mut prims: Vec<(f64, usize, Vec<f64>)> = vec![];
+    for (i, p) in params.iter().enumerate() {
+        let input: Vec<f64> = p.iter().chain(camera).copied().collect();
+        let (f, b) = (twin.project)(&input, &ints);
+        if b[0] == 0 || !f[0].is_finite() {
+            continue;
+        }
+        prims.push((f[0], i, f[5 + cull_words..].to_vec()));
+    }
+    prims.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    let mut out = Reference {
+        width,
+        height,
+        color: vec![],
+        alpha: vec![0.0; width * height],
+        depth: vec![0.0; width * height],
+    };
+    for y in 0..height {
+        for x in 0..width {
+            let mut pixel = vec![x as f64 + 0.5, y as f64 + 0.5];
+            if let Some(info) = twin.pixel_info {
+                pixel.extend(camera);
+                pixel = info(&pixel, &ints).0;
+            }
+            let (mut t, mut c, mut d) = (1.0f64, vec![0.0; channels], 0.0f64);
+            for (depth, _, shade) in &prims {
+                let input: Vec<f64> = pixel.iter().chain(shade).copied().collect();
+                let (o, valid) = (twin.evaluate)(&input, &[]);
+                if valid[0] == 0 {
+                    continue;
+                }
+                let next = t * (1.0 - o[0]);
+                if next <= T_MIN as f64 {
+                    break;
+                }
+                for (ch, v) in c.iter_mut().zip(&o[1..]) {
+                    *ch += o[0] * t * v;
+                }
+                d += o[0] * t * depth;
+                t = next;
+            }
+            out.color.extend(&c);
+            let px = y * width + x;
+            out.alpha[px] = 1.0 - t;
+            out.depth[px] = if t < 1.0 { d / (1.0 - t) } else { 0.0 };
+        }
+    }
+    out
+}
