@@ -132,3 +132,18 @@ pub mod generalized {
         }
     }
 }
+
+/// A PLY scene's Gaussians as splats of shape 2 with their degree-1 colors (how `splat render
+/// --scene` reads a scene for this method).
+impl splat_runtime::io::ply::FromStored for generalized::Params {
+    fn from_stored(g: &splat_runtime::io::ply::StoredGaussian) -> Self {
+        generalized::Params {
+            mean: g.mean,
+            log_scale: g.log_scale,
+            rotation: g.rotation,
+            opacity_logit: g.opacity_logit,
+            log_shape_half: 0.0,
+            sh: [g.sh[0], g.sh[1], g.sh[2], g.sh[3]],
+        }
+    }
+}

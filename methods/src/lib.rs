@@ -10,15 +10,7 @@ pub use gaussians::{gs3d, gs3d_sh0, gs3d_sh1, gs3d_sh2};
 pub use linear::linprim;
 pub use unscented::gut;
 
-/// Parameters that can be built from a Gaussian stored in an INRIA PLY file.
-pub trait FromStored {
-    fn from_stored(g: &splat_runtime::io::ply::StoredGaussian) -> Self;
-}
-
-/// Parameters that can be stored as a Gaussian of an INRIA PLY file (what `splat fit` writes).
-pub trait ToStored {
-    fn to_stored(&self) -> splat_runtime::io::ply::StoredGaussian;
-}
+pub use splat_runtime::io::ply::{FromStored, ToStored};
 
 /// `FromStored` and `ToStored` for methods whose parameters are the stored Gaussian's fields as
 /// they are (degree-3 SH).

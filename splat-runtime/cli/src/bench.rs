@@ -5,11 +5,12 @@
 //! adapter has them), the GPU memory held, and optionally the forward image as raw float32
 //! (H x W x 3, what `shared/bench/gsplat_bench.py` compares against gsplat's).
 
-use crate::{Backend, Method, MethodTask, with_method};
+use crate::Backend;
+use crate::methods::{self, Method};
 use anyhow::{Context, Result, bail};
-use splat_methods::FromStored;
 use splat_runtime::gpu::entries::Accumulation;
 use splat_runtime::gpu::{Gpu, GpuRenderer, GpuScene};
+use splat_runtime::io::ply::FromStored;
 use splat_runtime::io::{camera as camera_io, ply, write_atomic};
 use splat_runtime::{Camera, Frame, FrameGrad, RenderOptions, SplatMethod};
 use std::path::PathBuf;
@@ -23,8 +24,8 @@ pub struct BenchArgs {
     /// Camera JSON (default: the built-in pinhole view at --width x --height).
     #[arg(long)]
     camera: Option<PathBuf>,
-    #[arg(long, value_enum, default_value_t = Method::Gs3d)]
-    method: Method,
+    #[arg(long)]
+    method: String,
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     backend: Backend,
     /// Timed frames per measurement (after 3 warm-up frames).
@@ -44,7 +45,8 @@ pub struct BenchArgs {
     height: u32,
 }
 
-pub fn bench_cmd(args: &BenchArgs) -> Result<()> {
+pub fn bench_cmd(args: &BenchArgs, methods: &[Method]) -> Result<()> {
+    let method = methods::find(methods, &args.method)?;
     if args.iters == 0 {
         bail!("--iters must be at least 1");
     }
@@ -62,15 +64,17 @@ pub fn bench_cmd(args: &BenchArgs) -> Result<()> {
     let gpu = crate::pick_gpu(args.backend)?;
     let task = Bench {
         args,
+        method: method.name,
         cloud: &cloud,
         camera: &camera,
         gpu: gpu.as_ref(),
     };
-    with_method(args.method, cloud.sh_degree, task)
+    (method.for_degree(cloud.sh_degree).bench)(&task)
 }
 
-struct Bench<'a> {
+pub struct Bench<'a> {
     args: &'a BenchArgs,
+    method: &'a str,
     cloud: &'a ply::GaussianCloud,
     camera: &'a Camera,
     gpu: Option<&'a Gpu>,
@@ -85,10 +89,8 @@ struct Sample {
 const FORWARD_STAGES: [&str; 3] = ["preprocess", "rasterize", "shade"];
 const BACKWARD_STAGES: [&str; 2] = ["backward blend", "project adjoint"];
 
-impl MethodTask for Bench<'_> {
-    type Output = ();
-
-    fn run<M: SplatMethod>(self) -> Result<()>
+impl Bench<'_> {
+    pub(crate) fn run<M: SplatMethod>(&self) -> Result<()>
     where
         M::Params: FromStored,
     {
@@ -112,7 +114,7 @@ impl MethodTask for Bench<'_> {
         };
         println!(
             "{}: {} primitives (SH degree {}), {w}x{h} {} camera, tile {}, {} timed frames",
-            self.args.method.name(),
+            self.method,
             params.len(),
             self.cloud.sh_degree,
             self.camera.model,
@@ -133,9 +135,7 @@ impl MethodTask for Bench<'_> {
         }
         Ok(())
     }
-}
 
-impl Bench<'_> {
     fn gpu_bench<M: SplatMethod>(
         &self,
         gpu: &Gpu,

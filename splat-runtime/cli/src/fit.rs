@@ -1,32 +1,17 @@
-//! `splat fit`: train a Gaussian method (3DGS, 3DGUT, 3DGEER) on posed images, on the GPU or the
-//! CPU,
-//! with a progress bar, the held-out views' PSNR and SSIM before and after, and the result
-//! written as an INRIA PLY.
+//! `splat fit`: train a method on posed images, on the GPU or the CPU, with a progress bar, the
+//! held-out views' PSNR and SSIM before and after, and the result written as an INRIA PLY.
 
+use crate::methods::{self, Method};
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
-use splat_methods::{ToStored, geer, gs3d, gut};
 use splat_runtime::glam::Vec3;
 use splat_runtime::io::dataset::{self, Dataset};
-use splat_runtime::io::ply::{self, GaussianCloud};
+use splat_runtime::io::ply::{self, GaussianCloud, ToStored};
 use splat_runtime::train::fit::{FitOptions, StepReport, evaluate, fit};
 use splat_runtime::train::gpu_fit::fit_gpu;
 use splat_runtime::train::{Trainable, init};
 use std::path::PathBuf;
 use std::time::Instant;
-
-#[derive(Clone, Copy, clap::ValueEnum, PartialEq, Eq)]
-pub enum FitMethod {
-    /// 3D Gaussian Splatting; pinhole cameras only.
-    #[value(name = "3dgs")]
-    Gs3d,
-    /// 3DGUT; every camera model (fisheye images train as they are).
-    #[value(name = "3dgut")]
-    Gut,
-    /// 3DGEER; every camera model.
-    #[value(name = "3dgeer")]
-    Geer,
-}
 
 #[derive(clap::Args)]
 pub struct FitArgs {
@@ -36,8 +21,9 @@ pub struct FitArgs {
     /// starts from the model's points).
     #[arg(long)]
     data: PathBuf,
-    #[arg(long, value_enum, default_value_t = FitMethod::Gs3d)]
-    method: FitMethod,
+    /// The method to train (one that implements `Trainable`).
+    #[arg(long)]
+    method: String,
     #[arg(long, default_value_t = 3000)]
     steps: usize,
     /// How many points to start from: at most this many of the dataset's points (evenly
@@ -67,7 +53,14 @@ pub struct FitArgs {
     out: PathBuf,
 }
 
-pub fn fit_cmd(args: &FitArgs) -> Result<()> {
+pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
+    let method = methods::find(methods, &args.method)?;
+    let Some(train) = method.full().fit else {
+        bail!(
+            "{} cannot be trained: it does not declare how (splat_runtime::train::Trainable)",
+            method.name
+        );
+    };
     let background = if args.white { Vec3::ONE } else { Vec3::ZERO };
     if args.points == 0 {
         bail!("--points must be at least 1");
@@ -100,80 +93,95 @@ pub fn fit_cmd(args: &FitArgs) -> Result<()> {
         random_background: args.random_background,
         ..Default::default()
     };
-    match args.method {
-        FitMethod::Gs3d => train::<gs3d::Method>(args, &data, mid, extent, &opts),
-        FitMethod::Gut => train::<gut::Method>(args, &data, mid, extent, &opts),
-        FitMethod::Geer => train::<geer::Method>(args, &data, mid, extent, &opts),
-    }
+    train(&Fit {
+        args,
+        data: &data,
+        mid,
+        extent,
+        opts: &opts,
+    })
 }
 
-fn train<M: Trainable>(
-    args: &FitArgs,
-    data: &Dataset,
+/// A training run, for any method.
+pub struct Fit<'a> {
+    args: &'a FitArgs,
+    data: &'a Dataset,
+    /// The cameras' centre and the scene's radius.
     mid: Vec3,
     extent: f32,
-    opts: &FitOptions,
-) -> Result<()>
-where
-    M::Params: ToStored,
-{
-    let mut params = if data.points.is_empty() {
-        init::in_cube::<M>(args.points, mid, extent / 2.0, args.seed)
-    } else {
-        let params = init::from_points::<M>(&data.points, args.points);
-        println!(
-            "starting from {} of the dataset's {} points",
-            params.len(),
-            data.points.len()
+    opts: &'a FitOptions,
+}
+
+impl Fit<'_> {
+    pub(crate) fn run<M: Trainable>(&self) -> Result<()>
+    where
+        M::Params: ToStored,
+    {
+        let Fit {
+            args,
+            data,
+            mid,
+            extent,
+            opts,
+        } = *self;
+        let mut params = if data.points.is_empty() {
+            init::in_cube::<M>(args.points, mid, extent / 2.0, args.seed)
+        } else {
+            let params = init::from_points::<M>(&data.points, args.points);
+            println!(
+                "starting from {} of the dataset's {} points",
+                params.len(),
+                data.points.len()
+            );
+            params
+        };
+        let before = evaluate::<M>(&params, &data.test, opts)?;
+        let bar = ProgressBar::new(args.steps as u64).with_style(
+            ProgressStyle::with_template("{bar:40} {pos}/{len} steps, {elapsed} (eta {eta}) {msg}")
+                .expect("a valid template"),
         );
-        params
-    };
-    let before = evaluate::<M>(&params, &data.test, opts)?;
-    let bar = ProgressBar::new(args.steps as u64).with_style(
-        ProgressStyle::with_template("{bar:40} {pos}/{len} steps, {elapsed} (eta {eta}) {msg}")
-            .expect("a valid template"),
-    );
-    let report = |r: &StepReport| {
-        bar.inc(1);
-        if r.step.is_multiple_of(10) || r.refinement.is_some() {
-            let v = r.loss;
-            bar.set_message(format!(
-                "loss {:.4} (L1 {:.4}, SSIM {:.3}), {} primitives",
-                v.loss, v.l1, v.ssim, r.primitives
-            ));
-        }
-    };
-    let gpu = crate::pick_gpu(args.backend)?;
-    let t = Instant::now();
-    let place = match &gpu {
-        Some(gpu) => {
-            fit_gpu::<M>(gpu, data, &mut params, extent, opts, report)?;
-            format!("the GPU ({})", gpu.adapter)
-        }
-        None => {
-            fit::<M>(data, &mut params, extent, opts, report)?;
-            "the CPU".to_string()
-        }
-    };
-    bar.finish();
-    let per_step = t.elapsed().as_secs_f64() / args.steps.max(1) as f64;
-    let after = evaluate::<M>(&params, &data.test, opts)?;
-    println!(
-        "{} steps on {place}, {:.1} ms per step, {} primitives; {} test views: PSNR {:.2} -> {:.2} dB, SSIM {:.3} -> {:.3}",
-        args.steps,
-        per_step * 1e3,
-        params.len(),
-        after.views,
-        before.psnr,
-        after.psnr,
-        before.ssim,
-        after.ssim
-    );
-    let cloud = GaussianCloud {
-        sh_degree: 3,
-        gaussians: params.iter().map(ToStored::to_stored).collect(),
-    };
-    ply::write(&args.out, &cloud).with_context(|| format!("writing {}", args.out.display()))?;
-    println!("wrote {}", args.out.display());
-    Ok(())
+        let report = |r: &StepReport| {
+            bar.inc(1);
+            if r.step.is_multiple_of(10) || r.refinement.is_some() {
+                let v = r.loss;
+                bar.set_message(format!(
+                    "loss {:.4} (L1 {:.4}, SSIM {:.3}), {} primitives",
+                    v.loss, v.l1, v.ssim, r.primitives
+                ));
+            }
+        };
+        let gpu = crate::pick_gpu(args.backend)?;
+        let t = Instant::now();
+        let place = match &gpu {
+            Some(gpu) => {
+                fit_gpu::<M>(gpu, data, &mut params, extent, opts, report)?;
+                format!("the GPU ({})", gpu.adapter)
+            }
+            None => {
+                fit::<M>(data, &mut params, extent, opts, report)?;
+                "the CPU".to_string()
+            }
+        };
+        bar.finish();
+        let per_step = t.elapsed().as_secs_f64() / args.steps.max(1) as f64;
+        let after = evaluate::<M>(&params, &data.test, opts)?;
+        println!(
+            "{} steps on {place}, {:.1} ms per step, {} primitives; {} test views: PSNR {:.2} -> {:.2} dB, SSIM {:.3} -> {:.3}",
+            args.steps,
+            per_step * 1e3,
+            params.len(),
+            after.views,
+            before.psnr,
+            after.psnr,
+            before.ssim,
+            after.ssim
+        );
+        let cloud = GaussianCloud {
+            sh_degree: 3,
+            gaussians: params.iter().map(ToStored::to_stored).collect(),
+        };
+        ply::write(&args.out, &cloud).with_context(|| format!("writing {}", args.out.display()))?;
+        println!("wrote {}", args.out.display());
+        Ok(())
+    }
 }

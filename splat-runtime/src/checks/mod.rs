@@ -1,6 +1,6 @@
 //! The checks a method author runs on a new primitive, written once over [`SplatMethod`]:
 //!
-//! - [`reference`]: an f64 brute-force renderer built from the method's f64 twins (every
+//! - [`reference`](mod@reference): an f64 brute-force renderer built from the method's f64 twins (every
 //!   primitive at every pixel, in depth order; no tiles, boxes or culling), and
 //!   [`adjoint`]: its analytic backward pass;
 //! - [`forward`]: the CPU render against the reference, boxes that hold every pixel a primitive

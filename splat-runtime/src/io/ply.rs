@@ -301,6 +301,17 @@ pub fn write_to(w: &mut dyn Write, cloud: &GaussianCloud) -> std::io::Result<()>
     Ok(())
 }
 
+/// Parameters that can be built from a Gaussian stored in an INRIA PLY file (how `splat render`
+/// reads a scene for a method).
+pub trait FromStored {
+    fn from_stored(g: &StoredGaussian) -> Self;
+}
+
+/// Parameters that can be stored as a Gaussian of an INRIA PLY file (what `splat fit` writes).
+pub trait ToStored {
+    fn to_stored(&self) -> StoredGaussian;
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -1,0 +1,225 @@
+//! The `splat` command line as a library: a user crate offers its own methods with the same
+//! commands (render, bench, fit, inspect, gallery, scene) in a few lines:
+//!
+//! ```no_run
+//! use splat_cli::{Instance, Method};
+//! # mod mine { pub type Method = splat_methods::gut::Method; }
+//! fn main() -> std::process::ExitCode {
+//!     splat_cli::run(&[Method::new(
+//!         "mine",
+//!         "my primitive",
+//!         Instance::trainable::<mine::Method>(),
+//!     )])
+//! }
+//! ```
+//!
+//! The project's own `splat` binary is this entry point with the built-in methods.
+
+mod bench;
+mod fit;
+mod methods;
+mod render;
+mod scene;
+
+pub use methods::{Instance, Method};
+
+use anyhow::{Context, Result};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand, ValueEnum};
+use splat_runtime::CameraModel;
+use splat_runtime::gpu::Gpu;
+use splat_runtime::io::{camera as camera_io, ply};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Parser)]
+#[command(
+    name = "splat",
+    version,
+    about = "Point-based differentiable rendering"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a scene (the built-in one when no --scene is given).
+    Render(render::RenderArgs),
+    /// Write the built-in scene as an INRIA PLY, and its camera as JSON.
+    Scene {
+        #[arg(long, default_value = "planet.ply")]
+        out: PathBuf,
+        #[arg(long)]
+        camera_out: Option<PathBuf>,
+    },
+    /// Render the built-in scene with every method and camera model into one picture (rows:
+    /// methods; columns: pinhole, fisheye, equiangular).
+    Gallery {
+        #[arg(long, default_value = "gallery.png")]
+        out: PathBuf,
+        /// Size of each panel.
+        #[arg(long, default_value_t = 320)]
+        width: u32,
+        #[arg(long, default_value_t = 240)]
+        height: u32,
+    },
+    /// Time forward and forward + backward frames on one scene (GPU: the device-resident
+    /// pipeline; CPU: per thread count), with per-stage medians.
+    Bench(bench::BenchArgs),
+    /// Train a Gaussian method on posed images (Blender, nerfstudio or COLMAP), on the GPU or
+    /// the CPU.
+    Fit(fit::FitArgs),
+    /// Print the Rust or WGSL the #[splat_method] compiler generated for a method.
+    Inspect {
+        #[arg(long)]
+        method: String,
+        #[arg(long, value_enum, default_value_t = Lang::Rust)]
+        lang: Lang,
+    },
+}
+
+#[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
+pub enum Model {
+    Pinhole,
+    #[value(name = "kannala_brandt")]
+    KannalaBrandt,
+    Equiangular,
+}
+
+impl From<Model> for CameraModel {
+    fn from(m: Model) -> CameraModel {
+        match m {
+            Model::Pinhole => CameraModel::Pinhole,
+            Model::KannalaBrandt => CameraModel::KannalaBrandt,
+            Model::Equiangular => CameraModel::Equiangular,
+        }
+    }
+}
+
+#[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
+pub enum Backend {
+    /// A hardware GPU if wgpu finds one, else the CPU (a software adapter such as lavapipe is
+    /// slower than the CPU backend).
+    Auto,
+    Cpu,
+    Gpu,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+pub enum Lang {
+    Rust,
+    Wgsl,
+}
+
+/// Runs the command line (`std::env::args`) offering `methods` (the first is the default):
+/// what a `main` returns.
+pub fn run(methods: &[Method]) -> ExitCode {
+    quiet_device_select_layer();
+    match run_with_args(methods, std::env::args_os()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => match e.downcast::<clap::Error>() {
+            // Usage errors, and --help and --version, as clap prints them.
+            Ok(usage) => usage.exit(),
+            Err(e) => {
+                eprintln!("error: {e:#}");
+                ExitCode::FAILURE
+            }
+        },
+    }
+}
+
+/// Runs the command line `args` (the program's name first) offering `methods`.
+pub fn run_with_args<I, T>(methods: &[Method], args: I) -> Result<()>
+where
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString> + Clone,
+{
+    let Some(first) = methods.first() else {
+        anyhow::bail!("this command line offers no methods");
+    };
+    let names: Vec<clap::builder::PossibleValue> = methods
+        .iter()
+        .map(|m| clap::builder::PossibleValue::new(m.name).help(m.help))
+        .collect();
+    // The methods are known only now: every `--method` lists them and defaults to the first.
+    let mut command = Cli::command();
+    for sub in ["render", "bench", "fit", "inspect"] {
+        command = command.mut_subcommand(sub, |s| {
+            s.mut_arg("method", |a| {
+                a.value_parser(clap::builder::PossibleValuesParser::new(names.clone()))
+                    .default_value(first.name)
+                    .required(false)
+            })
+        });
+    }
+    let cli = Cli::from_arg_matches(&command.try_get_matches_from(args)?)?;
+    dispatch(cli, methods)
+}
+
+fn dispatch(cli: Cli, methods: &[Method]) -> Result<()> {
+    match cli.command {
+        Command::Render(args) => render::render_cmd(&args, methods),
+        Command::Fit(args) => fit::fit_cmd(&args, methods),
+        Command::Bench(args) => bench::bench_cmd(&args, methods),
+        Command::Scene { out, camera_out } => {
+            ply::write(&out, &scene::planet())
+                .with_context(|| format!("writing {}", out.display()))?;
+            println!("wrote {}", out.display());
+            if let Some(c) = camera_out {
+                camera_io::write(&c, &scene::camera(800, 600, CameraModel::Pinhole))
+                    .with_context(|| format!("writing {}", c.display()))?;
+                println!("wrote {}", c.display());
+            }
+            Ok(())
+        }
+        Command::Gallery { out, width, height } => render::gallery(&out, width, height, methods),
+        Command::Inspect { method, lang } => {
+            let source = methods::find(methods, &method)?.full().source;
+            let text = match lang {
+                Lang::Wgsl => source.wgsl,
+                Lang::Rust => source.rust,
+            };
+            // A reader that stops early (`| head`) is not an error.
+            match std::io::Write::write_all(&mut std::io::stdout(), text.as_bytes()) {
+                Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(e.into()),
+                _ => Ok(()),
+            }
+        }
+    }
+}
+
+/// Mesa's Vulkan device-selection layer looks for a Wayland display to pick the GPU driving
+/// it, and without `XDG_RUNTIME_DIR` libwayland prints an error line on stderr. wgpu picks the
+/// adapter itself, so the layer has nothing to do here: it is switched off (its documented
+/// `NODEVICE_SELECT`) unless the user set either variable.
+fn quiet_device_select_layer() {
+    let set = |k| std::env::var_os(k).is_some();
+    if !set("XDG_RUNTIME_DIR") && !set("NODEVICE_SELECT") {
+        // SAFETY: called first thing in `run`, before this program starts any thread.
+        unsafe { std::env::set_var("NODEVICE_SELECT", "1") };
+    }
+}
+
+/// The GPU `backend` asks for: none for the CPU; for `auto`, a hardware adapter if there is
+/// one (and a line saying why not when there is none).
+pub(crate) fn pick_gpu(backend: Backend) -> Result<Option<Gpu>> {
+    Ok(match backend {
+        Backend::Cpu => None,
+        Backend::Gpu => Some(Gpu::new()?),
+        Backend::Auto => match Gpu::new() {
+            Ok(g) if !g.software => Some(g),
+            Ok(g) => {
+                println!(
+                    "backend auto: the CPU, since the only GPU adapter is a software one ({}), slower than the CPU backend",
+                    g.adapter
+                );
+                None
+            }
+            Err(e) => {
+                println!("backend auto: the CPU, since there is no GPU ({e})");
+                None
+            }
+        },
+    })
+}

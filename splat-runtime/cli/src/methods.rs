@@ -1,0 +1,101 @@
+//! The methods a `splat` command line offers. Each is a name, a line of help and its compiled
+//! instances (one, or one per SH degree); what each command runs for an instance is built from
+//! its types here, once, so the commands themselves never name a method.
+
+use crate::bench::Bench;
+use crate::fit::Fit;
+use crate::render::Render;
+use anyhow::{Result, bail};
+use splat_runtime::io::ply::{FromStored, ToStored};
+use splat_runtime::train::Trainable;
+use splat_runtime::{Frame, GeneratedSource, SplatMethod};
+
+/// A method on the command line.
+pub struct Method {
+    pub name: &'static str,
+    pub help: &'static str,
+    /// `instances[k]` renders scenes of SH degree k; the last one higher degrees, training and
+    /// `inspect`.
+    instances: Vec<Instance>,
+}
+
+/// One compiled method: what each command does with it.
+#[derive(Clone, Copy)]
+pub struct Instance {
+    pub(crate) source: GeneratedSource,
+    pub(crate) render: fn(&Render) -> Result<(Frame, String)>,
+    pub(crate) bench: fn(&Bench) -> Result<()>,
+    pub(crate) fit: Option<fn(&Fit) -> Result<()>>,
+}
+
+impl Instance {
+    /// A method that renders (its parameters read from a PLY scene's Gaussians).
+    pub fn of<M: SplatMethod>() -> Instance
+    where
+        M::Params: FromStored,
+    {
+        Instance {
+            source: M::SOURCE,
+            render: |r| r.run::<M>(),
+            bench: |b| b.run::<M>(),
+            fit: None,
+        }
+    }
+
+    /// A method that also trains (`splat fit`, written back as PLY Gaussians).
+    pub fn trainable<M: Trainable>() -> Instance
+    where
+        M::Params: FromStored + ToStored,
+    {
+        Instance {
+            fit: Some(|f| f.run::<M>()),
+            ..Instance::of::<M>()
+        }
+    }
+}
+
+impl Method {
+    pub fn new(name: &'static str, help: &'static str, instance: Instance) -> Method {
+        Method::per_sh_degree(name, help, vec![instance])
+    }
+
+    /// A method compiled once per SH degree: `instances[k]` for scenes of degree k, so a
+    /// low-degree scene evaluates no higher-order terms.
+    pub fn per_sh_degree(
+        name: &'static str,
+        help: &'static str,
+        instances: Vec<Instance>,
+    ) -> Method {
+        assert!(!instances.is_empty(), "{name}: at least one instance");
+        Method {
+            name,
+            help,
+            instances,
+        }
+    }
+
+    /// The instance for a scene of SH degree `degree`.
+    pub(crate) fn for_degree(&self, degree: u32) -> &Instance {
+        let last = self.instances.len() - 1;
+        &self.instances[(degree as usize).min(last)]
+    }
+
+    /// The full instance (the highest degree).
+    pub(crate) fn full(&self) -> &Instance {
+        &self.instances[self.instances.len() - 1]
+    }
+}
+
+/// The method called `name`.
+pub(crate) fn find<'m>(methods: &'m [Method], name: &str) -> Result<&'m Method> {
+    match methods.iter().find(|m| m.name == name) {
+        Some(m) => Ok(m),
+        None => {
+            let names: Vec<&str> = methods.iter().map(|m| m.name).collect();
+            bail!(
+                "unknown method `{name}` (this command offers {})",
+                names.join(", ")
+            )
+        }
+    }
+}

@@ -1,0 +1,251 @@
+//! `splat render` and `splat gallery`.
+
+use crate::methods::{self, Method};
+use crate::{Backend, Model, pick_gpu, scene};
+use anyhow::{Result, bail};
+use splat_runtime::io::ply::{FromStored, GaussianCloud};
+use splat_runtime::io::{camera as camera_io, image as image_io, ply};
+use splat_runtime::{Camera, CameraModel, Frame, Image, RenderOptions, SplatMethod, render};
+use std::path::PathBuf;
+use std::time::Instant;
+
+#[derive(clap::Args)]
+pub struct RenderArgs {
+    /// INRIA 3DGS PLY scene.
+    #[arg(long)]
+    scene: Option<PathBuf>,
+    /// Camera JSON (default: the built-in view, at --width x --height, of --camera-model).
+    #[arg(long)]
+    camera: Option<PathBuf>,
+    /// The built-in camera's model (default pinhole; a camera file names its own).
+    #[arg(long, value_enum, conflicts_with = "camera")]
+    camera_model: Option<Model>,
+    #[arg(long)]
+    method: String,
+    /// Output file: .png, .exr or .npy.
+    #[arg(long, default_value = "render.png")]
+    out: PathBuf,
+    /// Tile size in pixels (8, 16, 32 or 64).
+    #[arg(long, default_value_t = 16)]
+    tile: u32,
+    /// Also output the expected depth.
+    #[arg(long)]
+    depth: bool,
+    /// Also output alpha.
+    #[arg(long)]
+    alpha: bool,
+    /// Blend at most this many primitives per tile.
+    #[arg(long)]
+    p_max: Option<usize>,
+    /// Where to render: the CPU backend (rayon + SIMD) or the wgpu backend (any adapter,
+    /// software ones included); `auto` picks a hardware GPU when there is one.
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    backend: Backend,
+    #[arg(long, default_value_t = 800)]
+    width: u32,
+    #[arg(long, default_value_t = 600)]
+    height: u32,
+}
+
+/// Renders a scene with the chosen method on the chosen backend.
+pub struct Render<'a> {
+    cloud: &'a GaussianCloud,
+    camera: &'a Camera,
+    opts: &'a RenderOptions,
+    backend: Backend,
+}
+
+impl Render<'_> {
+    /// The frame, and where it ran.
+    pub(crate) fn run<M: SplatMethod>(&self) -> Result<(Frame, String)>
+    where
+        M::Params: FromStored,
+    {
+        let params: Vec<M::Params> = self
+            .cloud
+            .gaussians
+            .iter()
+            .map(M::Params::from_stored)
+            .collect();
+        Ok(match pick_gpu(self.backend)? {
+            None => (
+                render::<M>(&params, self.camera, self.opts)?,
+                "CPU".to_string(),
+            ),
+            Some(gpu) => {
+                let frame =
+                    splat_runtime::gpu::render::render::<M>(&gpu, &params, self.camera, self.opts)?;
+                (frame, format!("GPU, {}", gpu.adapter))
+            }
+        })
+    }
+}
+
+/// Renders `cloud` with `method` on `backend`; returns the frame and where it ran.
+fn render_method(
+    method: &Method,
+    cloud: &GaussianCloud,
+    camera: &Camera,
+    opts: &RenderOptions,
+    backend: Backend,
+) -> Result<(Frame, String)> {
+    let task = Render {
+        cloud,
+        camera,
+        opts,
+        backend,
+    };
+    (method.for_degree(cloud.sh_degree).render)(&task)
+}
+
+/// Every method on every camera model, panels in a grid; a method that does not support a
+/// model gets a dark panel.
+pub(crate) fn gallery(
+    out: &std::path::Path,
+    width: u32,
+    height: u32,
+    methods: &[Method],
+) -> Result<()> {
+    let side = 1..=2048;
+    if !side.contains(&width) || !side.contains(&height) {
+        bail!("panel size {width}x{height} is out of range (1..=2048 per side)");
+    }
+    let cloud = scene::planet();
+    let (cols, rows) = (CameraModel::ALL.len() as u32, methods.len() as u32);
+    let mut grid = Image {
+        width: width * cols,
+        height: height * rows,
+        channels: 3,
+        data: vec![0.08; (width * cols * height * rows * 3) as usize],
+    };
+    let opts = RenderOptions::default();
+    for (r, method) in methods.iter().enumerate() {
+        for (c, model) in CameraModel::ALL.into_iter().enumerate() {
+            let camera = scene::camera(width, height, model);
+            let frame = match render_method(method, &cloud, &camera, &opts, Backend::Cpu) {
+                Ok((frame, _)) => frame,
+                // A pinhole-only method on another model: a dark panel. Any other error is one.
+                Err(e)
+                    if matches!(
+                        e.downcast_ref::<splat_runtime::RenderError>(),
+                        Some(splat_runtime::RenderError::CameraModel { .. })
+                    ) =>
+                {
+                    println!("{} / {model}: {e}", method.name);
+                    continue;
+                }
+                Err(e) => return Err(e),
+            };
+            for y in 0..height {
+                let src = (y * width * 3) as usize;
+                let dst = (((r as u32 * height + y) * grid.width + c as u32 * width) * 3) as usize;
+                let row = (width * 3) as usize;
+                grid.data[dst..dst + row].copy_from_slice(&frame.color.data[src..src + row]);
+            }
+            println!(
+                "{} / {model}: {} visible, {} intersections, shade {:.1} ms",
+                method.name,
+                frame.stats.visible,
+                frame.stats.intersections,
+                frame.stats.shade.as_secs_f64() * 1e3
+            );
+        }
+    }
+    let frame = Frame {
+        color: grid,
+        alpha: None,
+        depth: None,
+        stats: Default::default(),
+    };
+    for p in image_io::write_frame(out, &frame)? {
+        println!("wrote {}", p.display());
+    }
+    Ok(())
+}
+
+pub(crate) fn render_cmd(args: &RenderArgs, methods: &[Method]) -> Result<()> {
+    let method = methods::find(methods, &args.method)?;
+    let ext = args
+        .out
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    if !["png", "exr", "npy"].contains(&ext.as_str()) {
+        bail!(
+            "output `{}`: unknown extension (use .png, .exr or .npy)",
+            args.out.display()
+        );
+    }
+    let t0 = Instant::now();
+    let (cloud, source) = match &args.scene {
+        Some(path) => (ply::read(path)?, path.display().to_string()),
+        None => (scene::planet(), "built-in planet".to_string()),
+    };
+    let camera: Camera = match &args.camera {
+        Some(path) => camera_io::read(path)?,
+        None => {
+            let side = 1..=splat_runtime::pipeline::MAX_SIDE;
+            if !side.contains(&args.width) || !side.contains(&args.height) {
+                bail!(
+                    "image size {}x{} is out of range (1..={} per side)",
+                    args.width,
+                    args.height,
+                    side.end()
+                );
+            }
+            let model = args.camera_model.unwrap_or(Model::Pinhole);
+            scene::camera(args.width, args.height, model.into())
+        }
+    };
+    let load = t0.elapsed();
+    let opts = RenderOptions {
+        tile_size: args.tile,
+        p_max: args.p_max,
+        alpha: args.alpha,
+        depth: args.depth,
+        ..Default::default()
+    };
+    let (frame, backend) = render_method(method, &cloud, &camera, &opts, args.backend)?;
+    let written = image_io::write_frame(&args.out, &frame)?;
+    let s = &frame.stats;
+    let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+    println!(
+        "{} on {backend}: {} primitives (SH degree {}) from {source}, {}x{} {} camera, tile {}",
+        method.name,
+        s.primitives,
+        cloud.sh_degree,
+        frame.color.width,
+        frame.color.height,
+        camera.model,
+        args.tile
+    );
+    let pairs = if backend == "CPU" {
+        s.pairs.to_string()
+    } else {
+        "not counted on the GPU".to_string()
+    };
+    println!(
+        "visible {}, intersections {}, pairs evaluated {pairs}",
+        s.visible, s.intersections
+    );
+    let stages = s.preprocess + s.rasterize + s.shade;
+    if backend != "CPU" && stages.is_zero() {
+        println!(
+            "load {:.1} ms; no stage times: this adapter has no GPU timestamps",
+            ms(load)
+        );
+    } else {
+        println!(
+            "load {:.1} ms, preprocess {:.1} ms, rasterize {:.1} ms, shade {:.1} ms",
+            ms(load),
+            ms(s.preprocess),
+            ms(s.rasterize),
+            ms(s.shade)
+        );
+    }
+    for p in written {
+        println!("wrote {}", p.display());
+    }
+    Ok(())
+}
