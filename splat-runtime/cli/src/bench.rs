@@ -61,6 +61,7 @@ pub fn bench_cmd(args: &BenchArgs, methods: &[Method]) -> Result<()> {
         Some(path) => camera_io::read(path)?,
         None => crate::scene::camera(args.width, args.height, Default::default()),
     };
+    methods::check_camera(method, methods, camera.model)?;
     let gpu = crate::pick_gpu(args.backend)?;
     let task = Bench {
         args,
@@ -131,7 +132,7 @@ impl Bench<'_> {
         );
         if let Some(path) = &self.args.raw_out {
             write_raw(path, &frame)?;
-            println!("wrote {}", path.display());
+            crate::wrote(&path);
         }
         Ok(())
     }

@@ -71,6 +71,7 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
         bail!("{}: no training views", args.data.display());
     }
     let first = &data.train[0];
+    methods::check_camera(method, methods, first.camera.model)?;
     println!(
         "{}: {} training and {} test views of {}x{}, read in {:.1} s",
         args.data.display(),
@@ -181,7 +182,7 @@ impl Fit<'_> {
             gaussians: params.iter().map(ToStored::to_stored).collect(),
         };
         ply::write(&args.out, &cloud).with_context(|| format!("writing {}", args.out.display()))?;
-        println!("wrote {}", args.out.display());
+        crate::wrote(&args.out);
         Ok(())
     }
 }

@@ -165,11 +165,11 @@ fn dispatch(cli: Cli, methods: &[Method]) -> Result<()> {
         Command::Scene { out, camera_out } => {
             ply::write(&out, &scene::planet())
                 .with_context(|| format!("writing {}", out.display()))?;
-            println!("wrote {}", out.display());
+            crate::wrote(&out);
             if let Some(c) = camera_out {
                 camera_io::write(&c, &scene::camera(800, 600, CameraModel::Pinhole))
                     .with_context(|| format!("writing {}", c.display()))?;
-                println!("wrote {}", c.display());
+                crate::wrote(&c);
             }
             Ok(())
         }
@@ -187,6 +187,12 @@ fn dispatch(cli: Cli, methods: &[Method]) -> Result<()> {
             }
         }
     }
+}
+
+/// Says where an output went, as a full path (the default names land where `splat` runs).
+pub(crate) fn wrote(path: &std::path::Path) {
+    let full = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    println!("wrote {}", full.display());
 }
 
 /// Mesa's Vulkan device-selection layer looks for a Wayland display to pick the GPU driving

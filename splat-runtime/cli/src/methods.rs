@@ -8,7 +8,7 @@ use crate::render::Render;
 use anyhow::{Result, bail};
 use splat_runtime::io::ply::{FromStored, ToStored};
 use splat_runtime::train::Trainable;
-use splat_runtime::{Frame, GeneratedSource, SplatMethod};
+use splat_runtime::{CameraModel, Frame, GeneratedSource, SplatMethod};
 
 /// A method on the command line.
 pub struct Method {
@@ -23,6 +23,8 @@ pub struct Method {
 #[derive(Clone, Copy)]
 pub struct Instance {
     pub(crate) source: GeneratedSource,
+    /// Whether it renders every camera model (else pinhole only).
+    pub(crate) generic_camera: bool,
     pub(crate) render: fn(&Render) -> Result<(Frame, String)>,
     pub(crate) bench: fn(&Bench) -> Result<()>,
     pub(crate) fit: Option<fn(&Fit) -> Result<()>>,
@@ -36,6 +38,7 @@ impl Instance {
     {
         Instance {
             source: M::SOURCE,
+            generic_camera: M::GENERIC_CAMERA,
             render: |r| r.run::<M>(),
             bench: |b| b.run::<M>(),
             fit: None,
@@ -84,6 +87,27 @@ impl Method {
     pub(crate) fn full(&self) -> &Instance {
         &self.instances[self.instances.len() - 1]
     }
+}
+
+/// Refuses a camera model `method` cannot render, by the names the user typed, suggesting
+/// the methods that can.
+pub(crate) fn check_camera(method: &Method, methods: &[Method], model: CameraModel) -> Result<()> {
+    if model == CameraModel::Pinhole || method.full().generic_camera {
+        return Ok(());
+    }
+    let can: Vec<String> = methods
+        .iter()
+        .filter(|m| m.full().generic_camera)
+        .map(|m| format!("--method {}", m.name))
+        .collect();
+    let hint = match can.is_empty() {
+        true => String::new(),
+        false => format!(": use {}", can.join(" or ")),
+    };
+    bail!(
+        "{} renders with a pinhole camera only, and the camera is {model}{hint}",
+        method.name
+    )
 }
 
 /// The method called `name`.

@@ -158,7 +158,7 @@ pub(crate) fn gallery(
         stats: Default::default(),
     };
     for p in image_io::write_frame(out, &frame)? {
-        println!("wrote {}", p.display());
+        crate::wrote(&p);
     }
     Ok(())
 }
@@ -198,6 +198,7 @@ pub(crate) fn render_cmd(args: &RenderArgs, methods: &[Method]) -> Result<()> {
             scene::camera(args.width, args.height, model.into())
         }
     };
+    methods::check_camera(method, methods, camera.model)?;
     let load = t0.elapsed();
     let opts = RenderOptions {
         tile_size: args.tile,
@@ -245,7 +246,7 @@ pub(crate) fn render_cmd(args: &RenderArgs, methods: &[Method]) -> Result<()> {
         );
     }
     for p in written {
-        println!("wrote {}", p.display());
+        crate::wrote(&p);
     }
     Ok(())
 }

@@ -324,6 +324,45 @@ fn bad_cameras_and_options_are_refused_clearly() {
     );
     fails(&render(&["--width", "0"]), "image size 0x600", &out);
     fails(&render(&["--tile", "7"]), "tile size 7", &out);
+    fails(&render(&["--p-max", "0"]), "P_max 0", &out);
+    write(
+        dir.path(),
+        "scaled.json",
+        cam.replacen("[\n      -1.0,", "[\n      -2.0,", 1)
+            .as_bytes(),
+    );
+    assert_ne!(
+        cam,
+        std::fs::read_to_string(dir.path().join("scaled.json")).unwrap()
+    );
+    fails(&render(&["--camera", "scaled.json"]), "not rigid", &out);
+    write(
+        dir.path(),
+        "kb.json",
+        cam.replace("\"pinhole\"", "\"kannala_brandt\"").as_bytes(),
+    );
+    fails(
+        &render(&["--camera", "kb.json", "--method", "3dgut"]),
+        "needs its coefficients `k`",
+        &out,
+    );
+    // Refused by the name typed, with what works instead; no internal instance names.
+    let fisheye = render(&["--camera-model", "kannala_brandt", "--method", "3dgs"]);
+    fails(&fisheye, "3dgs renders with a pinhole camera only", &out);
+    let stderr = String::from_utf8_lossy(&fisheye.stderr);
+    assert!(
+        stderr.contains("--method 3dgut or --method 3dgeer"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("gs3d_sh"), "{stderr}");
+    // Each error says its cause once.
+    let missing = render(&["--scene", "missing.ply"]);
+    fails(&missing, "missing.ply", &out);
+    let stderr = String::from_utf8_lossy(&missing.stderr);
+    assert_eq!(stderr.matches("os error 2").count(), 1, "{stderr}");
+    let broken = render(&["--camera", "broken.json"]);
+    let stderr = String::from_utf8_lossy(&broken.stderr);
+    assert_eq!(stderr.matches("EOF while parsing").count(), 1, "{stderr}");
     let bad_ext = dir.path().join("out.bmp");
     fails(
         &splat(&["render", "--out", "out.bmp"], dir.path()),
@@ -608,7 +647,7 @@ fn fit_starts_from_a_colmap_datasets_points() {
         stdout.contains("starting from 40 of the dataset's 40 points"),
         "{stdout}"
     );
-    assert!(stdout.contains("wrote fit.ply"), "{stdout}");
+    assert!(stdout.contains("fit.ply"), "{stdout}");
     let cloud = splat_runtime::io::ply::read(&dir.path().join("fit.ply")).unwrap();
     assert_eq!(cloud.gaussians.len(), 40);
 
@@ -621,4 +660,45 @@ fn fit_starts_from_a_colmap_datasets_points() {
         stdout.contains("starting from 10 of the dataset's 40 points"),
         "{stdout}"
     );
+}
+
+/// `splat inspect | head` stops reading early: the command ends quietly, no panic.
+#[test]
+fn inspect_into_a_closed_pipe_exits_quietly() {
+    use std::io::Read;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_splat"))
+        .args(["inspect", "--method", "3dgeer"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut first = [0u8; 16];
+    child.stdout.take().unwrap().read_exact(&mut first).unwrap();
+    // The pipe's reading end is closed here (dropped), as `head` does.
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
+
+/// The depth PNG says how it maps depth, with the range, in its text metadata; outputs are
+/// reported by their full path.
+#[test]
+fn the_depth_png_records_its_mapping() {
+    let dir = temp();
+    let stdout = ok(&splat(
+        &[
+            "render", "--depth", "--width", "64", "--height", "48", "--out", "d.png",
+        ],
+        dir.path(),
+    ));
+    let full = dir.path().canonicalize().unwrap().join("d.depth.png");
+    assert!(
+        stdout.contains(&format!("wrote {}", full.display())),
+        "{stdout}"
+    );
+    let bytes = std::fs::read(&full).unwrap();
+    let text = String::from_utf8_lossy(&bytes);
+    assert!(text.contains("tEXtDescription"), "no text chunk");
+    assert!(text.contains("(nearest)") && text.contains("0 = nothing hit"));
 }

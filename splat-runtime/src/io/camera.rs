@@ -1,8 +1,9 @@
 //! Cameras as JSON:
 //! `{"width": W, "height": H, "fx": .., "fy": .., "cx": .., "cy": ..,
 //!   "world_to_camera": [[4 rows of 4]], "model": "pinhole"}` (row-major, OpenCV convention).
-//! `model` is `pinhole` (the default), `kannala_brandt` (with `"k": [k1, k2, k3, k4]`, zeros
-//! if absent: the equidistant fisheye) or `equiangular`; see [`CameraModel`].
+//! `model` is `pinhole` (the default), `kannala_brandt` (with `"k": [k1, k2, k3, k4]`, required;
+//! zeros are the equidistant fisheye) or `equiangular`; see [`CameraModel`]. The pose must be
+//! rigid (a rotation and a translation).
 
 use crate::pipeline::MAX_SIDE;
 use crate::types::{Camera, CameraModel};
@@ -33,15 +34,12 @@ fn pinhole() -> String {
 
 #[derive(Debug, thiserror::Error)]
 pub enum CameraError {
-    #[error("cannot read camera {path}: {source}")]
-    Io {
-        path: String,
-        source: std::io::Error,
-    },
-    #[error("camera {path} is not valid JSON for a camera: {source}")]
+    #[error("cannot read camera {path}: {error}")]
+    Io { path: String, error: std::io::Error },
+    #[error("camera {path} is not valid JSON for a camera: {error}")]
     Json {
         path: String,
-        source: serde_json::Error,
+        error: serde_json::Error,
     },
     #[error(
         "camera model `{0}` is not supported (supported: pinhole, kannala_brandt, equiangular)"
@@ -55,6 +53,14 @@ pub enum CameraError {
     Intrinsics(&'static str),
     #[error("camera world_to_camera must be finite with last row [0, 0, 0, 1]")]
     Pose,
+    #[error(
+        "camera world_to_camera is not rigid: its 3x3 part is off a rotation by {0:.2e} (R^T R - I, or a reflection); scale or shear would distort the render"
+    )]
+    NotRigid(f32),
+    #[error(
+        "camera model kannala_brandt needs its coefficients `k`: [k1, k2, k3, k4] ([0, 0, 0, 0] is the equidistant fisheye)"
+    )]
+    NoCoefficients,
 }
 
 impl CameraFile {
@@ -63,6 +69,9 @@ impl CameraFile {
             .ok_or_else(|| CameraError::Model(self.model.clone()))?;
         if self.k.is_some() && model != CameraModel::KannalaBrandt {
             return Err(CameraError::Coefficients(model));
+        }
+        if self.k.is_none() && model == CameraModel::KannalaBrandt {
+            return Err(CameraError::NoCoefficients);
         }
         let k = self.k.unwrap_or_default();
         if !k.iter().all(|v| v.is_finite()) {
@@ -84,8 +93,16 @@ impl CameraFile {
             return Err(CameraError::Pose);
         }
         let col = |c: usize| Vec3::new(m[0][c], m[1][c], m[2][c]);
+        let rotation = Mat3::from_cols(col(0), col(1), col(2));
+        let off = (rotation.transpose() * rotation - Mat3::IDENTITY)
+            .to_cols_array()
+            .iter()
+            .fold(0.0f32, |a, v| a.max(v.abs()));
+        if off > 1e-3 || rotation.determinant() < 0.0 {
+            return Err(CameraError::NotRigid(off));
+        }
         Ok(Camera {
-            rotation: Mat3::from_cols(col(0), col(1), col(2)),
+            rotation,
             translation: col(3),
             focal: Vec2::new(self.fx, self.fy),
             principal: Vec2::new(self.cx, self.cy),
@@ -114,13 +131,13 @@ impl CameraFile {
 }
 
 pub fn read(path: &Path) -> Result<Camera, CameraError> {
-    let text = std::fs::read_to_string(path).map_err(|source| CameraError::Io {
+    let text = std::fs::read_to_string(path).map_err(|error| CameraError::Io {
         path: path.display().to_string(),
-        source,
+        error,
     })?;
-    let file: CameraFile = serde_json::from_str(&text).map_err(|source| CameraError::Json {
+    let file: CameraFile = serde_json::from_str(&text).map_err(|error| CameraError::Json {
         path: path.display().to_string(),
-        source,
+        error,
     })?;
     file.to_camera()
 }

@@ -12,17 +12,14 @@ pub enum ImageError {
     Extension(String),
     #[error("{0}-channel color cannot be stored as PNG or EXR (1, 3 or 4 channels): use .npy")]
     Channels(usize),
-    #[error("cannot write {path}: {source}")]
-    Io {
-        path: String,
-        source: std::io::Error,
-    },
+    #[error("cannot write {path}: {error}")]
+    Io { path: String, error: std::io::Error },
 }
 
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> ImageError + '_ {
-    move |source| ImageError::Io {
+    move |error| ImageError::Io {
         path: path.display().to_string(),
-        source,
+        error,
     }
 }
 
@@ -61,6 +58,48 @@ pub fn write_frame(path: &Path, frame: &Frame) -> Result<Vec<PathBuf>, ImageErro
     }
 }
 
+/// Depth as an 8-bit PNG over its visible range: nearest 255, farthest 26, no hit 0, with the
+/// mapping and the range in a `Description` text chunk (a viewer shows shape, not metres; the
+/// EXR and NPY outputs keep the values).
+fn write_depth_png(path: &Path, im: &Image) -> Result<(), ImageError> {
+    let (lo, hi) = im
+        .data
+        .iter()
+        .filter(|v| **v > 0.0)
+        .fold((f32::INFINITY, 0.0f32), |(lo, hi), v| {
+            (lo.min(*v), hi.max(*v))
+        });
+    let span = if hi > lo { hi - lo } else { 1.0 };
+    let bytes: Vec<u8> = im
+        .data
+        .iter()
+        .map(|v| match *v > 0.0 {
+            true => ((1.0 - 0.9 * (v - lo) / span) * 255.0).round() as u8,
+            false => 0,
+        })
+        .collect();
+    let description = match lo.is_finite() {
+        true => format!(
+            "expected depth (camera z): 255 = {lo} (nearest), 26 = {hi} (farthest), linear between; 0 = nothing hit"
+        ),
+        false => "expected depth: nothing hit (every pixel 0)".to_string(),
+    };
+    super::write_atomic(path, |w| {
+        let mut encoder = png::Encoder::new(w, im.width, im.height);
+        encoder.set_color(png::ColorType::Grayscale);
+        encoder.set_depth(png::BitDepth::Eight);
+        encoder
+            .add_text_chunk("Description".into(), description)
+            .map_err(std::io::Error::other)?;
+        let mut writer = encoder.write_header().map_err(std::io::Error::other)?;
+        writer
+            .write_image_data(&bytes)
+            .map_err(std::io::Error::other)?;
+        writer.finish().map_err(std::io::Error::other)
+    })
+    .map_err(io(path))
+}
+
 /// Interleaves images of the same size channel-wise.
 pub fn stack(images: &[&Image]) -> Image {
     let (w, h) = (images[0].width, images[0].height);
@@ -79,33 +118,14 @@ pub fn stack(images: &[&Image]) -> Image {
     }
 }
 
-fn write_picture(path: &Path, ext: &str, im: &Image, normalize: bool) -> Result<(), ImageError> {
+fn write_picture(path: &Path, ext: &str, im: &Image, depth: bool) -> Result<(), ImageError> {
     if ![1, 3, 4].contains(&im.channels) {
         return Err(ImageError::Channels(im.channels));
     }
-    // Depth as PNG is scaled to [0, 1] over its visible range (zero where nothing was hit).
-    let data: Vec<f32> = if normalize && ext == "png" {
-        let (lo, hi) = im
-            .data
-            .iter()
-            .filter(|v| **v > 0.0)
-            .fold((f32::INFINITY, 0.0f32), |(lo, hi), v| {
-                (lo.min(*v), hi.max(*v))
-            });
-        let span = if hi > lo { hi - lo } else { 1.0 };
-        im.data
-            .iter()
-            .map(|v| {
-                if *v > 0.0 {
-                    1.0 - 0.9 * (v - lo) / span
-                } else {
-                    0.0
-                }
-            })
-            .collect()
-    } else {
-        im.data.clone()
-    };
+    if depth && ext == "png" {
+        return write_depth_png(path, im);
+    }
+    let data = im.data.clone();
     let (w, h) = (im.width, im.height);
     let dynamic = if ext == "png" {
         let bytes: Vec<u8> = data

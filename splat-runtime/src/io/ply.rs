@@ -30,11 +30,8 @@ pub struct GaussianCloud {
 
 #[derive(Debug, thiserror::Error)]
 pub enum PlyError {
-    #[error("cannot read {path}: {source}")]
-    Io {
-        path: String,
-        source: std::io::Error,
-    },
+    #[error("cannot read {path}: {error}")]
+    Io { path: String, error: std::io::Error },
     #[error("not a PLY file (it must start with `ply`)")]
     NotPly,
     #[error("unsupported PLY format `{0}`: only binary_little_endian 1.0 is supported")]
@@ -86,9 +83,9 @@ impl Kind {
 }
 
 pub fn read(path: &Path) -> Result<GaussianCloud, PlyError> {
-    let io = |source| PlyError::Io {
+    let io = |error| PlyError::Io {
         path: path.display().to_string(),
-        source,
+        error,
     };
     let file = std::fs::File::open(path).map_err(io)?;
     parse(&mut std::io::BufReader::new(file))

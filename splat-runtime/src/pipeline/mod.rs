@@ -63,6 +63,8 @@ pub enum RenderError {
     ImageSize { width: f32, height: f32 },
     #[error("tile size {0} is not supported: use 8, 16, 32 or 64")]
     TileSize(u32),
+    #[error("P_max 0 would blend nothing: give at least 1, or none for whole lists")]
+    PMax,
     #[error("camera {0} must be finite and positive")]
     Camera(&'static str),
     #[error(
@@ -166,6 +168,9 @@ pub(crate) fn check<M: SplatMethod>(
     }
     if ![8, 16, 32, 64].contains(&opts.tile_size) {
         return Err(RenderError::TileSize(opts.tile_size));
+    }
+    if opts.p_max == Some(0) {
+        return Err(RenderError::PMax);
     }
     let size = camera.size;
     let ok = |v: f32| v.is_finite() && v >= 1.0 && v <= MAX_SIDE as f32 && v.fract() == 0.0;
