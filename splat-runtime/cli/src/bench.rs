@@ -132,7 +132,7 @@ impl Bench<'_> {
         );
         if let Some(path) = &self.args.raw_out {
             write_raw(path, &frame)?;
-            crate::wrote(&path);
+            crate::wrote(path);
         }
         Ok(())
     }
