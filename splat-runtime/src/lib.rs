@@ -17,6 +17,7 @@
 
 pub mod checks;
 pub mod flat;
+#[cfg(feature = "gpu")]
 pub mod gpu;
 pub mod io;
 pub mod lanes;

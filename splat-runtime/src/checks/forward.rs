@@ -143,6 +143,7 @@ pub fn tile_cull_is_conservative<M: SplatMethod>(
 
 /// The GPU backend's forward against the CPU backend's: color, alpha and depth within
 /// 1e-4 + 1% per element, equal intersection counts (tiles 8 and 16).
+#[cfg(feature = "gpu")]
 pub fn gpu_forward_matches_cpu<M: SplatMethod>(label: &str, params: &[M::Params], cam: &Camera) {
     let Some(gpu) = crate::gpu::adapter_or_skip() else {
         return;

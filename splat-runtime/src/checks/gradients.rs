@@ -6,7 +6,6 @@ use super::adjoint::{self, ReferenceGrad};
 use super::reference::render_words;
 use super::{camera_words, channels, frame_grad, group_error, options, weights, words};
 use crate::flat::Flat;
-use crate::gpu::entries::Accumulation;
 use crate::method::SplatMethod;
 use crate::pipeline::{backward, render_for_backward};
 use crate::types::Camera;
@@ -227,6 +226,7 @@ pub fn invalid_pairs_leave_no_trace<M: SplatMethod>(
 /// near 1e-6; the bound leaves room for a pair whose alpha sits within an ulp of the cutoff,
 /// which the two backends' `exp` can decide differently (3DGUT on the equiangular camera, 400
 /// particles: one such pair, 6e-4).
+#[cfg(feature = "gpu")]
 pub fn gpu_gradients_match_cpu<M: SplatMethod>(label: &str, params: &[M::Params], cam: &Camera) {
     let Some(gpu) = crate::gpu::adapter_or_skip() else {
         return;
@@ -239,7 +239,7 @@ pub fn gpu_gradients_match_cpu<M: SplatMethod>(label: &str, params: &[M::Params]
         let (_, mut gstate) =
             crate::gpu::render::render_for_backward::<M>(&gpu, params, cam, &opts).unwrap();
         let want = backward::<M>(&state, params, cam, &grad).unwrap();
-        let got = crate::gpu::render::backward(&mut gstate, &grad, Accumulation::default_for(&gpu))
+        let got = crate::gpu::render::backward(&mut gstate, &grad, crate::gpu::entries::Accumulation::default_for(&gpu))
             .unwrap();
         let flat = |ps: &[M::Params]| -> Vec<f64> { ps.iter().flat_map(words).collect() };
         let err = group_error(&flat(&got.gradients.params), &flat(&want.params));

@@ -6,6 +6,7 @@
 pub mod adam;
 pub mod densify;
 pub mod fit;
+#[cfg(feature = "gpu")]
 pub mod gpu_fit;
 pub mod init;
 pub mod loss;
