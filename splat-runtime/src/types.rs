@@ -180,18 +180,29 @@ impl Camera {
 pub const KB_NEWTON_STEPS: usize = 8;
 
 /// What `project` returns for one primitive.
+///
+/// The runtime sorts the visible primitives of each tile by `depth` and blends them front to
+/// back: a pixel takes a pair when `evaluate` says it is `valid`, accumulates `alpha * T *
+/// color` and `T *= 1 - alpha`, and stops before T would fall to
+/// [`T_MIN`](crate::pipeline::shade::T_MIN) (the pair that would cross it is not taken).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Projected<C, S> {
     /// False culls the primitive (behind the camera, degenerate, off screen).
     pub visible: bool,
-    /// Sort key for front-to-back blending.
+    /// Sort key for front-to-back blending; also what the depth output averages (weighted by
+    /// each pair's alpha * T).
     pub depth: f32,
-    /// Pixel-space bounding box of the primitive's footprint, inclusive of `bbox_min`.
+    /// Pixel-space box (`bbox_min` to `bbox_max`, inclusive) that must hold every pixel centre
+    /// where `evaluate` can return a valid pair: the tiles it overlaps are the only ones the
+    /// primitive is listed in. Too small cuts the footprint off; too large only costs time.
+    /// `checks::forward::boxes_hold_every_contributing_pixel` tests it.
     pub bbox_min: Vec2,
     pub bbox_max: Vec2,
-    /// Data for `tile_cull`.
+    /// Data for `tile_cull`, which may drop box tiles the footprint does not reach. A method
+    /// without `tile_cull` declares any small type and fills it with a placeholder (3DGUT:
+    /// `Projected<f32, Shade>` with `cull: 0.0`); every box tile is then kept.
     pub cull: C,
-    /// Data for `evaluate`.
+    /// Data for `evaluate` (and, on the GPU, what is stored per primitive for shading).
     pub shade: S,
 }
 
