@@ -8,6 +8,8 @@
 //! at 0, and multiplicative steps (β 1 -> 2 and 4 -> 8 are the same distance).
 
 use splat_macros::splat_method;
+use splat_runtime::glam::{Quat, Vec3, Vec4};
+use splat_runtime::train::Shape;
 
 #[splat_method]
 pub mod generalized {
@@ -145,5 +147,65 @@ impl splat_runtime::io::ply::FromStored for generalized::Params {
             log_shape_half: 0.0,
             sh: [g.sh[0], g.sh[1], g.sh[2], g.sh[3]],
         }
+    }
+}
+
+/// How GES trains (`splat fit`): 3DGS's rates, the shape at 1e-3, the degree-1 band from step
+/// 1,000; a primitive starts as a Gaussian (β = 2).
+impl splat_runtime::train::Trainable for generalized::Method {
+    fn learning_rates(extent: f32) -> Vec<splat_runtime::train::Rate> {
+        use splat_runtime::train::Rate;
+        let fixed = |lr: f32, n: usize| std::iter::repeat_n(Rate::fixed(lr), n);
+        let position = Rate {
+            first: 1.6e-4 * extent,
+            last: 1.6e-6 * extent,
+            from_step: 0,
+        };
+        let band1 = Rate {
+            from_step: 1000,
+            ..Rate::fixed(2.5e-3 / 20.0)
+        };
+        let rates = std::iter::repeat_n(position, 3).chain(fixed(5e-3, 3));
+        let rates = rates.chain(fixed(1e-3, 4)).chain(fixed(5e-2, 1));
+        let rates = rates.chain(fixed(1e-3, 1)).chain(fixed(2.5e-3, 3));
+        rates.chain(std::iter::repeat_n(band1, 9)).collect()
+    }
+
+    fn from_point(point: Vec3, color: Vec3, scale: f32) -> generalized::Params {
+        let c0 = splat_runtime::prelude::spherical_harmonics([Vec3::ONE], Vec3::Z).x;
+        generalized::Params {
+            mean: point,
+            log_scale: Vec3::splat(scale.max(1e-7).ln()),
+            rotation: Vec4::new(1.0, 0.0, 0.0, 0.0),
+            opacity_logit: (0.1f32 / 0.9).ln(),
+            log_shape_half: 0.0,
+            sh: [(color - 0.5) / c0, Vec3::ZERO, Vec3::ZERO, Vec3::ZERO],
+        }
+    }
+
+    fn shape(p: &generalized::Params) -> Shape {
+        let r = p.rotation;
+        Shape {
+            position: p.mean,
+            scale: p.log_scale.exp(),
+            rotation: Quat::from_xyzw(r.y, r.z, r.w, r.x).normalize(),
+            opacity: 1.0 / (1.0 + (-p.opacity_logit).exp()),
+        }
+    }
+
+    fn with_shape(p: &generalized::Params, s: &Shape) -> generalized::Params {
+        let o = s.opacity.clamp(1e-6, 1.0 - 1e-6);
+        let q = s.rotation;
+        generalized::Params {
+            mean: s.position,
+            log_scale: s.scale.max(Vec3::splat(1e-12)).ln(),
+            rotation: Vec4::new(q.w, q.x, q.y, q.z),
+            opacity_logit: (o / (1.0 - o)).ln(),
+            ..*p
+        }
+    }
+
+    fn position_gradient(g: &generalized::Params) -> Vec3 {
+        g.mean
     }
 }

@@ -239,8 +239,12 @@ pub fn gpu_gradients_match_cpu<M: SplatMethod>(label: &str, params: &[M::Params]
         let (_, mut gstate) =
             crate::gpu::render::render_for_backward::<M>(&gpu, params, cam, &opts).unwrap();
         let want = backward::<M>(&state, params, cam, &grad).unwrap();
-        let got = crate::gpu::render::backward(&mut gstate, &grad, crate::gpu::entries::Accumulation::default_for(&gpu))
-            .unwrap();
+        let got = crate::gpu::render::backward(
+            &mut gstate,
+            &grad,
+            crate::gpu::entries::Accumulation::default_for(&gpu),
+        )
+        .unwrap();
         let flat = |ps: &[M::Params]| -> Vec<f64> { ps.iter().flat_map(words).collect() };
         let err = group_error(&flat(&got.gradients.params), &flat(&want.params));
         let cam_err = group_error(
