@@ -229,7 +229,7 @@ fn expand_module(kind: Kind, item: syn::ItemMod, diag: &Diag) -> Option<TokenStr
         });
     }
     if kind == Kind::Method {
-        items.extend(emit::method::method_impl(&m.name, &kernels, diag)?);
+        items.extend(emit::method::method_impl(&m, &kernels, diag)?);
     }
     let (wgsl, signatures) = match emit::naga::wgsl(&wgsl_kernels(&kernels)) {
         Ok(w) => w,

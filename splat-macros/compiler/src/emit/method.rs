@@ -4,7 +4,7 @@
 use super::api::{Kernel, pack, slot_access};
 use crate::diag::Diag;
 use crate::ir::Scalar;
-use crate::model::FnDef;
+use crate::model::{FnDef, Module};
 use crate::types::{Ty, builtin_struct};
 use proc_macro2::{Literal, TokenStream};
 use quote::quote;
@@ -54,6 +54,39 @@ fn check_params(def: &FnDef, want: &[(&str, Option<&Ty>)], diag: &Diag) -> Resul
         }
     }
     Ok(())
+}
+
+/// The user function that was probably meant as the missing role function `role`: one that
+/// returns the role's type (`returns`) under another name, or a name one or two edits away.
+fn near_miss<'m>(m: &'m Module, role: &str, returns: &str) -> Option<(&'m FnDef, String)> {
+    let user = || m.fns.iter().filter(|f| !f.builtin);
+    let typed = user().find(|f| matches!(&f.ret, Ty::Struct(s) if s.display.starts_with(returns)));
+    if let Some(f) = typed {
+        let hint = format!("`fn {}` returns `{returns}`: name it `{role}`", f.name);
+        return Some((f, hint));
+    }
+    let (distance, f) = user()
+        .map(|f| (edit_distance(&f.name, role), f))
+        .min_by_key(|(d, _)| *d)?;
+    (distance <= 2).then(|| (f, format!("did you mean `{role}` for `fn {}`?", f.name)))
+}
+
+/// Levenshtein distance between two names.
+fn edit_distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut diagonal = row[0];
+        row[0] = i + 1;
+        for (j, cb) in b.iter().enumerate() {
+            let next = (diagonal + usize::from(ca != *cb))
+                .min(row[j] + 1)
+                .min(row[j + 1] + 1);
+            diagonal = row[j + 1];
+            row[j + 1] = next;
+        }
+    }
+    row[b.len()]
 }
 
 /// The `checks::Twin` of the method: its f64 twins (module `twin`) behind slice signatures.
@@ -120,21 +153,25 @@ fn call_args(def: &FnDef, names: &[TokenStream], by_value: &[bool]) -> Vec<Token
         .collect()
 }
 
-pub fn method_impl(module: &syn::Ident, kernels: &[Kernel], diag: &Diag) -> Option<TokenStream> {
+pub fn method_impl(m: &Module, kernels: &[Kernel], diag: &Diag) -> Option<TokenStream> {
+    let module = &m.name;
     let module_name = module.to_string();
     let find = |n: &str| kernels.iter().find(|k| k.def.name == n);
-    let missing = |what: &str| {
-        diag.error_at(
-            module,
-            format!("a #[splat_method] module needs `fn {what}` (see splat_runtime::SplatMethod for the signature)"),
-        )
+    let missing = |what: &str, returns: &str| {
+        let need = format!(
+            "a #[splat_method] module needs `fn {what}` (see splat_runtime::SplatMethod for the signature)"
+        );
+        match near_miss(m, what, returns) {
+            Some((f, hint)) => diag.error_at(&f.item.sig.ident, format!("{need}; {hint}")),
+            None => diag.error_at(module, need),
+        }
     };
     let Some(project) = find("project") else {
-        missing("project");
+        missing("project", "Projected");
         return None;
     };
     let Some(evaluate) = find("evaluate") else {
-        missing("evaluate");
+        missing("evaluate", "Contribution");
         return None;
     };
     let tile_cull = find("tile_cull");
@@ -473,4 +510,18 @@ fn float_slots(slots: &[Scalar]) -> std::vec::IntoIter<TokenStream> {
         })
         .collect::<Vec<_>>()
         .into_iter()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::edit_distance;
+
+    #[test]
+    fn edit_distance_counts_insertions_deletions_and_substitutions() {
+        assert_eq!(edit_distance("kitten", "sitting"), 3);
+        assert_eq!(edit_distance("evalute", "evaluate"), 1);
+        assert_eq!(edit_distance("project", "project"), 0);
+        assert_eq!(edit_distance("", "abc"), 3);
+        assert!(edit_distance("shade", "evaluate") > 2);
+    }
 }
