@@ -119,6 +119,18 @@ fn truth() -> Vec<Params> {
         .collect()
 }
 
+/// Writes the known scene's Blender dataset into `dir`: 10 training views on three rings and
+/// 3 held-out ones between them; returns the training cameras.
+fn write_known_scene(dir: &Path) -> Vec<Camera> {
+    let scene = truth();
+    let train_eyes: Vec<Vec3> = (0..10)
+        .map(|k| eye(k, 10, 0.8 * (k % 3) as f32 - 0.8))
+        .collect();
+    let test_eyes = [eye(1, 20, 0.3), eye(7, 20, -0.4), eye(13, 20, 0.1)];
+    write_split(dir, "test", &scene, &test_eyes);
+    write_split(dir, "train", &scene, &train_eyes)
+}
+
 /// The pose read back equals the one written, up to the f32 round trip through the file.
 fn assert_same_pose(got: &Camera, want: &Camera) {
     let close = |a: &[f32], b: &[f32]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-4);
@@ -154,12 +166,7 @@ fn options(steps: usize) -> FitOptions {
 fn three_dgs_fits_a_blender_dataset_of_a_known_scene() {
     let dir = tempfile::tempdir().unwrap();
     let scene = truth();
-    let train_eyes: Vec<Vec3> = (0..10)
-        .map(|k| eye(k, 10, 0.8 * (k % 3) as f32 - 0.8))
-        .collect();
-    let test_eyes = [eye(1, 20, 0.3), eye(7, 20, -0.4), eye(13, 20, 0.1)];
-    let train_cams = write_split(dir.path(), "train", &scene, &train_eyes);
-    write_split(dir.path(), "test", &scene, &test_eyes);
+    let train_cams = write_known_scene(dir.path());
 
     let data = read_blender(dir.path(), Vec3::ZERO).unwrap();
     assert_eq!((data.train.len(), data.test.len()), (10, 3));
@@ -404,12 +411,7 @@ fn density_control_clones_splits_prunes_and_resets_as_3dgs_does() {
 fn density_control_beats_a_fixed_count_from_a_sparse_start() {
     let dir = tempfile::tempdir().unwrap();
     let scene = truth();
-    let train_eyes: Vec<Vec3> = (0..10)
-        .map(|k| eye(k, 10, 0.8 * (k % 3) as f32 - 0.8))
-        .collect();
-    let test_eyes = [eye(1, 20, 0.3), eye(7, 20, -0.4), eye(13, 20, 0.1)];
-    write_split(dir.path(), "train", &scene, &train_eyes);
-    write_split(dir.path(), "test", &scene, &test_eyes);
+    write_known_scene(dir.path());
     let data = read_blender(dir.path(), Vec3::ZERO).unwrap();
     let start: Vec<Params> = scene
         .iter()
@@ -468,12 +470,7 @@ fn the_gpu_loop_trains_like_the_cpu_loop() {
     use splat_runtime::train::gpu_fit::fit_gpu;
     let dir = tempfile::tempdir().unwrap();
     let scene = truth();
-    let train_eyes: Vec<Vec3> = (0..10)
-        .map(|k| eye(k, 10, 0.8 * (k % 3) as f32 - 0.8))
-        .collect();
-    let test_eyes = [eye(1, 20, 0.3), eye(7, 20, -0.4), eye(13, 20, 0.1)];
-    write_split(dir.path(), "train", &scene, &train_eyes);
-    write_split(dir.path(), "test", &scene, &test_eyes);
+    write_known_scene(dir.path());
     let data = read_blender(dir.path(), Vec3::ZERO).unwrap();
 
     let opts = FitOptions {
@@ -537,16 +534,7 @@ fn the_gpu_loop_trains_like_the_cpu_loop() {
 fn random_backgrounds_recomposite_the_targets_and_train() {
     let dir = tempfile::tempdir().unwrap();
     let scene = truth();
-    let train_eyes: Vec<Vec3> = (0..10)
-        .map(|k| eye(k, 10, 0.8 * (k % 3) as f32 - 0.8))
-        .collect();
-    write_split(dir.path(), "train", &scene, &train_eyes);
-    write_split(
-        dir.path(),
-        "test",
-        &scene,
-        &[eye(1, 20, 0.3), eye(7, 20, -0.4)],
-    );
+    write_known_scene(dir.path());
     let black = read_blender(dir.path(), Vec3::ZERO).unwrap();
     let white = read_blender(dir.path(), Vec3::ONE).unwrap();
     for (b, w) in black.train.iter().zip(&white.train) {

@@ -192,12 +192,8 @@ pub fn fit<M: Trainable>(
     opts: &FitOptions,
     mut progress: impl FnMut(&StepReport),
 ) -> Result<(), FitError> {
-    if data.train.is_empty() {
-        return Err(FitError::NoViews);
-    }
+    let rates = rates_for::<M>(data, extent)?;
     let words = M::Params::LEN;
-    let rates = M::learning_rates(extent);
-    assert_eq!(rates.len(), words, "one learning rate per parameter word");
     let mut flat = flatten::<M>(params);
     let mut adam = Adam::new(params.len(), words);
     let mut grads = vec![0.0f32; flat.len()];
@@ -268,6 +264,24 @@ pub fn fit<M: Trainable>(
         });
     }
     Ok(())
+}
+
+/// The method's learning rates, once a run can start: the dataset has training views and the
+/// method declares one rate per parameter word.
+pub(crate) fn rates_for<M: Trainable>(data: &Dataset, extent: f32) -> Result<Vec<Rate>, FitError> {
+    if data.train.is_empty() {
+        return Err(FitError::NoViews);
+    }
+    let rates = M::learning_rates(extent);
+    if rates.len() != M::Params::LEN {
+        return Err(FitError::Unsupported(format!(
+            "{} declares {} learning rates for {} parameter words",
+            M::NAME,
+            rates.len(),
+            M::Params::LEN
+        )));
+    }
+    Ok(rates)
 }
 
 /// This step's background: `opts.background`, or a random color.

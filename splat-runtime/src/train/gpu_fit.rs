@@ -7,7 +7,7 @@
 
 use super::densify::Densifier;
 use super::fit::{
-    FitError, FitOptions, StepReport, Trainable, flatten, step_background, with_alpha,
+    FitError, FitOptions, StepReport, Trainable, flatten, rates_for, step_background, with_alpha,
 };
 use crate::flat::Flat;
 use crate::gpu::entries::Accumulation;
@@ -43,12 +43,8 @@ pub fn fit_gpu<M: Trainable>(
     opts: &FitOptions,
     mut progress: impl FnMut(&StepReport),
 ) -> Result<(), FitError> {
-    if data.train.is_empty() {
-        return Err(FitError::NoViews);
-    }
+    let rates = rates_for::<M>(data, extent)?;
     let words = M::Params::LEN;
-    let rates = M::learning_rates(extent);
-    assert_eq!(rates.len(), words, "one learning rate per parameter word");
     let position = position_word::<M>().ok_or_else(|| {
         FitError::Unsupported(format!(
             "{}: its position is not three consecutive parameter words",
