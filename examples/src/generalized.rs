@@ -8,7 +8,7 @@
 //! at 0, and multiplicative steps (β 1 -> 2 and 4 -> 8 are the same distance).
 
 use splat_macros::splat_method;
-use splat_runtime::glam::{Quat, Vec3, Vec4};
+use splat_runtime::glam::{Vec3, Vec4};
 use splat_runtime::train::Shape;
 
 #[splat_method]
@@ -184,23 +184,16 @@ impl splat_runtime::train::Trainable for generalized::Method {
     }
 
     fn shape(p: &generalized::Params) -> Shape {
-        let r = p.rotation;
-        Shape {
-            position: p.mean,
-            scale: p.log_scale.exp(),
-            rotation: Quat::from_xyzw(r.y, r.z, r.w, r.x).normalize(),
-            opacity: 1.0 / (1.0 + (-p.opacity_logit).exp()),
-        }
+        Shape::from_gaussian(p.mean, p.log_scale, p.rotation, p.opacity_logit)
     }
 
     fn with_shape(p: &generalized::Params, s: &Shape) -> generalized::Params {
-        let o = s.opacity.clamp(1e-6, 1.0 - 1e-6);
-        let q = s.rotation;
+        let (mean, log_scale, rotation, opacity_logit) = s.to_gaussian();
         generalized::Params {
-            mean: s.position,
-            log_scale: s.scale.max(Vec3::splat(1e-12)).ln(),
-            rotation: Vec4::new(q.w, q.x, q.y, q.z),
-            opacity_logit: (o / (1.0 - o)).ln(),
+            mean,
+            log_scale,
+            rotation,
+            opacity_logit,
             ..*p
         }
     }

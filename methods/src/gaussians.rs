@@ -174,27 +174,21 @@ macro_rules! gaussians_3d {
             }
 
             fn shape(p: &$name::Params) -> splat_runtime::train::Shape {
-                let r = p.rotation;
-                splat_runtime::train::Shape {
-                    position: p.mean,
-                    scale: p.log_scale.exp(),
-                    rotation: splat_runtime::glam::Quat::from_xyzw(r.y, r.z, r.w, r.x).normalize(),
-                    opacity: 1.0 / (1.0 + (-p.opacity_logit).exp()),
-                }
+                splat_runtime::train::Shape::from_gaussian(
+                    p.mean,
+                    p.log_scale,
+                    p.rotation,
+                    p.opacity_logit,
+                )
             }
 
             fn with_shape(p: &$name::Params, s: &splat_runtime::train::Shape) -> $name::Params {
-                let o = s.opacity.clamp(1e-6, 1.0 - 1e-6);
+                let (mean, log_scale, rotation, opacity_logit) = s.to_gaussian();
                 $name::Params {
-                    mean: s.position,
-                    log_scale: s.scale.max(splat_runtime::glam::Vec3::splat(1e-12)).ln(),
-                    rotation: splat_runtime::glam::Vec4::new(
-                        s.rotation.w,
-                        s.rotation.x,
-                        s.rotation.y,
-                        s.rotation.z,
-                    ),
-                    opacity_logit: (o / (1.0 - o)).ln(),
+                    mean,
+                    log_scale,
+                    rotation,
+                    opacity_logit,
                     ..*p
                 }
             }

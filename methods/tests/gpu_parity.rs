@@ -16,6 +16,7 @@ mod common;
 
 use common::{camera, gaussian_at, spread_gaussians};
 use splat_methods::gs3d::{Method, Params};
+use splat_runtime::checks::forward::outputs_close;
 use splat_runtime::checks::{camera_words, group_error, words};
 use splat_runtime::glam::Vec2;
 use splat_runtime::gpu::entries::{Accumulation, Reduction};
@@ -62,30 +63,8 @@ fn gpu_forward_matches_cpu() {
                 coverage > 0.2,
                 "the scene should cover the image (mean alpha {coverage})"
             );
-            let mut worst = 0.0f32;
-            let outputs = [
-                ("color", &cpu.color.data, &gpu_frame.color.data),
-                (
-                    "alpha",
-                    &cpu.alpha.as_ref().unwrap().data,
-                    &gpu_frame.alpha.as_ref().unwrap().data,
-                ),
-                (
-                    "depth",
-                    &cpu.depth.as_ref().unwrap().data,
-                    &gpu_frame.depth.as_ref().unwrap().data,
-                ),
-            ];
-            for (what, c, g) in outputs {
-                for (i, (a, b)) in c.iter().zip(g.iter()).enumerate() {
-                    let bound = 1e-4 + 0.01 * a.abs();
-                    worst = worst.max((a - b).abs() / bound);
-                    assert!(
-                        (a - b).abs() <= bound,
-                        "tile {tile_size}, p_max {p_max:?}, {what}[{i}]: cpu {a} gpu {b}"
-                    );
-                }
-            }
+            let label = format!("tile {tile_size}, p_max {p_max:?}, cpu / gpu");
+            let worst = outputs_close(&label, &cpu, &gpu_frame, 1e-4, 0.01);
             println!(
                 "tile {tile_size}, p_max {p_max:?}: worst difference {worst:.3} of the bound ({})",
                 gpu.adapter

@@ -95,12 +95,7 @@ impl Bench<'_> {
     where
         M::Params: FromStored,
     {
-        let params: Vec<M::Params> = self
-            .cloud
-            .gaussians
-            .iter()
-            .map(M::Params::from_stored)
-            .collect();
+        let params: Vec<M::Params> = self.cloud.params();
         let opts = RenderOptions {
             tile_size: self.args.tile,
             ..Default::default()

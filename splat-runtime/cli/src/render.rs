@@ -61,12 +61,7 @@ impl Render<'_> {
     where
         M::Params: FromStored,
     {
-        let params: Vec<M::Params> = self
-            .cloud
-            .gaussians
-            .iter()
-            .map(M::Params::from_stored)
-            .collect();
+        let params: Vec<M::Params> = self.cloud.params();
         Ok(match pick_gpu(self.backend)? {
             None => (
                 render::<M>(&params, self.camera, self.opts)?,

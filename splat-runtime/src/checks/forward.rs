@@ -4,7 +4,7 @@
 use super::reference::render_words;
 use super::{camera_words, channels, options, words};
 use crate::method::SplatMethod;
-use crate::pipeline::{RenderOptions, render};
+use crate::pipeline::{Frame, RenderOptions, render};
 use crate::types::Camera;
 
 /// CPU renders (tiles 8 and 16) within 1e-5 absolute + 1% relative of the reference, per
@@ -109,29 +109,8 @@ pub fn tile_cull_is_conservative<M: SplatMethod>(
         };
         let culled = render::<M>(params, cam, &opts(true)).unwrap();
         let all = render::<M>(params, cam, &opts(false)).unwrap();
-        let outputs = [
-            ("color", &culled.color.data, &all.color.data),
-            (
-                "alpha",
-                &culled.alpha.as_ref().unwrap().data,
-                &all.alpha.as_ref().unwrap().data,
-            ),
-            (
-                "depth",
-                &culled.depth.as_ref().unwrap().data,
-                &all.depth.as_ref().unwrap().data,
-            ),
-        ];
-        let mut worst = 0.0f32;
-        for (what, a, b) in outputs {
-            for (i, (x, y)) in a.iter().zip(b.iter()).enumerate() {
-                worst = worst.max((x - y).abs());
-                assert!(
-                    (x - y).abs() <= 1e-6,
-                    "{label}, tile {tile_size}, {what}[{i}]: {x} with the cull, {y} without"
-                );
-            }
-        }
+        let label = format!("{label}, tile {tile_size}, with the cull / without");
+        let worst = outputs_close(&label, &all, &culled, 1e-6, 0.0) * 1e-6;
         let (with, without) = (culled.stats.intersections, all.stats.intersections);
         println!(
             "{label}, tile {tile_size}: {with} intersections with the cull, {without} without; largest difference {worst:e}"
@@ -156,30 +135,36 @@ pub fn gpu_forward_matches_cpu<M: SplatMethod>(label: &str, params: &[M::Params]
             cpu.stats.intersections, frame.stats.intersections,
             "{label}"
         );
-        let mut worst = 0.0f32;
-        let outputs = [
-            ("color", &cpu.color.data, &frame.color.data),
-            (
-                "alpha",
-                &cpu.alpha.as_ref().unwrap().data,
-                &frame.alpha.as_ref().unwrap().data,
-            ),
-            (
-                "depth",
-                &cpu.depth.as_ref().unwrap().data,
-                &frame.depth.as_ref().unwrap().data,
-            ),
-        ];
-        for (what, c, g) in outputs {
-            for (i, (a, b)) in c.iter().zip(g.iter()).enumerate() {
-                let bound = 1e-4 + 0.01 * a.abs();
-                worst = worst.max((a - b).abs() / bound);
-                assert!(
-                    (a - b).abs() <= bound,
-                    "{label}, tile {tile_size}, {what}[{i}]: cpu {a} gpu {b}"
-                );
-            }
-        }
+        let worst = outputs_close(
+            &format!("{label}, tile {tile_size}, cpu / gpu"),
+            &cpu,
+            &frame,
+            1e-4,
+            0.01,
+        );
         println!("{label}, tile {tile_size}: GPU forward worst {worst:.3} of the bound");
     }
+}
+
+/// Asserts that every output of `got` (color, alpha, depth, as far as `want` has them) is
+/// within `abs + rel * |want|` of `want`'s, naming the output and element that is not; returns
+/// the worst difference as a fraction of its bound.
+pub fn outputs_close(label: &str, want: &Frame, got: &Frame, abs: f32, rel: f32) -> f32 {
+    let pairs = [
+        ("color", Some(&want.color), Some(&got.color)),
+        ("alpha", want.alpha.as_ref(), got.alpha.as_ref()),
+        ("depth", want.depth.as_ref(), got.depth.as_ref()),
+    ];
+    let mut worst = 0.0f32;
+    for (what, w, g) in pairs {
+        let Some(w) = w else { continue };
+        let g = g.unwrap_or_else(|| panic!("{label}: {what} is missing"));
+        assert_eq!(w.data.len(), g.data.len(), "{label}: {what} sizes");
+        for (i, (a, b)) in w.data.iter().zip(&g.data).enumerate() {
+            let bound = abs + rel * a.abs();
+            worst = worst.max((a - b).abs() / bound);
+            assert!((a - b).abs() <= bound, "{label}, {what}[{i}]: {a} / {b}");
+        }
+    }
+    worst
 }

@@ -298,6 +298,13 @@ pub fn write_to(w: &mut dyn Write, cloud: &GaussianCloud) -> std::io::Result<()>
     Ok(())
 }
 
+impl GaussianCloud {
+    /// The cloud as a method's parameters.
+    pub fn params<P: FromStored>(&self) -> Vec<P> {
+        self.gaussians.iter().map(P::from_stored).collect()
+    }
+}
+
 /// Parameters that can be built from a Gaussian stored in an INRIA PLY file (how `splat render`
 /// reads a scene for a method).
 pub trait FromStored {

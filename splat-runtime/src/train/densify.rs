@@ -9,7 +9,7 @@
 
 use super::fit::Trainable;
 use crate::types::Camera;
-use glam::{Quat, Vec3};
+use glam::{Quat, Vec3, Vec4};
 
 /// A primitive as density control sees it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -20,6 +20,33 @@ pub struct Shape {
     pub rotation: Quat,
     /// In [0, 1].
     pub opacity: f32,
+}
+
+impl Shape {
+    /// The shape of a Gaussian in 3DGS's parameterization: log scales, a (w, x, y, z)
+    /// rotation quaternion (normalized here), an opacity logit.
+    pub fn from_gaussian(mean: Vec3, log_scale: Vec3, rotation: Vec4, opacity_logit: f32) -> Shape {
+        let r = rotation;
+        Shape {
+            position: mean,
+            scale: log_scale.exp(),
+            rotation: Quat::from_xyzw(r.y, r.z, r.w, r.x).normalize(),
+            opacity: 1.0 / (1.0 + (-opacity_logit).exp()),
+        }
+    }
+
+    /// Back to that parameterization: (mean, log scales, (w, x, y, z) rotation, opacity
+    /// logit), with the opacity kept inside (0, 1) and the scales above zero.
+    pub fn to_gaussian(&self) -> (Vec3, Vec3, Vec4, f32) {
+        let o = self.opacity.clamp(1e-6, 1.0 - 1e-6);
+        let q = self.rotation;
+        (
+            self.position,
+            self.scale.max(Vec3::splat(1e-12)).ln(),
+            Vec4::new(q.w, q.x, q.y, q.z),
+            (o / (1.0 - o)).ln(),
+        )
+    }
 }
 
 /// When and how density control acts; scales are relative to the scene's extent.
