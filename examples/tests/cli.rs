@@ -29,6 +29,6 @@ fn a_user_method_gets_the_commands() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("[possible values: ges]"), "{err}");
-    let err = run(&["fit", "--data", "nowhere"]).unwrap_err().to_string();
+    let err = run(&["fit", "nowhere"]).unwrap_err().to_string();
     assert!(err.contains("ges cannot be trained"), "{err}");
 }

@@ -18,6 +18,7 @@
 mod bench;
 mod fit;
 mod methods;
+mod plot;
 mod render;
 mod scene;
 

@@ -1,10 +1,12 @@
 //! The built-in scene: a ringed planet of a few thousand Gaussians (banded sphere, tilted
-//! ring, a moon, stars all around), and a camera looking at it, so `splat render` runs with no
-//! files.
+//! ring, a moon, stars all around), a camera looking at it, and views of it to train on, so
+//! `splat render` and `splat fit` run with no files.
 
+use splat_methods::gs3d;
 use splat_runtime::glam::{Mat3, Vec2, Vec3, Vec4};
+use splat_runtime::io::dataset::{Dataset, View};
 use splat_runtime::io::ply::{GaussianCloud, StoredGaussian};
-use splat_runtime::{Camera, CameraModel};
+use splat_runtime::{Camera, CameraModel, RenderError, RenderOptions, render};
 
 /// SH DC coefficient for a target color (color = 0.5 + C0 * dc).
 fn dc(color: Vec3) -> Vec3 {
@@ -49,6 +51,16 @@ fn gaussian(
 
 pub fn planet() -> GaussianCloud {
     let mut rng = Lcg(7);
+    let mut gaussians = body(&mut rng);
+    gaussians.extend(stars(&mut rng));
+    GaussianCloud {
+        sh_degree: 1,
+        gaussians,
+    }
+}
+
+/// The planet, its ring and its moon.
+fn body(rng: &mut Lcg) -> Vec<StoredGaussian> {
     let mut out = vec![];
     // The planet: points on a sphere, colored by latitude bands.
     let bands = [
@@ -92,8 +104,13 @@ pub fn planet() -> GaussianCloud {
             Vec3::ZERO,
         ));
     }
-    // Stars on a sphere of radius 25 around the camera's target, in every direction: what a
-    // wide camera sees beyond the planet (a fisheye past 180 degrees sees some behind it).
+    out
+}
+
+/// Stars on a sphere of radius 25 around the camera's target, in every direction: what a
+/// wide camera sees beyond the planet (a fisheye past 180 degrees sees some behind it).
+fn stars(rng: &mut Lcg) -> Vec<StoredGaussian> {
+    let mut out = vec![];
     for _ in 0..1500 {
         let z = rng.next() * 2.0 - 1.0;
         let phi = rng.next() * std::f32::consts::TAU;
@@ -108,17 +125,18 @@ pub fn planet() -> GaussianCloud {
             Vec3::ZERO,
         ));
     }
-    GaussianCloud {
-        sh_degree: 1,
-        gaussians: out,
-    }
+    out
 }
 
 /// Looks at the origin from slightly above the ring plane, 6 units away: a pinhole with a
 /// 58° horizontal field of view, a nearly equidistant fisheye seeing 183° across and 225°
 /// diagonally, or a 126° equiangular camera.
 pub fn camera(width: u32, height: u32, model: CameraModel) -> Camera {
-    let eye = Vec3::new(0.0, 1.5, -5.8);
+    looking_from(Vec3::new(0.0, 1.5, -5.8), width, height, model)
+}
+
+/// A camera at `eye` looking at the origin (image x to the right of the world's up axis).
+fn looking_from(eye: Vec3, width: u32, height: u32, model: CameraModel) -> Camera {
     let forward = (-eye).normalize();
     let right = Vec3::Y.cross(forward).normalize() * -1.0;
     let down = forward.cross(right);
@@ -139,4 +157,53 @@ pub fn camera(width: u32, height: u32, model: CameraModel) -> Camera {
         distortion,
         model,
     }
+}
+
+/// The built-in training dataset: the planet, its ring and its moon (no stars) rendered by
+/// 3DGS on `background`, seen by `views` pinhole cameras circling it 6 units away while rising
+/// and sinking through the ring plane; every 8th view (from the first) is held out.
+pub fn dataset(
+    views: usize,
+    width: u32,
+    height: u32,
+    background: Vec3,
+) -> Result<Dataset, RenderError> {
+    let cloud = GaussianCloud {
+        sh_degree: 1,
+        gaussians: body(&mut Lcg(7)),
+    };
+    let params: Vec<gs3d::Params> = cloud.params();
+    let opts = RenderOptions {
+        alpha: true,
+        ..Default::default()
+    };
+    let mut data = Dataset {
+        train: vec![],
+        test: vec![],
+        points: vec![],
+    };
+    for k in 0..views {
+        let a = k as f32 / views as f32 * std::f32::consts::TAU;
+        let eye = Vec3::new(5.8 * a.sin(), 1.5 + 1.8 * (2.0 * a).sin(), -5.8 * a.cos());
+        let camera = looking_from(eye, width, height, CameraModel::Pinhole);
+        let frame = render::<gs3d::Method>(&params, &camera, &opts)?;
+        // Rendered on black: the color is the one composited on black.
+        let view = View {
+            name: format!("built-in view {k}"),
+            camera,
+            image: frame.color,
+            coverage: frame.alpha.map(|a| a.data),
+            background: Vec3::ZERO,
+        };
+        let view = View {
+            image: view.on(background).into_owned(),
+            background,
+            ..view
+        };
+        match k % 8 {
+            0 => data.test.push(view),
+            _ => data.train.push(view),
+        }
+    }
+    Ok(data)
 }

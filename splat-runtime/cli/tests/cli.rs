@@ -475,47 +475,72 @@ fn tiny_dataset(dir: &Path, views: usize) {
     }
 }
 
+/// What `splat fit --out out` wrote in `dir`: the scene, a render per test view, the metrics
+/// (one row per step, and the test views' PSNR where measured) and the curve.
+struct FitOutput {
+    scene: splat_runtime::io::ply::GaussianCloud,
+    /// (step, test PSNR) where measured.
+    psnr: Vec<(usize, f64)>,
+    /// Rows of metrics.csv after the header.
+    rows: usize,
+}
+
+fn fit_output(out: &Path, test_views: usize, size: (u32, u32)) -> FitOutput {
+    let scene = splat_runtime::io::ply::read(&out.join("scene.ply")).unwrap();
+    for k in 0..test_views {
+        let png = image::open(out.join(format!("test/{k:03}.png"))).unwrap();
+        assert_eq!((png.width(), png.height()), size);
+    }
+    assert!(!out.join(format!("test/{test_views:03}.png")).exists());
+    let curve = image::open(out.join("curve.png")).unwrap();
+    assert_eq!((curve.width(), curve.height()), (900, 640));
+    let csv = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
+    let mut lines = csv.lines();
+    assert_eq!(
+        lines.next(),
+        Some("step,loss,l1,ssim,primitives,test_psnr,test_ssim")
+    );
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert!(rows.iter().all(|r| r.len() == 7), "{csv}");
+    let psnr = rows
+        .iter()
+        .filter(|r| !r[5].is_empty())
+        .map(|r| (r[0].parse().unwrap(), r[5].parse().unwrap()))
+        .collect();
+    FitOutput {
+        scene,
+        psnr,
+        rows: rows.len(),
+    }
+}
+
 #[test]
-fn fit_trains_on_a_dataset_and_writes_a_ply() {
+fn fit_trains_on_a_dataset_and_writes_its_outputs() {
     let dir = tempfile::tempdir().unwrap();
     tiny_dataset(&dir.path().join("data"), 3);
-    let out = splat(
-        &[
-            "fit", "--data", "data", "--steps", "20", "--points", "200", "--out", "fit.ply",
-        ],
-        dir.path(),
-    );
-    let stdout = ok(&out);
+    let args = ["fit", "data", "--steps", "20", "--points", "200"];
+    let stdout = ok(&splat(&[&args[..], &["--out", "out"]].concat(), dir.path()));
     assert!(
         stdout.contains("3 training and 3 test views of 16x16"),
         "{stdout}"
     );
     assert!(stdout.contains("PSNR"), "{stdout}");
-    let cloud = splat_runtime::io::ply::read(&dir.path().join("fit.ply")).unwrap();
-    assert_eq!((cloud.sh_degree, cloud.gaussians.len()), (3, 200));
+    let fit = fit_output(&dir.path().join("out"), 3, (16, 16));
+    assert_eq!((fit.scene.sh_degree, fit.scene.gaussians.len()), (3, 200));
+    // Step 0 (before training), then 20 steps; PSNR before and after only.
+    assert_eq!(fit.rows, 21);
+    assert_eq!(fit.psnr.iter().map(|p| p.0).collect::<Vec<_>>(), [0, 20]);
 
     // The same on the GPU loop, where there is an adapter (lavapipe in CI).
     let gpu = splat(
-        &[
-            "fit",
-            "--data",
-            "data",
-            "--steps",
-            "20",
-            "--points",
-            "200",
-            "--out",
-            "gpu.ply",
-            "--backend",
-            "gpu",
-        ],
+        &[&args[..], &["--out", "gpu", "--backend", "gpu"]].concat(),
         dir.path(),
     );
     if gpu.status.success() {
         let stdout = String::from_utf8_lossy(&gpu.stdout);
         assert!(stdout.contains("20 steps on the GPU"), "{stdout}");
-        let cloud = splat_runtime::io::ply::read(&dir.path().join("gpu.ply")).unwrap();
-        assert_eq!(cloud.gaussians.len(), 200);
+        let fit = fit_output(&dir.path().join("gpu"), 3, (16, 16));
+        assert_eq!(fit.scene.gaussians.len(), 200);
     } else {
         let stderr = String::from_utf8_lossy(&gpu.stderr);
         assert!(stderr.contains("no GPU adapter"), "{stderr}");
@@ -523,27 +548,56 @@ fn fit_trains_on_a_dataset_and_writes_a_ply() {
     }
 }
 
+/// With no dataset, `splat fit` trains on views of the built-in planet; the test views are
+/// measured every `--eval-every` steps, and training brings them closer.
+#[test]
+fn fit_without_a_dataset_trains_on_the_built_in_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let args = [
+        "fit",
+        "--backend",
+        "cpu",
+        "--steps",
+        "60",
+        "--points",
+        "400",
+        "--eval-every",
+        "20",
+    ];
+    let stdout = ok(&splat(&args, dir.path()));
+    assert!(
+        stdout.contains("the built-in dataset: 28 training and 4 test views of 112x84"),
+        "{stdout}"
+    );
+    let fit = fit_output(&dir.path().join("fit"), 4, (112, 84));
+    assert_eq!(fit.rows, 61);
+    let steps: Vec<usize> = fit.psnr.iter().map(|p| p.0).collect();
+    assert_eq!(steps, [0, 20, 40, 60]);
+    let (before, after) = (fit.psnr[0].1, fit.psnr[3].1);
+    assert!(after > before + 3.0, "test PSNR {before} -> {after}");
+}
+
 #[test]
 fn fit_refuses_a_missing_or_broken_dataset_by_name() {
     let dir = tempfile::tempdir().unwrap();
-    let ply = dir.path().join("fit.ply");
+    let out = dir.path().join("fit");
     fails(
-        &splat(&["fit", "--data", "nowhere"], dir.path()),
+        &splat(&["fit", "nowhere"], dir.path()),
         "cannot read nowhere: no such folder",
-        &ply,
+        &out,
     );
     std::fs::create_dir(dir.path().join("empty")).unwrap();
     fails(
-        &splat(&["fit", "--data", "empty"], dir.path()),
+        &splat(&["fit", "empty"], dir.path()),
         "neither transforms_train.json (Blender) nor transforms.json (nerfstudio)",
-        &ply,
+        &out,
     );
     tiny_dataset(&dir.path().join("data"), 2);
     std::fs::write(dir.path().join("data/transforms_test.json"), "{").unwrap();
     fails(
-        &splat(&["fit", "--data", "data", "--steps", "2"], dir.path()),
+        &splat(&["fit", "data", "--steps", "2"], dir.path()),
         "transforms_test.json is not valid JSON",
-        &ply,
+        &out,
     );
 }
 
@@ -637,7 +691,7 @@ fn tiny_colmap_dataset(dir: &Path) {
 fn fit_starts_from_a_colmap_datasets_points() {
     let dir = tempfile::tempdir().unwrap();
     tiny_colmap_dataset(&dir.path().join("data"));
-    let args = ["fit", "--data", "data", "--steps", "5", "--out", "fit.ply"];
+    let args = ["fit", "data", "--steps", "5", "--out", "out"];
     let stdout = ok(&splat(&args, dir.path()));
     assert!(
         stdout.contains("2 training and 1 test views of 16x16"),
@@ -647,13 +701,12 @@ fn fit_starts_from_a_colmap_datasets_points() {
         stdout.contains("starting from 40 of the dataset's 40 points"),
         "{stdout}"
     );
-    assert!(stdout.contains("fit.ply"), "{stdout}");
-    let cloud = splat_runtime::io::ply::read(&dir.path().join("fit.ply")).unwrap();
+    let cloud = splat_runtime::io::ply::read(&dir.path().join("out/scene.ply")).unwrap();
     assert_eq!(cloud.gaussians.len(), 40);
 
     // --points caps the count.
     let args = [
-        "fit", "--data", "data", "--steps", "1", "--points", "10", "--out", "fit.ply",
+        "fit", "data", "--steps", "1", "--points", "10", "--out", "out",
     ];
     let stdout = ok(&splat(&args, dir.path()));
     assert!(

@@ -118,6 +118,20 @@ pub fn stack(images: &[&Image]) -> Image {
     }
 }
 
+/// Writes one image (1, 3 or 4 channels) as PNG (8 bits, clamped to [0, 1]) or EXR, by the
+/// extension of `path`.
+pub fn write_image(path: &Path, im: &Image) -> Result<(), ImageError> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    match ext.as_str() {
+        "png" | "exr" => write_picture(path, &ext, im, false),
+        _ => Err(ImageError::Extension(path.display().to_string())),
+    }
+}
+
 fn write_picture(path: &Path, ext: &str, im: &Image, depth: bool) -> Result<(), ImageError> {
     if ![1, 3, 4].contains(&im.channels) {
         return Err(ImageError::Channels(im.channels));

@@ -80,6 +80,9 @@ pub struct FitOptions {
     pub random_background: bool,
     /// Adaptive density control, or none (the primitive count stays fixed).
     pub densify: Option<DensifyOptions>,
+    /// Evaluate the test views after every this many steps (reported in [`StepReport`]);
+    /// `None`: never during training.
+    pub eval_every: Option<usize>,
 }
 
 impl Default for FitOptions {
@@ -96,6 +99,7 @@ impl Default for FitOptions {
             seed: 0,
             random_background: false,
             densify: Some(DensifyOptions::default()),
+            eval_every: None,
         }
     }
 }
@@ -140,7 +144,7 @@ pub(crate) fn with_alpha(r: &RenderOptions) -> RenderOptions {
     RenderOptions { alpha: true, ..*r }
 }
 
-fn composite(mut color: Image, alpha: Option<&Image>, background: Vec3) -> Image {
+pub(crate) fn composite(mut color: Image, alpha: Option<&Image>, background: Vec3) -> Image {
     if let Some(a) = alpha {
         let b = background.to_array();
         for (px, a) in color.data.chunks_exact_mut(3).zip(&a.data) {
@@ -152,25 +156,46 @@ fn composite(mut color: Image, alpha: Option<&Image>, background: Vec3) -> Image
     color
 }
 
+/// Renders each of `views` with `params`, composited on `opts.background`.
+pub fn render_views<M: SplatMethod>(
+    params: &[M::Params],
+    views: &[View],
+    opts: &FitOptions,
+) -> Result<Vec<Image>, FitError> {
+    views
+        .iter()
+        .map(|v| render_view::<M>(params, v, opts))
+        .collect()
+}
+
+impl Evaluation {
+    /// Mean PSNR and SSIM of `images` against the pictures of `views`.
+    pub fn of(images: &[Image], views: &[View]) -> Result<Evaluation, FitError> {
+        let mut e = Evaluation {
+            views: views.len(),
+            ..Default::default()
+        };
+        for (img, v) in images.iter().zip(views) {
+            e.psnr += loss::psnr(img, &v.image)? / views.len() as f64;
+            e.ssim += loss::ssim(img, &v.image)? / views.len() as f64;
+        }
+        Ok(e)
+    }
+}
+
 /// Mean PSNR and SSIM of `params` over `views`.
 pub fn evaluate<M: SplatMethod>(
     params: &[M::Params],
     views: &[View],
     opts: &FitOptions,
 ) -> Result<Evaluation, FitError> {
-    let mut e = Evaluation {
-        views: views.len(),
-        ..Default::default()
-    };
-    if views.is_empty() {
-        return Ok(e);
-    }
-    for v in views {
-        let img = render_view::<M>(params, v, opts)?;
-        e.psnr += loss::psnr(&img, &v.image)? / views.len() as f64;
-        e.ssim += loss::ssim(&img, &v.image)? / views.len() as f64;
-    }
-    Ok(e)
+    Evaluation::of(&render_views::<M>(params, views, opts)?, views)
+}
+
+/// Whether the test views are evaluated after `step` (counted from zero).
+pub(crate) fn evaluates_at(opts: &FitOptions, step: usize) -> bool {
+    opts.eval_every
+        .is_some_and(|n| n > 0 && (step + 1).is_multiple_of(n))
 }
 
 /// What a step reports to the caller's progress callback.
@@ -180,6 +205,9 @@ pub struct StepReport<'a> {
     pub primitives: usize,
     /// Set on the steps that refined the primitive set.
     pub refinement: Option<&'a Refinement>,
+    /// The test views' PSNR and SSIM after this step, on the steps `FitOptions::eval_every`
+    /// asks for.
+    pub evaluation: Option<Evaluation>,
 }
 
 /// Trains `params` on the training views of `data` for `opts.steps` steps on the CPU (with
@@ -256,11 +284,16 @@ pub fn fit<M: Trainable>(
                 flat = after;
             }
         }
+        let evaluation = match evaluates_at(opts, step) {
+            true => Some(evaluate::<M>(params, &data.test, opts)?),
+            false => None,
+        };
         progress(&StepReport {
             step,
             loss: &value,
             primitives: params.len(),
             refinement: refinement.as_ref(),
+            evaluation,
         });
     }
     Ok(())

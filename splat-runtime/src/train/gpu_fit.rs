@@ -7,13 +7,16 @@
 
 use super::densify::Densifier;
 use super::fit::{
-    FitError, FitOptions, StepReport, Trainable, flatten, rates_for, step_background, with_alpha,
+    Evaluation, FitError, FitOptions, StepReport, Trainable, composite, evaluates_at, flatten,
+    rates_for, step_background, with_alpha,
 };
 use crate::flat::Flat;
 use crate::gpu::entries::Accumulation;
 use crate::gpu::train::{GpuAdam, GpuLoss, GpuObserver, GpuTrainError};
 use crate::gpu::{Gpu, GpuRenderError, GpuRenderer, GpuScene};
-use crate::io::dataset::Dataset;
+use crate::io::dataset::{Dataset, View};
+use crate::method::SplatMethod;
+use crate::pipeline::Image;
 use glam::Vec3;
 
 impl From<GpuTrainError> for FitError {
@@ -129,11 +132,19 @@ pub fn fit_gpu<M: Trainable>(
             adam.remap(gpu, n, &origin, |k| before[k] != after[k])?;
             scene.upload(gpu, &host)?;
         }
+        let evaluation = match evaluates_at(opts, step) {
+            true => {
+                let images = render_resident(&mut renderer, &scene, &data.test, opts.background)?;
+                Some(Evaluation::of(&images, &data.test)?)
+            }
+            false => None,
+        };
         progress(&StepReport {
             step,
             loss: &value,
             primitives: scene.len(),
             refinement: refinement.as_ref(),
+            evaluation,
         });
     }
     *params = scene.download(gpu)?;
@@ -151,4 +162,34 @@ fn position_word<M: Trainable>() -> Option<usize> {
     };
     let first = (0..words).find(|&k| unit(k) == Vec3::X)?;
     (first + 2 < words && unit(first + 1) == Vec3::Y && unit(first + 2) == Vec3::Z).then_some(first)
+}
+
+/// Renders each of `views` with `params` on `gpu`, as [`super::fit::render_views`] does on
+/// the CPU.
+pub fn render_views_gpu<M: SplatMethod>(
+    gpu: &Gpu,
+    params: &[M::Params],
+    views: &[View],
+    opts: &FitOptions,
+) -> Result<Vec<Image>, FitError> {
+    let mut renderer = GpuRenderer::<M>::new(gpu, &with_alpha(&opts.render))?;
+    let scene = GpuScene::<M>::new(gpu, params)?;
+    render_resident(&mut renderer, &scene, views, opts.background)
+}
+
+/// Renders each of `views` from the device-resident `scene`, composited on `background`.
+fn render_resident<M: SplatMethod>(
+    renderer: &mut GpuRenderer<M>,
+    scene: &GpuScene<M>,
+    views: &[View],
+    background: Vec3,
+) -> Result<Vec<Image>, FitError> {
+    views
+        .iter()
+        .map(|v| {
+            renderer.forward(scene, &v.camera)?;
+            let frame = renderer.download_frame()?;
+            Ok(composite(frame.color, frame.alpha.as_ref(), background))
+        })
+        .collect()
 }
