@@ -562,3 +562,119 @@ fn random_backgrounds_recomposite_the_targets_and_train() {
     );
     assert!(after.psnr > before.psnr + 4.0);
 }
+
+/// Options for the resume tests: 40 steps, density control every 5 steps from step 5 with an
+/// opacity reset at 20, random backgrounds (the generator matters), a checkpoint every 20.
+fn resumable_options() -> FitOptions {
+    FitOptions {
+        random_background: true,
+        densify: Some(splat_runtime::train::DensifyOptions {
+            start: 5,
+            every: 5,
+            reset_every: 20,
+            ..Default::default()
+        }),
+        checkpoint_every: Some(20),
+        ..options(40)
+    }
+}
+
+/// A run from its checkpoint (written to a file and read back) takes the very steps the
+/// uninterrupted run took: the same primitives, moments and generator state, bit for bit, with
+/// density control acting on both sides of the checkpoint (CPU, one thread, so sums run in one
+/// order).
+#[test]
+fn a_run_resumed_from_its_checkpoint_takes_the_same_steps() {
+    use splat_runtime::train::Checkpoint;
+    use splat_runtime::train::fit::fit_from;
+    let dir = tempfile::tempdir().unwrap();
+    let scene = truth();
+    write_known_scene(dir.path());
+    let data = read_blender(dir.path(), Vec3::ZERO).unwrap();
+    let opts = resumable_options();
+    let start: Vec<Params> = scene
+        .iter()
+        .step_by(4)
+        .map(|g| Method::from_point(g.mean, Vec3::splat(0.5), 0.3))
+        .collect();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    pool.install(|| {
+        let mut whole = Checkpoint::start::<Method>(&start, opts.steps, opts.seed);
+        let mut saved = vec![];
+        let mut counts = vec![];
+        fit_from::<Method>(&data, &mut whole, 1.0, &opts, |r| {
+            saved.extend(r.checkpoint.cloned());
+            counts.push(r.primitives);
+        })
+        .unwrap();
+        assert_eq!(saved.iter().map(|c| c.step).collect::<Vec<_>>(), [20, 40]);
+        assert_eq!(saved[1], whole, "the last checkpoint is the run's end");
+        let at20 = &saved[0];
+        assert_eq!((at20.adam.step, at20.primitives()), (20, counts[19]));
+        assert!(
+            counts[19] != start.len() && counts[39] != counts[19],
+            "{counts:?}"
+        );
+
+        let path = dir.path().join("checkpoint.bin");
+        at20.write(&path).unwrap();
+        let mut resumed = Checkpoint::read(&path).unwrap();
+        assert_eq!(&resumed, at20);
+        fit_from::<Method>(&data, &mut resumed, 1.0, &opts, |_| {}).unwrap();
+        assert_eq!(resumed, whole);
+
+        // Another run length or another method is refused.
+        let mut other = at20.clone();
+        let longer = FitOptions {
+            steps: 50,
+            ..resumable_options()
+        };
+        let err = fit_from::<Method>(&data, &mut other, 1.0, &longer, |_| {}).unwrap_err();
+        assert!(err.to_string().contains("40-step run, not 50"), "{err}");
+        let err = fit_from::<splat_methods::gut::Method>(&data, &mut other, 1.0, &opts, |_| {})
+            .unwrap_err();
+        assert!(err.to_string().contains("not gut"), "{err}");
+    });
+}
+
+/// On the GPU loop a resumed run goes on from the checkpoint's state (moments and statistics
+/// downloaded, uploaded again) and ends as close to the uninterrupted run as two GPU runs of
+/// the same steps do (float atomics add in any order).
+#[test]
+fn the_gpu_loop_resumes_from_its_checkpoint() {
+    let Some(gpu) = splat_runtime::gpu::adapter_or_skip() else {
+        return;
+    };
+    use splat_runtime::train::Checkpoint;
+    use splat_runtime::train::gpu_fit::fit_gpu_from;
+    let dir = tempfile::tempdir().unwrap();
+    write_known_scene(dir.path());
+    let data = read_blender(dir.path(), Vec3::ZERO).unwrap();
+    let opts = resumable_options();
+    let start = moved_start::<Method>(&truth());
+    let mut whole = Checkpoint::start::<Method>(&start, opts.steps, opts.seed);
+    let mut saved = vec![];
+    fit_gpu_from::<Method>(&gpu, &data, &mut whole, 1.0, &opts, |r| {
+        saved.extend(r.checkpoint.cloned())
+    })
+    .unwrap();
+    let mut resumed = saved[0].clone();
+    assert_eq!((resumed.step, resumed.adam.step), (20, 20));
+    assert!(
+        resumed.adam.m.iter().any(|m| *m != 0.0),
+        "moments came down"
+    );
+    fit_gpu_from::<Method>(&gpu, &data, &mut resumed, 1.0, &opts, |_| {}).unwrap();
+    assert_eq!(resumed.step, 40);
+    let psnr = |c: &Checkpoint| {
+        evaluate::<Method>(&c.params::<Method>(), &data.test, &opts)
+            .unwrap()
+            .psnr
+    };
+    let (a, b) = (psnr(&whole), psnr(&resumed));
+    println!("held-out PSNR after 40 steps: uninterrupted {a:.3}, resumed at 20 {b:.3} dB");
+    assert!((a - b).abs() < 0.2, "{a} vs {b}");
+}

@@ -5,7 +5,7 @@
 
 use crate::methods::{self, Method};
 use crate::{plot, scene};
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result, anyhow, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use plotters::prelude::*;
 use splat_runtime::glam::Vec3;
@@ -13,10 +13,10 @@ use splat_runtime::io::dataset::{self, Dataset};
 use splat_runtime::io::image::write_image;
 use splat_runtime::io::ply::{self, GaussianCloud, ToStored};
 use splat_runtime::io::write_atomic;
-use splat_runtime::train::fit::{Evaluation, FitOptions, StepReport, fit, render_views};
-use splat_runtime::train::gpu_fit::{fit_gpu, render_views_gpu};
+use splat_runtime::train::fit::{Evaluation, FitOptions, StepReport, fit_from, render_views};
+use splat_runtime::train::gpu_fit::{fit_gpu_from, render_views_gpu};
 use splat_runtime::train::loss::LossValue;
-use splat_runtime::train::{DensifyOptions, Trainable, init};
+use splat_runtime::train::{Checkpoint, DensifyOptions, Trainable, init};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -62,6 +62,14 @@ pub struct FitArgs {
     /// 0: only then.
     #[arg(long, default_value_t = 250)]
     eval_every: usize,
+    /// Save the run's state to <out>/checkpoint.bin every this many steps (and after the
+    /// last); 0: never.
+    #[arg(long, default_value_t = 1000)]
+    checkpoint_every: usize,
+    /// Go on from <out>/checkpoint.bin (and keep <out>/metrics.csv up to it): the same steps
+    /// follow as in the run that saved it.
+    #[arg(long)]
+    resume: bool,
     /// Where to train: the GPU (the device-resident loop), the CPU, or `auto` (a hardware
     /// GPU when there is one).
     #[arg(long, value_enum, default_value_t = crate::Backend::Auto)]
@@ -79,6 +87,10 @@ const BUILT_IN: (usize, u32, u32) = (32, 112, 84);
 const BUILT_IN_STEPS: usize = 2000;
 const BUILT_IN_POINTS: usize = 2000;
 const BUILT_IN_MAX_PRIMITIVES: usize = 6000;
+
+/// The checkpoint's and the metrics' names in the output folder.
+const CHECKPOINT: &str = "checkpoint.bin";
+const METRICS: &str = "metrics.csv";
 
 pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
     let method = methods::find(methods, &args.method)?;
@@ -105,7 +117,30 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
             )
         }
     };
-    let steps = args.steps.unwrap_or(defaults.0);
+    let resume = match args.resume {
+        true => {
+            let path = args.out.join(CHECKPOINT);
+            let c = Checkpoint::read(&path)?;
+            if let Some(steps) = args.steps.filter(|s| *s != c.steps) {
+                bail!(
+                    "{} is a checkpoint of a {}-step run, not {steps} (the learning rates follow the run's length): leave --steps out",
+                    path.display(),
+                    c.steps
+                );
+            }
+            println!(
+                "resuming from {} after step {} of {}",
+                path.display(),
+                c.step,
+                c.steps
+            );
+            Some(c)
+        }
+        false => None,
+    };
+    let steps = (args.steps)
+        .or(resume.as_ref().map(|c| c.steps))
+        .unwrap_or(defaults.0);
     let points = args.points.unwrap_or(defaults.1);
     let max_primitives = args.max_primitives.unwrap_or(defaults.2);
     if points == 0 {
@@ -139,6 +174,7 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
         }),
         random_background: args.random_background,
         eval_every: (args.eval_every > 0).then_some(args.eval_every),
+        checkpoint_every: (args.checkpoint_every > 0).then_some(args.checkpoint_every),
         ..Default::default()
     };
     std::fs::create_dir_all(args.out.join("test"))
@@ -146,6 +182,7 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
     train(&Fit {
         args,
         data: &data,
+        resume,
         points,
         mid,
         extent,
@@ -157,6 +194,8 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
 pub struct Fit<'a> {
     args: &'a FitArgs,
     data: &'a Dataset,
+    /// The checkpoint to go on from, if any.
+    resume: Option<Checkpoint>,
     /// How many points to start from.
     points: usize,
     /// The cameras' centre and the scene's radius.
@@ -173,37 +212,59 @@ impl Fit<'_> {
         let Fit {
             args,
             data,
+            ref resume,
             points,
             mid,
             extent,
             opts,
         } = *self;
-        let mut params = if data.points.is_empty() {
-            init::in_cube::<M>(points, mid, extent / 2.0, args.seed)
-        } else {
-            let params = init::from_points::<M>(&data.points, points);
-            println!(
-                "starting from {} of the dataset's {} points",
-                params.len(),
-                data.points.len()
-            );
-            params
-        };
         let gpu = crate::pick_gpu(args.backend)?;
         let test_images = |params: &[M::Params]| match &gpu {
             Some(gpu) => render_views_gpu::<M>(gpu, params, &data.test, opts),
             None => render_views::<M>(params, &data.test, opts),
         };
-        let before = Evaluation::of(&test_images(&params)?, &data.test)?;
-        let mut log = Log::default();
-        log.evaluations.push((0, before));
+        let (mut state, mut log) = match resume {
+            Some(c) if c.method != M::NAME => bail!(
+                "{} is a checkpoint of {}, not of {} (--method {})",
+                args.out.join(CHECKPOINT).display(),
+                c.method,
+                M::NAME,
+                args.method
+            ),
+            Some(c) => (c.clone(), Log::read_csv(&args.out.join(METRICS), c.step)?),
+            None => {
+                let params = start::<M>(data, points, mid, extent, args.seed);
+                let before = Evaluation::of(&test_images(&params)?, &data.test)?;
+                let log = Log {
+                    evaluations: vec![(0, before)],
+                    ..Default::default()
+                };
+                (Checkpoint::start::<M>(&params, opts.steps, args.seed), log)
+            }
+        };
+        let before = log.evaluations.first().map(|e| e.1).unwrap_or_default();
+        let checkpoint_path = args.out.join(CHECKPOINT);
+        let metrics = args.out.join(METRICS);
+        let mut saved = Ok(());
         let bar = ProgressBar::new(opts.steps as u64).with_style(
             ProgressStyle::with_template("{bar:40} {pos}/{len} steps, {elapsed} (eta {eta}) {msg}")
                 .expect("a valid template"),
         );
+        bar.set_position(state.step as u64);
+        let first = state.step;
         let report = |r: &StepReport| {
             bar.inc(1);
             log.record(r);
+            // With the checkpoint, the metrics up to it (a resumed run keeps them). One that
+            // cannot be written stops nothing now; the run reports it at its end.
+            if let Some(c) = r.checkpoint
+                && saved.is_ok()
+            {
+                saved = c
+                    .write(&checkpoint_path)
+                    .with_context(|| format!("writing {}", checkpoint_path.display()))
+                    .and_then(|()| log.write_csv(&metrics));
+            }
             if r.step.is_multiple_of(10) || r.refinement.is_some() || r.evaluation.is_some() {
                 let v = r.loss;
                 let test = log.evaluations.last().map_or(before.psnr, |e| e.1.psnr);
@@ -216,16 +277,23 @@ impl Fit<'_> {
         let t = Instant::now();
         let place = match &gpu {
             Some(gpu) => {
-                fit_gpu::<M>(gpu, data, &mut params, extent, opts, report)?;
+                fit_gpu_from::<M>(gpu, data, &mut state, extent, opts, report)?;
                 format!("the GPU ({})", gpu.adapter)
             }
             None => {
-                fit::<M>(data, &mut params, extent, opts, report)?;
+                fit_from::<M>(data, &mut state, extent, opts, report)?;
                 "the CPU".to_string()
             }
         };
         bar.finish();
-        let per_step = t.elapsed().as_secs_f64() / opts.steps.max(1) as f64;
+        saved?;
+        if opts.checkpoint_every.is_some() {
+            state
+                .write(&checkpoint_path)
+                .with_context(|| format!("writing {}", checkpoint_path.display()))?;
+        }
+        let params = state.params::<M>();
+        let per_step = t.elapsed().as_secs_f64() / (opts.steps - first).max(1) as f64;
         let images = test_images(&params)?;
         let after = Evaluation::of(&images, &data.test)?;
         if log.evaluations.last().is_none_or(|e| e.0 < opts.steps) {
@@ -233,7 +301,7 @@ impl Fit<'_> {
         }
         println!(
             "{} steps on {place}, {:.1} ms per step, {} primitives; {} test views: PSNR {:.2} -> {:.2} dB, SSIM {:.3} -> {:.3}",
-            opts.steps,
+            opts.steps - first,
             per_step * 1e3,
             params.len(),
             after.views,
@@ -253,11 +321,31 @@ impl Fit<'_> {
             let path = out.join("test").join(format!("{k:03}.png"));
             write_image(&path, image).with_context(|| format!("writing {}", path.display()))?;
         }
-        log.write_csv(&out.join("metrics.csv"))?;
+        log.write_csv(&metrics)?;
         log.plot(&out.join("curve.png"))?;
         crate::wrote(out);
         Ok(())
     }
+}
+
+/// The primitives a run starts from: the dataset's points, or random ones in a cube.
+fn start<M: Trainable>(
+    data: &Dataset,
+    points: usize,
+    mid: Vec3,
+    extent: f32,
+    seed: u64,
+) -> Vec<M::Params> {
+    if data.points.is_empty() {
+        return init::in_cube::<M>(points, mid, extent / 2.0, seed);
+    }
+    let params = init::from_points::<M>(&data.points, points);
+    println!(
+        "starting from {} of the dataset's {} points",
+        params.len(),
+        data.points.len()
+    );
+    params
 }
 
 /// What a run measured: the training loss at every step, the test views' PSNR and SSIM at the
@@ -276,6 +364,49 @@ impl Log {
         if let Some(e) = r.evaluation {
             self.evaluations.push((step, e));
         }
+    }
+
+    /// The rows of a run's `metrics.csv` up to step `last` (what a resumed run keeps).
+    fn read_csv(path: &Path, last: usize) -> Result<Log> {
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let mut log = Log::default();
+        for (k, line) in text.lines().enumerate().skip(1) {
+            let bad = || {
+                anyhow!(
+                    "{} line {}: not a metrics row: {line}",
+                    path.display(),
+                    k + 1
+                )
+            };
+            let f: Vec<&str> = line.split(',').collect();
+            let [step, loss, l1, ssim, primitives, psnr, test_ssim] = f[..] else {
+                return Err(bad());
+            };
+            let step: usize = step.parse().map_err(|_| bad())?;
+            if step > last {
+                break;
+            }
+            let num = |s: &str| s.parse::<f64>().map_err(|_| bad());
+            if step > 0 {
+                let v = LossValue {
+                    loss: num(loss)?,
+                    l1: num(l1)?,
+                    ssim: num(ssim)?,
+                };
+                log.steps
+                    .push((step, v, primitives.parse().map_err(|_| bad())?));
+            }
+            if !psnr.is_empty() {
+                let e = Evaluation {
+                    psnr: num(psnr)?,
+                    ssim: num(test_ssim)?,
+                    views: 0,
+                };
+                log.evaluations.push((step, e));
+            }
+        }
+        Ok(log)
     }
 
     /// One row per step: the loss, its L1 and SSIM terms, the primitive count, and the test

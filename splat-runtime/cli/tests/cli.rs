@@ -577,6 +577,64 @@ fn fit_without_a_dataset_trains_on_the_built_in_one() {
     assert!(after > before + 3.0, "test PSNR {before} -> {after}");
 }
 
+/// `--resume` goes on from <out>/checkpoint.bin and keeps the metrics up to it; a checkpoint
+/// of another run length, of another method, or damaged is refused by name.
+#[test]
+fn fit_resumes_from_its_checkpoint() {
+    let dir = tempfile::tempdir().unwrap();
+    tiny_dataset(&dir.path().join("data"), 3);
+    let args = ["fit", "data", "--points", "50", "--out", "out"];
+    let first = [
+        &args[..],
+        &[
+            "--steps",
+            "20",
+            "--checkpoint-every",
+            "10",
+            "--eval-every",
+            "10",
+        ],
+    ]
+    .concat();
+    ok(&splat(&first, dir.path()));
+    let out = dir.path().join("out");
+    assert!(out.join("checkpoint.bin").exists());
+    let stdout = ok(&splat(&[&args[..], &["--resume"]].concat(), dir.path()));
+    assert!(
+        stdout.contains("resuming from out/checkpoint.bin after step 20 of 20"),
+        "{stdout}"
+    );
+    let fit = fit_output(&out, 3, (16, 16));
+    assert_eq!(fit.rows, 21);
+    let steps: Vec<usize> = fit.psnr.iter().map(|p| p.0).collect();
+    assert_eq!(steps, [0, 10, 20]);
+
+    let scene = std::fs::read(out.join("scene.ply")).unwrap();
+    let refused = |extra: &[&str], needle: &str| {
+        let out = splat(&[&args[..], &["--resume"], extra].concat(), dir.path());
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success());
+        assert!(stderr.contains(needle), "{stderr}");
+    };
+    refused(
+        &["--steps", "30"],
+        "out/checkpoint.bin is a checkpoint of a 20-step run",
+    );
+    refused(
+        &["--method", "3dgut"],
+        "out/checkpoint.bin is a checkpoint of gs3d, not of gut",
+    );
+    std::fs::write(out.join("checkpoint.bin"), "SPLATCK1 and then nothing").unwrap();
+    refused(&[], "out/checkpoint.bin is damaged");
+    std::fs::write(out.join("checkpoint.bin"), "ply").unwrap();
+    refused(&[], "out/checkpoint.bin is not a splat checkpoint");
+    assert_eq!(
+        std::fs::read(out.join("scene.ply")).unwrap(),
+        scene,
+        "nothing lost"
+    );
+}
+
 #[test]
 fn fit_refuses_a_missing_or_broken_dataset_by_name() {
     let dir = tempfile::tempdir().unwrap();

@@ -7,7 +7,8 @@
 use super::device::{Grown, Kernel, dispatch};
 use super::{Gpu, GpuError};
 use crate::io::dataset::View;
-use crate::train::adam::remap_rows;
+use crate::train::adam::{bias_corrections, remap_rows};
+use crate::train::checkpoint::AdamState;
 use crate::train::loss::{LossValue, WINDOW, window};
 use glam::Vec3;
 
@@ -189,7 +190,7 @@ pub struct GpuAdam {
     rates: wgpu::Buffer,
     info: wgpu::Buffer,
     words: usize,
-    step: i32,
+    step: u64,
     pub beta1: f32,
     pub beta2: f32,
     pub eps: f32,
@@ -233,7 +234,7 @@ impl GpuAdam {
         self.v.ensure(gpu, total)?;
         self.step += 1;
         let (b1, b2) = (self.beta1, self.beta2);
-        let (c1, c2) = (1.0 - b1.powi(self.step), 1.0 - b2.powi(self.step));
+        let (c1, c2) = bias_corrections(b1, b2, self.step);
         let floats = [b1, b2, c1, c2, self.eps, 0.0, 0.0, 0.0].map(f32::to_bits);
         gpu.write(
             &self.info,
@@ -258,6 +259,37 @@ impl GpuAdam {
             &bind,
             (total as u32).div_ceil(256),
         );
+        Ok(())
+    }
+
+    /// The step count and the moments of `primitives` primitives, for a checkpoint.
+    pub fn download(&self, gpu: &Gpu, primitives: usize) -> Result<AdamState, GpuError> {
+        let total = primitives * self.words;
+        let read = |b: &wgpu::Buffer| -> Result<Vec<f32>, GpuError> {
+            match total {
+                0 => Ok(vec![]),
+                _ => Ok(gpu
+                    .read(b, total)?
+                    .into_iter()
+                    .map(f32::from_bits)
+                    .collect()),
+            }
+        };
+        Ok(AdamState {
+            step: self.step,
+            m: read(&self.m)?,
+            v: read(&self.v)?,
+        })
+    }
+
+    /// Goes on from a saved state.
+    pub fn restore(&mut self, gpu: &Gpu, state: &AdamState) -> Result<(), GpuError> {
+        self.step = state.step;
+        for (buffer, values) in [(&mut self.m, &state.m), (&mut self.v, &state.v)] {
+            buffer.ensure(gpu, values.len())?;
+            let words: Vec<u32> = values.iter().map(|x| x.to_bits()).collect();
+            gpu.write(buffer, &words);
+        }
         Ok(())
     }
 

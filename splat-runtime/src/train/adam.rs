@@ -2,13 +2,15 @@
 //! of `Params` (each field its own rate, as 3DGS trains positions, scales, rotations,
 //! opacities and colors at different rates) and bias correction.
 
+use super::checkpoint::AdamState;
+
 /// Adam's state for `primitives` x `words` parameter words.
 pub struct Adam {
     pub beta1: f32,
     pub beta2: f32,
     pub eps: f32,
     words: usize,
-    step: i32,
+    step: u64,
     m: Vec<f32>,
     v: Vec<f32>,
 }
@@ -35,7 +37,7 @@ impl Adam {
         assert_eq!(grads.len(), self.m.len(), "gradients and optimizer state");
         self.step += 1;
         let (b1, b2) = (self.beta1, self.beta2);
-        let (c1, c2) = (1.0 - b1.powi(self.step), 1.0 - b2.powi(self.step));
+        let (c1, c2) = bias_corrections(b1, b2, self.step);
         let words = self.words.max(1);
         for (i, ((p, g), (m, v))) in params
             .iter_mut()
@@ -51,6 +53,26 @@ impl Adam {
 }
 
 impl Adam {
+    /// Adam for parameters of `words` words per primitive, from a saved state.
+    pub fn resume(words: usize, state: AdamState) -> Adam {
+        Adam {
+            words,
+            step: state.step,
+            m: state.m,
+            v: state.v,
+            ..Adam::new(0, words)
+        }
+    }
+
+    /// The step count and both moments, for a checkpoint.
+    pub fn state(&self) -> AdamState {
+        AdamState {
+            step: self.step,
+            m: self.m.clone(),
+            v: self.v.clone(),
+        }
+    }
+
     /// Follows a change of the primitive set: new primitive `i` keeps the moments of old
     /// primitive `origin[i]`, or starts from zero moments where it is `None`.
     pub fn remap(&mut self, origin: &[Option<usize>]) {
@@ -67,6 +89,13 @@ impl Adam {
             }
         }
     }
+}
+
+/// `1 - beta1^t` and `1 - beta2^t`, Adam's bias corrections after `t` steps.
+pub fn bias_corrections(beta1: f32, beta2: f32, t: u64) -> (f32, f32) {
+    // Past 2^31 steps both are 1 to f32 precision.
+    let t = t.min(i32::MAX as u64) as i32;
+    (1.0 - beta1.powi(t), 1.0 - beta2.powi(t))
 }
 
 /// Rows of `words` values, new row `i` a copy of old row `origin[i]` or zeros where `None`.

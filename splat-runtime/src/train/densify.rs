@@ -113,6 +113,25 @@ impl Densifier {
         }
     }
 
+    /// Density control going on from saved statistics (`grad2d` and `seen` per primitive, as
+    /// [`Densifier::statistics`] gives them), or from none when they are empty.
+    pub fn resume(
+        opts: DensifyOptions,
+        primitives: usize,
+        grad2d: &[f32],
+        seen: &[u32],
+    ) -> Densifier {
+        let mut d = Densifier::new(opts, primitives);
+        d.add_observations(grad2d, seen);
+        d
+    }
+
+    /// The statistics gathered since the last refinement, per primitive: the summed
+    /// screen-space gradient norms and the views that saw it.
+    pub fn statistics(&self) -> (Vec<f32>, Vec<u32>) {
+        (self.grad2d.clone(), self.count.clone())
+    }
+
     /// Adds one view's screen-space position gradient of each primitive in `visible`, given
     /// the gradient of every primitive's parameters.
     ///

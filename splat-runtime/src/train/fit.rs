@@ -5,6 +5,7 @@
 //! (see the issue notes).
 
 use super::adam::Adam;
+use super::checkpoint::Checkpoint;
 use super::densify::{Densifier, DensifyOptions, Refinement, Shape};
 use super::loss::{self, LossError, LossValue};
 use crate::flat::Flat;
@@ -83,6 +84,8 @@ pub struct FitOptions {
     /// Evaluate the test views after every this many steps (reported in [`StepReport`]);
     /// `None`: never during training.
     pub eval_every: Option<usize>,
+    /// Report the run's state (to save as a checkpoint) after every this many steps.
+    pub checkpoint_every: Option<usize>,
 }
 
 impl Default for FitOptions {
@@ -100,6 +103,7 @@ impl Default for FitOptions {
             random_background: false,
             densify: Some(DensifyOptions::default()),
             eval_every: None,
+            checkpoint_every: None,
         }
     }
 }
@@ -208,6 +212,8 @@ pub struct StepReport<'a> {
     /// The test views' PSNR and SSIM after this step, on the steps `FitOptions::eval_every`
     /// asks for.
     pub evaluation: Option<Evaluation>,
+    /// The run's state after this step, on the steps `FitOptions::checkpoint_every` asks for.
+    pub checkpoint: Option<&'a Checkpoint>,
 }
 
 /// Trains `params` on the training views of `data` for `opts.steps` steps on the CPU (with
@@ -218,24 +224,42 @@ pub fn fit<M: Trainable>(
     params: &mut Vec<M::Params>,
     extent: f32,
     opts: &FitOptions,
+    progress: impl FnMut(&StepReport),
+) -> Result<(), FitError> {
+    let mut state = Checkpoint::start::<M>(params, opts.steps, opts.seed);
+    fit_from::<M>(data, &mut state, extent, opts, progress)?;
+    *params = state.params::<M>();
+    Ok(())
+}
+
+/// Trains on the CPU from `state` (a run's first state, [`Checkpoint::start`], or a checkpoint
+/// it reported) to its last step; `state` ends as the run's last state. The same steps follow
+/// from a checkpoint as in the run that wrote it.
+pub fn fit_from<M: Trainable>(
+    data: &Dataset,
+    state: &mut Checkpoint,
+    extent: f32,
+    opts: &FitOptions,
     mut progress: impl FnMut(&StepReport),
 ) -> Result<(), FitError> {
     let rates = rates_for::<M>(data, extent)?;
+    check_resumable::<M>(state, opts)?;
     let words = M::Params::LEN;
-    let mut flat = flatten::<M>(params);
-    let mut adam = Adam::new(params.len(), words);
+    let mut params = state.params::<M>();
+    let mut flat = state.params.clone();
+    let mut adam = Adam::resume(words, state.adam.clone());
     let mut grads = vec![0.0f32; flat.len()];
     let mut densifier = opts
         .densify
         .clone()
-        .map(|d| Densifier::new(d, params.len()));
-    let mut rng = fastrand::Rng::with_seed(opts.seed);
+        .map(|d| Densifier::resume(d, params.len(), &state.grad2d, &state.seen));
+    let mut rng = fastrand::Rng::with_seed(state.rng);
     let render_opts = with_alpha(&opts.render);
-    for step in 0..opts.steps {
+    for step in state.step..opts.steps {
         let view = &data.train[rng.usize(..data.train.len())];
         let background = step_background(opts, &mut rng);
-        let (frame, state) =
-            crate::pipeline::render_for_backward::<M>(params, &view.camera, &render_opts)?;
+        let (frame, pass) =
+            crate::pipeline::render_for_backward::<M>(&params, &view.camera, &render_opts)?;
         let image = composite(frame.color, frame.alpha.as_ref(), background);
         let (value, d_color) =
             loss::loss_and_gradient(&image, &view.on(background), opts.ssim_weight)?;
@@ -250,7 +274,7 @@ pub fn fit<M: Trainable>(
             alpha: Some(d_alpha),
             depth: None,
         };
-        let g = crate::pipeline::backward::<M>(&state, params, &view.camera, &grad)?;
+        let g = crate::pipeline::backward::<M>(&pass, &params, &view.camera, &grad)?;
         for (p, out) in g.params.iter().zip(grads.chunks_exact_mut(words)) {
             p.write_words(out);
         }
@@ -267,34 +291,75 @@ pub fn fit<M: Trainable>(
         }
         let mut refinement = None;
         if let Some(d) = densifier.as_mut().filter(|d| step < d.opts.stop) {
-            let visible = state.pre.visible.iter().map(|(i, _)| *i as usize);
-            d.observe::<M>(params, &g.params, visible, &view.camera);
+            let visible = pass.pre.visible.iter().map(|(i, _)| *i as usize);
+            d.observe::<M>(&params, &g.params, visible, &view.camera);
             if d.refines_at(step) {
-                let r = d.refine::<M>(params, step, extent, &mut rng);
+                let r = d.refine::<M>(&mut params, step, extent, &mut rng);
                 adam.remap(&r.origin);
-                flat = flatten::<M>(params);
+                flat = flatten::<M>(&params);
                 grads = vec![0.0; flat.len()];
                 refinement = Some(r);
             }
             if d.resets_at(step) {
-                d.reset_opacity::<M>(params);
-                let after = flatten::<M>(params);
+                d.reset_opacity::<M>(&mut params);
+                let after = flatten::<M>(&params);
                 // Only the words the reset moved (opacities) forget their moments.
                 adam.forget(|k| flat[k] != after[k]);
                 flat = after;
             }
         }
         let evaluation = match evaluates_at(opts, step) {
-            true => Some(evaluate::<M>(params, &data.test, opts)?),
+            true => Some(evaluate::<M>(&params, &data.test, opts)?),
             false => None,
         };
+        let save = checkpoints_at(opts, step);
+        if save || step + 1 == opts.steps {
+            state.step = step + 1;
+            state.params = flat.clone();
+            state.adam = adam.state();
+            (state.grad2d, state.seen) = densifier
+                .as_ref()
+                .map(Densifier::statistics)
+                .unwrap_or_default();
+            state.rng = rng.get_seed();
+        }
         progress(&StepReport {
             step,
             loss: &value,
             primitives: params.len(),
             refinement: refinement.as_ref(),
             evaluation,
+            checkpoint: save.then_some(&*state),
         });
+    }
+    Ok(())
+}
+
+/// Whether a checkpoint is reported after `step` (counted from zero).
+pub(crate) fn checkpoints_at(opts: &FitOptions, step: usize) -> bool {
+    opts.checkpoint_every
+        .is_some_and(|n| n > 0 && (step + 1).is_multiple_of(n))
+}
+
+/// Refuses to go on from a state of another method or another run length.
+pub(crate) fn check_resumable<M: Trainable>(
+    state: &Checkpoint,
+    opts: &FitOptions,
+) -> Result<(), FitError> {
+    if state.method != M::NAME || state.words != M::Params::LEN {
+        return Err(FitError::Unsupported(format!(
+            "the checkpoint is of {} ({} parameter words), not {} ({})",
+            state.method,
+            state.words,
+            M::NAME,
+            M::Params::LEN
+        )));
+    }
+    if state.steps != opts.steps {
+        return Err(FitError::Unsupported(format!(
+            "the checkpoint is of a {}-step run, not {} steps (the learning rates follow the run's length)",
+            state.steps, opts.steps
+        )));
     }
     Ok(())
 }

@@ -5,10 +5,11 @@
 //! Every hundred steps density control refines on the host: the scene and the moments go
 //! down and back up.
 
+use super::checkpoint::Checkpoint;
 use super::densify::Densifier;
 use super::fit::{
-    Evaluation, FitError, FitOptions, StepReport, Trainable, composite, evaluates_at, flatten,
-    rates_for, step_background, with_alpha,
+    Evaluation, FitError, FitOptions, StepReport, Trainable, check_resumable, checkpoints_at,
+    composite, evaluates_at, flatten, rates_for, step_background, with_alpha,
 };
 use crate::flat::Flat;
 use crate::gpu::entries::Accumulation;
@@ -44,9 +45,25 @@ pub fn fit_gpu<M: Trainable>(
     params: &mut Vec<M::Params>,
     extent: f32,
     opts: &FitOptions,
+    progress: impl FnMut(&StepReport),
+) -> Result<(), FitError> {
+    let mut state = Checkpoint::start::<M>(params, opts.steps, opts.seed);
+    fit_gpu_from::<M>(gpu, data, &mut state, extent, opts, progress)?;
+    *params = state.params::<M>();
+    Ok(())
+}
+
+/// Trains from `state` as [`super::fit::fit_from`] does, on `gpu`.
+pub fn fit_gpu_from<M: Trainable>(
+    gpu: &Gpu,
+    data: &Dataset,
+    state: &mut Checkpoint,
+    extent: f32,
+    opts: &FitOptions,
     mut progress: impl FnMut(&StepReport),
 ) -> Result<(), FitError> {
     let rates = rates_for::<M>(data, extent)?;
+    check_resumable::<M>(state, opts)?;
     let words = M::Params::LEN;
     let position = position_word::<M>().ok_or_else(|| {
         FitError::Unsupported(format!(
@@ -63,16 +80,17 @@ pub fn fit_gpu<M: Trainable>(
     }
     let targets: Vec<_> = data.train.iter().collect();
     let mut loss = GpuLoss::new(gpu, &targets, opts.ssim_weight as f32)?;
-    let mut scene = GpuScene::<M>::new(gpu, params)?;
+    let mut scene = GpuScene::<M>::new(gpu, &state.params::<M>())?;
     let mut adam = GpuAdam::new(gpu, words)?;
+    adam.restore(gpu, &state.adam)?;
     let mut observer = GpuObserver::new(gpu)?;
     let mut densifier = opts
         .densify
         .clone()
-        .map(|d| Densifier::new(d, params.len()));
+        .map(|d| Densifier::resume(d, scene.len(), &state.grad2d, &state.seen));
     let acc = Accumulation::default_for(gpu);
-    let mut rng = fastrand::Rng::with_seed(opts.seed);
-    for step in 0..opts.steps {
+    let mut rng = fastrand::Rng::with_seed(state.rng);
+    for step in state.step..opts.steps {
         let k = rng.usize(..data.train.len());
         let camera = &data.train[k].camera;
         let background = step_background(opts, &mut rng);
@@ -80,8 +98,8 @@ pub fn fit_gpu<M: Trainable>(
         let size = (frame.grid.width, frame.grid.height);
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         let grad = renderer.pixel_gradients()?.clone();
-        let state = renderer.pixel_state();
-        loss.record(gpu, &mut enc, k, background, size, state, &grad)?;
+        let pixel_state = renderer.pixel_state();
+        loss.record(gpu, &mut enc, k, background, size, pixel_state, &grad)?;
         gpu.queue.submit([enc.finish()]);
         renderer.backward_on_device(&scene, acc)?;
 
@@ -139,15 +157,31 @@ pub fn fit_gpu<M: Trainable>(
             }
             false => None,
         };
+        let save = checkpoints_at(opts, step);
+        if save || step + 1 == opts.steps {
+            let n = scene.len();
+            state.step = step + 1;
+            state.params = flatten::<M>(&scene.download(gpu)?);
+            state.adam = adam.download(gpu, n)?;
+            (state.grad2d, state.seen) = match densifier.as_mut() {
+                Some(d) => {
+                    let (grad2d, seen) = observer.take(gpu, n)?;
+                    d.add_observations(&grad2d, &seen);
+                    d.statistics()
+                }
+                None => Default::default(),
+            };
+            state.rng = rng.get_seed();
+        }
         progress(&StepReport {
             step,
             loss: &value,
             primitives: scene.len(),
             refinement: refinement.as_ref(),
             evaluation,
+            checkpoint: save.then_some(&*state),
         });
     }
-    *params = scene.download(gpu)?;
     Ok(())
 }
 

@@ -4,6 +4,7 @@
 //! also on the GPU ([`gpu_fit`]).
 
 pub mod adam;
+pub mod checkpoint;
 pub mod densify;
 pub mod fit;
 #[cfg(feature = "gpu")]
@@ -11,5 +12,6 @@ pub mod gpu_fit;
 pub mod init;
 pub mod loss;
 
+pub use checkpoint::Checkpoint;
 pub use densify::{DensifyOptions, Shape};
 pub use fit::{FitOptions, Rate, Trainable};

@@ -1,0 +1,312 @@
+//! Checkpoints: everything a training run needs to go on where it stopped (the steps done,
+//! the primitives, Adam's moments, density control's statistics, the random generator), and
+//! their file format.
+//!
+//! The file is little-endian: the magic `SPLATCK1`, then `u64` counts and fields (see
+//! [`Checkpoint::write_to`]), then the arrays. Every count is checked against the file's
+//! length before anything is allocated, so a damaged file is refused by name, never trusted.
+
+use crate::flat::Flat;
+use crate::method::SplatMethod;
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+
+const MAGIC: &[u8; 8] = b"SPLATCK1";
+
+/// Adam's state: its step count and both moments, one per parameter word.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct AdamState {
+    pub step: u64,
+    pub m: Vec<f32>,
+    pub v: Vec<f32>,
+}
+
+/// A training run's state after `step` of `steps` steps.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Checkpoint {
+    /// The method trained (`SplatMethod::NAME`) and its parameter words per primitive.
+    pub method: String,
+    pub words: usize,
+    pub step: usize,
+    /// The run's length: the learning-rate schedule depends on it.
+    pub steps: usize,
+    /// The primitives' parameter words, one primitive after another.
+    pub params: Vec<f32>,
+    pub adam: AdamState,
+    /// Density control's statistics since its last refinement (per primitive: summed
+    /// screen-space gradient norms, views that saw it); empty without density control.
+    pub grad2d: Vec<f32>,
+    pub seen: Vec<u32>,
+    /// The random generator's state.
+    pub rng: u64,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum CheckpointError {
+    #[error("cannot read {path}: {error}")]
+    Io {
+        path: PathBuf,
+        error: std::io::Error,
+    },
+    #[error("{path} is not a splat checkpoint (it does not start with SPLATCK1)")]
+    Magic { path: PathBuf },
+    #[error("{path} is damaged: {what}")]
+    Damaged { path: PathBuf, what: String },
+}
+
+impl Checkpoint {
+    /// The state before the first step of a `steps`-step run of method `M` from `params`.
+    pub fn start<M: SplatMethod>(params: &[M::Params], steps: usize, seed: u64) -> Checkpoint {
+        Checkpoint {
+            method: M::NAME.to_string(),
+            words: M::Params::LEN,
+            step: 0,
+            steps,
+            params: super::fit::flatten::<M>(params),
+            adam: AdamState {
+                step: 0,
+                m: vec![0.0; params.len() * M::Params::LEN],
+                v: vec![0.0; params.len() * M::Params::LEN],
+            },
+            grad2d: vec![],
+            seen: vec![],
+            rng: seed,
+        }
+    }
+
+    /// The primitives, as method `M`'s parameters.
+    pub fn params<M: SplatMethod>(&self) -> Vec<M::Params> {
+        self.params
+            .chunks_exact(M::Params::LEN)
+            .map(M::Params::read_words)
+            .collect()
+    }
+
+    pub fn primitives(&self) -> usize {
+        self.params.len() / self.words.max(1)
+    }
+
+    /// Writes the checkpoint to `path` atomically (a run killed while writing leaves the
+    /// previous checkpoint).
+    pub fn write(&self, path: &Path) -> std::io::Result<()> {
+        crate::io::write_atomic(path, |w| self.write_to(w))
+    }
+
+    /// The header (magic, method name, then words, step, steps, primitives, Adam's step,
+    /// statistics count, generator state as `u64`), then the parameters, both moments and the
+    /// statistics.
+    pub fn write_to(&self, w: &mut dyn Write) -> std::io::Result<()> {
+        w.write_all(MAGIC)?;
+        let name = self.method.as_bytes();
+        w.write_all(&(name.len() as u64).to_le_bytes())?;
+        w.write_all(name)?;
+        for n in [
+            self.words as u64,
+            self.step as u64,
+            self.steps as u64,
+            self.primitives() as u64,
+            self.adam.step,
+            self.grad2d.len() as u64,
+            self.rng,
+        ] {
+            w.write_all(&n.to_le_bytes())?;
+        }
+        for words in [&self.params, &self.adam.m, &self.adam.v, &self.grad2d] {
+            write_f32s(w, words)?;
+        }
+        for s in &self.seen {
+            w.write_all(&s.to_le_bytes())?;
+        }
+        Ok(())
+    }
+
+    pub fn read(path: &Path) -> Result<Checkpoint, CheckpointError> {
+        let io = |error| CheckpointError::Io {
+            path: path.to_path_buf(),
+            error,
+        };
+        let mut bytes = vec![];
+        std::fs::File::open(path)
+            .and_then(|mut f| f.read_to_end(&mut bytes))
+            .map_err(io)?;
+        Checkpoint::parse(&bytes, path)
+    }
+
+    /// Parses a checkpoint file's bytes (`path` names it in errors).
+    pub fn parse(bytes: &[u8], path: &Path) -> Result<Checkpoint, CheckpointError> {
+        let damaged = |what: String| CheckpointError::Damaged {
+            path: path.to_path_buf(),
+            what,
+        };
+        if bytes.get(..8) != Some(MAGIC) {
+            return Err(CheckpointError::Magic {
+                path: path.to_path_buf(),
+            });
+        }
+        let mut r = Reader { bytes, at: 8, path };
+        let name_len = r.count("the method name's length")?;
+        let method = String::from_utf8(r.take(name_len, 1, "the method name")?.to_vec())
+            .map_err(|_| damaged("the method name is not UTF-8".into()))?;
+        let words = r.count("words")?;
+        let step = r.count("step")?;
+        let steps = r.count("steps")?;
+        let primitives = r.count("primitives")?;
+        let adam_step = r.u64("Adam's step")?;
+        let stats = r.count("statistics")?;
+        let rng = r.u64("generator")?;
+        if step > steps {
+            return Err(damaged(format!(
+                "step {step} is past the run's {steps} steps"
+            )));
+        }
+        let total = primitives
+            .checked_mul(words)
+            .ok_or_else(|| damaged(format!("{primitives} primitives of {words} words")))?;
+        let params = r.f32s(total, "the parameters")?;
+        let m = r.f32s(total, "Adam's first moments")?;
+        let v = r.f32s(total, "Adam's second moments")?;
+        let grad2d = r.f32s(stats, "density control's gradient statistics")?;
+        let seen = r
+            .take(stats, 4, "density control's view counts")?
+            .chunks_exact(4)
+            .map(|b| u32::from_le_bytes(b.try_into().expect("4 bytes")))
+            .collect();
+        if r.at != bytes.len() {
+            return Err(damaged(format!(
+                "{} bytes follow the checkpoint's end",
+                bytes.len() - r.at
+            )));
+        }
+        if stats != 0 && stats != primitives {
+            return Err(damaged(format!(
+                "statistics for {stats} primitives, parameters for {primitives}"
+            )));
+        }
+        Ok(Checkpoint {
+            method,
+            words,
+            step,
+            steps,
+            params,
+            adam: AdamState {
+                step: adam_step,
+                m,
+                v,
+            },
+            grad2d,
+            seen,
+            rng,
+        })
+    }
+}
+
+fn write_f32s(w: &mut dyn Write, values: &[f32]) -> std::io::Result<()> {
+    let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+    w.write_all(&bytes)
+}
+
+/// Reads fields off a checkpoint's bytes, refusing to read (or allocate) past their end.
+struct Reader<'a> {
+    bytes: &'a [u8],
+    at: usize,
+    path: &'a Path,
+}
+
+impl Reader<'_> {
+    /// `count` items of `size` bytes.
+    fn take(&mut self, count: usize, size: usize, what: &str) -> Result<&[u8], CheckpointError> {
+        let end = count
+            .checked_mul(size)
+            .and_then(|n| n.checked_add(self.at))
+            .filter(|end| *end <= self.bytes.len())
+            .ok_or_else(|| CheckpointError::Damaged {
+                path: self.path.to_path_buf(),
+                what: format!("it ends before {what} ({count} items)"),
+            })?;
+        let out = &self.bytes[self.at..end];
+        self.at = end;
+        Ok(out)
+    }
+
+    fn u64(&mut self, what: &str) -> Result<u64, CheckpointError> {
+        let b = self.take(1, 8, what)?;
+        Ok(u64::from_le_bytes(b.try_into().expect("8 bytes")))
+    }
+
+    /// A count, which must fit in memory's address range.
+    fn count(&mut self, what: &str) -> Result<usize, CheckpointError> {
+        let n = self.u64(what)?;
+        usize::try_from(n).map_err(|_| CheckpointError::Damaged {
+            path: self.path.to_path_buf(),
+            what: format!("{what} is {n}"),
+        })
+    }
+
+    fn f32s(&mut self, count: usize, what: &str) -> Result<Vec<f32>, CheckpointError> {
+        Ok(self
+            .take(count, 4, what)?
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes(b.try_into().expect("4 bytes")))
+            .collect())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample() -> Checkpoint {
+        Checkpoint {
+            method: "3dgs".into(),
+            words: 2,
+            step: 5,
+            steps: 10,
+            params: vec![1.0, -2.0, 3.5, f32::MIN_POSITIVE],
+            adam: AdamState {
+                step: 5,
+                m: vec![0.1, 0.2, 0.3, 0.4],
+                v: vec![1e-9, 2e-9, 3e-9, 4e-9],
+            },
+            grad2d: vec![0.5, 0.25],
+            seen: vec![3, 7],
+            rng: u64::MAX - 3,
+        }
+    }
+
+    #[test]
+    fn a_checkpoint_survives_its_file() {
+        let mut bytes = vec![];
+        sample().write_to(&mut bytes).unwrap();
+        let back = Checkpoint::parse(&bytes, Path::new("c.bin")).unwrap();
+        assert_eq!(back, sample());
+    }
+
+    /// Every truncation, a wrong magic, trailing bytes and a count far past the file's size
+    /// are refused with the file's name (no panic, no huge allocation).
+    #[test]
+    fn damaged_checkpoints_are_refused_by_name() {
+        let mut bytes = vec![];
+        sample().write_to(&mut bytes).unwrap();
+        let path = Path::new("run/checkpoint.bin");
+        for n in 0..bytes.len() {
+            let e = Checkpoint::parse(&bytes[..n], path)
+                .unwrap_err()
+                .to_string();
+            assert!(e.starts_with("run/checkpoint.bin "), "{e}");
+        }
+        let mut long = bytes.clone();
+        long.push(0);
+        let e = Checkpoint::parse(&long, path).unwrap_err().to_string();
+        assert!(e.contains("1 bytes follow"), "{e}");
+        let mut huge = bytes.clone();
+        // The primitive count (after magic, name length, name, words, step, steps).
+        let at = 8 + 8 + 4 + 3 * 8;
+        huge[at..at + 8].copy_from_slice(&(1u64 << 60).to_le_bytes());
+        let e = Checkpoint::parse(&huge, path).unwrap_err().to_string();
+        assert!(e.contains("damaged"), "{e}");
+        let e = Checkpoint::parse(b"PLY\n....", path)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("not a splat checkpoint"), "{e}");
+    }
+}
