@@ -81,9 +81,7 @@ pub struct FitArgs {
     out: PathBuf,
 }
 
-/// The built-in dataset: its size, and the defaults that train it in about a minute on 2
-/// cores.
-const BUILT_IN: (usize, u32, u32) = (32, 112, 84);
+/// The defaults that train the built-in dataset in under a minute on 2 cores.
 const BUILT_IN_STEPS: usize = 2000;
 const BUILT_IN_POINTS: usize = 2000;
 const BUILT_IN_MAX_PRIMITIVES: usize = 6000;
@@ -109,7 +107,7 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
             (7000, 100_000, DensifyOptions::default().max_primitives),
         ),
         None => {
-            let (views, width, height) = BUILT_IN;
+            let (views, width, height) = scene::DATASET;
             (
                 scene::dataset(views, width, height, background)?,
                 "the built-in dataset".to_string(),

@@ -27,8 +27,9 @@ pub use methods::{Instance, Method};
 use anyhow::{Context, Result};
 use clap::{CommandFactory, FromArgMatches, Parser, Subcommand, ValueEnum};
 use splat_runtime::CameraModel;
+use splat_runtime::glam::Vec3;
 use splat_runtime::gpu::Gpu;
-use splat_runtime::io::{camera as camera_io, ply};
+use splat_runtime::io::{camera as camera_io, dataset, ply};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -53,6 +54,21 @@ enum Command {
         out: PathBuf,
         #[arg(long)]
         camera_out: Option<PathBuf>,
+    },
+    /// Write the built-in dataset (what `splat fit` trains on without a dataset) as a Blender /
+    /// NeRF-synthetic folder, with as many views of any size.
+    Dataset {
+        #[arg(long, default_value = "planet-dataset")]
+        out: PathBuf,
+        #[arg(long, default_value_t = scene::DATASET.0)]
+        views: usize,
+        #[arg(long, default_value_t = scene::DATASET.1)]
+        width: u32,
+        #[arg(long, default_value_t = scene::DATASET.2)]
+        height: u32,
+        /// Compose the pictures' color on white (their alpha is written either way).
+        #[arg(long)]
+        white: bool,
     },
     /// Render the built-in scene with every method and camera model into one picture (rows:
     /// methods; columns: pinhole, fisheye, equiangular).
@@ -172,6 +188,29 @@ fn dispatch(cli: Cli, methods: &[Method]) -> Result<()> {
                     .with_context(|| format!("writing {}", c.display()))?;
                 crate::wrote(&c);
             }
+            Ok(())
+        }
+        Command::Dataset {
+            out,
+            views,
+            width,
+            height,
+            white,
+        } => {
+            if views < 2 {
+                anyhow::bail!(
+                    "--views must be at least 2 (every 8th view, from the first, is a test view)"
+                );
+            }
+            let background = if white { Vec3::ONE } else { Vec3::ZERO };
+            let data = scene::dataset(views, width, height, background)?;
+            dataset::write_blender(&out, &data)?;
+            println!(
+                "{} training and {} test views of {width}x{height}",
+                data.train.len(),
+                data.test.len()
+            );
+            crate::wrote(&out);
             Ok(())
         }
         Command::Gallery { out, width, height } => render::gallery(&out, width, height, methods),

@@ -159,6 +159,9 @@ fn looking_from(eye: Vec3, width: u32, height: u32, model: CameraModel) -> Camer
     }
 }
 
+/// The built-in dataset's views, width and height.
+pub const DATASET: (usize, u32, u32) = (32, 112, 84);
+
 /// The built-in training dataset: the planet, its ring and its moon (no stars) rendered by
 /// 3DGS on `background`, seen by `views` pinhole cameras circling it 6 units away while rising
 /// and sinking through the ring plane; every 8th view (from the first) is held out.

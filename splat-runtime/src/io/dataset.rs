@@ -154,6 +154,117 @@ pub fn read_blender(dir: &Path, background: Vec3) -> Result<Dataset, DatasetErro
     })
 }
 
+/// Writes `data` as a Blender / NeRF-synthetic dataset in `dir` (what [`read_blender`] reads
+/// back): `train/r_<k>.png` and `test/r_<k>.png` as RGBA, straight alpha from each view's
+/// coverage, and `transforms_train.json`, `transforms_test.json` with OpenGL camera-to-world
+/// matrices. The format says only a horizontal field of view per split, so every view must be
+/// a pinhole camera with square pixels, the principal point at the centre, and the split's
+/// first view's field of view. Every file is written atomically.
+pub fn write_blender(dir: &Path, data: &Dataset) -> Result<(), DatasetError> {
+    let splits = [("train", &data.train), ("test", &data.test)];
+    // Everything is checked before anything is written.
+    let mut angles = vec![];
+    for (name, views) in splits {
+        angles.push(blender_angle(
+            &dir.join(format!("transforms_{name}.json")),
+            views,
+        )?);
+    }
+    for ((name, views), angle) in splits.into_iter().zip(angles) {
+        let mut frames = Vec::with_capacity(views.len());
+        for (k, view) in views.iter().enumerate() {
+            let file = format!("{name}/r_{k}");
+            write_rgba(&dir.join(format!("{file}.png")), view)?;
+            let c = &view.camera;
+            let w2c = Mat4::from_cols(
+                c.rotation.x_axis.extend(0.0),
+                c.rotation.y_axis.extend(0.0),
+                c.rotation.z_axis.extend(0.0),
+                c.translation.extend(1.0),
+            );
+            // OpenCV camera axes to OpenGL ones: y and z flip.
+            let c2w = w2c.inverse() * Mat4::from_diagonal(Vec4::new(1.0, -1.0, -1.0, 1.0));
+            let rows: Vec<[f32; 4]> = (0..4).map(|i| c2w.row(i).to_array()).collect();
+            frames.push(serde_json::json!({
+                "file_path": format!("./{file}"),
+                "transform_matrix": rows,
+            }));
+        }
+        let json_path = dir.join(format!("transforms_{name}.json"));
+        let json = serde_json::json!({ "camera_angle_x": angle, "frames": frames });
+        let text = serde_json::to_string_pretty(&json).expect("JSON of numbers and strings");
+        super::write_atomic(&json_path, |w| w.write_all(text.as_bytes())).map_err(|error| {
+            DatasetError::Io {
+                path: json_path.clone(),
+                error,
+            }
+        })?;
+    }
+    Ok(())
+}
+
+/// The horizontal field of view of a split's views, if the Blender format can hold them
+/// (`json_path` names the split in errors).
+fn blender_angle(json_path: &Path, views: &[View]) -> Result<f32, DatasetError> {
+    let Some(first) = views.first() else {
+        return Err(DatasetError::Empty(json_path.to_path_buf()));
+    };
+    let angle = 2.0 * (0.5 * first.camera.size.x / first.camera.focal.x).atan();
+    for (k, view) in views.iter().enumerate() {
+        let c = &view.camera;
+        let centred = (c.principal - c.size / 2.0).abs().max_element() < 1e-3;
+        let same_angle = (2.0 * (0.5 * c.size.x / c.focal.x).atan() - angle).abs() < 1e-5;
+        if c.model != CameraModel::Pinhole || c.focal.x != c.focal.y || !centred || !same_angle {
+            return Err(field(
+                json_path,
+                format!("frames[{k}]"),
+                format!(
+                    "cannot hold {}: the format has pinhole cameras with square pixels, the principal point at the centre and one field of view per split",
+                    view.name
+                ),
+            ));
+        }
+    }
+    Ok(angle)
+}
+
+/// A view as an 8-bit RGBA PNG: its coverage as alpha, its color taken off its background
+/// (straight alpha, as Blender writes it).
+fn write_rgba(path: &Path, view: &View) -> Result<(), DatasetError> {
+    let io = |error| DatasetError::Io {
+        path: path.to_path_buf(),
+        error,
+    };
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir).map_err(io)?;
+    }
+    let (w, h) = (view.image.width, view.image.height);
+    let pixels = (w * h) as usize;
+    let alpha = |p: usize| view.coverage.as_ref().map_or(1.0, |a| a[p]);
+    let b = view.background.to_array();
+    let mut bytes = Vec::with_capacity(pixels * 4);
+    for (p, rgb) in view.image.data.chunks_exact(3).enumerate() {
+        let a = alpha(p);
+        for (c, b) in rgb.iter().zip(b) {
+            let straight = match a > 0.0 {
+                true => (c - (1.0 - a) * b) / a,
+                false => 0.0,
+            };
+            bytes.push((straight.clamp(0.0, 1.0) * 255.0).round() as u8);
+        }
+        bytes.push((a.clamp(0.0, 1.0) * 255.0).round() as u8);
+    }
+    let image = image::RgbaImage::from_raw(w, h, bytes).expect("4 bytes per pixel");
+    super::write_atomic(path, |out| {
+        let mut buf = std::io::Cursor::new(Vec::new());
+        image
+            .write_to(&mut buf, image::ImageFormat::Png)
+            .map_err(std::io::Error::other)?;
+        out.write_all(buf.get_ref())
+    })
+    .map_err(io)
+}
+
 fn read_json(path: &Path) -> Result<serde_json::Value, DatasetError> {
     let text = std::fs::read_to_string(path).map_err(|error| DatasetError::Io {
         path: path.to_path_buf(),
@@ -408,4 +519,107 @@ pub(super) fn read_image(
         data,
     };
     Ok((image, alpha.iter().any(|a| *a < 1.0).then_some(alpha)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A pinhole camera at `eye` looking at the origin, 30 x 20 pixels.
+    fn looking_from(eye: Vec3) -> Camera {
+        let f = (-eye).normalize();
+        let r = f.cross(Vec3::Y).normalize();
+        let rotation = Mat3::from_cols(r, f.cross(r), f).transpose();
+        Camera {
+            rotation,
+            translation: -(rotation * eye),
+            focal: Vec2::splat(24.0),
+            principal: Vec2::new(15.0, 10.0),
+            size: Vec2::new(30.0, 20.0),
+            ..Default::default()
+        }
+    }
+
+    /// A view whose color and coverage vary over the image, composited on `background`.
+    fn view(eye: Vec3, background: Vec3) -> View {
+        let pixels = 30 * 20;
+        let coverage: Vec<f32> = (0..pixels).map(|p| (p % 7) as f32 / 6.0).collect();
+        let mut data = Vec::with_capacity(pixels * 3);
+        for (p, a) in coverage.iter().enumerate() {
+            let straight = Vec3::new((p % 30) as f32 / 29.0, (p / 30) as f32 / 19.0, 0.5);
+            data.extend((straight * *a + background * (1.0 - a)).to_array());
+        }
+        View {
+            name: format!("view from {eye}"),
+            camera: looking_from(eye),
+            image: Image {
+                width: 30,
+                height: 20,
+                channels: 3,
+                data,
+            },
+            coverage: Some(coverage),
+            background,
+        }
+    }
+
+    /// Written as Blender and read back (on another background): the same poses and focal
+    /// lengths, the same pictures up to 8-bit rounding, re-composited.
+    #[test]
+    fn a_dataset_survives_the_blender_format() {
+        let dir = tempfile::tempdir().unwrap();
+        let white = Vec3::ONE;
+        let eyes = [Vec3::new(3.0, 1.0, -2.0), Vec3::new(-2.5, -0.5, 2.0)];
+        let data = Dataset {
+            train: eyes.iter().map(|e| view(*e, white)).collect(),
+            test: vec![view(Vec3::new(0.5, 2.0, 3.0), white)],
+            points: vec![],
+        };
+        write_blender(dir.path(), &data).unwrap();
+        let back = read_blender(dir.path(), Vec3::ZERO).unwrap();
+        let pairs = data.train.iter().chain(&data.test);
+        for (want, got) in pairs.zip(back.train.iter().chain(&back.test)) {
+            let (a, b) = (want.camera, got.camera);
+            assert!(
+                (a.focal - b.focal).abs().max_element() < 1e-4,
+                "{a:?} {b:?}"
+            );
+            assert_eq!((a.principal, a.size), (b.principal, b.size));
+            let pose = |c: &Camera| {
+                [
+                    c.rotation.to_cols_array().to_vec(),
+                    c.translation.to_array().to_vec(),
+                ]
+                .concat()
+            };
+            for (x, y) in pose(&a).iter().zip(pose(&b)) {
+                assert!((x - y).abs() < 1e-5, "{a:?} {b:?}");
+            }
+            let on_black = want.on(Vec3::ZERO);
+            let worst = (on_black.data.iter().zip(&got.image.data))
+                .fold(0.0f32, |m, (x, y)| m.max((x - y).abs()));
+            assert!(worst < 1.5 / 255.0, "{worst}");
+        }
+    }
+
+    /// What the format cannot say is refused by file and frame.
+    #[test]
+    fn views_the_blender_format_cannot_hold_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut fisheye = view(Vec3::new(3.0, 1.0, -2.0), Vec3::ZERO);
+        fisheye.camera.model = CameraModel::KannalaBrandt;
+        let plain = view(Vec3::new(-3.0, 1.0, -2.0), Vec3::ZERO);
+        let data = Dataset {
+            train: vec![plain.clone(), fisheye],
+            test: vec![plain],
+            points: vec![],
+        };
+        let err = write_blender(dir.path(), &data).unwrap_err().to_string();
+        assert!(
+            err.contains("transforms_train.json: frames[1] cannot hold"),
+            "{err}"
+        );
+        let written = std::fs::read_dir(dir.path()).unwrap().count();
+        assert_eq!(written, 0, "nothing is written");
+    }
 }
