@@ -8,7 +8,7 @@
 
 use super::ForwardState;
 use super::RenderError;
-use super::shade::{group_pixels, step};
+use super::shade::{group_pixels, misses_group, step};
 use crate::flat::Flat;
 use crate::lanes::{F32x8, LANES, M32x8};
 use crate::method::SplatMethod;
@@ -148,6 +148,9 @@ fn backward_tile_body<M: SplatMethod>(
                     break;
                 }
                 let p = &state.pre.projected[prim as usize];
+                if misses_group(p, x0, y) {
+                    continue;
+                }
                 let c = M::evaluate_lanes(&pixels, &p.shade);
                 let st = step(c.alpha, c.valid, done, t);
                 done = done | st.stop;

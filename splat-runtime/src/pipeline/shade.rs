@@ -80,6 +80,16 @@ pub fn step(alpha: F32x8, valid: M32x8, done: M32x8, t: F32x8) -> Step {
     }
 }
 
+/// Whether `p`'s box misses every pixel centre of the group of eight pixels from `(x0, y)`:
+/// `evaluate` is then invalid on all its lanes (the box's contract), so the pair can be
+/// skipped without computing it, in the forward and the backward pass alike.
+#[inline(always)]
+pub fn misses_group<C, S>(p: &Projected<C, S>, x0: u32, y: u32) -> bool {
+    let (x, y) = (x0 as f32 + 0.5, y as f32 + 0.5);
+    let last = x + (LANES - 1) as f32;
+    y < p.bbox_min.y || y > p.bbox_max.y || last < p.bbox_min.x || x > p.bbox_max.x
+}
+
 /// Blends one tile, in code compiled for AVX2 + FMA where the CPU has them.
 pub fn shade_tile<M: SplatMethod>(
     grid: &TileGrid,
@@ -141,6 +151,9 @@ fn shade_tile_body<M: SplatMethod>(
                     break;
                 }
                 let p = &projected[prim as usize];
+                if misses_group(p, x0, y) {
+                    continue;
+                }
                 let c = M::evaluate_lanes(&pixels, &p.shade);
                 out.pairs += (!done).count() as u64;
                 let st = step(c.alpha, c.valid, done, t);
