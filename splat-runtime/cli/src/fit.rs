@@ -433,9 +433,10 @@ impl Log {
             .with_context(|| format!("writing {}", path.display()))
     }
 
-    /// The training loss (a running mean over 50 steps) above the test PSNR, by step.
+    /// The training loss (a running mean over 50 steps, in decades) above the test PSNR, by
+    /// step.
     fn plot(&self, path: &Path) -> Result<()> {
-        let last = self.steps.last().map_or(1, |s| s.0).max(1);
+        let last = self.steps.last().map_or(1, |s| s.0);
         let window = 50;
         let smooth: Vec<(f64, f64)> = self
             .steps
@@ -451,59 +452,22 @@ impl Log {
             .map(|(s, e)| (*s as f64, e.psnr))
             .collect();
         plot::png(path, (900, 640), |root| {
-            let err = plot::drawing("training curve");
+            let err = plot::drawing("training curve".into());
             let (top, bottom) = root.split_vertically(320);
-            let range = |v: &mut dyn Iterator<Item = f64>| {
-                let (lo, hi) = v.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| {
-                    (lo.min(x), hi.max(x))
-                });
-                match lo.is_finite() && hi > lo {
-                    true => (lo - 0.05 * (hi - lo))..(hi + 0.05 * (hi - lo)),
-                    false => (lo - 1.0)..(lo + 1.0),
-                }
-            };
-            let mut chart = ChartBuilder::on(&top)
-                .caption("training loss (mean of 50 steps)", plot::text(20))
-                .margin(12)
-                .margin_right(30)
-                .x_label_area_size(36)
-                .y_label_area_size(64)
-                .build_cartesian_2d(0.0..last as f64, range(&mut smooth.iter().map(|p| p.1)))
-                .map_err(&err)?;
+            let caption = "training loss (mean of 50 steps)";
+            let (log, linear) = (plot::Scale::Log, plot::Scale::Linear);
+            let loss = smooth.iter().map(|p| p.1);
+            let mut chart = plot::by_step(&top, caption, last, loss, log)?;
+            let line = smooth.iter().map(|(x, y)| (*x, log.y(*y)));
             chart
-                .configure_mesh()
-                .x_desc("step")
-                .x_label_formatter(&|x| format!("{x:.0}"))
-                .label_style(plot::text(14))
-                .draw()
+                .draw_series(LineSeries::new(line, BLUE.stroke_width(2)))
                 .map_err(&err)?;
-            chart
-                .draw_series(LineSeries::new(
-                    smooth.iter().copied(),
-                    BLUE.stroke_width(2),
-                ))
-                .map_err(&err)?;
-            let mut chart = ChartBuilder::on(&bottom)
-                .caption("test PSNR (dB)", plot::text(20))
-                .margin(12)
-                .margin_right(30)
-                .x_label_area_size(36)
-                .y_label_area_size(64)
-                .build_cartesian_2d(0.0..last as f64, range(&mut psnr.iter().map(|p| p.1)))
-                .map_err(&err)?;
-            chart
-                .configure_mesh()
-                .x_desc("step")
-                .x_label_formatter(&|x| format!("{x:.0}"))
-                .label_style(plot::text(14))
-                .draw()
-                .map_err(&err)?;
-            chart
-                .draw_series(LineSeries::new(psnr.iter().copied(), RED.stroke_width(2)))
-                .map_err(&err)?;
-            chart
-                .draw_series(psnr.iter().map(|p| Circle::new(*p, 4, RED.filled())))
-                .map_err(&err)?;
+            let test = psnr.iter().map(|p| p.1);
+            let mut chart = plot::by_step(&bottom, "test PSNR (dB)", last, test, linear)?;
+            let line = LineSeries::new(psnr.iter().copied(), RED.stroke_width(2));
+            chart.draw_series(line).map_err(&err)?;
+            let dots = psnr.iter().map(|p| Circle::new(*p, 4, RED.filled()));
+            chart.draw_series(dots).map_err(&err)?;
             Ok(())
         })
     }

@@ -2,6 +2,7 @@
 //! system font is needed), written atomically by the runtime's image writer.
 
 use anyhow::{Context, Result, anyhow};
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use splat_runtime::Image;
 use std::path::Path;
@@ -47,9 +48,73 @@ pub fn text(size: u32) -> TextStyle<'static> {
     (FONT, size).into_font().into()
 }
 
+/// A canvas area of [`png`].
+pub type Area<'a> = DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>;
+
+/// How a chart's y axis maps values.
+#[derive(Clone, Copy)]
+pub enum Scale {
+    Linear,
+    /// Decades: the chart holds log10 of each value, the labels show the values.
+    Log,
+}
+
+impl Scale {
+    /// Where value `v` sits on the axis.
+    pub fn y(self, v: f64) -> f64 {
+        match self {
+            Scale::Linear => v,
+            Scale::Log => v.max(1e-30).log10(),
+        }
+    }
+}
+
+/// A chart of values by training step on `area`: x from 0 to `last`, y over the range of
+/// `ys` (padded by 5%) on `scale`, with a caption, a grid and labelled axes. Points drawn on
+/// it go through `scale.y`.
+pub fn by_step<'a, 'b>(
+    area: &'a Area<'b>,
+    caption: &str,
+    last: usize,
+    ys: impl Iterator<Item = f64>,
+    scale: Scale,
+) -> Result<ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>> {
+    let (lo, hi) = ys
+        .map(|v| scale.y(v))
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), y| {
+            (lo.min(y), hi.max(y))
+        });
+    let y = match (lo.is_finite(), hi > lo) {
+        (true, true) => (lo - 0.05 * (hi - lo))..(hi + 0.05 * (hi - lo)),
+        (true, false) => (lo - 1.0)..(lo + 1.0),
+        (false, _) => 0.0..1.0,
+    };
+    let err = drawing(format!("chart \"{caption}\""));
+    let mut chart = ChartBuilder::on(area)
+        .caption(caption, text(20))
+        .margin(12)
+        .margin_right(30)
+        .x_label_area_size(36)
+        .y_label_area_size(64)
+        .build_cartesian_2d(0.0..last.max(1) as f64, y)
+        .map_err(&err)?;
+    chart
+        .configure_mesh()
+        .x_desc("step")
+        .x_label_formatter(&|x| format!("{x:.0}"))
+        .y_label_formatter(&|y| match scale {
+            Scale::Linear => format!("{y:.1}"),
+            Scale::Log => format!("{:.1e}", 10f64.powf(*y)),
+        })
+        .label_style(text(14))
+        .draw()
+        .map_err(&err)?;
+    Ok(chart)
+}
+
 /// plotters' errors carry the backend's error type; as anyhow errors they name the plot.
 pub fn drawing<E: std::error::Error + Send + Sync + 'static>(
-    what: &'static str,
+    what: String,
 ) -> impl Fn(DrawingAreaErrorKind<E>) -> anyhow::Error {
     move |e| anyhow!("drawing the {what}: {e}")
 }

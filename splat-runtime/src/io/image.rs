@@ -23,13 +23,17 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> ImageError + '_ {
     }
 }
 
-/// Writes the frame to `path` (and the depth sibling for PNG / EXR); returns every path written.
-pub fn write_frame(path: &Path, frame: &Frame) -> Result<Vec<PathBuf>, ImageError> {
-    let ext = path
-        .extension()
+/// The extension of `path`, lower case ("" without one).
+fn extension(path: &Path) -> String {
+    path.extension()
         .and_then(|e| e.to_str())
         .unwrap_or("")
-        .to_ascii_lowercase();
+        .to_ascii_lowercase()
+}
+
+/// Writes the frame to `path` (and the depth sibling for PNG / EXR); returns every path written.
+pub fn write_frame(path: &Path, frame: &Frame) -> Result<Vec<PathBuf>, ImageError> {
+    let ext = extension(path);
     match ext.as_str() {
         "npy" => {
             let mut planes = vec![&frame.color];
@@ -121,11 +125,7 @@ pub fn stack(images: &[&Image]) -> Image {
 /// Writes one image (1, 3 or 4 channels) as PNG (8 bits, clamped to [0, 1]) or EXR, by the
 /// extension of `path`.
 pub fn write_image(path: &Path, im: &Image) -> Result<(), ImageError> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .unwrap_or("")
-        .to_ascii_lowercase();
+    let ext = extension(path);
     match ext.as_str() {
         "png" | "exr" => write_picture(path, &ext, im, false),
         _ => Err(ImageError::Extension(path.display().to_string())),
