@@ -27,12 +27,12 @@ pub struct FitArgs {
     /// nerfstudio (transforms.json; every 8th view held out) or COLMAP (a sparse model in
     /// sparse/0 or sparse, the pictures in images; every 8th view by name held out; training
     /// starts from the model's points). Without one: the built-in dataset, 32 views of the
-    /// built-in planet (128x96, rendered by 3DGS), which trains in about a minute on 2 cores.
+    /// built-in planet (112x84, rendered by 3DGS), which trains in under a minute on 2 cores.
     dataset: Option<PathBuf>,
     /// The method to train (one that implements `Trainable`).
     #[arg(long)]
     method: String,
-    /// Training steps [default: 7000; 3000 on the built-in dataset].
+    /// Training steps [default: 7000; 2000 on the built-in dataset].
     #[arg(long)]
     steps: Option<usize>,
     /// How many points to start from: at most this many of the dataset's points (evenly
@@ -285,11 +285,6 @@ impl Fit<'_> {
         };
         bar.finish();
         saved?;
-        if opts.checkpoint_every.is_some() {
-            state
-                .write(&checkpoint_path)
-                .with_context(|| format!("writing {}", checkpoint_path.display()))?;
-        }
         let params = state.params::<M>();
         let per_step = t.elapsed().as_secs_f64() / (opts.steps - first).max(1) as f64;
         let images = test_images(&params)?;

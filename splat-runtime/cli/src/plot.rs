@@ -23,7 +23,7 @@ fn register_font() {
 pub fn png(
     path: &Path,
     (width, height): (u32, u32),
-    draw: impl FnOnce(&DrawingArea<BitMapBackend, plotters::coord::Shift>) -> Result<()>,
+    draw: impl FnOnce(&Area) -> Result<()>,
 ) -> Result<()> {
     register_font();
     let mut rgb = vec![255u8; (width * height * 3) as usize];

@@ -302,29 +302,22 @@ impl GpuAdam {
         origin: &[Option<usize>],
         forget: impl Fn(usize) -> bool,
     ) -> Result<(), GpuError> {
-        let total = primitives * self.words;
-        for moments in [&mut self.m, &mut self.v] {
-            let old: Vec<f32> = if total == 0 {
-                vec![]
-            } else {
-                gpu.read(moments, total)?
-                    .into_iter()
-                    .map(f32::from_bits)
-                    .collect()
-            };
-            let mut new = remap_rows(&old, self.words, origin);
+        let old = self.download(gpu, primitives)?;
+        let moved = |rows: &[f32]| {
+            let mut new = remap_rows(rows, self.words, origin);
             for (k, x) in new.iter_mut().enumerate() {
                 if forget(k) {
                     *x = 0.0;
                 }
             }
-            moments.ensure(gpu, new.len())?;
-            gpu.write(
-                moments,
-                &new.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
-            );
-        }
-        Ok(())
+            new
+        };
+        let new = AdamState {
+            step: old.step,
+            m: moved(&old.m),
+            v: moved(&old.v),
+        };
+        self.restore(gpu, &new)
     }
 }
 

@@ -81,6 +81,8 @@ pub enum DatasetError {
         path: PathBuf,
         error: std::io::Error,
     },
+    #[error("cannot write {path}: {error}")]
+    Write { path: PathBuf, error: String },
     #[error("{path} is not valid JSON: {error}")]
     Json {
         path: PathBuf,
@@ -194,9 +196,9 @@ pub fn write_blender(dir: &Path, data: &Dataset) -> Result<(), DatasetError> {
         let json = serde_json::json!({ "camera_angle_x": angle, "frames": frames });
         let text = serde_json::to_string_pretty(&json).expect("JSON of numbers and strings");
         super::write_atomic(&json_path, |w| w.write_all(text.as_bytes())).map_err(|error| {
-            DatasetError::Io {
+            DatasetError::Write {
                 path: json_path.clone(),
-                error,
+                error: error.to_string(),
             }
         })?;
     }
@@ -231,38 +233,31 @@ fn blender_angle(json_path: &Path, views: &[View]) -> Result<f32, DatasetError> 
 /// A view as an 8-bit RGBA PNG: its coverage as alpha, its color taken off its background
 /// (straight alpha, as Blender writes it).
 fn write_rgba(path: &Path, view: &View) -> Result<(), DatasetError> {
-    let io = |error| DatasetError::Io {
+    let failed = |error: String| DatasetError::Write {
         path: path.to_path_buf(),
         error,
     };
     if let Some(dir) = path.parent() {
-        std::fs::create_dir_all(dir).map_err(io)?;
+        std::fs::create_dir_all(dir).map_err(|e| failed(e.to_string()))?;
     }
-    let (w, h) = (view.image.width, view.image.height);
-    let pixels = (w * h) as usize;
-    let alpha = |p: usize| view.coverage.as_ref().map_or(1.0, |a| a[p]);
     let b = view.background.to_array();
-    let mut bytes = Vec::with_capacity(pixels * 4);
+    let mut rgba = Vec::with_capacity(view.image.data.len() / 3 * 4);
     for (p, rgb) in view.image.data.chunks_exact(3).enumerate() {
-        let a = alpha(p);
+        let a = view.coverage.as_ref().map_or(1.0, |c| c[p]);
         for (c, b) in rgb.iter().zip(b) {
-            let straight = match a > 0.0 {
+            rgba.push(match a > 0.0 {
                 true => (c - (1.0 - a) * b) / a,
                 false => 0.0,
-            };
-            bytes.push((straight.clamp(0.0, 1.0) * 255.0).round() as u8);
+            });
         }
-        bytes.push((a.clamp(0.0, 1.0) * 255.0).round() as u8);
+        rgba.push(a);
     }
-    let image = image::RgbaImage::from_raw(w, h, bytes).expect("4 bytes per pixel");
-    super::write_atomic(path, |out| {
-        let mut buf = std::io::Cursor::new(Vec::new());
-        image
-            .write_to(&mut buf, image::ImageFormat::Png)
-            .map_err(std::io::Error::other)?;
-        out.write_all(buf.get_ref())
-    })
-    .map_err(io)
+    let image = Image {
+        channels: 4,
+        data: rgba,
+        ..view.image
+    };
+    super::image::write_image(path, &image).map_err(|e| failed(e.to_string()))
 }
 
 fn read_json(path: &Path) -> Result<serde_json::Value, DatasetError> {

@@ -1,8 +1,8 @@
 //! The training loop, the same for every method: pick a view, render, loss, backward, Adam
 //! step, and every so often adaptive density control. A method takes part by implementing
 //! [`Trainable`] (its learning rates, how a primitive starts from a point, and where its
-//! shape is) in its own file. This is the CPU loop; the device-resident GPU loop comes next
-//! (see the issue notes).
+//! shape is) in its own file. This is the CPU loop; [`super::gpu_fit`] runs the same steps on
+//! the device.
 
 use super::adam::Adam;
 use super::checkpoint::Checkpoint;
@@ -84,7 +84,8 @@ pub struct FitOptions {
     /// Evaluate the test views after every this many steps (reported in [`StepReport`]);
     /// `None`: never during training.
     pub eval_every: Option<usize>,
-    /// Report the run's state (to save as a checkpoint) after every this many steps.
+    /// Report the run's state (to save as a checkpoint) after every this many steps and after
+    /// the last.
     pub checkpoint_every: Option<usize>,
 }
 
@@ -196,10 +197,18 @@ pub fn evaluate<M: SplatMethod>(
     Evaluation::of(&render_views::<M>(params, views, opts)?, views)
 }
 
-/// Whether the test views are evaluated after `step` (counted from zero).
-pub(crate) fn evaluates_at(opts: &FitOptions, step: usize) -> bool {
-    opts.eval_every
-        .is_some_and(|n| n > 0 && (step + 1).is_multiple_of(n))
+/// Whether a checkpoint is reported after `step`: every `FitOptions::checkpoint_every` steps
+/// and after the last one.
+pub(crate) fn saves_at(opts: &FitOptions, step: usize) -> bool {
+    let last = step + 1 == opts.steps;
+    after_every(opts.checkpoint_every, step)
+        || (last && opts.checkpoint_every.is_some_and(|n| n > 0))
+}
+
+/// Whether something done every `every` steps (`FitOptions::eval_every`,
+/// `checkpoint_every`) is done after `step` (counted from zero).
+pub(crate) fn after_every(every: Option<usize>, step: usize) -> bool {
+    every.is_some_and(|n| n > 0 && (step + 1).is_multiple_of(n))
 }
 
 /// What a step reports to the caller's progress callback.
@@ -212,7 +221,8 @@ pub struct StepReport<'a> {
     /// The test views' PSNR and SSIM after this step, on the steps `FitOptions::eval_every`
     /// asks for.
     pub evaluation: Option<Evaluation>,
-    /// The run's state after this step, on the steps `FitOptions::checkpoint_every` asks for.
+    /// The run's state after this step, on the steps `FitOptions::checkpoint_every` asks for
+    /// (and the last).
     pub checkpoint: Option<&'a Checkpoint>,
 }
 
@@ -308,11 +318,11 @@ pub fn fit_from<M: Trainable>(
                 flat = after;
             }
         }
-        let evaluation = match evaluates_at(opts, step) {
+        let evaluation = match after_every(opts.eval_every, step) {
             true => Some(evaluate::<M>(&params, &data.test, opts)?),
             false => None,
         };
-        let save = checkpoints_at(opts, step);
+        let save = saves_at(opts, step);
         if save || step + 1 == opts.steps {
             state.step = step + 1;
             state.params = flat.clone();
@@ -333,12 +343,6 @@ pub fn fit_from<M: Trainable>(
         });
     }
     Ok(())
-}
-
-/// Whether a checkpoint is reported after `step` (counted from zero).
-pub(crate) fn checkpoints_at(opts: &FitOptions, step: usize) -> bool {
-    opts.checkpoint_every
-        .is_some_and(|n| n > 0 && (step + 1).is_multiple_of(n))
 }
 
 /// Refuses to go on from a state of another method or another run length.

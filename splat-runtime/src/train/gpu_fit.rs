@@ -8,8 +8,8 @@
 use super::checkpoint::Checkpoint;
 use super::densify::Densifier;
 use super::fit::{
-    Evaluation, FitError, FitOptions, StepReport, Trainable, check_resumable, checkpoints_at,
-    composite, evaluates_at, flatten, rates_for, step_background, with_alpha,
+    Evaluation, FitError, FitOptions, StepReport, Trainable, after_every, check_resumable,
+    composite, flatten, rates_for, saves_at, step_background, with_alpha,
 };
 use crate::flat::Flat;
 use crate::gpu::entries::Accumulation;
@@ -150,14 +150,14 @@ pub fn fit_gpu_from<M: Trainable>(
             adam.remap(gpu, n, &origin, |k| before[k] != after[k])?;
             scene.upload(gpu, &host)?;
         }
-        let evaluation = match evaluates_at(opts, step) {
+        let evaluation = match after_every(opts.eval_every, step) {
             true => {
                 let images = render_resident(&mut renderer, &scene, &data.test, opts.background)?;
                 Some(Evaluation::of(&images, &data.test)?)
             }
             false => None,
         };
-        let save = checkpoints_at(opts, step);
+        let save = saves_at(opts, step);
         if save || step + 1 == opts.steps {
             let n = scene.len();
             state.step = step + 1;
