@@ -10,8 +10,8 @@ use common::gaussian_at;
 use splat_methods::gs3d::{Method, Params};
 use splat_runtime::glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
 use splat_runtime::io::dataset::{DatasetError, read_blender};
-use splat_runtime::train::Trainable;
 use splat_runtime::train::fit::{FitOptions, evaluate, fit};
+use splat_runtime::train::{DensifyOptions, Strategy, Trainable};
 use splat_runtime::{Camera, CameraModel, RenderOptions, SplatMethod, render};
 use std::path::Path;
 
@@ -341,7 +341,7 @@ fn three_dgut_fits_a_nerfstudio_fisheye_dataset() {
 /// the pruning threshold.
 #[test]
 fn density_control_clones_splits_prunes_and_resets_as_3dgs_does() {
-    use splat_runtime::train::densify::{Densifier, DensifyOptions};
+    use splat_runtime::train::densify::Densifier;
     let cam = common::camera(SIZE, SIZE);
     let at = |x: f32, scale: f32, opacity: f32| {
         let mut p = Method::from_point(Vec3::new(x, 0.0, 2.0), Vec3::splat(0.5), scale);
@@ -418,7 +418,7 @@ fn density_control_beats_a_fixed_count_from_a_sparse_start() {
         .step_by(8)
         .map(|g| Method::from_point(g.mean, Vec3::splat(0.5), 0.3))
         .collect();
-    let run = |densify: Option<splat_runtime::train::DensifyOptions>| {
+    let run = |densify: Option<splat_runtime::train::Strategy>| {
         let mut params = start.clone();
         let opts = FitOptions {
             densify,
@@ -436,11 +436,11 @@ fn density_control_beats_a_fixed_count_from_a_sparse_start() {
         (e.psnr, params.len(), grown, split)
     };
     let fixed = run(None);
-    let densified = run(Some(splat_runtime::train::DensifyOptions {
+    let densified = run(Some(Strategy::Adc(DensifyOptions {
         start: 100,
         every: 100,
         ..Default::default()
-    }));
+    })));
     println!(
         "from {} primitives: fixed count {:.2} dB; density control {:.2} dB with {} primitives ({} cloned, {} split)",
         start.len(),
@@ -457,6 +457,167 @@ fn density_control_beats_a_fixed_count_from_a_sparse_start() {
         densified.0 > fixed.0 + 3.0,
         "density control fits the held-out views better"
     );
+}
+
+/// MCMC finds 3DGS's words, and its penalties' gradients are those of their value (f64
+/// central differences).
+#[test]
+fn mcmc_reads_3dgs_words_and_differentiates_its_penalties() {
+    use splat_runtime::Flat;
+    use splat_runtime::train::mcmc::{GaussianWords, Mcmc, McmcOptions};
+    let layout = GaussianWords::of::<Method>().expect("3DGS's words are a Gaussian's");
+    let want = GaussianWords {
+        position: 0,
+        log_scale: 3,
+        rotation: 6,
+        opacity: 10,
+    };
+    assert_eq!(layout, want);
+    let mcmc = Mcmc::new::<Method>(McmcOptions::default()).unwrap();
+    let words = Params::LEN;
+    let mut rng = fastrand::Rng::with_seed(2);
+    let flat: Vec<f32> = (0..3 * words).map(|_| 2.0 * rng.f32() - 1.0).collect();
+    let mut grads = vec![0.0; flat.len()];
+    mcmc.regularize(&flat, &mut grads, words);
+    let value = |f: &[f32]| mcmc.regularize(f, &mut vec![0.0; f.len()], words) as f64;
+    for k in 0..flat.len() {
+        let h = 1e-2;
+        let (mut up, mut down) = (flat.clone(), flat.clone());
+        up[k] += h;
+        down[k] -= h;
+        let numeric = (value(&up) - value(&down)) / (2.0 * h as f64);
+        let tol = 1e-3 * numeric.abs().max(1e-4);
+        assert!(
+            (grads[k] as f64 - numeric).abs() <= tol,
+            "word {k}: {} vs {numeric}",
+            grads[k]
+        );
+    }
+}
+
+/// MCMC's refinement: every dead primitive moves onto a live one drawn by opacity, the copies
+/// of a primitive share its opacity so that the stack is as opaque as it was, the set grows by
+/// the asked fraction up to the cap, and the drawn primitives and their copies start their
+/// optimizer state afresh; the noise moves the faint ones only.
+#[test]
+fn mcmc_relocates_dead_primitives_grows_and_stirs_the_faint() {
+    use splat_runtime::train::mcmc::{Mcmc, McmcOptions};
+    let mut rng = fastrand::Rng::with_seed(4);
+    let start: Vec<Params> = (0..40)
+        .map(|i| {
+            let p = Vec3::new(i as f32, 0.0, 0.0);
+            let mut g = Method::from_point(p, Vec3::splat(0.5), 0.1);
+            // Every fourth one dead (opacity 0.002), the others from 0.2 to 0.9.
+            let opacity: f32 = if i % 4 == 0 {
+                0.002
+            } else {
+                0.2 + 0.7 * rng.f32()
+            };
+            g.opacity_logit = (opacity / (1.0 - opacity)).ln();
+            g
+        })
+        .collect();
+    let opacity = |g: &Params| Method::shape(g).opacity;
+    let relocate_only = Mcmc::new::<Method>(McmcOptions {
+        growth: 0.0,
+        ..Default::default()
+    })
+    .unwrap();
+    let mut params = start.clone();
+    let r = relocate_only.refine::<Method>(&mut params, &mut rng);
+    assert_eq!((r.relocated, r.cloned, params.len()), (10, 0, 40));
+    for (i, (g, o)) in params.iter().zip(&r.origin).enumerate() {
+        let stack: Vec<&Params> = params.iter().filter(|h| h.mean == g.mean).collect();
+        let was = start.iter().find(|h| h.mean == g.mean).unwrap();
+        assert!(opacity(was) > 0.005, "{i} sits on a live primitive");
+        let kept = 1.0 - stack.iter().map(|h| 1.0 - opacity(h)).product::<f32>();
+        assert!(
+            (kept - opacity(was)).abs() < 1e-4,
+            "{i}: {kept} vs {}",
+            opacity(was)
+        );
+        assert_eq!(
+            o.is_none(),
+            stack.len() > 1,
+            "{i}: fresh state where copied"
+        );
+    }
+
+    let growing = Mcmc::new::<Method>(McmcOptions {
+        max_primitives: 45,
+        growth: 0.2,
+        ..Default::default()
+    })
+    .unwrap();
+    let mut params = start.clone();
+    let r = growing.refine::<Method>(&mut params, &mut rng);
+    assert_eq!((r.cloned, params.len(), r.origin.len()), (5, 45, 45));
+    assert!(r.origin[40..].iter().all(Option::is_none));
+
+    // The noise: with isotropic scale s a faint primitive moves by s^2 * noise * scaler.
+    let words = <Params as splat_runtime::Flat>::LEN;
+    let mut flat = vec![0.0; start.len() * words];
+    for (g, w) in start.iter().zip(flat.chunks_exact_mut(words)) {
+        splat_runtime::Flat::write_words(g, w);
+    }
+    let before = flat.clone();
+    growing.perturb(&mut flat, words, 1e-5, 3);
+    for (i, g) in start.iter().enumerate() {
+        let at = |f: &[f32]| Vec3::from_slice(&f[i * words..i * words + 3]);
+        let moved = at(&flat).distance(at(&before));
+        assert_eq!(
+            moved > 1e-4,
+            opacity(g) < 0.1,
+            "{i}: opacity {}, moved {moved}",
+            opacity(g)
+        );
+    }
+}
+
+/// The primitives of the MCMC tests: 60 random ones in the cube around the known scene, most
+/// of them in empty space at first.
+fn random_start() -> Vec<Params> {
+    splat_runtime::train::init::in_cube::<Method>(60, Vec3::ZERO, 1.5, 5)
+}
+
+/// The MCMC strategy of the tests: from step 100, growing by 30% up to 240 primitives.
+fn test_mcmc() -> Strategy {
+    Strategy::Mcmc(splat_runtime::train::McmcOptions {
+        start: 100,
+        growth: 0.3,
+        max_primitives: 240,
+        ..Default::default()
+    })
+}
+
+/// From random points MCMC, started as the paper starts it, moves the faint primitives onto
+/// the scene and grows to its cap, and the held-out views come out far better than the start.
+#[test]
+fn mcmc_fits_the_known_scene_from_random_points() {
+    use splat_runtime::train::McmcOptions;
+    let dir = tempfile::tempdir().unwrap();
+    write_known_scene(dir.path());
+    let data = read_blender(dir.path(), Vec3::ZERO).unwrap();
+    let mut params = random_start();
+    McmcOptions::prepare::<Method>(&mut params);
+    let opts = FitOptions {
+        densify: Some(test_mcmc()),
+        ..options(1200)
+    };
+    let before = evaluate::<Method>(&params, &data.test, &opts).unwrap().psnr;
+    let mut relocated = 0;
+    fit::<Method>(&data, &mut params, 3.5, &opts, |r| {
+        relocated += r.refinement.map_or(0, |r| r.relocated);
+    })
+    .unwrap();
+    let after = evaluate::<Method>(&params, &data.test, &opts).unwrap().psnr;
+    println!(
+        "MCMC from 60 random primitives: held-out PSNR {before:.2} -> {after:.2} dB with {} primitives, {relocated} relocated",
+        params.len(),
+    );
+    assert_eq!(params.len(), 240, "MCMC grows to its cap");
+    assert!(relocated > 20, "and relocates");
+    assert!(after > before + 4.0, "and fits the held-out views");
 }
 
 /// The GPU loop trains like the CPU loop: on the known scene, the same steps from the same
@@ -504,28 +665,35 @@ fn the_gpu_loop_trains_like_the_cpu_loop() {
         .step_by(8)
         .map(|g| Method::from_point(g.mean, Vec3::splat(0.5), 0.3))
         .collect();
-    let run = |densify| {
+    let run = |densify, mut params: Vec<Params>| {
         let opts = FitOptions {
             densify,
             ..options(1200)
         };
-        let mut params = sparse.clone();
         fit_gpu::<Method>(&gpu, &data, &mut params, 3.5, &opts, |_| {}).unwrap();
         let e = evaluate::<Method>(&params, &data.test, &opts).unwrap();
         (e.psnr, params.len())
     };
-    let fixed = run(None);
-    let densified = run(Some(splat_runtime::train::DensifyOptions {
+    let fixed = run(None, sparse.clone());
+    let adc = Strategy::Adc(DensifyOptions {
         start: 100,
         every: 100,
         ..Default::default()
-    }));
+    });
+    let densified = run(Some(adc), sparse.clone());
+    let mut prepared = random_start();
+    splat_runtime::train::McmcOptions::prepare::<Method>(&mut prepared);
+    let before = evaluate::<Method>(&prepared, &data.test, &options(0)).unwrap();
+    let sampled = run(Some(test_mcmc()), prepared);
     println!(
-        "GPU from {} primitives: fixed {fixed:?}, density control {densified:?}",
-        sparse.len()
+        "GPU from {} primitives: fixed {fixed:?}, density control {densified:?}; MCMC from 60 random: {:.2} dB before, {sampled:?} after",
+        sparse.len(),
+        before.psnr
     );
     assert!(densified.1 > 3 * sparse.len(), "the count grows");
     assert!(densified.0 > fixed.0 + 3.0, "and the fit improves");
+    assert_eq!(sampled.1, 240, "MCMC grows to its cap");
+    assert!(sampled.0 > before.psnr + 4.0, "and fits the held-out views");
 }
 
 /// A dataset read on black, re-composited on white, is the dataset read on white; training on
@@ -568,12 +736,12 @@ fn random_backgrounds_recomposite_the_targets_and_train() {
 fn resumable_options() -> FitOptions {
     FitOptions {
         random_background: true,
-        densify: Some(splat_runtime::train::DensifyOptions {
+        densify: Some(Strategy::Adc(DensifyOptions {
             start: 5,
             every: 5,
             reset_every: 20,
             ..Default::default()
-        }),
+        })),
         checkpoint_every: Some(20),
         ..options(40)
     }

@@ -16,7 +16,7 @@ use splat_runtime::io::write_atomic;
 use splat_runtime::train::fit::{Evaluation, FitOptions, StepReport, fit_from, render_views};
 use splat_runtime::train::gpu_fit::{fit_gpu_from, render_views_gpu};
 use splat_runtime::train::loss::LossValue;
-use splat_runtime::train::{Checkpoint, DensifyOptions, Trainable, init};
+use splat_runtime::train::{Checkpoint, DensifyOptions, McmcOptions, Strategy, Trainable, init};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -40,6 +40,11 @@ pub struct FitArgs {
     /// (Blender and nerfstudio scenes) [default: 100000; 2000 on the built-in dataset].
     #[arg(long)]
     points: Option<usize>,
+    /// The random points' cube: its half-side in units of the scene's extent (the cameras'
+    /// largest distance from their centre, times 1.1), as gsplat's `init_extent` [default: 3;
+    /// 0.5 on the built-in dataset].
+    #[arg(long)]
+    init_extent: Option<f32>,
     /// Composite the images on white instead of black.
     #[arg(long)]
     white: bool,
@@ -49,12 +54,11 @@ pub struct FitArgs {
     random_background: bool,
     #[arg(long, default_value_t = 0)]
     seed: u64,
-    /// Keep the primitive count fixed (no adaptive density control: cloning, splitting,
-    /// pruning, opacity resets).
-    #[arg(long)]
-    no_densify: bool,
-    /// Density control adds no primitives past this many [default: 4000000; 6000 on the
-    /// built-in dataset].
+    /// How the primitive set changes.
+    #[arg(long, value_enum, default_value_t = StrategyArg::Adc)]
+    strategy: StrategyArg,
+    /// Density control adds no primitives past this many [default: 4000000 with adc, 1000000
+    /// with mcmc; 6000 on the built-in dataset].
     #[arg(long)]
     max_primitives: Option<usize>,
     /// Measure the test views' PSNR and SSIM every this many steps (for the curve and
@@ -81,10 +85,44 @@ pub struct FitArgs {
     out: PathBuf,
 }
 
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum StrategyArg {
+    /// 3DGS's adaptive density control (gsplat's DefaultStrategy): clone and split where the
+    /// screen-space position gradient is large, prune faint and huge primitives, reset
+    /// opacities every 3,000 steps.
+    Adc,
+    /// MCMC (gsplat's MCMCStrategy): move faint primitives onto opaque ones, add 5% every 100
+    /// steps up to --max-primitives, stir faint ones with noise; starts the primitives at
+    /// opacity 0.5 and a tenth of their size, and penalizes opacity and scale.
+    Mcmc,
+    /// None: the primitive count stays fixed.
+    Fixed,
+}
+
+/// The knobs whose defaults depend on the dataset.
+struct Defaults {
+    steps: usize,
+    points: usize,
+    /// `None`: the strategy's own default.
+    max_primitives: Option<usize>,
+    init_extent: f32,
+}
+
+/// For a dataset folder: gsplat's defaults for a 7,000-step run.
+const DATASET_DEFAULTS: Defaults = Defaults {
+    steps: 7000,
+    points: 100_000,
+    max_primitives: None,
+    init_extent: 3.0,
+};
+
 /// The defaults that train the built-in dataset in under a minute on 2 cores.
-const BUILT_IN_STEPS: usize = 2000;
-const BUILT_IN_POINTS: usize = 2000;
-const BUILT_IN_MAX_PRIMITIVES: usize = 6000;
+const BUILT_IN_DEFAULTS: Defaults = Defaults {
+    steps: 2000,
+    points: 2000,
+    max_primitives: Some(6000),
+    init_extent: 0.5,
+};
 
 /// The checkpoint's and the metrics' names in the output folder.
 const CHECKPOINT: &str = "checkpoint.bin";
@@ -104,14 +142,14 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
         Some(dir) => (
             dataset::read(dir, background)?,
             dir.display().to_string(),
-            (7000, 100_000, DensifyOptions::default().max_primitives),
+            DATASET_DEFAULTS,
         ),
         None => {
             let (views, width, height) = scene::DATASET;
             (
                 scene::dataset(views, width, height, background)?,
                 "the built-in dataset".to_string(),
-                (BUILT_IN_STEPS, BUILT_IN_POINTS, BUILT_IN_MAX_PRIMITIVES),
+                BUILT_IN_DEFAULTS,
             )
         }
     };
@@ -138,11 +176,15 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
     };
     let steps = (args.steps)
         .or(resume.as_ref().map(|c| c.steps))
-        .unwrap_or(defaults.0);
-    let points = args.points.unwrap_or(defaults.1);
-    let max_primitives = args.max_primitives.unwrap_or(defaults.2);
+        .unwrap_or(defaults.steps);
+    let points = args.points.unwrap_or(defaults.points);
+    let max_primitives = args.max_primitives.or(defaults.max_primitives);
+    let init_extent = args.init_extent.unwrap_or(defaults.init_extent);
     if points == 0 {
         bail!("--points must be at least 1");
+    }
+    if !(init_extent > 0.0 && init_extent.is_finite()) {
+        bail!("--init-extent must be a positive number, not {init_extent}");
     }
     if data.train.is_empty() {
         bail!("{name}: no training views");
@@ -166,10 +208,23 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
         steps,
         background,
         seed: args.seed,
-        densify: (!args.no_densify).then(|| DensifyOptions {
-            max_primitives,
-            ..Default::default()
-        }),
+        densify: match args.strategy {
+            StrategyArg::Adc => {
+                let d = DensifyOptions::default();
+                Some(Strategy::Adc(DensifyOptions {
+                    max_primitives: max_primitives.unwrap_or(d.max_primitives),
+                    ..d
+                }))
+            }
+            StrategyArg::Mcmc => {
+                let m = McmcOptions::default();
+                Some(Strategy::Mcmc(McmcOptions {
+                    max_primitives: max_primitives.unwrap_or(m.max_primitives),
+                    ..m
+                }))
+            }
+            StrategyArg::Fixed => None,
+        },
         random_background: args.random_background,
         eval_every: (args.eval_every > 0).then_some(args.eval_every),
         checkpoint_every: (args.checkpoint_every > 0).then_some(args.checkpoint_every),
@@ -184,6 +239,7 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
         points,
         mid,
         extent,
+        init_extent,
         opts: &opts,
     })
 }
@@ -199,6 +255,8 @@ pub struct Fit<'a> {
     /// The cameras' centre and the scene's radius.
     mid: Vec3,
     extent: f32,
+    /// The random points' cube's half-side, in units of `extent`.
+    init_extent: f32,
     opts: &'a FitOptions,
 }
 
@@ -214,6 +272,7 @@ impl Fit<'_> {
             points,
             mid,
             extent,
+            init_extent,
             opts,
         } = *self;
         let gpu = crate::pick_gpu(args.backend)?;
@@ -231,7 +290,10 @@ impl Fit<'_> {
             ),
             Some(c) => (c.clone(), Log::read_csv(&args.out.join(METRICS), c.step)?),
             None => {
-                let params = start::<M>(data, points, mid, extent, args.seed);
+                let mut params = start::<M>(data, points, mid, init_extent * extent, args.seed);
+                if let Some(Strategy::Mcmc(_)) = opts.densify {
+                    McmcOptions::prepare::<M>(&mut params);
+                }
                 let before = Evaluation::of(&test_images(&params)?, &data.test)?;
                 let log = Log {
                     evaluations: vec![(0, before)],
@@ -321,16 +383,17 @@ impl Fit<'_> {
     }
 }
 
-/// The primitives a run starts from: the dataset's points, or random ones in a cube.
+/// The primitives a run starts from: the dataset's points, or random ones in the cube of
+/// half-side `half` around `mid`.
 fn start<M: Trainable>(
     data: &Dataset,
     points: usize,
     mid: Vec3,
-    extent: f32,
+    half: f32,
     seed: u64,
 ) -> Vec<M::Params> {
     if data.points.is_empty() {
-        return init::in_cube::<M>(points, mid, extent / 2.0, seed);
+        return init::in_cube::<M>(points, mid, half, seed);
     }
     let params = init::from_points::<M>(&data.points, points);
     println!(

@@ -548,6 +548,49 @@ fn fit_trains_on_a_dataset_and_writes_its_outputs() {
     }
 }
 
+/// `--strategy mcmc` starts the primitives as the MCMC paper does (opacity 0.5, not 3DGS's
+/// 0.1) and trains; `--strategy fixed` keeps the count; an unknown strategy is refused.
+#[test]
+fn fit_takes_a_strategy() {
+    let dir = tempfile::tempdir().unwrap();
+    tiny_dataset(&dir.path().join("data"), 3);
+    let args = [
+        "fit",
+        "data",
+        "--steps",
+        "5",
+        "--points",
+        "100",
+        "--backend",
+        "cpu",
+    ];
+    let median_opacity = |out: &str| {
+        let fit = fit_output(&dir.path().join(out), 3, (16, 16));
+        let mut o: Vec<f32> = (fit.scene.gaussians.iter())
+            .map(|g| 1.0 / (1.0 + (-g.opacity_logit).exp()))
+            .collect();
+        o.sort_by(f32::total_cmp);
+        (o.len(), o[o.len() / 2])
+    };
+    for (strategy, out) in [("mcmc", "mcmc"), ("adc", "adc"), ("fixed", "fixed")] {
+        let run = [&args[..], &["--strategy", strategy, "--out", out]].concat();
+        ok(&splat(&run, dir.path()));
+    }
+    let (mcmc, adc) = (median_opacity("mcmc"), median_opacity("adc"));
+    assert_eq!((mcmc.0, adc.0, median_opacity("fixed").0), (100, 100, 100));
+    assert!(
+        mcmc.1 > 0.4 && adc.1 < 0.2,
+        "median opacity: MCMC {mcmc:?}, ADC {adc:?}"
+    );
+    let bad = splat(&[&args[..], &["--strategy", "greedy"]].concat(), dir.path());
+    assert!(!bad.status.success());
+    let stderr = String::from_utf8_lossy(&bad.stderr);
+    assert!(
+        stderr.contains("possible values: adc, mcmc, fixed"),
+        "{stderr}"
+    );
+}
+
 /// With no dataset, `splat fit` trains on views of the built-in planet; the test views are
 /// measured every `--eval-every` steps, and training brings them closer.
 #[test]

@@ -1,6 +1,7 @@
 //! What a training step runs on the device besides the renderer: the photometric loss and its
-//! gradient ([`GpuLoss`], `loss.wgsl`), Adam ([`GpuAdam`], `adam.wgsl`) and density control's
-//! statistics ([`GpuObserver`], `observe.wgsl`). Each records into the caller's encoder; the
+//! gradient ([`GpuLoss`], `loss.wgsl`), Adam ([`GpuAdam`], `adam.wgsl`), density control's
+//! statistics ([`GpuObserver`], `observe.wgsl`) and MCMC's per-step terms ([`GpuMcmc`],
+//! `mcmc.wgsl`). Each records into the caller's encoder; the
 //! data stays on the device, and the host reads back only what it asks for (the loss value,
 //! and the state density control refines from every hundred steps).
 
@@ -10,11 +11,13 @@ use crate::io::dataset::View;
 use crate::train::adam::{bias_corrections, remap_rows};
 use crate::train::checkpoint::AdamState;
 use crate::train::loss::{LossValue, WINDOW, window};
+use crate::train::mcmc::Mcmc;
 use glam::Vec3;
 
 const LOSS: &str = include_str!("shaders/loss.wgsl");
 const ADAM: &str = include_str!("shaders/adam.wgsl");
 const OBSERVE: &str = include_str!("shaders/observe.wgsl");
+const MCMC: &str = include_str!("shaders/mcmc.wgsl");
 
 /// The loss of the renderer's frame against one of a set of target images, all kept on the
 /// device.
@@ -392,6 +395,91 @@ impl GpuObserver {
     }
 }
 
+/// MCMC's per-step terms on the device: the penalties' gradients and the position noise.
+pub struct GpuMcmc {
+    regularize: Kernel,
+    perturb: Kernel,
+    /// One uniform per kernel: both are recorded into one submission.
+    infos: [wgpu::Buffer; 2],
+    /// The strategy, for its options and layout (and its refinements, on the host).
+    pub mcmc: Mcmc,
+    words: usize,
+}
+
+impl GpuMcmc {
+    pub fn new(gpu: &Gpu, mcmc: Mcmc, words: usize) -> Result<GpuMcmc, GpuError> {
+        Ok(GpuMcmc {
+            regularize: gpu.kernel(MCMC, "regularize")?,
+            perturb: gpu.kernel(MCMC, "perturb")?,
+            infos: [gpu.uniform_buffer(12), gpu.uniform_buffer(12)],
+            mcmc,
+            words,
+        })
+    }
+
+    /// Records `kernel` (0: regularize, 1: perturb) over `buffers` and the primitives.
+    fn record(
+        &self,
+        gpu: &Gpu,
+        encoder: &mut wgpu::CommandEncoder,
+        kernel: usize,
+        buffers: &[(&str, &wgpu::Buffer)],
+        primitives: usize,
+        (seed, noise_scale): (u32, f32),
+    ) -> Result<(), GpuError> {
+        let (o, l) = (&self.mcmc.opts, self.mcmc.words);
+        let n = primitives.max(1) as f32;
+        let size = [primitives as u32, self.words as u32, seed, 0];
+        let layout = [l.position, l.log_scale, l.rotation, l.opacity].map(|w| w as u32);
+        let weights = [o.opacity_reg / n, o.scale_reg / (3.0 * n), noise_scale, 0.0];
+        let info = &self.infos[kernel];
+        gpu.write(
+            info,
+            &[&size[..], &layout[..], &weights.map(f32::to_bits)[..]].concat(),
+        );
+        let kernel = [&self.regularize, &self.perturb][kernel];
+        let bind = gpu.bind_named(kernel, &[buffers, &[("info", info)]].concat())?;
+        let groups = (primitives as u32).div_ceil(256);
+        dispatch(encoder, &kernel.pipeline, &bind, groups);
+        Ok(())
+    }
+
+    /// Records the penalties' gradients added to `grads` (before Adam).
+    pub fn record_regularize(
+        &self,
+        gpu: &Gpu,
+        encoder: &mut wgpu::CommandEncoder,
+        params: &wgpu::Buffer,
+        grads: &wgpu::Buffer,
+        primitives: usize,
+    ) -> Result<(), GpuError> {
+        let buffers = [("params", params), ("grads", grads)];
+        self.record(gpu, encoder, 0, &buffers, primitives, (0, 0.0))
+    }
+
+    /// Records the noise of `seed` added to the positions in `params` (after Adam), with the
+    /// position's learning rate `position_lr`.
+    pub fn record_perturb(
+        &self,
+        gpu: &Gpu,
+        encoder: &mut wgpu::CommandEncoder,
+        params: &wgpu::Buffer,
+        primitives: usize,
+        position_lr: f32,
+        seed: u32,
+    ) -> Result<(), GpuError> {
+        let scale = self.mcmc.opts.noise_lr * position_lr;
+        self.record(
+            gpu,
+            encoder,
+            1,
+            &[("params", params)],
+            primitives,
+            (seed, scale),
+        )
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -530,5 +618,66 @@ mod tests {
             .map(f32::from_bits)
             .collect();
         assert!(m[0] != 0.0 && m[words..].iter().all(|v| *v == 0.0), "{m:?}");
+    }
+
+    /// The device's penalties and noise equal the host's on Gaussians of every opacity (the
+    /// faint ones move, with the same hashed draws).
+    #[test]
+    fn device_mcmc_terms_match_the_cpu() {
+        use crate::train::mcmc::{GaussianWords, Mcmc, McmcOptions};
+        let Some(gpu) = crate::gpu::adapter_or_skip() else {
+            return;
+        };
+        // Position, log scales, (w, x, y, z) rotation, opacity logit, one color word.
+        let (prims, words) = (300, 12);
+        let layout = GaussianWords {
+            position: 0,
+            log_scale: 3,
+            rotation: 6,
+            opacity: 10,
+        };
+        let mcmc = Mcmc {
+            opts: McmcOptions::default(),
+            words: layout,
+        };
+        let mut rng = fastrand::Rng::with_seed(6);
+        let mut params: Vec<f32> = (0..prims * words).map(|_| rng.f32() - 0.5).collect();
+        for (i, p) in params.chunks_exact_mut(words).enumerate() {
+            p[10] = -12.0 + 0.05 * i as f32; // opacities from 6e-6 to 0.95
+        }
+        let grads: Vec<f32> = (0..prims * words).map(|_| rng.f32() - 0.5).collect();
+        let to_words = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<u32>>();
+        let on_device = (
+            gpu.buffer_from("params", &to_words(&params)).unwrap(),
+            gpu.buffer_from("grads", &to_words(&grads)).unwrap(),
+        );
+        let device = GpuMcmc::new(&gpu, mcmc.clone(), words).unwrap();
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        device
+            .record_regularize(&gpu, &mut enc, &on_device.0, &on_device.1, prims)
+            .unwrap();
+        device
+            .record_perturb(&gpu, &mut enc, &on_device.0, prims, 1e-5, 77)
+            .unwrap();
+        gpu.queue.submit([enc.finish()]);
+
+        let (mut want_params, mut want_grads) = (params.clone(), grads.clone());
+        mcmc.regularize(&want_params, &mut want_grads, words);
+        mcmc.perturb(&mut want_params, words, 1e-5, 77);
+        let read = |b: &wgpu::Buffer| -> Vec<f32> {
+            let w = gpu.read(b, prims * words).unwrap();
+            w.into_iter().map(f32::from_bits).collect()
+        };
+        for (what, got, want) in [
+            ("gradient", read(&on_device.1), &want_grads),
+            ("parameter", read(&on_device.0), &want_params),
+        ] {
+            for (k, (a, b)) in got.iter().zip(want.iter()).enumerate() {
+                let tol = 1e-5 * b.abs().max(1.0);
+                assert!((a - b).abs() <= tol, "{what} word {k}: {a} vs {b}");
+            }
+        }
+        let moved = (0..prims).filter(|i| want_params[i * words] != params[i * words]);
+        assert!(moved.count() > 50, "the faint primitives move");
     }
 }

@@ -93,6 +93,8 @@ pub struct Refinement {
     pub cloned: usize,
     pub split: usize,
     pub pruned: usize,
+    /// Moved onto another primitive (MCMC).
+    pub relocated: usize,
 }
 
 /// The statistics density control gathers between refinements.

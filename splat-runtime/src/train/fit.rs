@@ -8,6 +8,7 @@ use super::adam::Adam;
 use super::checkpoint::Checkpoint;
 use super::densify::{Densifier, DensifyOptions, Refinement, Shape};
 use super::loss::{self, LossError, LossValue};
+use super::mcmc::{Mcmc, McmcOptions};
 use crate::flat::Flat;
 use crate::io::dataset::{Dataset, View};
 use crate::method::SplatMethod;
@@ -79,8 +80,8 @@ pub struct FitOptions {
     /// A random background color per step instead of `background` (the targets' transparent
     /// parts re-composited on it), so that the scene cannot paint the background in.
     pub random_background: bool,
-    /// Adaptive density control, or none (the primitive count stays fixed).
-    pub densify: Option<DensifyOptions>,
+    /// How the primitive set changes, or not at all (the primitive count stays fixed).
+    pub densify: Option<Strategy>,
     /// Evaluate the test views after every this many steps (reported in [`StepReport`]);
     /// `None`: never during training.
     pub eval_every: Option<usize>,
@@ -102,9 +103,39 @@ impl Default for FitOptions {
             },
             seed: 0,
             random_background: false,
-            densify: Some(DensifyOptions::default()),
+            densify: Some(Strategy::Adc(DensifyOptions::default())),
             eval_every: None,
             checkpoint_every: None,
+        }
+    }
+}
+
+/// How the primitive set changes during training.
+#[derive(Clone, Debug)]
+pub enum Strategy {
+    /// 3DGS's adaptive density control: clone, split, prune, reset opacities.
+    Adc(DensifyOptions),
+    /// MCMC: relocate dead primitives, grow by a fraction, position noise, opacity and scale
+    /// penalties.
+    Mcmc(McmcOptions),
+}
+
+impl FitOptions {
+    /// Adaptive density control's options, when that is the strategy.
+    pub fn adc(&self) -> Option<&DensifyOptions> {
+        match &self.densify {
+            Some(Strategy::Adc(d)) => Some(d),
+            _ => None,
+        }
+    }
+
+    /// MCMC for `M`, when that is the strategy.
+    pub(crate) fn mcmc<M: Trainable>(&self) -> Result<Option<Mcmc>, FitError> {
+        match &self.densify {
+            Some(Strategy::Mcmc(o)) => Ok(Some(
+                Mcmc::new::<M>(o.clone()).map_err(FitError::Unsupported)?,
+            )),
+            _ => Ok(None),
         }
     }
 }
@@ -259,10 +290,9 @@ pub fn fit_from<M: Trainable>(
     let mut flat = state.params.clone();
     let mut adam = Adam::resume(words, state.adam.clone());
     let mut grads = vec![0.0f32; flat.len()];
-    let mut densifier = opts
-        .densify
-        .clone()
-        .map(|d| Densifier::resume(d, params.len(), &state.grad2d, &state.seen));
+    let mut densifier = (opts.adc())
+        .map(|d| Densifier::resume(d.clone(), params.len(), &state.grad2d, &state.seen));
+    let mcmc = opts.mcmc::<M>()?;
     let mut rng = fastrand::Rng::with_seed(state.rng);
     let render_opts = with_alpha(&opts.render);
     for step in state.step..opts.steps {
@@ -288,6 +318,9 @@ pub fn fit_from<M: Trainable>(
         for (p, out) in g.params.iter().zip(grads.chunks_exact_mut(words)) {
             p.write_words(out);
         }
+        if let Some(m) = &mcmc {
+            m.regularize(&flat, &mut grads, words);
+        }
         let lr: Vec<f32> = rates.iter().map(|r| r.at(step, opts.steps)).collect();
         // Words not trained yet get no gradient, so their moments start from zero.
         for (k, g) in grads.iter_mut().enumerate() {
@@ -300,6 +333,19 @@ pub fn fit_from<M: Trainable>(
             *p = M::Params::read_words(w);
         }
         let mut refinement = None;
+        if let Some(m) = &mcmc {
+            if m.opts.refines_at(step) {
+                let r = m.refine::<M>(&mut params, &mut rng);
+                adam.remap(&r.origin);
+                flat = flatten::<M>(&params);
+                grads = vec![0.0; flat.len()];
+                refinement = Some(r);
+            }
+            m.perturb(&mut flat, words, lr[m.words.position], rng.u32(..));
+            for (p, w) in params.iter_mut().zip(flat.chunks_exact(words)) {
+                *p = M::Params::read_words(w);
+            }
+        }
         if let Some(d) = densifier.as_mut().filter(|d| step < d.opts.stop) {
             let visible = pass.pre.visible.iter().map(|(i, _)| *i as usize);
             d.observe::<M>(&params, &g.params, visible, &view.camera);

@@ -13,7 +13,7 @@ use super::fit::{
 };
 use crate::flat::Flat;
 use crate::gpu::entries::Accumulation;
-use crate::gpu::train::{GpuAdam, GpuLoss, GpuObserver, GpuTrainError};
+use crate::gpu::train::{GpuAdam, GpuLoss, GpuMcmc, GpuObserver, GpuTrainError};
 use crate::gpu::{Gpu, GpuRenderError, GpuRenderer, GpuScene};
 use crate::io::dataset::{Dataset, View};
 use crate::method::SplatMethod;
@@ -84,10 +84,12 @@ pub fn fit_gpu_from<M: Trainable>(
     let mut adam = GpuAdam::new(gpu, words)?;
     adam.restore(gpu, &state.adam)?;
     let mut observer = GpuObserver::new(gpu)?;
-    let mut densifier = opts
-        .densify
-        .clone()
-        .map(|d| Densifier::resume(d, scene.len(), &state.grad2d, &state.seen));
+    let mut densifier =
+        (opts.adc()).map(|d| Densifier::resume(d.clone(), scene.len(), &state.grad2d, &state.seen));
+    let mcmc = match opts.mcmc::<M>()? {
+        Some(m) => Some(GpuMcmc::new(gpu, m, words)?),
+        None => None,
+    };
     let acc = Accumulation::default_for(gpu);
     let mut rng = fastrand::Rng::with_seed(state.rng);
     for step in state.step..opts.steps {
@@ -113,6 +115,9 @@ pub fn fit_gpu_from<M: Trainable>(
         let n = scene.len();
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         let param_grads = renderer.param_gradients();
+        if let Some(m) = &mcmc {
+            m.record_regularize(gpu, &mut enc, scene.buffer(), param_grads, n)?;
+        }
         adam.record(gpu, &mut enc, scene.buffer(), param_grads, n, &lr)?;
         let observing = densifier.as_ref().filter(|d| step < d.opts.stop);
         if observing.is_some() {
@@ -129,6 +134,19 @@ pub fn fit_gpu_from<M: Trainable>(
         let value = loss.value(gpu)?;
 
         let mut refinement = None;
+        if let Some(m) = &mcmc {
+            if m.mcmc.opts.refines_at(step) {
+                let mut host = scene.download(gpu)?;
+                let r = m.mcmc.refine::<M>(&mut host, &mut rng);
+                adam.remap(gpu, n, &r.origin, |_| false)?;
+                scene.upload(gpu, &host)?;
+                refinement = Some(r);
+            }
+            let (n, lr) = (scene.len(), lr[m.mcmc.words.position]);
+            let mut enc = gpu.device.create_command_encoder(&Default::default());
+            m.record_perturb(gpu, &mut enc, scene.buffer(), n, lr, rng.u32(..))?;
+            gpu.queue.submit([enc.finish()]);
+        }
         if let Some(d) = densifier.as_mut().filter(|d| step < d.opts.stop)
             && (d.refines_at(step) || d.resets_at(step))
         {

@@ -1,6 +1,6 @@
 //! What training shares across methods (DESIGN §10), built up step by step: the photometric
 //! loss with its gradient and the evaluation metrics ([`loss`]), Adam ([`adam`]), adaptive density
-//! control ([`densify`]), and the loop with the trait a method implements to take part ([`fit`]),
+//! control ([`densify`]) or MCMC ([`mcmc`]), and the loop with the trait a method implements to take part ([`fit`]),
 //! also on the GPU ([`gpu_fit`]).
 
 pub mod adam;
@@ -11,7 +11,9 @@ pub mod fit;
 pub mod gpu_fit;
 pub mod init;
 pub mod loss;
+pub mod mcmc;
 
 pub use checkpoint::Checkpoint;
 pub use densify::{DensifyOptions, Shape};
-pub use fit::{FitOptions, Rate, Trainable};
+pub use fit::{FitOptions, Rate, Strategy, Trainable};
+pub use mcmc::McmcOptions;
