@@ -44,8 +44,9 @@ macro_rules! stored_as_is {
 
 stored_as_is!(gut::Params, geer::Params);
 
-/// 3DGUT and 3DGEER train like 3DGS (their parameters are the same Gaussian's): the same
-/// learning rates and initialization.
+/// 3DGUT, 3DGEER and LinPrim train like 3DGS (their parameters are the same Gaussian's, or
+/// for LinPrim's octahedra the Gaussian they are stored as): the same learning rates and
+/// initialization, and density control sees the stored Gaussian's shape.
 macro_rules! trained_like_3dgs {
     ($($m:ident),*) => {$(
         impl splat_runtime::train::Trainable for $m::Method {
@@ -78,7 +79,7 @@ macro_rules! trained_like_3dgs {
     )*};
 }
 
-trained_like_3dgs!(gut, geer);
+trained_like_3dgs!(gut, geer, linprim);
 
 /// The 3DGS primitive with the same stored fields.
 fn as_3dgs(p: &impl ToStored) -> gs3d::Params {

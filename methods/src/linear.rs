@@ -158,3 +158,16 @@ impl crate::FromStored for linprim::Params {
         }
     }
 }
+
+/// And back: the Gaussian whose two standard deviations reach the vertices.
+impl crate::ToStored for linprim::Params {
+    fn to_stored(&self) -> splat_runtime::io::ply::StoredGaussian {
+        splat_runtime::io::ply::StoredGaussian {
+            mean: self.mean,
+            log_scale: self.log_scale - std::f32::consts::LN_2,
+            rotation: self.rotation,
+            opacity_logit: self.opacity_logit,
+            sh: self.sh,
+        }
+    }
+}

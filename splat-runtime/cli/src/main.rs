@@ -24,7 +24,7 @@ fn main() -> ExitCode {
         Method::new(
             "linprim",
             "LinPrim: octahedra (each Gaussian of the scene becomes one); pinhole only",
-            Instance::of::<linprim::Method>(),
+            Instance::trainable::<linprim::Method>(),
         ),
         Method::new(
             "3dgeer",
