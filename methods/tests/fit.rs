@@ -219,7 +219,10 @@ fn linprim_fits_the_known_scene() {
     let before = evaluate::<linprim::Method>(&params, &data.test, &opts).unwrap();
     fit::<linprim::Method>(&data, &mut params, 1.0, &opts, |_| {}).unwrap();
     let after = evaluate::<linprim::Method>(&params, &data.test, &opts).unwrap();
-    println!("LinPrim: test PSNR {:.2} -> {:.2} dB", before.psnr, after.psnr);
+    println!(
+        "LinPrim: test PSNR {:.2} -> {:.2} dB",
+        before.psnr, after.psnr
+    );
     assert!(after.psnr > before.psnr + 4.0);
     let mcmc = FitOptions {
         densify: Some(Strategy::Mcmc(Default::default())),

@@ -38,3 +38,35 @@ impl Diag {
         self.errors.borrow().iter().map(|e| e.to_string()).collect()
     }
 }
+
+/// Levenshtein distance between two names.
+pub fn edit_distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut diagonal = row[0];
+        row[0] = i + 1;
+        for (j, cb) in b.iter().enumerate() {
+            let next = (diagonal + usize::from(ca != *cb))
+                .min(row[j] + 1)
+                .min(row[j + 1] + 1);
+            diagonal = row[j + 1];
+            row[j + 1] = next;
+        }
+    }
+    row[b.len()]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::edit_distance;
+
+    #[test]
+    fn edit_distance_counts_insertions_deletions_and_substitutions() {
+        assert_eq!(edit_distance("kitten", "sitting"), 3);
+        assert_eq!(edit_distance("evalute", "evaluate"), 1);
+        assert_eq!(edit_distance("project", "project"), 0);
+        assert_eq!(edit_distance("", "abc"), 3);
+        assert!(edit_distance("shade", "evaluate") > 2);
+    }
+}

@@ -118,3 +118,46 @@ fn helpers_are_inlined_and_custom_adjoints_kept_as_calls() {
     let (f, _) = &k[2];
     assert_eq!(count(f, &|s| matches!(s, Stmt::Call { .. })), 1, "{f}");
 }
+
+/// Every method the suggestions offer is one the lowering accepts on that type (a call with
+/// the wrong arguments fails on its arguments, not as an unknown method); near misses and
+/// other libraries' spellings get a suggestion.
+#[test]
+fn suggested_methods_exist_and_near_misses_get_one() {
+    use crate::lower::intrinsics::method_names;
+    use crate::types::Ty;
+    let types = [
+        ("f32", Ty::F32),
+        ("u32", Ty::U32),
+        ("i32", Ty::I32),
+        ("Vec2", Ty::Vec(2)),
+        ("Vec3", Ty::Vec(3)),
+        ("Vec4", Ty::Vec(4)),
+        ("Mat2", Ty::Mat(2)),
+        ("Mat3", Ty::Mat(3)),
+        ("Quat", Ty::Quat),
+    ];
+    for (written, ty) in types {
+        for name in method_names(&ty) {
+            let src =
+                format!("mod m {{ fn f(x: {written}) -> f32 {{ let _y = x.{name}(); 0.0 }} }}");
+            let item: syn::ItemMod = syn::parse_str(&src).expect("valid Rust");
+            let unknown = match compile_ir(Kind::Functions, item) {
+                Ok(_) => vec![],
+                Err(e) => e.into_iter().filter(|m| m.contains("no method")).collect(),
+            };
+            assert!(unknown.is_empty(), "{written}::{name}: {unknown:?}");
+        }
+    }
+    let hint = |src: &str| errors(src).join("\n");
+    let vec3 = |call: &str| format!("mod m {{ fn f(v: Vec3) -> f32 {{ {call} }} }}");
+    assert!(hint(&vec3("v.magnitude()")).contains("did you mean `length`?"));
+    assert!(hint(&vec3("v.lenght()")).contains("did you mean `length`?"));
+    assert!(hint(&vec3("v.normalise().x")).contains("did you mean `normalize`?"));
+    // A spelling whose method the type lacks gets no suggestion.
+    let m = hint("mod m { fn f(x: f32) -> f32 { x.magnitude() } }");
+    assert!(
+        m.contains("see the intrinsic list") && !m.contains("did you mean"),
+        "{m}"
+    );
+}

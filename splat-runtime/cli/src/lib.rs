@@ -70,9 +70,10 @@ enum Command {
         #[arg(long)]
         white: bool,
     },
-    /// Render the built-in scene with every method and camera model into one picture (rows:
-    /// methods; columns: pinhole, fisheye, equiangular).
+    /// Render the built-in scene with every method and camera model into one labelled PNG
+    /// (rows: methods; columns: pinhole, fisheye, equiangular).
     Gallery {
+        /// The picture (.png).
         #[arg(long, default_value = "gallery.png")]
         out: PathBuf,
         /// Size of each panel.

@@ -19,14 +19,28 @@ fn register_font() {
     });
 }
 
-/// Draws with `draw` on a `width` x `height` canvas and writes it to `path` as PNG.
+/// Draws with `draw` on a white `width` x `height` canvas and writes it to `path` as PNG.
 pub fn png(
     path: &Path,
     (width, height): (u32, u32),
     draw: impl FnOnce(&Area) -> Result<()>,
 ) -> Result<()> {
+    let white = Image {
+        width,
+        height,
+        channels: 3,
+        data: vec![1.0; (width * height * 3) as usize],
+    };
+    png_over(path, &white, draw)
+}
+
+/// Draws with `draw` over the RGB picture `base` and writes it to `path` as PNG.
+pub fn png_over(path: &Path, base: &Image, draw: impl FnOnce(&Area) -> Result<()>) -> Result<()> {
     register_font();
-    let mut rgb = vec![255u8; (width * height * 3) as usize];
+    let (width, height) = (base.width, base.height);
+    let mut rgb: Vec<u8> = (base.data.iter())
+        .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
+        .collect();
     {
         let root = BitMapBackend::with_buffer(&mut rgb, (width, height)).into_drawing_area();
         draw(&root)?;
@@ -34,10 +48,8 @@ pub fn png(
             .map_err(|e| anyhow!("drawing {}: {e}", path.display()))?;
     }
     let image = Image {
-        width,
-        height,
-        channels: 3,
         data: rgb.iter().map(|b| *b as f32 / 255.0).collect(),
+        ..*base
     };
     splat_runtime::io::image::write_image(path, &image)
         .with_context(|| format!("writing {}", path.display()))

@@ -3,6 +3,7 @@
 use crate::methods::{self, Method};
 use crate::{Backend, Model, pick_gpu, scene};
 use anyhow::{Result, bail};
+use plotters::prelude::RGBColor;
 use splat_runtime::io::ply::{FromStored, GaussianCloud};
 use splat_runtime::io::{camera as camera_io, image as image_io, ply};
 use splat_runtime::{Camera, CameraModel, Frame, Image, RenderOptions, SplatMethod, render};
@@ -93,8 +94,13 @@ fn render_method(
     (method.for_degree(cloud.sh_degree).render)(&task)
 }
 
-/// Every method on every camera model, panels in a grid; a method that does not support a
-/// model gets a dark panel.
+/// The gallery's label margins, pixels: the methods' names on the left, the camera models'
+/// on top.
+const ROW_LABELS: u32 = 96;
+const COLUMN_LABELS: u32 = 26;
+
+/// Every method on every camera model, panels in a labelled grid (PNG); a method that does
+/// not support a model gets a dark panel saying so.
 pub(crate) fn gallery(
     out: &std::path::Path,
     width: u32,
@@ -105,20 +111,40 @@ pub(crate) fn gallery(
     if !side.contains(&width) || !side.contains(&height) {
         bail!("panel size {width}x{height} is out of range (1..=2048 per side)");
     }
+    let png = out.extension().and_then(|e| e.to_str());
+    if !png.is_some_and(|e| e.eq_ignore_ascii_case("png")) {
+        bail!(
+            "gallery `{}`: the gallery is a labelled picture, write it as .png",
+            out.display()
+        );
+    }
     let cloud = scene::planet();
     let (cols, rows) = (CameraModel::ALL.len() as u32, methods.len() as u32);
     let mut grid = Image {
-        width: width * cols,
-        height: height * rows,
+        width: ROW_LABELS + width * cols,
+        height: COLUMN_LABELS + height * rows,
         channels: 3,
-        data: vec![0.08; (width * cols * height * rows * 3) as usize],
+        data: vec![
+            1.0;
+            ((ROW_LABELS + width * cols) * (COLUMN_LABELS + height * rows) * 3) as usize
+        ],
     };
+    let mut unsupported = vec![];
     let opts = RenderOptions::default();
     for (r, method) in methods.iter().enumerate() {
         for (c, model) in CameraModel::ALL.into_iter().enumerate() {
             let camera = scene::camera(width, height, model);
-            let frame = match render_method(method, &cloud, &camera, &opts, Backend::Cpu) {
-                Ok((frame, _)) => frame,
+            let panel = match render_method(method, &cloud, &camera, &opts, Backend::Cpu) {
+                Ok((frame, _)) => {
+                    println!(
+                        "{} / {model}: {} visible, {} intersections, shade {:.1} ms",
+                        method.name,
+                        frame.stats.visible,
+                        frame.stats.intersections,
+                        frame.stats.shade.as_secs_f64() * 1e3
+                    );
+                    frame.color.data
+                }
                 // A pinhole-only method on another model: a dark panel. Any other error is one.
                 Err(e)
                     if matches!(
@@ -127,34 +153,49 @@ pub(crate) fn gallery(
                     ) =>
                 {
                     println!("{} / {model}: {e}", method.name);
-                    continue;
+                    unsupported.push((r as u32, c as u32));
+                    vec![0.08; (width * height * 3) as usize]
                 }
                 Err(e) => return Err(e),
             };
+            let (x0, y0) = (
+                ROW_LABELS + c as u32 * width,
+                COLUMN_LABELS + r as u32 * height,
+            );
+            let row = (width * 3) as usize;
             for y in 0..height {
                 let src = (y * width * 3) as usize;
-                let dst = (((r as u32 * height + y) * grid.width + c as u32 * width) * 3) as usize;
-                let row = (width * 3) as usize;
-                grid.data[dst..dst + row].copy_from_slice(&frame.color.data[src..src + row]);
+                let dst = (((y0 + y) * grid.width + x0) * 3) as usize;
+                grid.data[dst..dst + row].copy_from_slice(&panel[src..src + row]);
             }
-            println!(
-                "{} / {model}: {} visible, {} intersections, shade {:.1} ms",
-                method.name,
-                frame.stats.visible,
-                frame.stats.intersections,
-                frame.stats.shade.as_secs_f64() * 1e3
-            );
         }
     }
-    let frame = Frame {
-        color: grid,
-        alpha: None,
-        depth: None,
-        stats: Default::default(),
-    };
-    for p in image_io::write_frame(out, &frame)? {
-        crate::wrote(&p);
-    }
+    crate::plot::png_over(out, &grid, |area| {
+        let err = crate::plot::drawing("gallery's labels".to_string());
+        let label = crate::plot::text(15);
+        for (c, model) in CameraModel::ALL.into_iter().enumerate() {
+            let at = ((ROW_LABELS + c as u32 * width + 6) as i32, 5);
+            area.draw_text(model.name(), &label, at).map_err(&err)?;
+        }
+        for (r, method) in methods.iter().enumerate() {
+            let at = (
+                6,
+                (COLUMN_LABELS + r as u32 * height + height / 2 - 8) as i32,
+            );
+            area.draw_text(method.name, &label, at).map_err(&err)?;
+        }
+        let note = crate::plot::text(13).color(&RGBColor(200, 200, 200));
+        for (r, c) in &unsupported {
+            let at = (
+                (ROW_LABELS + c * width + 6) as i32,
+                (COLUMN_LABELS + r * height + height / 2 - 8) as i32,
+            );
+            area.draw_text("pinhole camera only", &note, at)
+                .map_err(&err)?;
+        }
+        Ok(())
+    })?;
+    crate::wrote(out);
     Ok(())
 }
 

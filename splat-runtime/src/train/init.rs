@@ -1,5 +1,5 @@
-//! Where training starts: primitives from a dataset's point cloud, sized by their neighbours
-//! as 3DGS does, or random ones in a cube when the dataset has no points.
+//! Where training starts: primitives from a dataset's point cloud, or random ones in a cube
+//! when the dataset has no points, each sized by its neighbours as 3DGS does.
 
 use super::fit::Trainable;
 use crate::io::dataset::Point;
@@ -88,18 +88,18 @@ fn kd_nearest(tree: &[(Vec3, usize)], depth: usize, q: Vec3, skip: usize, best: 
     }
 }
 
-/// `n` Gaussians at random points of the cube of half-side `half` around `centre`, random
-/// colors, sized to the points' mean spacing.
+/// `n` primitives at random points of the cube of half-side `half` around `centre`, random
+/// colors, each sized to its neighbours as [`from_points`] does (gsplat's random start).
 pub fn in_cube<M: Trainable>(n: usize, centre: Vec3, half: f32, seed: u64) -> Vec<M::Params> {
     let mut rng = fastrand::Rng::with_seed(seed);
     let mut unit = || Vec3::new(rng.f32(), rng.f32(), rng.f32());
-    let spacing = 2.0 * half / (n as f32).cbrt();
-    (0..n)
-        .map(|_| {
-            let p = centre + (unit() * 2.0 - 1.0) * half;
-            M::from_point(p, unit(), spacing)
+    let points: Vec<Point> = (0..n)
+        .map(|_| Point {
+            position: centre + (unit() * 2.0 - 1.0) * half,
+            color: unit(),
         })
-        .collect()
+        .collect();
+    from_points::<M>(&points, n)
 }
 
 #[cfg(test)]

@@ -66,27 +66,9 @@ fn near_miss<'m>(m: &'m Module, role: &str, returns: &str) -> Option<(&'m FnDef,
         return Some((f, hint));
     }
     let (distance, f) = user()
-        .map(|f| (edit_distance(&f.name, role), f))
+        .map(|f| (crate::diag::edit_distance(&f.name, role), f))
         .min_by_key(|(d, _)| *d)?;
     (distance <= 2).then(|| (f, format!("did you mean `{role}` for `fn {}`?", f.name)))
-}
-
-/// Levenshtein distance between two names.
-fn edit_distance(a: &str, b: &str) -> usize {
-    let b: Vec<char> = b.chars().collect();
-    let mut row: Vec<usize> = (0..=b.len()).collect();
-    for (i, ca) in a.chars().enumerate() {
-        let mut diagonal = row[0];
-        row[0] = i + 1;
-        for (j, cb) in b.iter().enumerate() {
-            let next = (diagonal + usize::from(ca != *cb))
-                .min(row[j] + 1)
-                .min(row[j + 1] + 1);
-            diagonal = row[j + 1];
-            row[j + 1] = next;
-        }
-    }
-    row[b.len()]
 }
 
 /// The `checks::Twin` of the method: its f64 twins (module `twin`) behind slice signatures.
@@ -510,18 +492,4 @@ fn float_slots(slots: &[Scalar]) -> std::vec::IntoIter<TokenStream> {
         })
         .collect::<Vec<_>>()
         .into_iter()
-}
-
-#[cfg(test)]
-mod tests {
-    use super::edit_distance;
-
-    #[test]
-    fn edit_distance_counts_insertions_deletions_and_substitutions() {
-        assert_eq!(edit_distance("kitten", "sitting"), 3);
-        assert_eq!(edit_distance("evalute", "evaluate"), 1);
-        assert_eq!(edit_distance("project", "project"), 0);
-        assert_eq!(edit_distance("", "abc"), 3);
-        assert!(edit_distance("shade", "evaluate") > 2);
-    }
 }

@@ -48,6 +48,119 @@ const VEC_UNARY: &[(&str, Unary)] = &[
     ("signum", Unary::Signum),
 ];
 
+/// The methods [`Lowerer::method`] accepts on a receiver of type `t` (for suggestions; a
+/// unit test checks that each is accepted).
+pub(crate) fn method_names(t: &Ty) -> Vec<&'static str> {
+    let vector_and_quat = [
+        "dot",
+        "length",
+        "length_squared",
+        "normalize",
+        "normalize_or_zero",
+    ];
+    let mut names: Vec<&'static str> = match t {
+        Ty::F32 => {
+            let own = [
+                "log2",
+                "log10",
+                "to_radians",
+                "to_degrees",
+                "min",
+                "max",
+                "clamp",
+            ];
+            let more = ["atan2", "powf", "powi", "mul_add", "sin_cos", "hypot"];
+            let unary = F32_UNARY.iter().map(|(n, _)| *n);
+            own.into_iter().chain(more).chain(unary).collect()
+        }
+        Ty::U32 => vec!["min", "max"],
+        Ty::I32 => vec!["min", "max", "abs"],
+        Ty::Vec(n) => {
+            let own = [
+                "min",
+                "max",
+                "clamp",
+                "distance",
+                "distance_squared",
+                "powf",
+                "lerp",
+            ];
+            let reductions = [
+                "min_element",
+                "max_element",
+                "element_sum",
+                "element_product",
+            ];
+            let sized = [(*n == 3, "cross"), (*n < 4, "extend"), (*n > 2, "truncate")];
+            let unary = VEC_UNARY.iter().map(|(n, _)| *n);
+            (own.into_iter()
+                .chain(reductions)
+                .chain(vector_and_quat)
+                .chain(unary))
+            .chain(sized.into_iter().filter(|(on, _)| *on).map(|(_, n)| n))
+            .collect()
+        }
+        Ty::Mat(n) => {
+            let own = [
+                "transpose",
+                "determinant",
+                "inverse",
+                "col",
+                "row",
+                "mul_scalar",
+            ];
+            let sized = if *n == 2 {
+                ["mul_vec2", "mul_mat2"]
+            } else {
+                ["mul_vec3", "mul_mat3"]
+            };
+            own.into_iter().chain(sized).collect()
+        }
+        Ty::Quat => {
+            let own = ["conjugate", "inverse", "mul_vec3"];
+            vector_and_quat.into_iter().chain(own).collect()
+        }
+        _ => vec![],
+    };
+    names.sort_unstable();
+    names.dedup();
+    names
+}
+
+/// What was probably meant by an unknown method `name` on `t`: a method of `t` that other
+/// libraries spell `name`, or one within two edits of it.
+fn suggestion(t: &Ty, name: &str) -> Option<&'static str> {
+    const OTHER_SPELLINGS: &[(&str, &str)] = &[
+        ("magnitude", "length"),
+        ("norm", "length"),
+        ("len", "length"),
+        ("mag", "length"),
+        ("squared_length", "length_squared"),
+        ("magnitude_squared", "length_squared"),
+        ("norm_squared", "length_squared"),
+        ("normalise", "normalize"),
+        ("normalized", "normalize"),
+        ("unit", "normalize"),
+        ("cross_product", "cross"),
+        ("dot_product", "dot"),
+        ("det", "determinant"),
+        ("transposed", "transpose"),
+        ("inverted", "inverse"),
+        ("pow", "powf"),
+        ("log", "ln"),
+        ("conj", "conjugate"),
+    ];
+    let names = method_names(t);
+    let spelled = OTHER_SPELLINGS.iter().find(|(other, _)| *other == name);
+    if let Some(&(_, ours)) = spelled.filter(|(_, ours)| names.contains(ours)) {
+        return Some(ours);
+    }
+    let nearest = names
+        .into_iter()
+        .map(|n| (crate::diag::edit_distance(n, name), n));
+    nearest.min().filter(|(d, _)| *d <= 2).map(|(_, n)| n)
+}
+
 /// Free functions and the method they stand for (receiver = first argument).
 const FREE_AS_METHOD: &[(&str, &str)] = &[
     ("exp", "exp"),
@@ -132,7 +245,10 @@ impl Lowerer<'_> {
                 if s.display == "Camera" && CAMERA_METHODS.iter().any(|(m, _)| *m == name) =>
             {
                 let helper = CAMERA_METHODS.iter().find(|(m, _)| *m == name).unwrap().1;
-                let def = self.module.find_fn(helper).expect("builtin camera helpers are in every module");
+                let def = self
+                    .module
+                    .find_fn(helper)
+                    .expect("builtin camera helpers are in every module");
                 self.camera_model |= MODEL_AWARE.contains(&name);
                 let mut all = vec![recv];
                 all.extend(args);
@@ -146,22 +262,42 @@ impl Lowerer<'_> {
             (Ty::F32, "log2" | "log10") => {
                 want(self, 0)?;
                 let l = self.un(Unary::Ln, self.f(&recv));
-                let k = if name == "log2" { std::f64::consts::LOG2_E } else { std::f64::consts::LOG10_E };
+                let k = if name == "log2" {
+                    std::f64::consts::LOG2_E
+                } else {
+                    std::f64::consts::LOG10_E
+                };
                 let k = self.fconst(k);
                 Ok(Self::scalar(self.bin(Binary::Mul, l, k)))
             }
             (Ty::F32, "to_radians" | "to_degrees") => {
                 want(self, 0)?;
-                let k = if name == "to_radians" { std::f64::consts::PI / 180.0 } else { 180.0 / std::f64::consts::PI };
+                let k = if name == "to_radians" {
+                    std::f64::consts::PI / 180.0
+                } else {
+                    180.0 / std::f64::consts::PI
+                };
                 let k = self.fconst(k);
                 Ok(Self::scalar(self.bin(Binary::Mul, self.f(&recv), k)))
             }
             (Ty::F32 | Ty::U32 | Ty::I32 | Ty::Vec(_), "min" | "max") => {
                 want(self, 1)?;
                 same(self, &args[0])?;
-                let op = if name == "min" { Binary::Min } else { Binary::Max };
-                let comps = recv.comps.iter().zip(&args[0].comps).map(|(&a, &b)| self.bin(op, a, b)).collect();
-                Ok(Val { ty: recv.ty.clone(), comps })
+                let op = if name == "min" {
+                    Binary::Min
+                } else {
+                    Binary::Max
+                };
+                let comps = recv
+                    .comps
+                    .iter()
+                    .zip(&args[0].comps)
+                    .map(|(&a, &b)| self.bin(op, a, b))
+                    .collect();
+                Ok(Val {
+                    ty: recv.ty.clone(),
+                    comps,
+                })
             }
             (Ty::F32 | Ty::Vec(_), "clamp") => {
                 want(self, 2)?;
@@ -173,18 +309,28 @@ impl Lowerer<'_> {
                         self.bin(Binary::Min, lo, args[1].comps[i])
                     })
                     .collect();
-                Ok(Val { ty: recv.ty.clone(), comps })
+                Ok(Val {
+                    ty: recv.ty.clone(),
+                    comps,
+                })
             }
             (Ty::F32, "atan2" | "powf") => {
                 want(self, 1)?;
                 same(self, &args[0])?;
-                let op = if name == "atan2" { Binary::Atan2 } else { Binary::Powf };
+                let op = if name == "atan2" {
+                    Binary::Atan2
+                } else {
+                    Binary::Powf
+                };
                 Ok(Self::scalar(self.bin(op, self.f(&recv), self.f(&args[0]))))
             }
             (Ty::F32, "powi") => {
                 want(self, 1)?;
                 let Some(n) = self.int_const(&args[0]) else {
-                    return self.err(arg_exprs[0].span(), "the exponent of `powi` must be a compile-time integer");
+                    return self.err(
+                        arg_exprs[0].span(),
+                        "the exponent of `powi` must be a compile-time integer",
+                    );
                 };
                 Ok(Self::scalar(self.powi(self.f(&recv), n)))
             }
@@ -199,11 +345,17 @@ impl Lowerer<'_> {
                 want(self, 0)?;
                 let s = self.un(Unary::Sin, self.f(&recv));
                 let c = self.un(Unary::Cos, self.f(&recv));
-                Ok(Val { ty: Ty::Tuple(vec![Ty::F32, Ty::F32]), comps: vec![s, c] })
+                Ok(Val {
+                    ty: Ty::Tuple(vec![Ty::F32, Ty::F32]),
+                    comps: vec![s, c],
+                })
             }
             (Ty::F32, "hypot") => {
                 want(self, 1)?;
-                let v = Val { ty: Ty::Vec(2), comps: vec![self.f(&recv), self.f(&args[0])] };
+                let v = Val {
+                    ty: Ty::Vec(2),
+                    comps: vec![self.f(&recv), self.f(&args[0])],
+                };
                 Ok(self.length(&v))
             }
             (Ty::Vec(_) | Ty::Quat, "dot") => {
@@ -247,8 +399,15 @@ impl Lowerer<'_> {
                 want(self, 1)?;
                 self.check_ty(&args[0], &Ty::F32, span, "the exponent")?;
                 let e = self.f(&args[0]);
-                let comps = recv.comps.iter().map(|&c| self.bin(Binary::Powf, c, e)).collect();
-                Ok(Val { ty: recv.ty.clone(), comps })
+                let comps = recv
+                    .comps
+                    .iter()
+                    .map(|&c| self.bin(Binary::Powf, c, e))
+                    .collect();
+                Ok(Val {
+                    ty: recv.ty.clone(),
+                    comps,
+                })
             }
             (Ty::Vec(_), "lerp") => {
                 want(self, 2)?;
@@ -265,7 +424,10 @@ impl Lowerer<'_> {
                         self.bin(Binary::Add, a, s)
                     })
                     .collect();
-                Ok(Val { ty: recv.ty.clone(), comps })
+                Ok(Val {
+                    ty: recv.ty.clone(),
+                    comps,
+                })
             }
             (Ty::Vec(_), "min_element" | "max_element" | "element_sum" | "element_product") => {
                 want(self, 0)?;
@@ -286,16 +448,30 @@ impl Lowerer<'_> {
                 self.check_ty(&args[0], &Ty::F32, span, "the new component")?;
                 let mut comps = recv.comps.clone();
                 comps.push(self.f(&args[0]));
-                Ok(Val { ty: Ty::Vec(n + 1), comps })
+                Ok(Val {
+                    ty: Ty::Vec(n + 1),
+                    comps,
+                })
             }
             (Ty::Vec(n), "truncate") if *n > 2 => {
                 want(self, 0)?;
-                Ok(Val { ty: Ty::Vec(n - 1), comps: recv.comps[..n - 1].to_vec() })
+                Ok(Val {
+                    ty: Ty::Vec(n - 1),
+                    comps: recv.comps[..n - 1].to_vec(),
+                })
             }
-            (Ty::Vec(n), s) if (2..=4).contains(&s.len()) && s.chars().all(|c| "xyzw"[..*n].contains(c)) => {
+            (Ty::Vec(n), s)
+                if (2..=4).contains(&s.len()) && s.chars().all(|c| "xyzw"[..*n].contains(c)) =>
+            {
                 want(self, 0)?;
-                let comps = s.chars().map(|c| recv.comps["xyzw".find(c).unwrap()]).collect();
-                Ok(Val { ty: Ty::Vec(s.len()), comps })
+                let comps = s
+                    .chars()
+                    .map(|c| recv.comps["xyzw".find(c).unwrap()])
+                    .collect();
+                Ok(Val {
+                    ty: Ty::Vec(s.len()),
+                    comps,
+                })
             }
             (Ty::Mat(_), "transpose") => {
                 want(self, 0)?;
@@ -312,11 +488,25 @@ impl Lowerer<'_> {
             (Ty::Mat(n), "col" | "row") => {
                 want(self, 1)?;
                 let Some(i) = self.int_const(&args[0]).filter(|i| (*i as usize) < *n) else {
-                    return self.err(span, format!("`{name}` needs a compile-time index below {n}"));
+                    return self.err(
+                        span,
+                        format!("`{name}` needs a compile-time index below {n}"),
+                    );
                 };
                 let i = i as usize;
-                let comps = (0..*n).map(|k| if name == "col" { recv.comps[i * n + k] } else { recv.comps[k * n + i] }).collect();
-                Ok(Val { ty: Ty::Vec(*n), comps })
+                let comps = (0..*n)
+                    .map(|k| {
+                        if name == "col" {
+                            recv.comps[i * n + k]
+                        } else {
+                            recv.comps[k * n + i]
+                        }
+                    })
+                    .collect();
+                Ok(Val {
+                    ty: Ty::Vec(*n),
+                    comps,
+                })
             }
             (Ty::Mat(n), "mul_vec2" | "mul_vec3") => {
                 want(self, 1)?;
@@ -338,7 +528,10 @@ impl Lowerer<'_> {
                 for c in comps.iter_mut().take(3) {
                     *c = self.un(Unary::Neg, *c);
                 }
-                Ok(Val { ty: Ty::Quat, comps })
+                Ok(Val {
+                    ty: Ty::Quat,
+                    comps,
+                })
             }
             (Ty::Quat, "mul_vec3") => {
                 want(self, 1)?;
@@ -350,12 +543,21 @@ impl Lowerer<'_> {
                 let z = self.konst(Const::I(0));
                 let neg = self.bin(Binary::Lt, recv.comps[0], z);
                 let n = self.un(Unary::Neg, recv.comps[0]);
-                Ok(Val { ty: Ty::I32, comps: vec![self.select(neg, n, recv.comps[0])] })
+                Ok(Val {
+                    ty: Ty::I32,
+                    comps: vec![self.select(neg, n, recv.comps[0])],
+                })
             }
-            (t, _) => self.err(
-                span,
-                format!("no method `{name}` on `{t}` in the supported subset (see the intrinsic list in the splat-macros docs)"),
-            ),
+            (t, _) => {
+                let hint = match suggestion(t, name) {
+                    Some(s) => format!(": did you mean `{s}`?"),
+                    None => " (see the intrinsic list in the splat-macros docs)".to_string(),
+                };
+                self.err(
+                    span,
+                    format!("no method `{name}` on `{t}` in the supported subset{hint}"),
+                )
+            }
         }
     }
 

@@ -8,7 +8,7 @@
 //! - `intrinsics.rs`: method calls on glam types and the free intrinsic functions.
 
 mod expr;
-mod intrinsics;
+pub(crate) mod intrinsics;
 
 use crate::diag::Diag;
 use crate::ir::{Binary, Block, Const, Function, Op, Scalar, Stmt, Unary, Var};
