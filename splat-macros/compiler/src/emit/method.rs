@@ -20,6 +20,16 @@ fn struct_field(ty: &Ty, name: &str) -> Option<Ty> {
     }
 }
 
+/// The type of parameter `i` of `def` as written, for errors about it (the parameter itself
+/// when the type cannot be found).
+fn written_type(def: &FnDef, i: usize) -> &dyn quote::ToTokens {
+    match def.item.sig.inputs.iter().nth(i) {
+        Some(syn::FnArg::Typed(t)) => &*t.ty,
+        Some(other) => other,
+        None => &def.item.sig.ident,
+    }
+}
+
 fn builtin(name: &str) -> Ty {
     builtin_struct(name, &[])
         .expect("builtin")
@@ -31,8 +41,8 @@ fn builtin(name: &str) -> Ty {
 fn check_params(def: &FnDef, want: &[(&str, Option<&Ty>)], diag: &Diag) -> Result<(), ()> {
     if def.params.len() != want.len() {
         let names: Vec<&str> = want.iter().map(|w| w.0).collect();
-        diag.error_at(
-            &def.item.sig.ident,
+        diag.error(
+            def.item.sig.paren_token.span.join(),
             format!(
                 "`{}` must take {} parameter(s): {}",
                 def.name,
@@ -42,12 +52,12 @@ fn check_params(def: &FnDef, want: &[(&str, Option<&Ty>)], diag: &Diag) -> Resul
         );
         return Err(());
     }
-    for (p, (what, ty)) in def.params.iter().zip(want) {
+    for (i, (p, (what, ty))) in def.params.iter().zip(want).enumerate() {
         if let Some(t) = ty
             && p.ty != **t
         {
             diag.error_at(
-                &p.ident,
+                &written_type(def, i),
                 format!("{what} of `{}` must be `{t}`, found `{}`", def.name, p.ty),
             );
             return Err(());
@@ -193,10 +203,18 @@ pub fn method_impl(m: &Module, kernels: &[Kernel], diag: &Diag) -> Option<TokenS
         );
         return None;
     };
-    if !pixel_ty.all_float() || !color_ty.all_float() {
+    let lanes = "(they become SIMD lanes)";
+    if !pixel_ty.all_float() {
         diag.error_at(
-            &evaluate.def.item.sig.ident,
-            "the pixel data and the color of `evaluate` must be made of f32 only (they become SIMD lanes)",
+            &written_type(evaluate.def, 0),
+            format!("the pixel data of `evaluate` must be made of f32 only {lanes}"),
+        );
+        return None;
+    }
+    if !color_ty.all_float() {
+        diag.error_at(
+            &evaluate.def.item.sig.output,
+            format!("the color of `evaluate` must be made of f32 only {lanes}"),
         );
         return None;
     }
@@ -234,7 +252,7 @@ pub fn method_impl(m: &Module, kernels: &[Kernel], diag: &Diag) -> Option<TokenS
         }
     } else if pixel_ty != Ty::Vec(2) {
         diag.error_at(
-            &evaluate.def.params[0].ident,
+            &written_type(evaluate.def, 0),
             "without `pixel_info`, the pixel data of `evaluate` is the pixel centre: `Vec2`",
         );
         return None;
