@@ -1,6 +1,7 @@
 //! The CPU backend against the GPU backend on the same scene and machine, stage by stage,
 //! forward and backward; then the global atomic adds of the GPU backward blend with and
-//! without the workgroup reduction (seed 001 Table I), with f32 atomics and with the
+//! without the workgroup reduction (Yuan and He, "Efficient Differentiable Hardware
+//! Rasterization for 3D Gaussian Splatting", Table I), with f32 atomics and with the
 //! compare-exchange loop; and the wall time of a frame through the one-shot path (upload,
 //! build, render, download) against the resident pipeline (scene and renderer kept, nothing
 //! read back but the intersection count). GPU stage times are GPU timestamps where the adapter

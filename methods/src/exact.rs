@@ -1,4 +1,4 @@
-//! 3DGEER (seed 003): the exact ray integral of each Gaussian, with the particle bounding
+//! 3DGEER (Huang et al. 2025): the exact ray integral of each Gaussian, with the particle bounding
 //! frustum (PBF, App. D.1) for the bounding box and for the per-tile association, on every
 //! camera model.
 //!

@@ -1,6 +1,6 @@
 //! 3D Gaussian Splatting (Kerbl et al. 2023) with EWA splatting and the StopThePop tile cull
-//! (seed 000, Listing 1 and §A.1.1), in the conventions of gsplat's "classic" mode
-//! (DESIGN.md §6): OpenCV camera, pixel centres at +0.5, 0.3 px dilation, tangent clamp,
+//! (XPR, Rhyner et al. 2026, Listing 1 and §A.1.1), in the conventions of gsplat's "classic"
+//! mode: OpenCV camera, pixel centres at +0.5, 0.3 px dilation, tangent clamp,
 //! near plane 0.01, alpha <= 0.99, pairs below 1/255 skipped, SH + 0.5 clamped at 0.
 //!
 //! The SH degree is a compile-time property of the method: `gaussians_3d!` instantiates one

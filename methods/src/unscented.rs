@@ -1,5 +1,5 @@
-//! 3DGUT (Wu et al. 2025; seed 000 §A.1.2): the 3DGS primitive projected by the unscented
-//! transform instead of the EWA Jacobian, and evaluated in 3D along each pixel's camera ray
+//! 3DGUT (Wu et al. 2025; as in XPR, Rhyner et al. 2026, §A.1.2): the 3DGS primitive
+//! projected by the unscented transform instead of the EWA Jacobian, and evaluated in 3D along each pixel's camera ray
 //! (the Gaussian's maximum response on the ray), so it works with every camera model.
 
 #[splat_macros::splat_method]

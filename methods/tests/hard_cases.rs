@@ -1,4 +1,4 @@
-//! Hard cases stay finite and correct (DESIGN.md §7): needle and flat Gaussians, a zero
+//! Hard cases stay finite and correct: needle and flat Gaussians, a zero
 //! quaternion, the camera inside a Gaussian, Gaussians behind the camera and at the near
 //! plane, opaque stacks (alpha clamp, transmittance underflow), huge and sub-pixel Gaussians,
 //! empty scenes, NaN / Inf parameters.

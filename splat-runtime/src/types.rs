@@ -6,7 +6,7 @@
 use crate::lanes::{F32x8, M32x8};
 use glam::{Mat3, Vec2, Vec3, Vec4};
 
-/// How a camera maps camera-space directions to pixels (seed 003 §3.3).
+/// How a camera maps camera-space directions to pixels (3DGEER, Huang et al. 2025, §3.3).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 #[repr(u32)]
 pub enum CameraModel {

@@ -1,4 +1,5 @@
-//! The backward blend (seed 001, eq. 5-7): re-walk each pixel's list front to back, carrying
+//! The backward blend (Yuan and He, "Efficient Differentiable Hardware Rasterization for 3D
+//! Gaussian Splatting", eq. 5-7): re-walk each pixel's list front to back, carrying
 //! the transmittance and the color accumulated so far; the color still to come behind
 //! primitive i is the final color minus that prefix, so no per-pixel list is stored. Each
 //! step calls `evaluate`'s lane adjoint, which sums the gradient over the group's eight lanes

@@ -1,7 +1,8 @@
-//! What training shares across methods (DESIGN §10), built up step by step: the photometric
-//! loss with its gradient and the evaluation metrics ([`loss`]), Adam ([`adam`]), adaptive density
-//! control ([`densify`]) or MCMC ([`mcmc`]), and the loop with the trait a method implements to take part ([`fit`]),
-//! also on the GPU ([`gpu_fit`]).
+//! What training shares across methods: the photometric loss with its gradient and the
+//! evaluation metrics ([`loss`]), Adam ([`adam`]), where training starts ([`init`]), adaptive
+//! density control ([`densify`]) or MCMC ([`mcmc`]), checkpoints ([`checkpoint`]), and the
+//! loop with the trait a method implements to take part ([`fit`]), also on the GPU
+//! ([`gpu_fit`]).
 
 pub mod adam;
 pub mod checkpoint;
