@@ -1,9 +1,9 @@
 //! The training loop on the GPU, step for step the CPU loop of [`super::fit`]: the scene, the
 //! target images, the loss, the gradients and Adam's moments live on the device. A step is
 //! the renderer's forward (which reads back the intersection count), the loss and backward,
-//! Adam and density control's statistics, and a read-back of the loss value (a few words).
-//! Every hundred steps density control refines on the host: the scene and the moments go
-//! down and back up.
+//! Adam, density control's statistics or MCMC's penalties and noise, and a read-back of the
+//! loss value (a few words). Every hundred steps density control or MCMC refines on the host:
+//! the scene and the moments go down and back up.
 
 use super::checkpoint::Checkpoint;
 use super::densify::Densifier;
