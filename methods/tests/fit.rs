@@ -820,7 +820,7 @@ fn a_run_resumed_from_its_checkpoint_takes_the_same_steps() {
         fit_from::<Method>(&data, &mut resumed, 1.0, &opts, |_| {}).unwrap();
         assert_eq!(resumed, whole);
 
-        // Another run length or another method is refused.
+        // Another run length, method or strategy is refused.
         let mut other = at20.clone();
         let longer = FitOptions {
             steps: 50,
@@ -831,6 +831,12 @@ fn a_run_resumed_from_its_checkpoint_takes_the_same_steps() {
         let err = fit_from::<splat_methods::gut::Method>(&data, &mut other, 1.0, &opts, |_| {})
             .unwrap_err();
         assert!(err.to_string().contains("not gut"), "{err}");
+        let sampled = FitOptions {
+            densify: Some(Strategy::Mcmc(Default::default())),
+            ..resumable_options()
+        };
+        let err = fit_from::<Method>(&data, &mut other, 1.0, &sampled, |_| {}).unwrap_err();
+        assert!(err.to_string().contains("strategy adc, not mcmc"), "{err}");
     });
 }
 

@@ -288,6 +288,12 @@ impl Fit<'_> {
                 M::NAME,
                 args.method
             ),
+            Some(c) if c.step > 0 && c.strategy != Strategy::name(opts.densify.as_ref()) => bail!(
+                "{} is a checkpoint of a run with --strategy {}, not {}",
+                args.out.join(CHECKPOINT).display(),
+                c.strategy,
+                Strategy::name(opts.densify.as_ref())
+            ),
             Some(c) => (c.clone(), Log::read_csv(&args.out.join(METRICS), c.step)?),
             None => {
                 let mut params = start::<M>(data, points, mid, init_extent * extent, args.seed);

@@ -691,8 +691,14 @@ fn fit_resumes_from_its_checkpoint() {
         &["--method", "3dgut"],
         "out/checkpoint.bin is a checkpoint of gs3d, not of gut",
     );
-    std::fs::write(out.join("checkpoint.bin"), "SPLATCK1 and then nothing").unwrap();
+    refused(
+        &["--strategy", "mcmc"],
+        "out/checkpoint.bin is a checkpoint of a run with --strategy adc, not mcmc",
+    );
+    std::fs::write(out.join("checkpoint.bin"), "SPLATCK2 and then nothing").unwrap();
     refused(&[], "out/checkpoint.bin is damaged");
+    std::fs::write(out.join("checkpoint.bin"), "SPLATCK1 and then nothing").unwrap();
+    refused(&[], "out/checkpoint.bin was written by an earlier splat");
     std::fs::write(out.join("checkpoint.bin"), "ply").unwrap();
     refused(&[], "out/checkpoint.bin is not a splat checkpoint");
     assert_eq!(

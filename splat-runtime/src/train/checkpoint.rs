@@ -2,7 +2,7 @@
 //! the primitives, Adam's moments, density control's statistics, the random generator), and
 //! their file format.
 //!
-//! The file is little-endian: the magic `SPLATCK1`, then `u64` counts and fields (see
+//! The file is little-endian: the magic `SPLATCK2`, then `u64` counts and fields (see
 //! [`Checkpoint::write_to`]), then the arrays. Every count is checked against the file's
 //! length before anything is allocated, so a damaged file is refused by name, never trusted.
 
@@ -11,7 +11,9 @@ use crate::method::SplatMethod;
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 
-const MAGIC: &[u8; 8] = b"SPLATCK1";
+const MAGIC: &[u8; 8] = b"SPLATCK2";
+/// The first format, without the strategy: refused with a word on why.
+const OLDER: &[&[u8; 8]] = &[b"SPLATCK1"];
 
 /// Adam's state: its step count and both moments, one per parameter word.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -27,6 +29,9 @@ pub struct Checkpoint {
     /// The method trained (`SplatMethod::NAME`) and its parameter words per primitive.
     pub method: String,
     pub words: usize,
+    /// How the primitive set changed (`Strategy::name`), set by the loop when it saves:
+    /// resuming with another strategy would silently take other steps.
+    pub strategy: String,
     pub step: usize,
     /// The run's length: the learning-rate schedule depends on it.
     pub steps: usize,
@@ -48,8 +53,12 @@ pub enum CheckpointError {
         path: PathBuf,
         error: std::io::Error,
     },
-    #[error("{path} is not a splat checkpoint (it does not start with SPLATCK1)")]
+    #[error("{path} is not a splat checkpoint (it does not start with SPLATCK2)")]
     Magic { path: PathBuf },
+    #[error(
+        "{path} was written by an earlier splat (format {format}), which this one cannot resume: start the run again"
+    )]
+    Older { path: PathBuf, format: String },
     #[error("{path} is damaged: {what}")]
     Damaged { path: PathBuf, what: String },
 }
@@ -60,6 +69,7 @@ impl Checkpoint {
         Checkpoint {
             method: M::NAME.to_string(),
             words: M::Params::LEN,
+            strategy: String::new(),
             step: 0,
             steps,
             params: super::fit::flatten::<M>(params),
@@ -92,14 +102,15 @@ impl Checkpoint {
         crate::io::write_atomic(path, |w| self.write_to(w))
     }
 
-    /// The header (magic, method name, then words, step, steps, primitives, Adam's step,
+    /// The header (magic, method name, strategy name, then words, step, steps, primitives, Adam's step,
     /// statistics count, generator state as `u64`), then the parameters, both moments and the
     /// statistics.
     pub fn write_to(&self, w: &mut dyn Write) -> std::io::Result<()> {
         w.write_all(MAGIC)?;
-        let name = self.method.as_bytes();
-        w.write_all(&(name.len() as u64).to_le_bytes())?;
-        w.write_all(name)?;
+        for name in [&self.method, &self.strategy] {
+            w.write_all(&(name.len() as u64).to_le_bytes())?;
+            w.write_all(name.as_bytes())?;
+        }
         for n in [
             self.words as u64,
             self.step as u64,
@@ -138,15 +149,26 @@ impl Checkpoint {
             path: path.to_path_buf(),
             what,
         };
-        if bytes.get(..8) != Some(MAGIC) {
+        let magic = bytes.get(..8);
+        if let Some(old) = OLDER.iter().find(|o| magic == Some(&o[..])) {
+            return Err(CheckpointError::Older {
+                path: path.to_path_buf(),
+                format: String::from_utf8_lossy(&old[..]).into_owned(),
+            });
+        }
+        if magic != Some(MAGIC) {
             return Err(CheckpointError::Magic {
                 path: path.to_path_buf(),
             });
         }
         let mut r = Reader { bytes, at: 8, path };
-        let name_len = r.count("the method name's length")?;
-        let method = String::from_utf8(r.take(name_len, 1, "the method name")?.to_vec())
-            .map_err(|_| damaged("the method name is not UTF-8".into()))?;
+        let mut name = |what: &str| -> Result<String, CheckpointError> {
+            let len = r.count(&format!("the {what}'s length"))?;
+            String::from_utf8(r.take(len, 1, &format!("the {what}"))?.to_vec())
+                .map_err(|_| damaged(format!("the {what} is not UTF-8")))
+        };
+        let method = name("method name")?;
+        let strategy = name("strategy name")?;
         let words = r.count("words")?;
         let step = r.count("step")?;
         let steps = r.count("steps")?;
@@ -185,6 +207,7 @@ impl Checkpoint {
         Ok(Checkpoint {
             method,
             words,
+            strategy,
             step,
             steps,
             params,
@@ -259,6 +282,7 @@ mod tests {
         Checkpoint {
             method: "3dgs".into(),
             words: 2,
+            strategy: "mcmc".into(),
             step: 5,
             steps: 10,
             params: vec![1.0, -2.0, 3.5, f32::MIN_POSITIVE],
@@ -299,8 +323,8 @@ mod tests {
         let e = Checkpoint::parse(&long, path).unwrap_err().to_string();
         assert!(e.contains("1 bytes follow"), "{e}");
         let mut huge = bytes.clone();
-        // The primitive count (after magic, name length, name, words, step, steps).
-        let at = 8 + 8 + 4 + 3 * 8;
+        // The primitive count (after magic, the names' lengths and names, words, step, steps).
+        let at = 8 + 8 + 4 + 8 + 4 + 3 * 8;
         huge[at..at + 8].copy_from_slice(&(1u64 << 60).to_le_bytes());
         let e = Checkpoint::parse(&huge, path).unwrap_err().to_string();
         assert!(e.contains("damaged"), "{e}");
@@ -308,5 +332,9 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("not a splat checkpoint"), "{e}");
+        let e = Checkpoint::parse(b"SPLATCK1.......", path)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("earlier splat (format SPLATCK1)"), "{e}");
     }
 }

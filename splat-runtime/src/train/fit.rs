@@ -120,6 +120,17 @@ pub enum Strategy {
     Mcmc(McmcOptions),
 }
 
+impl Strategy {
+    /// The strategy's name, as the command line spells it (`fixed` for none).
+    pub fn name(strategy: Option<&Strategy>) -> &'static str {
+        match strategy {
+            Some(Strategy::Adc(_)) => "adc",
+            Some(Strategy::Mcmc(_)) => "mcmc",
+            None => "fixed",
+        }
+    }
+}
+
 impl FitOptions {
     /// Adaptive density control's options, when that is the strategy.
     pub fn adc(&self) -> Option<&DensifyOptions> {
@@ -284,7 +295,7 @@ pub fn fit_from<M: Trainable>(
     mut progress: impl FnMut(&StepReport),
 ) -> Result<(), FitError> {
     let rates = rates_for::<M>(data, extent)?;
-    check_resumable::<M>(state, opts)?;
+    adopt::<M>(state, opts)?;
     let words = M::Params::LEN;
     let mut params = state.params::<M>();
     let mut flat = state.params.clone();
@@ -391,9 +402,10 @@ pub fn fit_from<M: Trainable>(
     Ok(())
 }
 
-/// Refuses to go on from a state of another method or another run length.
-pub(crate) fn check_resumable<M: Trainable>(
-    state: &Checkpoint,
+/// Makes `state` this run's: refuses a state of another method, run length or (once
+/// started) strategy, and records the strategy.
+pub(crate) fn adopt<M: Trainable>(
+    state: &mut Checkpoint,
     opts: &FitOptions,
 ) -> Result<(), FitError> {
     if state.method != M::NAME || state.words != M::Params::LEN {
@@ -411,6 +423,14 @@ pub(crate) fn check_resumable<M: Trainable>(
             state.steps, opts.steps
         )));
     }
+    let strategy = Strategy::name(opts.densify.as_ref());
+    if state.step > 0 && state.strategy != strategy {
+        return Err(FitError::Unsupported(format!(
+            "the checkpoint is of a run with strategy {}, not {strategy} (the primitives change otherwise)",
+            state.strategy
+        )));
+    }
+    state.strategy = strategy.to_string();
     Ok(())
 }
 

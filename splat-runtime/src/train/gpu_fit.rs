@@ -8,8 +8,8 @@
 use super::checkpoint::Checkpoint;
 use super::densify::Densifier;
 use super::fit::{
-    Evaluation, FitError, FitOptions, StepReport, Trainable, after_every, check_resumable,
-    composite, flatten, rates_for, saves_at, step_background, with_alpha,
+    Evaluation, FitError, FitOptions, StepReport, Trainable, adopt, after_every, composite,
+    flatten, rates_for, saves_at, step_background, with_alpha,
 };
 use crate::flat::Flat;
 use crate::gpu::entries::Accumulation;
@@ -63,7 +63,7 @@ pub fn fit_gpu_from<M: Trainable>(
     mut progress: impl FnMut(&StepReport),
 ) -> Result<(), FitError> {
     let rates = rates_for::<M>(data, extent)?;
-    check_resumable::<M>(state, opts)?;
+    adopt::<M>(state, opts)?;
     let words = M::Params::LEN;
     let position = position_word::<M>().ok_or_else(|| {
         FitError::Unsupported(format!(
