@@ -120,14 +120,12 @@ pub(crate) fn gallery(
     }
     let cloud = scene::planet();
     let (cols, rows) = (CameraModel::ALL.len() as u32, methods.len() as u32);
+    let (grid_width, grid_height) = (ROW_LABELS + width * cols, COLUMN_LABELS + height * rows);
     let mut grid = Image {
-        width: ROW_LABELS + width * cols,
-        height: COLUMN_LABELS + height * rows,
+        width: grid_width,
+        height: grid_height,
         channels: 3,
-        data: vec![
-            1.0;
-            ((ROW_LABELS + width * cols) * (COLUMN_LABELS + height * rows) * 3) as usize
-        ],
+        data: vec![1.0; (grid_width * grid_height * 3) as usize],
     };
     let mut unsupported = vec![];
     let opts = RenderOptions::default();

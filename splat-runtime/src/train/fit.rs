@@ -340,12 +340,10 @@ pub fn fit_from<M: Trainable>(
             }
         }
         adam.step(&mut flat, &grads, &lr);
-        for (p, w) in params.iter_mut().zip(flat.chunks_exact(words)) {
-            *p = M::Params::read_words(w);
-        }
         let mut refinement = None;
         if let Some(m) = &mcmc {
             if m.opts.refines_at(step) {
+                read_into::<M>(&mut params, &flat);
                 let r = m.refine::<M>(&mut params, &mut rng);
                 adam.remap(&r.origin);
                 flat = flatten::<M>(&params);
@@ -353,10 +351,8 @@ pub fn fit_from<M: Trainable>(
                 refinement = Some(r);
             }
             m.perturb(&mut flat, words, lr[m.words.position], rng.u32(..));
-            for (p, w) in params.iter_mut().zip(flat.chunks_exact(words)) {
-                *p = M::Params::read_words(w);
-            }
         }
+        read_into::<M>(&mut params, &flat);
         if let Some(d) = densifier.as_mut().filter(|d| step < d.opts.stop) {
             let visible = pass.pre.visible.iter().map(|(i, _)| *i as usize);
             d.observe::<M>(&params, &g.params, visible, &view.camera);
@@ -457,6 +453,13 @@ pub(crate) fn step_background(opts: &FitOptions, rng: &mut fastrand::Rng) -> Vec
     match opts.random_background {
         true => Vec3::new(rng.f32(), rng.f32(), rng.f32()),
         false => opts.background,
+    }
+}
+
+/// Reads every primitive of `params` back from its words in `flat` (as many).
+pub(crate) fn read_into<M: SplatMethod>(params: &mut [M::Params], flat: &[f32]) {
+    for (p, w) in params.iter_mut().zip(flat.chunks_exact(M::Params::LEN)) {
+        *p = M::Params::read_words(w);
     }
 }
 

@@ -238,9 +238,10 @@ impl Mcmc {
             ..Default::default()
         };
         let alive = |s: &Shape| s.opacity > o.min_opacity && s.position.is_finite();
-        let dead: Vec<usize> = (0..n).filter(|&i| !alive(&M::shape(&params[i]))).collect();
-        let weights: Vec<f32> = (params.iter().map(M::shape))
-            .map(|s| if alive(&s) { s.opacity } else { 0.0 })
+        let shapes: Vec<Shape> = params.iter().map(M::shape).collect();
+        let dead: Vec<usize> = (0..n).filter(|&i| !alive(&shapes[i])).collect();
+        let weights: Vec<f32> = (shapes.iter())
+            .map(|s| if alive(s) { s.opacity } else { 0.0 })
             .collect();
         if let Some(drawn) = draw(&weights, dead.len(), rng) {
             self.share::<M>(params, &drawn);
