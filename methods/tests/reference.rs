@@ -106,3 +106,86 @@ fn sh_degree_instances_agree_when_higher_terms_are_zero() {
         }
     }
 }
+
+/// The blend's thresholds as renderer options: raised, they change the image as the reference
+/// with the same rule says, on the CPU and the GPU, forward and backward; at their defaults
+/// the image is bit for bit the one rendered without naming them.
+#[test]
+fn blend_thresholds_follow_the_reference_on_cpu_and_gpu() {
+    use splat_runtime::checks::forward::{
+        forward_matches_reference_with, gpu_forward_matches_cpu_with,
+    };
+    use splat_runtime::checks::gradients::gpu_gradients_match_cpu_with;
+    use splat_runtime::pipeline::shade::{Blend, T_MIN};
+
+    let mut rng = fastrand::Rng::with_seed(4);
+    let cam = camera(48, 40);
+    // Dense enough that pixels reach every T-stop below and many pairs are faint.
+    let params: Vec<Params> = (0..400)
+        .map(|_| {
+            let px = Vec2::new(rng.f32() * 56.0 - 4.0, rng.f32() * 48.0 - 4.0);
+            let z = 2.0 + rng.f32() * 4.0;
+            let mut g = gaussian_at(&mut rng, &cam, px, z, -2.0);
+            g.opacity_logit = 1.0 + 4.0 * rng.f32();
+            g
+        })
+        .collect();
+    let opts = RenderOptions::default();
+    let named = RenderOptions {
+        blend: Blend {
+            t_min: T_MIN,
+            alpha_min: 0.0,
+        },
+        ..opts
+    };
+    assert_eq!(
+        render::<Method>(&params, &cam, &opts).unwrap().color.data,
+        render::<Method>(&params, &cam, &named).unwrap().color.data
+    );
+    let default_image = render::<Method>(&params, &cam, &opts).unwrap().color.data;
+    for blend in [
+        Blend {
+            t_min: 0.0,
+            alpha_min: 0.0,
+        },
+        Blend {
+            t_min: 0.05,
+            alpha_min: 0.0,
+        },
+        Blend {
+            t_min: T_MIN,
+            alpha_min: 0.1,
+        },
+    ] {
+        let label = format!("{blend:?}");
+        forward_matches_reference_with::<Method>(&label, &params, &cam, blend);
+        gpu_forward_matches_cpu_with::<Method>(&label, &params, &cam, blend);
+        gpu_gradients_match_cpu_with::<Method>(&label, &params, &cam, blend);
+        let changed = RenderOptions { blend, ..opts };
+        let image = render::<Method>(&params, &cam, &changed)
+            .unwrap()
+            .color
+            .data;
+        let moved = image
+            .iter()
+            .zip(&default_image)
+            .filter(|(a, b)| a != b)
+            .count();
+        assert!(moved > 100, "{label}: only {moved} color values moved");
+    }
+    let bad = RenderOptions {
+        blend: Blend {
+            t_min: 1.0,
+            alpha_min: 0.0,
+        },
+        ..opts
+    };
+    let Err(err) = render::<Method>(&params, &cam, &bad) else {
+        panic!("t_min 1 was accepted");
+    };
+    let err = err.to_string();
+    assert!(
+        err.contains("t_min and alpha_min must be in [0, 1)"),
+        "{err}"
+    );
+}

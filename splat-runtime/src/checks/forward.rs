@@ -1,9 +1,10 @@
 //! Forward checks: the CPU render against the f64 reference, boxes that hold every pixel a
 //! primitive reaches, a conservative `tile_cull`, and the GPU render against the CPU's.
 
-use super::reference::render_words;
-use super::{camera_words, channels, options, words};
+use super::reference::{render_with, render_words};
+use super::{camera_words, channels, options, options_with, words};
 use crate::method::SplatMethod;
+use crate::pipeline::shade::Blend;
 use crate::pipeline::{Frame, RenderOptions, render};
 use crate::types::Camera;
 
@@ -14,10 +15,19 @@ pub fn forward_matches_reference<M: SplatMethod>(
     params: &[M::Params],
     cam: &Camera,
 ) -> f64 {
-    let ws: Vec<Vec<f64>> = params.iter().map(words).collect();
-    let reference = render_words::<M>(&ws, &camera_words(cam), cam.model);
+    forward_matches_reference_with::<M>(label, params, cam, Blend::default())
+}
+
+/// [`forward_matches_reference`] with the blend's thresholds `blend` on both sides.
+pub fn forward_matches_reference_with<M: SplatMethod>(
+    label: &str,
+    params: &[M::Params],
+    cam: &Camera,
+    blend: Blend,
+) -> f64 {
+    let reference = render_with::<M>(params, cam, blend);
     for tile_size in [8, 16] {
-        let frame = render::<M>(params, cam, &options(tile_size)).expect("render");
+        let frame = render::<M>(params, cam, &options_with(tile_size, blend)).expect("render");
         let mut worst = 0.0f64;
         let outputs = [
             ("color", &frame.color.data, &reference.color),
@@ -124,11 +134,22 @@ pub fn tile_cull_is_conservative<M: SplatMethod>(
 /// 1e-4 + 1% per element, equal intersection counts (tiles 8 and 16).
 #[cfg(feature = "gpu")]
 pub fn gpu_forward_matches_cpu<M: SplatMethod>(label: &str, params: &[M::Params], cam: &Camera) {
+    gpu_forward_matches_cpu_with::<M>(label, params, cam, Blend::default());
+}
+
+/// [`gpu_forward_matches_cpu`] with the blend's thresholds `blend` on both backends.
+#[cfg(feature = "gpu")]
+pub fn gpu_forward_matches_cpu_with<M: SplatMethod>(
+    label: &str,
+    params: &[M::Params],
+    cam: &Camera,
+    blend: Blend,
+) {
     let Some(gpu) = crate::gpu::adapter_or_skip() else {
         return;
     };
     for tile_size in [8, 16] {
-        let opts = options(tile_size);
+        let opts = options_with(tile_size, blend);
         let cpu = render::<M>(params, cam, &opts).unwrap();
         let frame = crate::gpu::render::render::<M>(&gpu, params, cam, &opts).unwrap();
         assert_eq!(

@@ -228,13 +228,24 @@ pub fn invalid_pairs_leave_no_trace<M: SplatMethod>(
 /// particles: one such pair, 6e-4).
 #[cfg(feature = "gpu")]
 pub fn gpu_gradients_match_cpu<M: SplatMethod>(label: &str, params: &[M::Params], cam: &Camera) {
+    gpu_gradients_match_cpu_with::<M>(label, params, cam, Default::default());
+}
+
+/// [`gpu_gradients_match_cpu`] with the blend's thresholds `blend` on both backends.
+#[cfg(feature = "gpu")]
+pub fn gpu_gradients_match_cpu_with<M: SplatMethod>(
+    label: &str,
+    params: &[M::Params],
+    cam: &Camera,
+    blend: crate::pipeline::shade::Blend,
+) {
     let Some(gpu) = crate::gpu::adapter_or_skip() else {
         return;
     };
     let n = (cam.size.x * cam.size.y) as usize;
     let grad = frame_grad(&weights(n, <M::Color as Flat>::LEN));
     for tile_size in [8, 16] {
-        let opts = options(tile_size);
+        let opts = super::options_with(tile_size, blend);
         let (_, state) = render_for_backward::<M>(params, cam, &opts).unwrap();
         let (_, mut gstate) =
             crate::gpu::render::render_for_backward::<M>(&gpu, params, cam, &opts).unwrap();

@@ -37,6 +37,7 @@ pub mod reference;
 
 use crate::flat::Flat;
 use crate::method::SplatMethod;
+use crate::pipeline::shade::Blend;
 use crate::pipeline::{FrameGrad, RenderOptions};
 use crate::types::Camera;
 
@@ -87,10 +88,16 @@ fn channels<M: SplatMethod>() -> usize {
 
 /// Every output, at `tile_size`.
 fn options(tile_size: u32) -> RenderOptions {
+    options_with(tile_size, Blend::default())
+}
+
+/// Every output, at `tile_size`, with the blend's thresholds `blend`.
+fn options_with(tile_size: u32, blend: Blend) -> RenderOptions {
     RenderOptions {
         tile_size,
         alpha: true,
         depth: true,
+        blend,
         ..Default::default()
     }
 }

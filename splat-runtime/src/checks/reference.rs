@@ -1,12 +1,12 @@
 //! The f64 brute-force reference renderer: every visible primitive evaluated at every pixel in
 //! depth order with the f64 twins of the method's functions; no tiles, no bounding boxes, no
-//! tile culling; only the method's own thresholds and the blend's stopping rule. It shares no
-//! code with the pipeline, so agreeing with it means something.
+//! tile culling; only the method's own thresholds and the blend's rule ([`Blend`]). It shares
+//! no code with the pipeline, so agreeing with it means something.
 
 use super::{camera_words, words};
 use crate::flat::Flat;
 use crate::method::SplatMethod;
-use crate::pipeline::shade::T_MIN;
+use crate::pipeline::shade::Blend;
 use crate::types::{Camera, CameraModel};
 
 /// An f64 render: color (H x W x channels), alpha and depth (H x W), row-major.
@@ -18,10 +18,19 @@ pub struct Reference {
     pub depth: Vec<f64>,
 }
 
-/// Renders `params` with method `M` through `camera`.
+/// Renders `params` with method `M` through `camera`, with the default blend.
 pub fn render<M: SplatMethod>(params: &[M::Params], camera: &Camera) -> Reference {
+    render_with::<M>(params, camera, Blend::default())
+}
+
+/// Renders `params` with method `M` through `camera`, with the blend's thresholds `blend`.
+pub fn render_with<M: SplatMethod>(
+    params: &[M::Params],
+    camera: &Camera,
+    blend: Blend,
+) -> Reference {
     let words: Vec<Vec<f64>> = params.iter().map(words).collect();
-    render_words::<M>(&words, &camera_words(camera), camera.model)
+    render_words_with::<M>(&words, &camera_words(camera), camera.model, blend)
 }
 
 /// Renders parameters given as f64 words (`M::Params`' words per primitive) through a camera
@@ -32,6 +41,17 @@ pub fn render_words<M: SplatMethod>(
     camera: &[f64],
     model: CameraModel,
 ) -> Reference {
+    render_words_with::<M>(params, camera, model, Blend::default())
+}
+
+fn render_words_with<M: SplatMethod>(
+    params: &[Vec<f64>],
+    camera: &[f64],
+    model: CameraModel,
+    blend: Blend,
+) -> Reference {
+    // The thresholds are f32 in the renderer: compare with the same values.
+    let (t_min, alpha_min) = (blend.t_min as f64, blend.alpha_min as f64);
     let twin = &M::TWIN;
     let (cull_words, channels) = (<M::Cull as Flat>::LEN, <M::Color as Flat>::LEN);
     let (width, height) = (camera[16] as usize, camera[17] as usize);
@@ -64,11 +84,11 @@ pub fn render_words<M: SplatMethod>(
             for (depth, _, shade) in &prims {
                 let input: Vec<f64> = pixel.iter().chain(shade).copied().collect();
                 let (o, valid) = (twin.evaluate)(&input, &[]);
-                if valid[0] == 0 {
+                if valid[0] == 0 || o[0] < alpha_min {
                     continue;
                 }
                 let next = t * (1.0 - o[0]);
-                if next <= T_MIN as f64 {
+                if next <= t_min {
                     break;
                 }
                 for (ch, v) in c.iter_mut().zip(&o[1..]) {

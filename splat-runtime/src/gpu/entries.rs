@@ -10,6 +10,7 @@ use super::kernel::{self, load};
 use super::{Gpu, GpuError};
 use crate::flat::Flat;
 use crate::method::{SplatMethod, WgslFunction};
+use crate::pipeline::shade::Blend;
 use crate::types::Camera;
 
 const TILES: &str = include_str!("shaders/tiles.wgsl");
@@ -157,7 +158,7 @@ impl Accumulation {
 }
 
 /// Workgroup sizes and batch sizes of a blend pass.
-struct Blend {
+struct BlendSizes {
     wg: u32,
     batch: u32,
     /// Gradient words reduced per round (backward with reduction only).
@@ -169,7 +170,7 @@ fn blend_sizes(
     tile: u32,
     layout: &Layout,
     workgroup_reduce: bool,
-) -> Result<Blend, GpuError> {
+) -> Result<BlendSizes, GpuError> {
     let wg = tile * tile;
     let mut budget = gpu.workgroup_storage().saturating_sub(RESERVED_BYTES);
     let rc = if workgroup_reduce {
@@ -190,7 +191,7 @@ fn blend_sizes(
             gpu.workgroup_storage()
         )));
     }
-    Ok(Blend { wg, batch, rc })
+    Ok(BlendSizes { wg, batch, rc })
 }
 
 /// The pixel data: its binding (camera words, only with `pixel_info`), the code computing it
@@ -230,7 +231,7 @@ fn evaluate_call<M: SplatMethod>(
     Ok((format!("{}({})", eval.name, args.join(", ")), eval))
 }
 
-fn tile_pass(layout: &Layout, tile: u32, b: &Blend) -> String {
+fn tile_pass(layout: &Layout, tile: u32, b: &BlendSizes, rule: Blend) -> String {
     fill(
         TILE_PASS,
         &[
@@ -241,7 +242,8 @@ fn tile_pass(layout: &Layout, tile: u32, b: &Blend) -> String {
             ("STRIDE", layout.stride.to_string()),
             ("SHADE_AT", layout.shade_at.to_string()),
             ("CHANNELS", layout.channels.to_string()),
-            ("T_MIN", format!("{:?}", crate::pipeline::shade::T_MIN)),
+            ("T_MIN", format!("{:?}", rule.t_min)),
+            ("ALPHA_MIN", format!("{:?}", rule.alpha_min)),
             (
                 "BATCH_WORDS",
                 (b.batch as usize * layout.shade_words.max(1)).to_string(),
@@ -251,7 +253,12 @@ fn tile_pass(layout: &Layout, tile: u32, b: &Blend) -> String {
 }
 
 /// `shade_tiles`: the forward blend, one workgroup per tile of `tile` x `tile` pixels.
-pub fn shade<M: SplatMethod>(gpu: &Gpu, tile: u32, want_depth: bool) -> Result<String, GpuError> {
+pub fn shade<M: SplatMethod>(
+    gpu: &Gpu,
+    tile: u32,
+    want_depth: bool,
+    rule: Blend,
+) -> Result<String, GpuError> {
     let wgsl = M::SOURCE.wgsl;
     let layout = Layout::of::<M>();
     let b = blend_sizes(gpu, tile, &layout, false)?;
@@ -284,7 +291,10 @@ pub fn shade<M: SplatMethod>(gpu: &Gpu, tile: u32, want_depth: bool) -> Result<S
             ("DEPTH", depth.into()),
         ],
     );
-    Ok(format!("{wgsl}\n{}\n{body}", tile_pass(&layout, tile, &b)))
+    Ok(format!(
+        "{wgsl}\n{}\n{body}",
+        tile_pass(&layout, tile, &b, rule)
+    ))
 }
 
 /// `backward_tiles`: the backward blend with the gradient accumulation `acc`.
@@ -293,6 +303,7 @@ pub fn backward<M: SplatMethod>(
     tile: u32,
     want_depth: bool,
     acc: Accumulation,
+    rule: Blend,
 ) -> Result<String, GpuError> {
     let wgsl = M::SOURCE.wgsl;
     let layout = Layout::of::<M>();
@@ -475,7 +486,10 @@ pub fn backward<M: SplatMethod>(
             ("SCATTER", scatter.into()),
         ],
     );
-    Ok(format!("{wgsl}\n{}\n{body}", tile_pass(&layout, tile, &b)))
+    Ok(format!(
+        "{wgsl}\n{}\n{body}",
+        tile_pass(&layout, tile, &b, rule)
+    ))
 }
 
 /// `project_backward`: `project`'s adjoint per primitive, camera gradients per workgroup; and

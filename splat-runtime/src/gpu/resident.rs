@@ -223,7 +223,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             count: gpu.kernel(&entries::tiles::<M>(false, opts.tile_cull)?, "count_tiles")?,
             emit: gpu.kernel(&entries::tiles::<M>(true, opts.tile_cull)?, "emit_tiles")?,
             shade: gpu.kernel(
-                &entries::shade::<M>(gpu, opts.tile_size, depth_sums)?,
+                &entries::shade::<M>(gpu, opts.tile_size, depth_sums, opts.blend)?,
                 "shade_tiles",
             )?,
             project_backward: gpu.kernel(&source, "project_backward")?,
@@ -611,7 +611,8 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         if let Some(p) = self.blends.get(&(want_depth, acc)) {
             return Ok(p.clone());
         }
-        let source = entries::backward::<M>(gpu, self.opts.tile_size, want_depth, acc)?;
+        let source =
+            entries::backward::<M>(gpu, self.opts.tile_size, want_depth, acc, self.opts.blend)?;
         let k = gpu.kernel(&source, "backward_tiles")?;
         self.blends.insert((want_depth, acc), k.clone());
         Ok(k)

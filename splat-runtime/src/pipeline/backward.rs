@@ -153,7 +153,7 @@ fn backward_tile_body<M: SplatMethod>(
                     continue;
                 }
                 let c = M::evaluate_lanes(&pixels, &p.shade);
-                let st = step(c.alpha, c.valid, done, t);
+                let st = step(c.alpha, c.valid, done, t, state.blend);
                 done = done | st.stop;
                 if !st.take.any() {
                     continue;

@@ -28,7 +28,7 @@ use std::time::{Duration, Instant};
 /// Largest accepted image side, in pixels.
 pub const MAX_SIDE: u32 = 16384;
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RenderOptions {
     /// Tile side in pixels: 8, 16, 32 or 64.
     pub tile_size: u32,
@@ -41,6 +41,8 @@ pub struct RenderOptions {
     /// Apply the method's `tile_cull` (false keeps every tile of each bounding box: what the
     /// cull saves, and a check that it only drops pairs the alpha threshold would skip).
     pub tile_cull: bool,
+    /// The blend's thresholds (transmittance stop, alpha skip).
+    pub blend: shade::Blend,
 }
 
 impl Default for RenderOptions {
@@ -51,6 +53,7 @@ impl Default for RenderOptions {
             alpha: false,
             depth: false,
             tile_cull: true,
+            blend: shade::Blend::default(),
         }
     }
 }
@@ -65,6 +68,8 @@ pub enum RenderError {
     TileSize(u32),
     #[error("P_max 0 would blend nothing: give at least 1, or none for whole lists")]
     PMax,
+    #[error("blend thresholds {0:?} are not supported: t_min and alpha_min must be in [0, 1)")]
+    Blend(shade::Blend),
     #[error("camera {0} must be finite and positive")]
     Camera(&'static str),
     #[error(
@@ -124,6 +129,7 @@ pub struct ForwardState<M: SplatMethod> {
     pub pre: Preprocessed<M>,
     pub lists: TileLists,
     pub p_max: Option<usize>,
+    pub blend: shade::Blend,
     /// Final transmittance, color and sum of weight * depth per pixel.
     pub transmittance: Vec<f32>,
     pub color: Vec<f32>,
@@ -171,6 +177,10 @@ pub(crate) fn check<M: SplatMethod>(
     }
     if opts.p_max == Some(0) {
         return Err(RenderError::PMax);
+    }
+    let fraction = |v: f32| (0.0..1.0).contains(&v);
+    if !(fraction(opts.blend.t_min) && fraction(opts.blend.alpha_min)) {
+        return Err(RenderError::Blend(opts.blend));
     }
     let size = camera.size;
     let ok = |v: f32| v.is_finite() && v >= 1.0 && v <= MAX_SIDE as f32 && v.fract() == 0.0;
@@ -255,6 +265,7 @@ fn forward<M: SplatMethod>(
                     capped(t as usize),
                     &pre.projected,
                     want_depth,
+                    opts.blend,
                 ),
             )
         })
@@ -293,6 +304,7 @@ fn forward<M: SplatMethod>(
         pre,
         lists,
         p_max: opts.p_max,
+        blend: opts.blend,
         transmittance,
         color: color.clone(),
         depth_acc,

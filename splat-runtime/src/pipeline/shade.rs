@@ -2,8 +2,8 @@
 //!
 //! A group is eight consecutive pixels of one row of the tile; each lane carries its own
 //! transmittance and stops on its own (a lane is done once the next primitive would bring its
-//! transmittance to `T_MIN` or below, the gsplat rule). The loop leaves a group when every lane
-//! is done. `P_max` caps how many entries of a tile's list are visited.
+//! transmittance to [`Blend::t_min`] or below, the gsplat rule). The loop leaves a group when
+//! every lane is done. `P_max` caps how many entries of a tile's list are visited.
 
 use super::grid::TileGrid;
 use crate::flat::Flat;
@@ -12,8 +12,29 @@ use crate::method::SplatMethod;
 use crate::types::{Camera, Projected};
 use glam::Vec2;
 
-/// Blending stops once transmittance would fall to this value.
+/// Blending stops once transmittance would fall to this value (gsplat's and 3DGS's).
 pub const T_MIN: f32 = 1e-4;
+
+/// The blend's two thresholds, shared by the forward pass, the backward pass (which replays
+/// it) and both backends. Raising either trades accuracy for time.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Blend {
+    /// A pixel stops before the primitive that would bring its transmittance to this or below.
+    pub t_min: f32,
+    /// Pairs whose alpha is below this are skipped, on top of the method's own `valid`
+    /// (1/255 for the built-in methods): only a value above the method's threshold changes
+    /// anything, since a primitive's box only holds the pixels the method keeps.
+    pub alpha_min: f32,
+}
+
+impl Default for Blend {
+    fn default() -> Self {
+        Blend {
+            t_min: T_MIN,
+            alpha_min: 0.0,
+        }
+    }
+}
 
 /// What one tile's blend produced, in the tile's pixel order (row-major over the full tile,
 /// including pixels past the image edge, which stay zero).
@@ -67,10 +88,10 @@ pub struct Step {
 
 /// The blend rule shared by the forward and the backward pass (which must replay it exactly).
 #[inline(always)]
-pub fn step(alpha: F32x8, valid: M32x8, done: M32x8, t: F32x8) -> Step {
-    let live = valid & !done;
+pub fn step(alpha: F32x8, valid: M32x8, done: M32x8, t: F32x8, blend: Blend) -> Step {
+    let live = valid & alpha.ge(F32x8::splat(blend.alpha_min)) & !done;
     let next = t * (1.0 - alpha);
-    let stop = live & next.le(F32x8::splat(T_MIN));
+    let stop = live & next.le(F32x8::splat(blend.t_min));
     let take = live & !stop;
     Step {
         alpha,
@@ -98,13 +119,16 @@ pub fn shade_tile<M: SplatMethod>(
     list: &[u32],
     projected: &[Projected<M::Cull, M::Shade>],
     want_depth: bool,
+    blend: Blend,
 ) -> TileOutput {
     #[cfg(target_arch = "x86_64")]
     if crate::lanes::has_avx2() {
         // SAFETY: the CPU supports the features the function is compiled for.
-        return unsafe { shade_tile_avx2::<M>(grid, camera, tile, list, projected, want_depth) };
+        return unsafe {
+            shade_tile_avx2::<M>(grid, camera, tile, list, projected, want_depth, blend)
+        };
     }
-    shade_tile_body::<M>(grid, camera, tile, list, projected, want_depth)
+    shade_tile_body::<M>(grid, camera, tile, list, projected, want_depth, blend)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -116,8 +140,9 @@ fn shade_tile_avx2<M: SplatMethod>(
     list: &[u32],
     projected: &[Projected<M::Cull, M::Shade>],
     want_depth: bool,
+    blend: Blend,
 ) -> TileOutput {
-    shade_tile_body::<M>(grid, camera, tile, list, projected, want_depth)
+    shade_tile_body::<M>(grid, camera, tile, list, projected, want_depth, blend)
 }
 
 #[inline(always)]
@@ -128,6 +153,7 @@ fn shade_tile_body<M: SplatMethod>(
     list: &[u32],
     projected: &[Projected<M::Cull, M::Shade>],
     want_depth: bool,
+    blend: Blend,
 ) -> TileOutput {
     let s = grid.size as usize;
     let channels = M::Color::LEN;
@@ -156,7 +182,7 @@ fn shade_tile_body<M: SplatMethod>(
                 }
                 let c = M::evaluate_lanes(&pixels, &p.shade);
                 out.pairs += (!done).count() as u64;
-                let st = step(c.alpha, c.valid, done, t);
+                let st = step(c.alpha, c.valid, done, t, blend);
                 let w = st.weight;
                 for (acc, ch) in color.as_mut().iter_mut().zip(c.color.as_ref()) {
                     *acc = *acc + w * *ch;

@@ -70,7 +70,7 @@ fn backward_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
             if (!done) {
                 let s = j * NS;
                 let r = {{EVALUATE}};
-                if (r.{{VALID}} != 0u) {
+                if (r.{{VALID}} != 0u && r.{{ALPHA}} >= ALPHA_MIN) {
                     let alpha = r.{{ALPHA}};
                     let next = t * (1.0 - alpha);
                     if (next <= T_MIN) {

@@ -25,7 +25,7 @@ fn shade_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_
         for (var j = 0u; j < m && !done; j++) {
             let s = j * NS;
             let r = {{EVALUATE}};
-            if (r.{{VALID}} == 0u) {
+            if (r.{{VALID}} == 0u || r.{{ALPHA}} < ALPHA_MIN) {
                 continue;
             }
             let next = t * (1.0 - r.{{ALPHA}});

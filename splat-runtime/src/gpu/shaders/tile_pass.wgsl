@@ -9,8 +9,10 @@ const NS: u32 = {{NS}}u; // shade words per primitive
 const STRIDE: u32 = {{STRIDE}}u; // projected words per primitive
 const SHADE_AT: u32 = {{SHADE_AT}}u;
 const CHANNELS: u32 = {{CHANNELS}}u;
-// Blending stops once transmittance would fall to this (the CPU's `shade::T_MIN`).
+// The blend's thresholds (the CPU's `shade::Blend`): stop once transmittance would fall to
+// T_MIN; skip pairs whose alpha is below ALPHA_MIN.
 const T_MIN: f32 = {{T_MIN}};
+const ALPHA_MIN: f32 = {{ALPHA_MIN}};
 
 @group(0) @binding(0) var<storage, read> projected: array<u32>;
 @group(0) @binding(1) var<storage, read> tile_prims: array<u32>;
