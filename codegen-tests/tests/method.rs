@@ -131,3 +131,20 @@ fn method_reports_its_shape() {
 fn generated_rust_snapshot() {
     insta::assert_snapshot!(isotropic::GENERATED_RUST);
 }
+
+/// The parameter groups are the fields of `Params`, named and sized as declared.
+#[test]
+fn param_groups_are_the_declared_fields() {
+    let groups = splat_runtime::param_groups::<Method>();
+    let want = [
+        ("mean", 0..3),
+        ("log_radius", 3..4),
+        ("color", 4..7),
+        ("opacity_logit", 7..8),
+    ];
+    let got: Vec<(&str, std::ops::Range<usize>)> = groups
+        .iter()
+        .map(|(n, r)| (n.as_str(), r.clone()))
+        .collect();
+    assert_eq!(got, want);
+}

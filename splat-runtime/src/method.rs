@@ -149,3 +149,45 @@ pub trait SplatMethod: Send + Sync + 'static {
     /// The parameter cotangent whose float slots are `sums` (what the GPU backward returns).
     fn params_from_float_slots(sums: &[f32]) -> Self::Params;
 }
+
+/// The fields of `M::Params` as word ranges, named as the method declared them (`mean`,
+/// `log_scale`, `sh`, ...): read from the generated `project_adjoint`, whose first results are
+/// the parameters' cotangent words (`d_p_mean_x`, `d_p_sh_3_z`, ...). Where the names do not
+/// give one word per parameter word, the whole of `Params` is one group, `params`.
+pub fn param_groups<M: SplatMethod>() -> Vec<(String, std::ops::Range<usize>)> {
+    let len = <M::Params as crate::Flat>::LEN;
+    let whole = vec![("params".to_string(), 0..len)];
+    let Some(adjoint) = M::SOURCE.function("project_adjoint") else {
+        return whole;
+    };
+    // The cotangent of the first argument: `d_<name>_<field>[_<index or component>...]`.
+    let Some(arg) = adjoint
+        .results
+        .first()
+        .and_then(|(n, _)| n.split('_').nth(1))
+    else {
+        return whole;
+    };
+    let prefix = format!("d_{arg}_");
+    let fields: Vec<&str> = adjoint
+        .results
+        .iter()
+        .map_while(|(n, _)| n.strip_prefix(&prefix))
+        .collect();
+    if fields.len() != len {
+        return whole;
+    }
+    let component = |s: &str| matches!(s, "x" | "y" | "z" | "w") || s.parse::<u32>().is_ok();
+    let mut groups: Vec<(String, std::ops::Range<usize>)> = vec![];
+    for (i, word) in fields.iter().enumerate() {
+        let mut name = *word;
+        while let Some((head, _)) = name.rsplit_once('_').filter(|(_, l)| component(l)) {
+            name = head;
+        }
+        match groups.last_mut() {
+            Some((last, range)) if last == name => range.end = i + 1,
+            _ => groups.push((name.to_string(), i..i + 1)),
+        }
+    }
+    groups
+}

@@ -1,5 +1,5 @@
 //! The `splat` command line as a library: a user crate offers its own methods with the same
-//! commands (render, bench, fit, inspect, gallery, scene) in a few lines:
+//! commands (render, bench, tradeoff, fit, inspect, gallery, scene) in a few lines:
 //!
 //! ```no_run
 //! use splat_cli::{Instance, Method};
@@ -21,6 +21,7 @@ mod methods;
 mod plot;
 mod render;
 mod scene;
+mod tradeoff;
 
 pub use methods::{Instance, Method};
 
@@ -85,6 +86,10 @@ enum Command {
     /// Time forward and forward + backward frames on one scene (GPU: the device-resident
     /// pipeline; CPU: per thread count), with per-stage medians.
     Bench(bench::BenchArgs),
+    /// What each accuracy knob (P_max, tile size, the transmittance stop, the alpha skip)
+    /// costs in time and memory and changes in the image and the gradients, against the
+    /// most accurate render: a table, CSVs and a plot.
+    Tradeoff(tradeoff::TradeoffArgs),
     /// Train a Gaussian method on posed images (Blender, nerfstudio or COLMAP), on the GPU or
     /// the CPU.
     Fit(fit::FitArgs),
@@ -162,7 +167,7 @@ where
         .collect();
     // The methods are known only now: every `--method` lists them and defaults to the first.
     let mut command = Cli::command();
-    for sub in ["render", "bench", "fit", "inspect"] {
+    for sub in ["render", "bench", "tradeoff", "fit", "inspect"] {
         command = command.mut_subcommand(sub, |s| {
             s.mut_arg("method", |a| {
                 a.value_parser(clap::builder::PossibleValuesParser::new(names.clone()))
@@ -180,6 +185,7 @@ fn dispatch(cli: Cli, methods: &[Method]) -> Result<()> {
         Command::Render(args) => render::render_cmd(&args, methods),
         Command::Fit(args) => fit::fit_cmd(&args, methods),
         Command::Bench(args) => bench::bench_cmd(&args, methods),
+        Command::Tradeoff(args) => tradeoff::tradeoff_cmd(&args, methods),
         Command::Scene { out, camera_out } => {
             ply::write(&out, &scene::planet())
                 .with_context(|| format!("writing {}", out.display()))?;

@@ -5,6 +5,7 @@
 use crate::bench::Bench;
 use crate::fit::Fit;
 use crate::render::Render;
+use crate::tradeoff::Tradeoff;
 use anyhow::{Result, bail};
 use splat_runtime::io::ply::{FromStored, ToStored};
 use splat_runtime::train::Trainable;
@@ -27,6 +28,7 @@ pub struct Instance {
     pub(crate) generic_camera: bool,
     pub(crate) render: fn(&Render) -> Result<(Frame, String)>,
     pub(crate) bench: fn(&Bench) -> Result<()>,
+    pub(crate) tradeoff: fn(&Tradeoff) -> Result<()>,
     pub(crate) fit: Option<fn(&Fit) -> Result<()>>,
 }
 
@@ -41,6 +43,7 @@ impl Instance {
             generic_camera: M::GENERIC_CAMERA,
             render: |r| r.run::<M>(),
             bench: |b| b.run::<M>(),
+            tradeoff: |t| t.run::<M>(),
             fit: None,
         }
     }

@@ -918,3 +918,97 @@ fn the_depth_png_records_its_mapping() {
     assert!(text.contains("tEXtDescription"), "no text chunk");
     assert!(text.contains("(nearest)") && text.contains("0 = nothing hit"));
 }
+
+/// The rows of a CSV file after its header, as fields.
+fn csv_rows(path: &Path) -> Vec<Vec<String>> {
+    let text = std::fs::read_to_string(path).unwrap();
+    text.lines()
+        .skip(1)
+        .map(|l| l.split(',').map(str::to_owned).collect())
+        .collect()
+}
+
+/// `splat tradeoff` end to end on a small view: every knob and setting in the CSV, gradient
+/// errors per parameter group and magnitude range, a plot; what the errors must be where the
+/// answer is known (a tile size never changes the image; t_min 0 is the reference itself; a
+/// short P_max list loses most of the picture); on the GPU the same sweep.
+#[test]
+fn tradeoff_sweeps_every_knob_and_writes_its_table_and_plot() {
+    let dir = temp();
+    let size = ["--width", "64", "--height", "48", "--iters", "1"];
+    let args = [&["tradeoff", "--backend", "cpu", "--out", "cpu"][..], &size].concat();
+    let stdout = ok(&splat(&args, dir.path()));
+    assert!(stdout.contains("| knob | setting |"), "{stdout}");
+    let rows = csv_rows(&dir.path().join("cpu/tradeoff.csv"));
+    let settings: Vec<(&str, &str)> = rows.iter().map(|r| (&*r[0], &*r[1])).collect();
+    let want = [
+        ("p_max", "512"),
+        ("p_max", "128"),
+        ("p_max", "32"),
+        ("p_max", "8"),
+        ("tile", "8"),
+        ("tile", "32"),
+        ("tile", "64"),
+        ("t_min", "0"),
+        ("t_min", "1e-3"),
+        ("t_min", "1e-2"),
+        ("t_min", "1e-1"),
+        ("alpha_min", "2/255"),
+        ("alpha_min", "8/255"),
+        ("alpha_min", "32/255"),
+    ];
+    assert_eq!(settings[0].0, "default");
+    assert_eq!(settings[1..], want);
+    let field = |knob: &str, value: &str, column: usize| -> f64 {
+        let row = rows
+            .iter()
+            .find(|r| r[0] == knob && (r[1] == value || knob == "default"));
+        row.unwrap()[column].parse().unwrap()
+    };
+    let (psnr, gradient) = (6, 8);
+    for tile in ["8", "32", "64"] {
+        assert_eq!(field("tile", tile, psnr), field("default", "", psnr));
+    }
+    assert_eq!(field("t_min", "0", psnr), f64::INFINITY);
+    assert_eq!(field("t_min", "0", gradient), 0.0);
+    assert!(field("default", "", psnr) > 60.0);
+    assert!(field("p_max", "8", psnr) < field("p_max", "512", psnr));
+    assert!(field("p_max", "8", gradient) > field("default", "", gradient));
+
+    let detail = csv_rows(&dir.path().join("cpu/gradients.csv"));
+    let groups: Vec<&str> = detail
+        .iter()
+        .filter(|r| r[0] == "default")
+        .map(|r| &*r[2])
+        .collect();
+    for g in ["mean", "log_scale", "rotation", "opacity_logit", "sh"] {
+        assert_eq!(
+            groups.iter().filter(|n| **n == g).count(),
+            3,
+            "{g}: {groups:?}"
+        );
+    }
+    assert_eq!(detail.len(), 15 * 5 * 3);
+    let plot = image::open(dir.path().join("cpu/tradeoff.png")).unwrap();
+    assert_eq!((plot.width(), plot.height()), (1400, 560));
+
+    let args = [&["tradeoff", "--backend", "gpu", "--out", "gpu"][..], &size].concat();
+    let out = splat(&args, dir.path());
+    if !out.status.success() {
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(stderr.contains("no GPU adapter"), "{stderr}");
+        assert!(std::env::var("SPLAT_REQUIRE_GPU").map_or(true, |v| v != "1"));
+        return;
+    }
+    // The GPU renders tiles of 8 and 16 only.
+    let gpu = csv_rows(&dir.path().join("gpu/tradeoff.csv"));
+    assert_eq!(gpu.len(), rows.len() - 2);
+    let tile = gpu.iter().find(|r| r[0] == "tile").unwrap();
+    assert_eq!(tile[1], "8");
+    assert!(tile[psnr].parse::<f64>().unwrap() > 60.0, "{tile:?}");
+    fails(
+        &splat(&["tradeoff", "--iters", "0", "--out", "never"], dir.path()),
+        "--iters must be at least 1",
+        &dir.path().join("never"),
+    );
+}

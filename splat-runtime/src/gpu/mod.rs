@@ -24,6 +24,9 @@ pub mod train;
 pub use device::Gpu;
 pub use resident::{GpuRenderError, GpuRenderer, GpuScene};
 
+/// The tile sizes the GPU backend renders with: one invocation per pixel of a tile.
+pub const TILE_SIZES: [u32; 2] = [8, 16];
+
 /// The adapter for tests and tools that can do without one: `None` (with a line on stderr)
 /// when there is none, unless `SPLAT_REQUIRE_GPU=1` (set by CI), which makes that a panic.
 pub fn adapter_or_skip() -> Option<Gpu> {
@@ -57,6 +60,6 @@ pub enum GpuError {
         bytes: u64,
         limit: u64,
     },
-    #[error("the GPU backend supports tile sizes 8 and 16 (one invocation per pixel), not {0}")]
+    #[error("the GPU backend supports tile sizes {TILE_SIZES:?} (one invocation per pixel), not {0}")]
     TileSize(u32),
 }

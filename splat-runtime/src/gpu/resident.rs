@@ -197,7 +197,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
     }
 
     fn build(gpu: &'g Gpu, opts: &RenderOptions, depth_sums: bool) -> Result<Self, GpuRenderError> {
-        if ![8, 16].contains(&opts.tile_size) {
+        if !super::TILE_SIZES.contains(&opts.tile_size) {
             return Err(GpuError::TileSize(opts.tile_size).into());
         }
         let layout = Layout::of::<M>();

@@ -28,6 +28,9 @@ use std::time::{Duration, Instant};
 /// Largest accepted image side, in pixels.
 pub const MAX_SIDE: u32 = 16384;
 
+/// The tile sizes the CPU pipeline renders with.
+pub const TILE_SIZES: [u32; 4] = [8, 16, 32, 64];
+
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RenderOptions {
     /// Tile side in pixels: 8, 16, 32 or 64.
@@ -142,6 +145,21 @@ impl<M: SplatMethod> ForwardState<M> {
         let list = self.lists.list(tile);
         &list[..self.p_max.map_or(list.len(), |p| p.min(list.len()))]
     }
+
+    /// Bytes held for the backward pass: the projected primitives, the visible set, the tile
+    /// lists and the per-pixel state.
+    pub fn bytes(&self) -> usize {
+        fn held<T>(v: &Vec<T>) -> usize {
+            v.capacity() * std::mem::size_of::<T>()
+        }
+        held(&self.pre.projected)
+            + held(&self.pre.visible)
+            + held(&self.lists.prims)
+            + held(&self.lists.ranges)
+            + held(&self.transmittance)
+            + held(&self.color)
+            + held(&self.depth_acc)
+    }
 }
 
 /// Per-primitive gradients and the camera's.
@@ -172,7 +190,7 @@ pub(crate) fn check<M: SplatMethod>(
             model: camera.model,
         });
     }
-    if ![8, 16, 32, 64].contains(&opts.tile_size) {
+    if !TILE_SIZES.contains(&opts.tile_size) {
         return Err(RenderError::TileSize(opts.tile_size));
     }
     if opts.p_max == Some(0) {

@@ -1,0 +1,595 @@
+//! `splat tradeoff`: what each accuracy knob of the renderer costs in time and memory and what
+//! it buys in image and gradient accuracy, on one scene, camera and backend.
+//!
+//! Each knob is swept alone from the defaults. The reference is the f32 render with every
+//! knob at its most accurate ([`reference_options`]); the f64 brute-force renderer would take
+//! minutes on a real scene. Gradients are those of one fixed random linear loss on the color
+//! (uniform in [-0.5, 0.5) per channel, as `splat bench`), compared per parameter group.
+
+use crate::Backend;
+use crate::methods::{self, Method};
+use crate::plot;
+use anyhow::{Context, Result, bail};
+use plotters::prelude::*;
+use splat_runtime::gpu::entries::Accumulation;
+use splat_runtime::gpu::{Gpu, GpuRenderer, GpuScene};
+use splat_runtime::io::ply::FromStored;
+use splat_runtime::io::{camera as camera_io, ply, write_atomic};
+use splat_runtime::pipeline::shade::Blend;
+use splat_runtime::{Camera, FrameGrad, RenderOptions, SplatMethod, param_groups};
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+#[derive(clap::Args)]
+pub struct TradeoffArgs {
+    /// INRIA 3DGS PLY scene (default: the built-in one).
+    #[arg(long)]
+    scene: Option<PathBuf>,
+    /// Camera JSON (default: the built-in pinhole view at --width x --height).
+    #[arg(long)]
+    camera: Option<PathBuf>,
+    #[arg(long)]
+    method: String,
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    backend: Backend,
+    /// Timed frames per setting and pass (after one warm-up frame); the median is reported.
+    #[arg(long, default_value_t = 5)]
+    iters: usize,
+    /// Output folder: tradeoff.csv (one row per setting), gradients.csv (per parameter group
+    /// and magnitude range) and tradeoff.png (time against error, with the Pareto front).
+    #[arg(long, default_value = "tradeoff")]
+    out: PathBuf,
+    #[arg(long, default_value_t = 800)]
+    width: u32,
+    #[arg(long, default_value_t = 600)]
+    height: u32,
+}
+
+/// One point of the sweep: a knob, its setting as the table and the CSV name it, the options.
+pub(crate) struct Setting {
+    pub knob: &'static str,
+    pub value: String,
+    pub opts: RenderOptions,
+}
+
+/// The defaults, then each knob alone at its other settings (the tile sizes the backend has).
+pub(crate) fn sweep(tile_sizes: &[u32]) -> Vec<Setting> {
+    let base = RenderOptions::default();
+    let mut out = vec![Setting {
+        knob: "default",
+        value: format!(
+            "p_max=none tile={} t_min={:e} alpha_min={}",
+            base.tile_size, base.blend.t_min, base.blend.alpha_min
+        ),
+        opts: base,
+    }];
+    let mut add = |knob, value: String, opts| out.push(Setting { knob, value, opts });
+    for p in [512, 128, 32, 8] {
+        let opts = RenderOptions {
+            p_max: Some(p),
+            ..base
+        };
+        add("p_max", p.to_string(), opts);
+    }
+    for &tile_size in tile_sizes.iter().filter(|&&t| t != base.tile_size) {
+        let opts = RenderOptions { tile_size, ..base };
+        add("tile", tile_size.to_string(), opts);
+    }
+    let blend = |t_min, alpha_min| RenderOptions {
+        blend: Blend { t_min, alpha_min },
+        ..base
+    };
+    add("t_min", "0".into(), blend(0.0, 0.0));
+    for t in [1e-3, 1e-2, 1e-1] {
+        add("t_min", format!("{t:e}"), blend(t, 0.0));
+    }
+    for a in [2, 8, 32] {
+        add(
+            "alpha_min",
+            format!("{a}/255"),
+            blend(base.blend.t_min, a as f32 / 255.0),
+        );
+    }
+    out
+}
+
+/// Every knob at its most accurate: whole lists, no transmittance stop, no alpha skip beyond
+/// the method's own threshold.
+pub(crate) fn reference_options() -> RenderOptions {
+    RenderOptions {
+        p_max: None,
+        blend: Blend {
+            t_min: 0.0,
+            alpha_min: 0.0,
+        },
+        ..RenderOptions::default()
+    }
+}
+
+/// Gradient magnitude ranges, relative to the group's largest reference gradient (seed 001's
+/// Table IV uses absolute ranges; relative ones do not depend on the loss's scale).
+const RANGES: [(f64, f64, &str); 3] = [
+    (0.1, f64::INFINITY, "[0.1, 1]"),
+    (1e-3, 0.1, "[1e-3, 0.1)"),
+    (1e-5, 1e-3, "[1e-5, 1e-3)"),
+];
+
+pub fn tradeoff_cmd(args: &TradeoffArgs, methods: &[Method]) -> Result<()> {
+    let method = methods::find(methods, &args.method)?;
+    if args.iters == 0 {
+        bail!("--iters must be at least 1");
+    }
+    let cloud = match &args.scene {
+        Some(path) => ply::read(path)?,
+        None => crate::scene::planet(),
+    };
+    let camera = match &args.camera {
+        Some(path) => camera_io::read(path)?,
+        None => crate::scene::camera(args.width, args.height, Default::default()),
+    };
+    methods::check_camera(method, methods, camera.model)?;
+    let gpu = crate::pick_gpu(args.backend)?;
+    let task = Tradeoff {
+        args,
+        method: method.name,
+        cloud: &cloud,
+        camera: &camera,
+        gpu: gpu.as_ref(),
+    };
+    (method.for_degree(cloud.sh_degree).tradeoff)(&task)
+}
+
+pub struct Tradeoff<'a> {
+    args: &'a TradeoffArgs,
+    method: &'a str,
+    cloud: &'a ply::GaussianCloud,
+    camera: &'a Camera,
+    gpu: Option<&'a Gpu>,
+}
+
+/// What one setting's frames gave.
+struct Measured<M: SplatMethod> {
+    forward: Duration,
+    backward: Duration,
+    /// Bytes the frame holds (CPU: kept for the backward pass; GPU: allocated on the device).
+    bytes: usize,
+    intersections: usize,
+    color: Vec<f32>,
+    params: Vec<M::Params>,
+}
+
+/// A setting's errors against the reference.
+struct Row {
+    knob: &'static str,
+    value: String,
+    forward_ms: f64,
+    backward_ms: f64,
+    mib: f64,
+    intersections: usize,
+    psnr: f64,
+    max_abs: f64,
+    /// Per parameter group: RMSE relative to the reference's RMS, and the mean relative error
+    /// per magnitude range (None where the range holds no word).
+    groups: Vec<(String, f64, Vec<Option<f64>>)>,
+}
+
+impl Row {
+    /// The worst group's relative RMSE.
+    fn gradient_error(&self) -> f64 {
+        self.groups.iter().map(|g| g.1).fold(0.0, f64::max)
+    }
+}
+
+impl Tradeoff<'_> {
+    pub(crate) fn run<M: SplatMethod>(&self) -> Result<()>
+    where
+        M::Params: FromStored,
+    {
+        let params: Vec<M::Params> = self.cloud.params();
+        let (w, h) = (self.camera.size.x as usize, self.camera.size.y as usize);
+        let mut rng = fastrand::Rng::with_seed(1);
+        let channels = <M::Color as splat_runtime::Flat>::LEN;
+        let grad = FrameGrad {
+            color: (0..w * h * channels).map(|_| rng.f32() - 0.5).collect(),
+            alpha: None,
+            depth: None,
+        };
+        let backend = match self.gpu {
+            Some(gpu) => format!("GPU, {}", gpu.adapter),
+            None => format!(
+                "CPU, {} threads",
+                std::thread::available_parallelism().map_or(1, |n| n.get())
+            ),
+        };
+        println!(
+            "{}: {} primitives (SH degree {}), {w}x{h} {} camera, {backend}, median of {} frames",
+            self.method,
+            params.len(),
+            self.cloud.sh_degree,
+            self.camera.model,
+            self.args.iters
+        );
+        let scene = match self.gpu {
+            Some(gpu) => Some(GpuScene::<M>::new(gpu, &params)?),
+            None => None,
+        };
+        let measure = |opts: &RenderOptions| -> Result<Measured<M>> {
+            match (self.gpu, &scene) {
+                (Some(gpu), Some(scene)) => self.on_gpu(gpu, scene, opts, &grad),
+                _ => self.on_cpu(&params, opts, &grad),
+            }
+        };
+        println!("reference: the f32 render with no P_max, t_min 0 and no extra alpha skip");
+        let reference = measure(&reference_options())?;
+        let groups = param_groups::<M>();
+        let settings = match self.gpu {
+            Some(_) => sweep(&splat_runtime::gpu::TILE_SIZES),
+            None => sweep(&splat_runtime::pipeline::TILE_SIZES),
+        };
+        let bar = indicatif::ProgressBar::new(settings.len() as u64);
+        let mut rows = vec![];
+        for s in &settings {
+            bar.set_message(format!("{} {}", s.knob, s.value));
+            let m = measure(&s.opts).with_context(|| format!("{} {}", s.knob, s.value))?;
+            rows.push(compare::<M>(s, &m, &reference, &groups));
+            bar.inc(1);
+        }
+        bar.finish_and_clear();
+        print_table(&rows);
+        self.write_outputs(&rows)
+    }
+
+    fn on_cpu<M: SplatMethod>(
+        &self,
+        params: &[M::Params],
+        opts: &RenderOptions,
+        grad: &FrameGrad,
+    ) -> Result<Measured<M>> {
+        let camera = self.camera;
+        let forward = median(self.args.iters, || {
+            let t = Instant::now();
+            splat_runtime::render::<M>(params, camera, opts)?;
+            Ok(t.elapsed())
+        })?;
+        let (frame, state) = splat_runtime::render_for_backward::<M>(params, camera, opts)?;
+        let backward = median(self.args.iters, || {
+            let t = Instant::now();
+            splat_runtime::backward::<M>(&state, params, camera, grad)?;
+            Ok(t.elapsed())
+        })?;
+        let gradients = splat_runtime::backward::<M>(&state, params, camera, grad)?;
+        Ok(Measured {
+            forward,
+            backward,
+            bytes: state.bytes(),
+            intersections: frame.stats.intersections,
+            color: frame.color.data,
+            params: gradients.params,
+        })
+    }
+
+    fn on_gpu<M: SplatMethod>(
+        &self,
+        gpu: &Gpu,
+        scene: &GpuScene<M>,
+        opts: &RenderOptions,
+        grad: &FrameGrad,
+    ) -> Result<Measured<M>> {
+        let mut renderer = GpuRenderer::<M>::new(gpu, opts)?;
+        let acc = Accumulation::default_for(gpu);
+        let camera = self.camera;
+        let forward = median(self.args.iters, || {
+            let t = Instant::now();
+            renderer.forward(scene, camera)?;
+            gpu.wait()?;
+            Ok(t.elapsed())
+        })?;
+        let backward = median(self.args.iters, || {
+            renderer.forward(scene, camera)?;
+            gpu.wait()?;
+            let t = Instant::now();
+            renderer.backward(scene, grad, acc)?;
+            gpu.wait()?;
+            Ok(t.elapsed())
+        })?;
+        let frame = renderer.download_frame()?;
+        let gradients = renderer.download_gradients()?.gradients;
+        let bytes = gpu
+            .device
+            .generate_allocator_report()
+            .map_or(0, |r| r.total_allocated_bytes as usize);
+        Ok(Measured {
+            forward,
+            backward,
+            bytes,
+            intersections: frame.stats.intersections,
+            color: frame.color.data,
+            params: gradients.params,
+        })
+    }
+
+    fn write_outputs(&self, rows: &[Row]) -> Result<()> {
+        let dir = &self.args.out;
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        let mut summary = String::from(
+            "knob,setting,forward_ms,backward_ms,memory_mib,intersections,psnr_db,max_abs,gradient_rel_rmse\n",
+        );
+        let mut detail = String::from("knob,setting,group,rel_rmse,range,mre\n");
+        for r in rows {
+            writeln!(
+                summary,
+                "{},{},{:.4},{:.4},{:.3},{},{:.3},{:.6e},{:.6e}",
+                r.knob,
+                r.value,
+                r.forward_ms,
+                r.backward_ms,
+                r.mib,
+                r.intersections,
+                r.psnr,
+                r.max_abs,
+                r.gradient_error()
+            )?;
+            for (group, rmse, mres) in &r.groups {
+                for ((_, _, range), mre) in RANGES.iter().zip(mres) {
+                    let mre = mre.map_or(String::new(), |v| format!("{v:.6e}"));
+                    writeln!(
+                        detail,
+                        "{},{},{group},{rmse:.6e},{range},{mre}",
+                        r.knob, r.value
+                    )?;
+                }
+            }
+        }
+        for (name, text) in [("tradeoff.csv", &summary), ("gradients.csv", &detail)] {
+            let path = dir.join(name);
+            write_atomic(&path, |w| w.write_all(text.as_bytes()))
+                .with_context(|| format!("writing {}", path.display()))?;
+        }
+        let plot = dir.join("tradeoff.png");
+        draw(&plot, rows, self.method)?;
+        crate::wrote(dir);
+        Ok(())
+    }
+}
+
+/// The median time of `iters` runs of `run`, after one warm-up run.
+fn median(iters: usize, mut run: impl FnMut() -> Result<Duration>) -> Result<Duration> {
+    run()?;
+    let mut times = (0..iters).map(|_| run()).collect::<Result<Vec<_>>>()?;
+    times.sort();
+    Ok(times[times.len() / 2])
+}
+
+fn compare<M: SplatMethod>(
+    s: &Setting,
+    m: &Measured<M>,
+    reference: &Measured<M>,
+    groups: &[(String, std::ops::Range<usize>)],
+) -> Row {
+    let diffs = m.color.iter().zip(&reference.color);
+    let (sq, max_abs) = diffs.fold((0.0f64, 0.0f64), |(sq, mx), (a, b)| {
+        let d = (*a as f64 - *b as f64).abs();
+        (sq + d * d, mx.max(d))
+    });
+    let mse = sq / m.color.len().max(1) as f64;
+    let words = |ps: &[M::Params]| -> Vec<f64> {
+        ps.iter().flat_map(splat_runtime::checks::words).collect()
+    };
+    let (got, want) = (words(&m.params), words(&reference.params));
+    let len = <M::Params as splat_runtime::Flat>::LEN;
+    let groups = groups
+        .iter()
+        .map(|(name, range)| {
+            let pick = |v: &[f64]| -> Vec<f64> {
+                v.chunks(len)
+                    .flat_map(|p| p[range.clone()].iter().copied())
+                    .collect()
+            };
+            let (g, r) = (pick(&got), pick(&want));
+            let (rmse, mres) = gradient_errors(&g, &r);
+            (name.clone(), rmse, mres)
+        })
+        .collect();
+    Row {
+        knob: s.knob,
+        value: s.value.clone(),
+        forward_ms: m.forward.as_secs_f64() * 1e3,
+        backward_ms: m.backward.as_secs_f64() * 1e3,
+        mib: m.bytes as f64 / 1048576.0,
+        intersections: m.intersections,
+        psnr: -10.0 * mse.log10(),
+        max_abs,
+        groups,
+    }
+}
+
+/// RMSE relative to the reference's RMS, and the mean relative error of the words whose
+/// reference magnitude (relative to the largest) falls in each of [`RANGES`].
+fn gradient_errors(got: &[f64], want: &[f64]) -> (f64, Vec<Option<f64>>) {
+    let n = want.len().max(1) as f64;
+    let rms = (want.iter().map(|w| w * w).sum::<f64>() / n).sqrt();
+    let sq = got
+        .iter()
+        .zip(want)
+        .map(|(g, w)| (g - w) * (g - w))
+        .sum::<f64>();
+    let rmse = match rms > 0.0 {
+        true => (sq / n).sqrt() / rms,
+        false => (sq / n).sqrt(),
+    };
+    let largest = want.iter().fold(0.0f64, |m, w| m.max(w.abs()));
+    let mres = RANGES
+        .iter()
+        .map(|&(lo, hi, _)| {
+            let errors: Vec<f64> = got
+                .iter()
+                .zip(want)
+                .filter(|(_, w)| {
+                    let r = w.abs() / largest;
+                    largest > 0.0 && r >= lo && r < hi
+                })
+                .map(|(g, w)| ((g - w) / w).abs())
+                .collect();
+            (!errors.is_empty()).then(|| errors.iter().sum::<f64>() / errors.len() as f64)
+        })
+        .collect();
+    (rmse, mres)
+}
+
+fn print_table(rows: &[Row]) {
+    println!(
+        "\n| knob | setting | forward ms | backward ms | MiB | intersections | PSNR dB | max abs | gradient rel. RMSE (worst group) |"
+    );
+    println!("|---|---|---:|---:|---:|---:|---:|---:|---:|");
+    for r in rows {
+        println!(
+            "| {} | {} | {:.2} | {:.2} | {:.1} | {} | {:.1} | {:.1e} | {:.1e} |",
+            r.knob,
+            r.value,
+            r.forward_ms,
+            r.backward_ms,
+            r.mib,
+            r.intersections,
+            r.psnr,
+            r.max_abs,
+            r.gradient_error()
+        );
+    }
+    println!("(PSNR and errors against the reference; inf: the same image)");
+}
+
+/// Errors at or below this (an exact match) are drawn on the floor of the log axis.
+const FLOOR: f64 = 1e-9;
+
+/// A color per knob, in the order the sweep first names them.
+const COLORS: [RGBColor; 6] = [
+    RGBColor(200, 30, 40),
+    RGBColor(40, 150, 60),
+    RGBColor(30, 90, 200),
+    RGBColor(230, 120, 20),
+    RGBColor(130, 60, 170),
+    RGBColor(90, 90, 90),
+];
+
+/// Two panels: forward time against image RMSE, forward + backward time against the worst
+/// group's gradient error; a color per knob, and the Pareto front over all settings.
+fn draw(path: &std::path::Path, rows: &[Row], method: &str) -> Result<()> {
+    let knobs: Vec<&str> = rows.iter().fold(vec![], |mut k, r| {
+        if !k.contains(&r.knob) {
+            k.push(r.knob);
+        }
+        k
+    });
+    let image: Vec<(f64, f64)> = rows
+        .iter()
+        .map(|r| (r.forward_ms, 10f64.powf(-r.psnr / 20.0)))
+        .collect();
+    let gradient: Vec<(f64, f64)> = rows
+        .iter()
+        .map(|r| (r.forward_ms + r.backward_ms, r.gradient_error()))
+        .collect();
+    plot::png(path, (1400, 560), |root| {
+        let panels = root.split_evenly((1, 2));
+        let series = [
+            (
+                "image against forward time",
+                "forward ms",
+                "image RMSE",
+                &image,
+            ),
+            (
+                "gradients against forward + backward time",
+                "forward + backward ms",
+                "gradient rel. RMSE, worst group",
+                &gradient,
+            ),
+        ];
+        for (area, (caption, x_desc, y_desc, points)) in panels.iter().zip(series) {
+            let caption = format!("{method}: {caption}");
+            let axes = (x_desc, y_desc);
+            panel(area, &caption, axes, points, rows, &knobs)?;
+        }
+        Ok(())
+    })
+}
+
+fn panel(
+    area: &plot::Area,
+    caption: &str,
+    (x_desc, y_desc): (&str, &str),
+    points: &[(f64, f64)],
+    rows: &[Row],
+    knobs: &[&str],
+) -> Result<()> {
+    let y = |v: f64| v.max(FLOOR).log10();
+    let (x_hi, y_lo, y_hi) = points.iter().fold(
+        (0.0f64, f64::INFINITY, f64::NEG_INFINITY),
+        |(xh, lo, hi), &(x, v)| (xh.max(x), lo.min(y(v)), hi.max(y(v))),
+    );
+    let err = plot::drawing(format!("chart \"{caption}\""));
+    let mut chart = ChartBuilder::on(area)
+        .caption(caption, plot::text(16))
+        .margin(12)
+        .margin_right(24)
+        .x_label_area_size(40)
+        .y_label_area_size(76)
+        .build_cartesian_2d(0.0..x_hi * 1.1, (y_lo - 0.5)..(y_hi + 0.5))
+        .map_err(&err)?;
+    chart
+        .configure_mesh()
+        .x_desc(x_desc)
+        .y_desc(format!("{y_desc} (exact: at {FLOOR:e})"))
+        .y_label_formatter(&|v| format!("{:.0e}", 10f64.powf(*v)))
+        .label_style(plot::text(13))
+        .draw()
+        .map_err(&err)?;
+    // The Pareto front: the settings no other setting beats in both time and error.
+    let mut order: Vec<usize> = (0..points.len()).collect();
+    order.sort_by(|&a, &b| points[a].0.total_cmp(&points[b].0));
+    let mut front = vec![];
+    for i in order {
+        if front.last().is_none_or(|&(_, e)| y(points[i].1) < e) {
+            front.push((points[i].0, y(points[i].1)));
+        }
+    }
+    chart
+        .draw_series(LineSeries::new(front, BLACK.mix(0.4).stroke_width(2)))
+        .map_err(&err)?
+        .label("Pareto front")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], BLACK.mix(0.4)));
+    for (k, knob) in knobs.iter().enumerate() {
+        let color = COLORS[k % COLORS.len()];
+        let mine: Vec<(f64, f64, &str)> = rows
+            .iter()
+            .zip(points)
+            .filter(|(r, _)| r.knob == *knob)
+            .map(|(r, &(x, v))| (x, y(v), r.value.as_str()))
+            .collect();
+        chart
+            .draw_series(
+                mine.iter()
+                    .map(|&(x, v, _)| Circle::new((x, v), 5, color.filled())),
+            )
+            .map_err(&err)?
+            .label(*knob)
+            .legend(move |(x, y)| Circle::new((x + 8, y), 5, color.filled()));
+        if *knob != "default" {
+            chart
+                .draw_series(mine.iter().map(|&(x, v, label)| {
+                    let style = plot::text(12).color(&color);
+                    EmptyElement::at((x, v)) + Text::new(label.to_string(), (7, -14), style)
+                }))
+                .map_err(&err)?;
+        }
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK.mix(0.3))
+        .label_font(plot::text(13))
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
+        .map_err(&err)?;
+    Ok(())
+}
