@@ -30,6 +30,7 @@ fn main() -> ExitCode {
             "3dgeer",
             "3DGEER: exact ray integral, particle bounding frustums; every camera",
             Instance::trainable::<geer::Method>(),
-        ),
+        )
+        .exact(),
     ])
 }

@@ -5,7 +5,7 @@
 use crate::bench::Bench;
 use crate::fit::Fit;
 use crate::render::Render;
-use crate::tradeoff::Tradeoff;
+use crate::tradeoff::{Outcome, Tradeoff};
 use anyhow::{Result, bail};
 use splat_runtime::io::ply::{FromStored, ToStored};
 use splat_runtime::train::Trainable;
@@ -18,6 +18,9 @@ pub struct Method {
     /// `instances[k]` renders scenes of SH degree k; the last one higher degrees, training and
     /// `inspect`.
     instances: Vec<Instance>,
+    /// Whether it evaluates its primitives exactly: `splat tradeoff` compares every method's
+    /// render of the same Gaussians with this one's.
+    pub(crate) exact: bool,
 }
 
 /// One compiled method: what each command does with it.
@@ -28,7 +31,7 @@ pub struct Instance {
     pub(crate) generic_camera: bool,
     pub(crate) render: fn(&Render) -> Result<(Frame, String)>,
     pub(crate) bench: fn(&Bench) -> Result<()>,
-    pub(crate) tradeoff: fn(&Tradeoff) -> Result<()>,
+    pub(crate) tradeoff: fn(&Tradeoff) -> Result<Vec<Outcome>>,
     pub(crate) fit: Option<fn(&Fit) -> Result<()>>,
 }
 
@@ -77,6 +80,16 @@ impl Method {
             name,
             help,
             instances,
+            exact: false,
+        }
+    }
+
+    /// Marks the method as the exact one (the accuracy reference of the evaluation-model
+    /// knob of `splat tradeoff`).
+    pub fn exact(self) -> Method {
+        Method {
+            exact: true,
+            ..self
         }
     }
 

@@ -40,6 +40,7 @@ pub struct TradeoffArgs {
     /// and magnitude range) and tradeoff.png (time against error, with the Pareto front).
     #[arg(long, default_value = "tradeoff")]
     out: PathBuf,
+
     #[arg(long, default_value_t = 800)]
     width: u32,
     #[arg(long, default_value_t = 600)]
@@ -120,6 +121,9 @@ pub fn tradeoff_cmd(args: &TradeoffArgs, methods: &[Method]) -> Result<()> {
     if args.iters == 0 {
         bail!("--iters must be at least 1");
     }
+    // The evaluation-model rows compare every method's render of the same Gaussians with the
+    // exact method's most accurate one (or this method's, where none is marked exact).
+    let exact = methods.iter().find(|m| m.exact);
     let cloud = match &args.scene {
         Some(path) => ply::read(path)?,
         None => crate::scene::planet(),
@@ -130,33 +134,116 @@ pub fn tradeoff_cmd(args: &TradeoffArgs, methods: &[Method]) -> Result<()> {
     };
     methods::check_camera(method, methods, camera.model)?;
     let gpu = crate::pick_gpu(args.backend)?;
-    let task = Tradeoff {
-        args,
-        method: method.name,
-        cloud: &cloud,
-        camera: &camera,
-        gpu: gpu.as_ref(),
+    let (w, h) = (camera.size.x as usize, camera.size.y as usize);
+    let backend = match &gpu {
+        Some(gpu) => format!("GPU, {}", gpu.adapter),
+        None => format!(
+            "CPU, {} threads",
+            std::thread::available_parallelism().map_or(1, |n| n.get())
+        ),
     };
-    (method.for_degree(cloud.sh_degree).tradeoff)(&task)
+    println!(
+        "{}: {} primitives (SH degree {}), {w}x{h} {} camera, {backend}, median of {} frames",
+        method.name,
+        cloud.gaussians.len(),
+        cloud.sh_degree,
+        camera.model,
+        args.iters
+    );
+    println!("reference: the f32 render with no P_max, t_min 0 and no extra alpha skip");
+    let settings = match gpu {
+        Some(_) => sweep(&splat_runtime::gpu::TILE_SIZES),
+        None => sweep(&splat_runtime::pipeline::TILE_SIZES),
+    };
+    // The other methods the camera allows, for the evaluation-model knob.
+    let models: Vec<&Method> = methods
+        .iter()
+        .filter(|m| methods::check_camera(m, methods, camera.model).is_ok())
+        .collect();
+    let runs = 1 + settings.len() + cloud.sh_degree as usize + models.len() + 1;
+    let bar = indicatif::ProgressBar::new(runs as u64);
+    let task = |method: &Method, cloud: &ply::GaussianCloud, options: Vec<RenderOptions>| {
+        let task = Tradeoff {
+            cloud,
+            camera: &camera,
+            gpu: gpu.as_ref(),
+            iters: args.iters,
+            options,
+            bar: &bar,
+        };
+        (method.for_degree(cloud.sh_degree).tradeoff)(&task)
+    };
+
+    let mut options = vec![reference_options()];
+    options.extend(settings.iter().map(|s| s.opts));
+    let mut outcomes = task(method, &cloud, options)?.into_iter();
+    let reference = outcomes.next().context("the reference frame")?;
+    let mut rows: Vec<Row> = settings
+        .iter()
+        .zip(outcomes)
+        .map(|(s, o)| compare(s.knob, s.value.clone(), &o, &reference))
+        .collect();
+    // SH degree: the scene's colors truncated to each lower degree, default options.
+    for degree in (0..cloud.sh_degree).rev() {
+        let lower = truncated(&cloud, degree);
+        let o = one(task(method, &lower, vec![RenderOptions::default()])?)?;
+        rows.push(compare("sh_degree", degree.to_string(), &o, &reference));
+    }
+    // Evaluation model: every method on the same Gaussians, default options.
+    let exact_reference = match exact {
+        Some(e) => one(task(e, &cloud, vec![reference_options()])?)?,
+        None => reference,
+    };
+    for m in models {
+        let o = one(task(m, &cloud, vec![RenderOptions::default()])?)?;
+        rows.push(compare("model", m.name.to_string(), &o, &exact_reference));
+    }
+    bar.finish_and_clear();
+    print_table(&rows);
+    if let Some(e) = exact {
+        println!("(model rows against {}'s most accurate render)", e.name);
+    }
+    write_outputs(&args.out, &rows, method.name)
 }
 
+/// The single outcome of a one-setting task.
+fn one(outcomes: Vec<Outcome>) -> Result<Outcome> {
+    outcomes.into_iter().next().context("no frame measured")
+}
+
+/// `cloud` with its colors cut to SH degree `degree`.
+fn truncated(cloud: &ply::GaussianCloud, degree: u32) -> ply::GaussianCloud {
+    let kept = ply::sh_coefficients(degree);
+    let mut lower = ply::GaussianCloud {
+        sh_degree: degree,
+        gaussians: cloud.gaussians.clone(),
+    };
+    for g in &mut lower.gaussians {
+        g.sh[kept..].fill(Default::default());
+    }
+    lower
+}
+
+/// Frames of one method on one scene for each of `options`.
 pub struct Tradeoff<'a> {
-    args: &'a TradeoffArgs,
-    method: &'a str,
     cloud: &'a ply::GaussianCloud,
     camera: &'a Camera,
     gpu: Option<&'a Gpu>,
+    iters: usize,
+    options: Vec<RenderOptions>,
+    bar: &'a indicatif::ProgressBar,
 }
 
 /// What one setting's frames gave.
-struct Measured<M: SplatMethod> {
+pub(crate) struct Outcome {
     forward: Duration,
     backward: Duration,
     /// Bytes the frame holds (CPU: kept for the backward pass; GPU: allocated on the device).
     bytes: usize,
     intersections: usize,
     color: Vec<f32>,
-    params: Vec<M::Params>,
+    /// Parameter gradient words per group (`param_groups`), primitive after primitive.
+    gradients: Vec<(String, Vec<f64>)>,
 }
 
 /// A setting's errors against the reference.
@@ -170,7 +257,8 @@ struct Row {
     psnr: f64,
     max_abs: f64,
     /// Per parameter group: RMSE relative to the reference's RMS, and the mean relative error
-    /// per magnitude range (None where the range holds no word).
+    /// per magnitude range (None where the range holds no word). Only the groups the
+    /// reference has with the same size (a lower SH degree has a smaller `sh`).
     groups: Vec<(String, f64, Vec<Option<f64>>)>,
 }
 
@@ -182,7 +270,7 @@ impl Row {
 }
 
 impl Tradeoff<'_> {
-    pub(crate) fn run<M: SplatMethod>(&self) -> Result<()>
+    pub(crate) fn run<M: SplatMethod>(&self) -> Result<Vec<Outcome>>
     where
         M::Params: FromStored,
     {
@@ -195,49 +283,35 @@ impl Tradeoff<'_> {
             alpha: None,
             depth: None,
         };
-        let backend = match self.gpu {
-            Some(gpu) => format!("GPU, {}", gpu.adapter),
-            None => format!(
-                "CPU, {} threads",
-                std::thread::available_parallelism().map_or(1, |n| n.get())
-            ),
-        };
-        println!(
-            "{}: {} primitives (SH degree {}), {w}x{h} {} camera, {backend}, median of {} frames",
-            self.method,
-            params.len(),
-            self.cloud.sh_degree,
-            self.camera.model,
-            self.args.iters
-        );
         let scene = match self.gpu {
             Some(gpu) => Some(GpuScene::<M>::new(gpu, &params)?),
             None => None,
         };
-        let measure = |opts: &RenderOptions| -> Result<Measured<M>> {
-            match (self.gpu, &scene) {
-                (Some(gpu), Some(scene)) => self.on_gpu(gpu, scene, opts, &grad),
-                _ => self.on_cpu(&params, opts, &grad),
-            }
-        };
-        println!("reference: the f32 render with no P_max, t_min 0 and no extra alpha skip");
-        let reference = measure(&reference_options())?;
         let groups = param_groups::<M>();
-        let settings = match self.gpu {
-            Some(_) => sweep(&splat_runtime::gpu::TILE_SIZES),
-            None => sweep(&splat_runtime::pipeline::TILE_SIZES),
-        };
-        let bar = indicatif::ProgressBar::new(settings.len() as u64);
-        let mut rows = vec![];
-        for s in &settings {
-            bar.set_message(format!("{} {}", s.knob, s.value));
-            let m = measure(&s.opts).with_context(|| format!("{} {}", s.knob, s.value))?;
-            rows.push(compare::<M>(s, &m, &reference, &groups));
-            bar.inc(1);
+        let len = <M::Params as splat_runtime::Flat>::LEN;
+        let mut out = vec![];
+        for opts in &self.options {
+            let (mut outcome, gradients) = match (self.gpu, &scene) {
+                (Some(gpu), Some(scene)) => self.on_gpu(gpu, scene, opts, &grad)?,
+                _ => self.on_cpu::<M>(&params, opts, &grad)?,
+            };
+            let words: Vec<f64> = gradients
+                .iter()
+                .flat_map(splat_runtime::checks::words)
+                .collect();
+            outcome.gradients = groups
+                .iter()
+                .map(|(name, range)| {
+                    let group = words
+                        .chunks(len)
+                        .flat_map(|p| p[range.clone()].iter().copied());
+                    (name.clone(), group.collect())
+                })
+                .collect();
+            out.push(outcome);
+            self.bar.inc(1);
         }
-        bar.finish_and_clear();
-        print_table(&rows);
-        self.write_outputs(&rows)
+        Ok(out)
     }
 
     fn on_cpu<M: SplatMethod>(
@@ -245,28 +319,29 @@ impl Tradeoff<'_> {
         params: &[M::Params],
         opts: &RenderOptions,
         grad: &FrameGrad,
-    ) -> Result<Measured<M>> {
+    ) -> Result<(Outcome, Vec<M::Params>)> {
         let camera = self.camera;
-        let forward = median(self.args.iters, || {
+        let forward = median(self.iters, || {
             let t = Instant::now();
             splat_runtime::render::<M>(params, camera, opts)?;
             Ok(t.elapsed())
         })?;
         let (frame, state) = splat_runtime::render_for_backward::<M>(params, camera, opts)?;
-        let backward = median(self.args.iters, || {
+        let backward = median(self.iters, || {
             let t = Instant::now();
             splat_runtime::backward::<M>(&state, params, camera, grad)?;
             Ok(t.elapsed())
         })?;
         let gradients = splat_runtime::backward::<M>(&state, params, camera, grad)?;
-        Ok(Measured {
+        let outcome = Outcome {
             forward,
             backward,
             bytes: state.bytes(),
             intersections: frame.stats.intersections,
             color: frame.color.data,
-            params: gradients.params,
-        })
+            gradients: vec![],
+        };
+        Ok((outcome, gradients.params))
     }
 
     fn on_gpu<M: SplatMethod>(
@@ -275,17 +350,17 @@ impl Tradeoff<'_> {
         scene: &GpuScene<M>,
         opts: &RenderOptions,
         grad: &FrameGrad,
-    ) -> Result<Measured<M>> {
+    ) -> Result<(Outcome, Vec<M::Params>)> {
         let mut renderer = GpuRenderer::<M>::new(gpu, opts)?;
         let acc = Accumulation::default_for(gpu);
         let camera = self.camera;
-        let forward = median(self.args.iters, || {
+        let forward = median(self.iters, || {
             let t = Instant::now();
             renderer.forward(scene, camera)?;
             gpu.wait()?;
             Ok(t.elapsed())
         })?;
-        let backward = median(self.args.iters, || {
+        let backward = median(self.iters, || {
             renderer.forward(scene, camera)?;
             gpu.wait()?;
             let t = Instant::now();
@@ -299,58 +374,57 @@ impl Tradeoff<'_> {
             .device
             .generate_allocator_report()
             .map_or(0, |r| r.total_allocated_bytes as usize);
-        Ok(Measured {
+        let outcome = Outcome {
             forward,
             backward,
             bytes,
             intersections: frame.stats.intersections,
             color: frame.color.data,
-            params: gradients.params,
-        })
+            gradients: vec![],
+        };
+        Ok((outcome, gradients.params))
     }
+}
 
-    fn write_outputs(&self, rows: &[Row]) -> Result<()> {
-        let dir = &self.args.out;
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        let mut summary = String::from(
-            "knob,setting,forward_ms,backward_ms,memory_mib,intersections,psnr_db,max_abs,gradient_rel_rmse\n",
-        );
-        let mut detail = String::from("knob,setting,group,rel_rmse,range,mre\n");
-        for r in rows {
-            writeln!(
-                summary,
-                "{},{},{:.4},{:.4},{:.3},{},{:.3},{:.6e},{:.6e}",
-                r.knob,
-                r.value,
-                r.forward_ms,
-                r.backward_ms,
-                r.mib,
-                r.intersections,
-                r.psnr,
-                r.max_abs,
-                r.gradient_error()
-            )?;
-            for (group, rmse, mres) in &r.groups {
-                for ((_, _, range), mre) in RANGES.iter().zip(mres) {
-                    let mre = mre.map_or(String::new(), |v| format!("{v:.6e}"));
-                    writeln!(
-                        detail,
-                        "{},{},{group},{rmse:.6e},{range},{mre}",
-                        r.knob, r.value
-                    )?;
-                }
+fn write_outputs(dir: &std::path::Path, rows: &[Row], method: &str) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let mut summary = String::from(
+        "knob,setting,forward_ms,backward_ms,memory_mib,intersections,psnr_db,max_abs,gradient_rel_rmse\n",
+    );
+    let mut detail = String::from("knob,setting,group,rel_rmse,range,mre\n");
+    for r in rows {
+        writeln!(
+            summary,
+            "{},{},{:.4},{:.4},{:.3},{},{:.3},{:.6e},{:.6e}",
+            r.knob,
+            r.value,
+            r.forward_ms,
+            r.backward_ms,
+            r.mib,
+            r.intersections,
+            r.psnr,
+            r.max_abs,
+            r.gradient_error()
+        )?;
+        for (group, rmse, mres) in &r.groups {
+            for ((_, _, range), mre) in RANGES.iter().zip(mres) {
+                let mre = mre.map_or(String::new(), |v| format!("{v:.6e}"));
+                writeln!(
+                    detail,
+                    "{},{},{group},{rmse:.6e},{range},{mre}",
+                    r.knob, r.value
+                )?;
             }
         }
-        for (name, text) in [("tradeoff.csv", &summary), ("gradients.csv", &detail)] {
-            let path = dir.join(name);
-            write_atomic(&path, |w| w.write_all(text.as_bytes()))
-                .with_context(|| format!("writing {}", path.display()))?;
-        }
-        let plot = dir.join("tradeoff.png");
-        draw(&plot, rows, self.method)?;
-        crate::wrote(dir);
-        Ok(())
     }
+    for (name, text) in [("tradeoff.csv", &summary), ("gradients.csv", &detail)] {
+        let path = dir.join(name);
+        write_atomic(&path, |w| w.write_all(text.as_bytes()))
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    draw(&dir.join("tradeoff.png"), rows, method)?;
+    crate::wrote(dir);
+    Ok(())
 }
 
 /// The median time of `iters` runs of `run`, after one warm-up run.
@@ -361,43 +435,32 @@ fn median(iters: usize, mut run: impl FnMut() -> Result<Duration>) -> Result<Dur
     Ok(times[times.len() / 2])
 }
 
-fn compare<M: SplatMethod>(
-    s: &Setting,
-    m: &Measured<M>,
-    reference: &Measured<M>,
-    groups: &[(String, std::ops::Range<usize>)],
-) -> Row {
-    let diffs = m.color.iter().zip(&reference.color);
+fn compare(knob: &'static str, value: String, o: &Outcome, reference: &Outcome) -> Row {
+    let diffs = o.color.iter().zip(&reference.color);
     let (sq, max_abs) = diffs.fold((0.0f64, 0.0f64), |(sq, mx), (a, b)| {
         let d = (*a as f64 - *b as f64).abs();
         (sq + d * d, mx.max(d))
     });
-    let mse = sq / m.color.len().max(1) as f64;
-    let words = |ps: &[M::Params]| -> Vec<f64> {
-        ps.iter().flat_map(splat_runtime::checks::words).collect()
-    };
-    let (got, want) = (words(&m.params), words(&reference.params));
-    let len = <M::Params as splat_runtime::Flat>::LEN;
-    let groups = groups
+    let mse = sq / o.color.len().max(1) as f64;
+    let groups = o
+        .gradients
         .iter()
-        .map(|(name, range)| {
-            let pick = |v: &[f64]| -> Vec<f64> {
-                v.chunks(len)
-                    .flat_map(|p| p[range.clone()].iter().copied())
-                    .collect()
-            };
-            let (g, r) = (pick(&got), pick(&want));
-            let (rmse, mres) = gradient_errors(&g, &r);
-            (name.clone(), rmse, mres)
+        .filter_map(|(name, got)| {
+            let (_, want) = reference
+                .gradients
+                .iter()
+                .find(|(n, w)| n == name && w.len() == got.len())?;
+            let (rmse, mres) = gradient_errors(got, want);
+            Some((name.clone(), rmse, mres))
         })
         .collect();
     Row {
-        knob: s.knob,
-        value: s.value.clone(),
-        forward_ms: m.forward.as_secs_f64() * 1e3,
-        backward_ms: m.backward.as_secs_f64() * 1e3,
-        mib: m.bytes as f64 / 1048576.0,
-        intersections: m.intersections,
+        knob,
+        value,
+        forward_ms: o.forward.as_secs_f64() * 1e3,
+        backward_ms: o.backward.as_secs_f64() * 1e3,
+        mib: o.bytes as f64 / 1048576.0,
+        intersections: o.intersections,
         psnr: -10.0 * mse.log10(),
         max_abs,
         groups,

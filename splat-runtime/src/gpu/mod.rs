@@ -60,6 +60,8 @@ pub enum GpuError {
         bytes: u64,
         limit: u64,
     },
-    #[error("the GPU backend supports tile sizes {TILE_SIZES:?} (one invocation per pixel), not {0}")]
+    #[error(
+        "the GPU backend supports tile sizes {TILE_SIZES:?} (one invocation per pixel), not {0}"
+    )]
     TileSize(u32),
 }
