@@ -15,6 +15,7 @@ use splat_runtime::gpu::entries::Accumulation;
 use splat_runtime::gpu::{Gpu, GpuRenderer, GpuScene};
 use splat_runtime::io::ply::FromStored;
 use splat_runtime::io::{camera as camera_io, ply, write_atomic};
+use splat_runtime::pipeline::precision::Precision;
 use splat_runtime::pipeline::shade::Blend;
 use splat_runtime::{Camera, FrameGrad, RenderOptions, SplatMethod, param_groups};
 use std::fmt::Write as _;
@@ -54,14 +55,18 @@ pub(crate) struct Setting {
     pub opts: RenderOptions,
 }
 
-/// The defaults, then each knob alone at its other settings (the tile sizes the backend has).
-pub(crate) fn sweep(tile_sizes: &[u32]) -> Vec<Setting> {
+/// The defaults, then each knob alone at its other settings (the tile sizes and precisions
+/// the backend has).
+pub(crate) fn sweep(tile_sizes: &[u32], precisions: &[Precision]) -> Vec<Setting> {
     let base = RenderOptions::default();
     let mut out = vec![Setting {
         knob: "default",
         value: format!(
-            "p_max=none tile={} t_min={:e} alpha_min={}",
-            base.tile_size, base.blend.t_min, base.blend.alpha_min
+            "p_max=none tile={} t_min={:e} alpha_min={} precision={}",
+            base.tile_size,
+            base.blend.t_min,
+            base.blend.alpha_min,
+            base.precision.name()
         ),
         opts: base,
     }];
@@ -91,6 +96,10 @@ pub(crate) fn sweep(tile_sizes: &[u32]) -> Vec<Setting> {
             format!("{a}/255"),
             blend(base.blend.t_min, a as f32 / 255.0),
         );
+    }
+    for &precision in precisions.iter().filter(|&&p| p != base.precision) {
+        let opts = RenderOptions { precision, ..base };
+        add("precision", precision.name().into(), opts);
     }
     out
 }
@@ -152,8 +161,8 @@ pub fn tradeoff_cmd(args: &TradeoffArgs, methods: &[Method]) -> Result<()> {
     );
     println!("reference: the f32 render with no P_max, t_min 0 and no extra alpha skip");
     let settings = match gpu {
-        Some(_) => sweep(&splat_runtime::gpu::TILE_SIZES),
-        None => sweep(&splat_runtime::pipeline::TILE_SIZES),
+        Some(_) => sweep(&splat_runtime::gpu::TILE_SIZES, &[Precision::F32]),
+        None => sweep(&splat_runtime::pipeline::TILE_SIZES, &Precision::ALL),
     };
     // The other methods the camera allows, for the evaluation-model knob.
     let models: Vec<&Method> = methods

@@ -64,4 +64,8 @@ pub enum GpuError {
         "the GPU backend supports tile sizes {TILE_SIZES:?} (one invocation per pixel), not {0}"
     )]
     TileSize(u32),
+    #[error(
+        "the GPU backend stores its per-pixel state as f32 only, not {0} (the CPU has every format)"
+    )]
+    Precision(&'static str),
 }

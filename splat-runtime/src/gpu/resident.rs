@@ -200,6 +200,9 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         if !super::TILE_SIZES.contains(&opts.tile_size) {
             return Err(GpuError::TileSize(opts.tile_size).into());
         }
+        if opts.precision != crate::pipeline::precision::Precision::F32 {
+            return Err(GpuError::Precision(opts.precision.name()).into());
+        }
         let layout = Layout::of::<M>();
         let (source, param_floats) = entries::project_backward::<M>()?;
         let pixel_backward = match M::HAS_PIXEL_INFO {

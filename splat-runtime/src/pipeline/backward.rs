@@ -116,12 +116,12 @@ fn backward_tile_body<M: SplatMethod>(
                 let x = (x0 + l as u32).min(grid.width - 1);
                 (y.min(grid.height - 1) * grid.width + x) as usize
             };
-            let t_final = lanes_of(|l| state.transmittance[px(l)]);
+            let t_final = lanes_of(|l| state.transmittance.get(px(l)));
             let mut d_color = M::ColorLanes::default();
             let mut c_final = M::ColorLanes::default();
             for ch in 0..channels {
                 d_color.as_mut()[ch] = lanes_of(|l| grad.color[px(l) * channels + ch]);
-                c_final.as_mut()[ch] = lanes_of(|l| state.color[px(l) * channels + ch]);
+                c_final.as_mut()[ch] = lanes_of(|l| state.color.get(px(l) * channels + ch));
             }
             let mut d_alpha_out = match &grad.alpha {
                 Some(a) => lanes_of(|l| a[px(l)]),
@@ -133,7 +133,7 @@ fn backward_tile_body<M: SplatMethod>(
                 let a = 1.0 - t_final;
                 let has = a.gt(F32x8::splat(0.0));
                 let a_safe = has.select_f32(a, F32x8::splat(1.0));
-                d_final = lanes_of(|l| state.depth_acc[px(l)]);
+                d_final = lanes_of(|l| state.depth_acc.get(px(l)));
                 let gd = lanes_of(|l| g[px(l)]);
                 d_d = has.select_f32(gd / a_safe, F32x8::splat(0.0));
                 d_alpha_out = d_alpha_out

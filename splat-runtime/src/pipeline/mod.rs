@@ -10,6 +10,7 @@
 
 pub mod backward;
 pub mod grid;
+pub mod precision;
 pub mod preprocess;
 pub mod rasterize;
 pub mod shade;
@@ -22,6 +23,7 @@ use rasterize::TileLists;
 use crate::flat::Flat;
 use crate::method::SplatMethod;
 use crate::types::{Camera, Projected};
+use precision::{Range, Stored};
 use rayon::prelude::*;
 use std::time::{Duration, Instant};
 
@@ -46,6 +48,9 @@ pub struct RenderOptions {
     pub tile_cull: bool,
     /// The blend's thresholds (transmittance stop, alpha skip).
     pub blend: shade::Blend,
+    /// How the per-pixel state (color, transmittance, depth sums) is stored: what the outputs
+    /// are read from and the backward pass replays against (CPU only for now).
+    pub precision: precision::Precision,
 }
 
 impl Default for RenderOptions {
@@ -57,6 +62,7 @@ impl Default for RenderOptions {
             depth: false,
             tile_cull: true,
             blend: shade::Blend::default(),
+            precision: precision::Precision::F32,
         }
     }
 }
@@ -133,10 +139,10 @@ pub struct ForwardState<M: SplatMethod> {
     pub lists: TileLists,
     pub p_max: Option<usize>,
     pub blend: shade::Blend,
-    /// Final transmittance, color and sum of weight * depth per pixel.
-    pub transmittance: Vec<f32>,
-    pub color: Vec<f32>,
-    pub depth_acc: Vec<f32>,
+    /// Final transmittance, color and sum of weight * depth per pixel, in the frame's precision.
+    pub transmittance: precision::Stored,
+    pub color: precision::Stored,
+    pub depth_acc: precision::Stored,
 }
 
 impl<M: SplatMethod> ForwardState<M> {
@@ -156,9 +162,9 @@ impl<M: SplatMethod> ForwardState<M> {
             + held(&self.pre.visible)
             + held(&self.lists.prims)
             + held(&self.lists.ranges)
-            + held(&self.transmittance)
-            + held(&self.color)
-            + held(&self.depth_acc)
+            + self.transmittance.bytes()
+            + self.color.bytes()
+            + self.depth_acc.bytes()
     }
 }
 
@@ -315,18 +321,31 @@ fn forward<M: SplatMethod>(
     }
     stats.shade = t2.elapsed();
 
-    let (alpha, depth) = alpha_and_depth(&grid, opts, &transmittance, &depth_acc);
+    // The per-pixel state in the frame's precision: the outputs are read from it, and the
+    // backward pass replays against it.
+    let p = opts.precision;
+    let color = Stored::new(p, Range::Unit, color);
+    let transmittance = Stored::new(p, Range::Unit, transmittance);
+    let depth_acc = Stored::new(p, Range::Unbounded, depth_acc);
+    let (alpha, depth) = alpha_and_depth(&grid, opts, &transmittance.as_f32(), &depth_acc.as_f32());
     // Only a render kept for the backward pass pays for a second copy of the color.
-    let state = keep.then(|| ForwardState {
-        grid,
-        pre,
-        lists,
-        p_max: opts.p_max,
-        blend: opts.blend,
-        transmittance,
-        color: color.clone(),
-        depth_acc,
-    });
+    let (state, color) = match keep {
+        true => {
+            let data = color.to_f32();
+            let state = ForwardState {
+                grid,
+                pre,
+                lists,
+                p_max: opts.p_max,
+                blend: opts.blend,
+                transmittance,
+                color,
+                depth_acc,
+            };
+            (Some(state), data)
+        }
+        false => (None, color.into_f32()),
+    };
     let frame = Frame {
         color: Image {
             width: grid.width,

@@ -1,0 +1,128 @@
+//! The per-pixel state in each storage format (f16, unorm16, unorm8) against f32 on the CPU:
+//! the outputs within the format's rounding step (unorm colors saturating at 1 instead of
+//! wrapping), the bytes held shrinking by the format's width, and the backward pass, which
+//! replays against the stored state, staying close to f32's.
+
+mod common;
+
+use common::{camera, gaussian_at};
+use splat_methods::gs3d::{Method, Params};
+use splat_runtime::checks::{group_error, words};
+use splat_runtime::glam::{Vec2, Vec3};
+use splat_runtime::pipeline::precision::Precision;
+use splat_runtime::{FrameGrad, RenderOptions, backward, render_for_backward};
+
+/// 400 Gaussians over a 48 x 40 image; with `bright`, some push the color past 1.
+fn scene(bright: bool) -> (splat_runtime::Camera, Vec<Params>) {
+    let mut rng = fastrand::Rng::with_seed(8);
+    let cam = camera(48, 40);
+    let params = (0..400)
+        .map(|i| {
+            let px = Vec2::new(rng.f32() * 56.0 - 4.0, rng.f32() * 48.0 - 4.0);
+            let z = 2.0 + rng.f32() * 4.0;
+            let mut g = gaussian_at(&mut rng, &cam, px, z, -2.0);
+            if bright && i % 10 == 0 {
+                g.sh[0] = Vec3::splat(4.0);
+            }
+            g
+        })
+        .collect();
+    (cam, params)
+}
+
+/// Colors past 1 saturate in the unorm formats, and the backward pass then replays against
+/// the saturated color: its gradients are those of neither image. Within [0, 1] a rounding
+/// step e of the stored color or transmittance enters the gradient of a pair's alpha through
+/// the remainder behind it, divided by 1 - alpha: at most 100 e with alpha capped at 0.99
+/// (measured: 4 to 5 e).
+#[test]
+fn each_format_rounds_the_outputs_within_its_step_and_holds_fewer_bytes() {
+    for bright in [false, true] {
+        check_formats(bright);
+    }
+}
+
+fn check_formats(bright: bool) {
+    let (cam, params) = scene(bright);
+    let opts = |precision| RenderOptions {
+        alpha: true,
+        depth: true,
+        precision,
+        ..RenderOptions::default()
+    };
+    let (full, full_state) =
+        render_for_backward::<Method>(&params, &cam, &opts(Precision::F32)).unwrap();
+    let brighter = full.color.data.iter().filter(|c| **c > 1.0).count();
+    assert_eq!(brighter > 50, bright, "{brighter} color values past 1");
+    let mut rng = fastrand::Rng::with_seed(2);
+    let pixels = full.color.data.len() / 3;
+    let grad = FrameGrad {
+        color: (0..pixels * 3).map(|_| rng.f32() - 0.5).collect(),
+        alpha: Some((0..pixels).map(|_| rng.f32() - 0.5).collect()),
+        depth: None,
+    };
+    let want = backward::<Method>(&full_state, &params, &cam, &grad).unwrap();
+    let flat = |ps: &[Params]| -> Vec<f64> { ps.iter().flat_map(words).collect() };
+    for precision in [Precision::F16, Precision::Unorm16, Precision::Unorm8] {
+        let (frame, state) =
+            render_for_backward::<Method>(&params, &cam, &opts(precision)).unwrap();
+        let unorm = precision != Precision::F16;
+        for (got, f32_value) in frame.color.data.iter().zip(&full.color.data) {
+            // f16 rounds within 2^-11 of the value (its unit roundoff; subnormals within
+            // 2^-25); unorm saturates to [0, 1] and rounds within half a step.
+            let (stored, step) = match unorm {
+                true => (f32_value.clamp(0.0, 1.0), precision.unit_error()),
+                false => (*f32_value, 2f32.powi(-11) * f32_value.abs() + 3e-8),
+            };
+            assert!(
+                (got - stored).abs() <= step,
+                "{precision:?}: {got} for {f32_value}"
+            );
+        }
+        let alpha = frame.alpha.as_ref().unwrap().data.iter();
+        for (got, f32_value) in alpha.zip(&full.alpha.as_ref().unwrap().data) {
+            assert!(
+                (got - f32_value).abs() <= precision.unit_error() + 1e-7,
+                "{precision:?}"
+            );
+        }
+        // Color and transmittance at the format's width; depth sums as f16 in the unorm formats.
+        let n = pixels as isize;
+        let width = |p: Precision| match p {
+            Precision::F32 => 4,
+            Precision::F16 | Precision::Unorm16 => 2,
+            Precision::Unorm8 => 1,
+        };
+        let saved = (4 - width(precision)) * 4 * n + (4 - 2) * n;
+        assert_eq!(
+            full_state.bytes() as isize - state.bytes() as isize,
+            saved,
+            "{precision:?}"
+        );
+        let got = backward::<Method>(&state, &params, &cam, &grad).unwrap();
+        let err = group_error(&flat(&got.params), &flat(&want.params));
+        println!("{precision:?}, bright {bright}: gradients {err:.2e} of the largest off f32's");
+        assert!(got.params.iter().all(splat_runtime::Flat::is_finite));
+        if !bright {
+            assert!(
+                err <= 100.0 * precision.unit_error() as f64,
+                "{precision:?}: {err}"
+            );
+        }
+    }
+}
+
+#[test]
+fn the_gpu_refuses_what_it_cannot_store() {
+    let Some(gpu) = splat_runtime::gpu::adapter_or_skip() else {
+        return;
+    };
+    let opts = RenderOptions {
+        precision: Precision::F16,
+        ..RenderOptions::default()
+    };
+    let err = splat_runtime::gpu::GpuRenderer::<Method>::new(&gpu, &opts)
+        .err()
+        .unwrap();
+    assert!(err.to_string().contains("f32 only, not f16"), "{err}");
+}
