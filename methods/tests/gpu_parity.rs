@@ -224,7 +224,7 @@ fn gpu_handles_empty_scenes_and_refuses_bad_input_clearly() {
     let err = splat_runtime::gpu::render::render::<Method>(&gpu, &params, &cam, &wide)
         .err()
         .unwrap();
-    assert!(err.to_string().contains("tile sizes 8 and 16"), "{err}");
+    assert!(err.to_string().contains("tile sizes [8, 16]"), "{err}");
     params[2].mean.y = f32::NAN;
     let err = splat_runtime::gpu::render::render::<Method>(&gpu, &params, &cam, &opts)
         .err()

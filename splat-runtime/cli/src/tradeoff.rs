@@ -535,7 +535,7 @@ fn print_table(rows: &[Row]) {
 const FLOOR: f64 = 1e-9;
 
 /// A color per knob, in the order the sweep first names them.
-const COLORS: [RGBColor; 7] = [
+const COLORS: [RGBColor; 8] = [
     RGBColor(200, 30, 40),
     RGBColor(40, 150, 60),
     RGBColor(30, 90, 200),
@@ -543,6 +543,7 @@ const COLORS: [RGBColor; 7] = [
     RGBColor(130, 60, 170),
     RGBColor(90, 90, 90),
     RGBColor(0, 150, 160),
+    RGBColor(150, 100, 40),
 ];
 
 /// Two panels: forward time against image RMSE, forward + backward time against the worst
