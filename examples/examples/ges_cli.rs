@@ -1,4 +1,4 @@
-//! A user crate's command line: every `splat` command (render, bench, inspect, gallery, scene)
+//! A user crate's command line: every `splat` command (render, bench, tradeoff, inspect, gallery, scene)
 //! for its own method, here GES.
 //!
 //! `cargo run --release -p splat-examples --example ges_cli -- render --out ges.png`
