@@ -1,5 +1,5 @@
-//! A user crate's command line: every `splat` command (render, bench, tradeoff, inspect, gallery, scene)
-//! for its own method, here GES.
+//! A user crate's command line: every `splat` command (render, bench, tradeoff, inspect,
+//! gallery, scene) for its own method, here GES.
 //!
 //! `cargo run --release -p splat-examples --example ges_cli -- render --out ges.png`
 
