@@ -11,7 +11,7 @@ use anyhow::{Context, Result, bail};
 use splat_runtime::gpu::entries::Accumulation;
 use splat_runtime::gpu::{Gpu, GpuRenderer, GpuScene};
 use splat_runtime::io::ply::FromStored;
-use splat_runtime::io::{camera as camera_io, ply, write_atomic};
+use splat_runtime::io::{ply, write_atomic};
 use splat_runtime::{Camera, Frame, FrameGrad, RenderOptions, SplatMethod};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -53,14 +53,11 @@ pub fn bench_cmd(args: &BenchArgs, methods: &[Method]) -> Result<()> {
     if let Some(&t) = args.threads.iter().find(|&&t| t == 0) {
         bail!("--threads {t}: a thread count must be at least 1");
     }
-    let cloud = match &args.scene {
-        Some(path) => ply::read(path)?,
-        None => crate::scene::planet(),
-    };
-    let camera = match &args.camera {
-        Some(path) => camera_io::read(path)?,
-        None => crate::scene::camera(args.width, args.height, Default::default()),
-    };
+    let (cloud, camera) = crate::scene::given_or_built_in(
+        args.scene.as_deref(),
+        args.camera.as_deref(),
+        (args.width, args.height),
+    )?;
     methods::check_camera(method, methods, camera.model)?;
     let gpu = crate::pick_gpu(args.backend)?;
     let task = Bench {

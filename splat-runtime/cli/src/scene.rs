@@ -128,6 +128,24 @@ fn stars(rng: &mut Lcg) -> Vec<StoredGaussian> {
     out
 }
 
+/// The scene and camera a command was given, or the built-in ones (a pinhole view at
+/// `width` x `height`).
+pub fn given_or_built_in(
+    scene: Option<&std::path::Path>,
+    camera: Option<&std::path::Path>,
+    (width, height): (u32, u32),
+) -> anyhow::Result<(GaussianCloud, Camera)> {
+    let cloud = match scene {
+        Some(path) => splat_runtime::io::ply::read(path)?,
+        None => planet(),
+    };
+    let camera = match camera {
+        Some(path) => splat_runtime::io::camera::read(path)?,
+        None => self::camera(width, height, CameraModel::Pinhole),
+    };
+    Ok((cloud, camera))
+}
+
 /// Looks at the origin from slightly above the ring plane, 6 units away: a pinhole with a
 /// 58° horizontal field of view, a nearly equidistant fisheye seeing 183° across and 225°
 /// diagonally, or a 126° equiangular camera.

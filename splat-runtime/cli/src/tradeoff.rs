@@ -14,7 +14,7 @@ use plotters::prelude::*;
 use splat_runtime::gpu::entries::Accumulation;
 use splat_runtime::gpu::{Gpu, GpuRenderer, GpuScene};
 use splat_runtime::io::ply::FromStored;
-use splat_runtime::io::{camera as camera_io, ply, write_atomic};
+use splat_runtime::io::{ply, write_atomic};
 use splat_runtime::pipeline::precision::Precision;
 use splat_runtime::pipeline::shade::Blend;
 use splat_runtime::{Camera, FrameGrad, RenderOptions, SplatMethod, param_groups};
@@ -133,14 +133,11 @@ pub fn tradeoff_cmd(args: &TradeoffArgs, methods: &[Method]) -> Result<()> {
     // The evaluation-model rows compare every method's render of the same Gaussians with the
     // exact method's most accurate one (or this method's, where none is marked exact).
     let exact = methods.iter().find(|m| m.exact);
-    let cloud = match &args.scene {
-        Some(path) => ply::read(path)?,
-        None => crate::scene::planet(),
-    };
-    let camera = match &args.camera {
-        Some(path) => camera_io::read(path)?,
-        None => crate::scene::camera(args.width, args.height, Default::default()),
-    };
+    let (cloud, camera) = crate::scene::given_or_built_in(
+        args.scene.as_deref(),
+        args.camera.as_deref(),
+        (args.width, args.height),
+    )?;
     methods::check_camera(method, methods, camera.model)?;
     let gpu = crate::pick_gpu(args.backend)?;
     let (w, h) = (camera.size.x as usize, camera.size.y as usize);
