@@ -189,3 +189,127 @@ pub fn outputs_close(label: &str, want: &Frame, got: &Frame, abs: f32, rel: f32)
     }
     worst
 }
+
+/// The hardware-rasterized forward pass against the tile-based one on the GPU (both without
+/// the transmittance stop, which fixed-function blending cannot make), for every precision
+/// the adapter can blend into. Each blend rounds the stored color and alpha to the format, so
+/// a pixel under n boxes may drift 2n rounding steps u (f32 2^-24, f16 2^-11 of values in
+/// [0, 1], unorm half a step) from the tile path's f32, plus 1e-5; the depth sums (f16 in the
+/// narrow formats) by 2n u times the farthest depth. Unorm formats are compared with the tile
+/// path's values saturated to [0, 1]. Returns each format with its worst error as a fraction
+/// of the bound, and asserts the depth sort holds one key per visible primitive.
+#[cfg(feature = "gpu")]
+pub fn hardware_forward_matches_tiles<M: SplatMethod>(
+    label: &str,
+    params: &[M::Params],
+    cam: &Camera,
+) -> Vec<(crate::pipeline::precision::Precision, f32)> {
+    use crate::gpu::raster::{HardwareRenderer, supports};
+    use crate::gpu::{GpuRenderer, GpuScene};
+    use crate::pipeline::precision::Precision;
+    let Some(gpu) = crate::gpu::adapter_or_skip() else {
+        return vec![];
+    };
+    let no_stop = Blend {
+        t_min: 0.0,
+        ..Blend::default()
+    };
+    let opts = options_with(16, no_stop);
+    let scene = GpuScene::<M>::new(&gpu, params).unwrap();
+    let mut tiles = GpuRenderer::<M>::new(&gpu, &opts).unwrap();
+    tiles.forward(&scene, cam).unwrap();
+    let want = tiles.download_frame().unwrap();
+    let layers = layers::<M>(params, cam);
+    let far = params
+        .iter()
+        .map(|p| M::project(p, cam))
+        .filter(|p| p.visible)
+        .map(|p| p.depth)
+        .fold(0.0f32, f32::max);
+    let mut out = vec![];
+    for precision in Precision::ALL {
+        if !supports(&gpu, precision) {
+            println!("{label}: this adapter cannot blend into {precision:?} targets");
+            continue;
+        }
+        let mut hw =
+            HardwareRenderer::<M>::new(&gpu, &RenderOptions { precision, ..opts }).unwrap();
+        let info = hw.forward(&scene, cam).unwrap();
+        assert_eq!(
+            info.intersections, want.stats.visible,
+            "{label}: one key per visible primitive"
+        );
+        assert_eq!(hw.sort_bytes(), 24 * want.stats.visible, "{label}");
+        let got = hw.download_frame().unwrap();
+        let (u, depth_u) = match precision {
+            Precision::F32 => (2f32.powi(-24), 2f32.powi(-24)),
+            Precision::F16 => (2f32.powi(-11), 2f32.powi(-11)),
+            p => (p.unit_error(), 2f32.powi(-11)),
+        };
+        let unorm = matches!(precision, Precision::Unorm16 | Precision::Unorm8);
+        let alpha = |f: &Frame, i| f.alpha.as_ref().unwrap().data[i];
+        let mut worst = 0.0f32;
+        let mut check = |what: &str, i: usize, a: f32, b: f32, bound: f32| {
+            worst = worst.max((a - b).abs() / bound);
+            assert!(
+                (a - b).abs() <= bound,
+                "{label}, {precision:?}, {what}[{i}]: tiles {a}, hardware {b}, bound {bound}"
+            );
+        };
+        let channels = want.color.channels;
+        for (i, n) in layers.iter().enumerate() {
+            let n = *n as f32;
+            let bound = 2.0 * n * u + 1e-5;
+            for c in 0..channels {
+                let k = i * channels + c;
+                let w = want.color.data[k];
+                check(
+                    "color",
+                    k,
+                    if unorm { w.clamp(0.0, 1.0) } else { w },
+                    got.color.data[k],
+                    bound,
+                );
+            }
+            check("alpha", i, alpha(&want, i), alpha(&got, i), bound);
+            // The depth sums: depth times alpha.
+            let sum = |f: &Frame| f.depth.as_ref().unwrap().data[i] * alpha(f, i);
+            check(
+                "depth sum",
+                i,
+                sum(&want),
+                sum(&got),
+                2.0 * n * depth_u * far + 1e-4 * far.max(1.0),
+            );
+        }
+        println!(
+            "{label}, {precision:?}: hardware forward worst {worst:.3} of the bound; sort {} keys (tiles {})",
+            info.intersections, want.stats.intersections
+        );
+        out.push((precision, worst));
+    }
+    out
+}
+
+/// Per pixel, how many primitives' boxes hold its centre (the fragments blended there).
+#[cfg(feature = "gpu")]
+fn layers<M: SplatMethod>(params: &[M::Params], cam: &Camera) -> Vec<u32> {
+    let (w, h) = (cam.size.x as usize, cam.size.y as usize);
+    let mut n = vec![0u32; w * h];
+    for p in params
+        .iter()
+        .map(|p| M::project(p, cam))
+        .filter(|p| p.visible)
+    {
+        let (lo, hi) = (p.bbox_min, p.bbox_max);
+        for y in 0..h {
+            for x in 0..w {
+                let (cx, cy) = (x as f32 + 0.5, y as f32 + 0.5);
+                if cx >= lo.x && cx <= hi.x && cy >= lo.y && cy <= hi.y {
+                    n[y * w + x] += 1;
+                }
+            }
+        }
+    }
+    n
+}

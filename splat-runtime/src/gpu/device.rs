@@ -27,6 +27,11 @@ pub struct Gpu {
     pub software: bool,
     /// Timestamp queries around compute passes (`TIMESTAMP_QUERY`): stage times on the GPU.
     pub timestamps: bool,
+    /// Blending into `Rgba32Float` render targets (`FLOAT32_BLENDABLE`).
+    pub float32_blending: bool,
+    /// Blending into `Rgba16Unorm` render targets (`TEXTURE_FORMAT_16BIT_NORM` and the
+    /// adapter's format features).
+    pub unorm16_targets: bool,
     limits: wgpu::Limits,
     pipelines: Mutex<HashMap<u64, wgpu::ComputePipeline>>,
 }
@@ -58,7 +63,21 @@ impl Gpu {
         let features = adapter.features()
             & (wgpu::Features::SHADER_FLOAT32_ATOMIC
                 | wgpu::Features::SUBGROUP
-                | wgpu::Features::TIMESTAMP_QUERY);
+                | wgpu::Features::TIMESTAMP_QUERY
+                | wgpu::Features::FLOAT32_BLENDABLE
+                | wgpu::Features::TEXTURE_FORMAT_16BIT_NORM
+                | wgpu::Features::TEXTURE_ADAPTER_SPECIFIC_FORMAT_FEATURES);
+        // Rendering into (and blending) Rgba16Unorm is an adapter-specific format feature.
+        let unorm16 = adapter.get_texture_format_features(wgpu::TextureFormat::Rgba16Unorm);
+        let unorm16_targets = features.contains(
+            wgpu::Features::TEXTURE_FORMAT_16BIT_NORM
+                | wgpu::Features::TEXTURE_ADAPTER_SPECIFIC_FORMAT_FEATURES,
+        ) && unorm16
+            .allowed_usages
+            .contains(wgpu::TextureUsages::RENDER_ATTACHMENT)
+            && unorm16
+                .flags
+                .contains(wgpu::TextureFormatFeatureFlags::BLENDABLE);
         let limits = adapter.limits();
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("splat"),
@@ -75,9 +94,16 @@ impl Gpu {
             subgroups: features.contains(wgpu::Features::SUBGROUP),
             software: info.device_type == wgpu::DeviceType::Cpu,
             timestamps: features.contains(wgpu::Features::TIMESTAMP_QUERY),
+            float32_blending: features.contains(wgpu::Features::FLOAT32_BLENDABLE),
+            unorm16_targets,
             limits,
             pipelines: Mutex::new(HashMap::new()),
         })
+    }
+
+    /// The device's limits (those of the adapter).
+    pub fn limits(&self) -> &wgpu::Limits {
+        &self.limits
     }
 
     /// Bytes of workgroup memory a shader may use.
@@ -204,15 +230,26 @@ impl Gpu {
         kernel: &Kernel,
         buffers: &[(&str, &wgpu::Buffer)],
     ) -> Result<wgpu::BindGroup, GpuError> {
+        let layout = kernel.pipeline.get_bind_group_layout(0);
+        self.bind_slots(&kernel.entry, &layout, &kernel.slots, buffers)
+    }
+
+    /// A bind group of `layout` with each buffer at its slot in `slots` ([`binding_slots`]).
+    pub fn bind_slots(
+        &self,
+        entry: &str,
+        layout: &wgpu::BindGroupLayout,
+        slots: &[(String, u32)],
+        buffers: &[(&str, &wgpu::Buffer)],
+    ) -> Result<wgpu::BindGroup, GpuError> {
         let mut entries = Vec::with_capacity(buffers.len());
         for (name, buffer) in buffers {
-            let slot = kernel
-                .slots
+            let slot = slots
                 .iter()
                 .find(|(n, _)| n == name)
                 .map(|(_, slot)| *slot)
                 .ok_or_else(|| {
-                    GpuError::Shader(format!("`{}` declares no binding `{name}`", kernel.entry))
+                    GpuError::Shader(format!("`{entry}` declares no binding `{name}`"))
                 })?;
             entries.push(wgpu::BindGroupEntry {
                 binding: slot,
@@ -220,8 +257,8 @@ impl Gpu {
             });
         }
         Ok(self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some(&kernel.entry),
-            layout: &kernel.pipeline.get_bind_group_layout(0),
+            label: Some(entry),
+            layout,
             entries: &entries,
         }))
     }
@@ -293,7 +330,7 @@ pub struct Kernel {
 }
 
 /// The binding declarations of a runtime shader: `@binding(N) var<...> name: ...` lines.
-fn binding_slots(source: &str) -> Vec<(String, u32)> {
+pub fn binding_slots(source: &str) -> Vec<(String, u32)> {
     source
         .lines()
         .filter_map(|line| {

@@ -21,6 +21,7 @@ const SHADE: &str = include_str!("shaders/shade.wgsl");
 const BACKWARD: &str = include_str!("shaders/backward.wgsl");
 const PROJECT_BACKWARD: &str = include_str!("shaders/project_backward.wgsl");
 const PIXEL_BACKWARD: &str = include_str!("shaders/pixel_backward.wgsl");
+const RASTER: &str = include_str!("shaders/raster.wgsl");
 
 /// Bytes of workgroup memory kept free of the batch (counters, flags).
 const RESERVED_BYTES: u32 = 256;
@@ -218,15 +219,17 @@ fn pixel<M: SplatMethod>(camera_binding: u32) -> Result<(String, String, Vec<Str
     Ok((binding, code, args))
 }
 
-/// `evaluate(pixel, staged shade words of entry j)`, and its signature.
+/// `evaluate(pixel, shade words)`, the shade words read from `words[s + k]`, and its
+/// signature.
 fn evaluate_call<M: SplatMethod>(
     pixel_args: &[String],
+    words: &str,
 ) -> Result<(String, &'static WgslFunction), GpuError> {
     let eval = sig::<M>("evaluate")?;
     let np = pixel_args.len();
     let mut args = pixel_args.to_vec();
     for (j, kind) in eval.args.iter().enumerate().skip(np) {
-        args.push(load(*kind, &format!("batch_words[s + {}u]", j - np)));
+        args.push(load(*kind, &format!("{words}[s + {}u]", j - np)));
     }
     Ok((format!("{}({})", eval.name, args.join(", ")), eval))
 }
@@ -263,7 +266,7 @@ pub fn shade<M: SplatMethod>(
     let layout = Layout::of::<M>();
     let b = blend_sizes(gpu, tile, &layout, false)?;
     let (camera, pixel_code, pixel_args) = pixel::<M>(6)?;
-    let (call, eval) = evaluate_call::<M>(&pixel_args)?;
+    let (call, eval) = evaluate_call::<M>(&pixel_args, "batch_words")?;
     let nc = layout.channels;
     let accumulate: String = (0..nc)
         .map(|c| {
@@ -309,7 +312,7 @@ pub fn backward<M: SplatMethod>(
     let layout = Layout::of::<M>();
     let b = blend_sizes(gpu, tile, &layout, acc.reduce == Reduction::Workgroup)?;
     let (camera, pixel_code, pixel_args) = pixel::<M>(9)?;
-    let (call, eval) = evaluate_call::<M>(&pixel_args)?;
+    let (call, eval) = evaluate_call::<M>(&pixel_args, "batch_words")?;
     let adj = sig::<M>("evaluate_adjoint")?;
     let (np, ns, nc) = (pixel_args.len(), layout.shade_words, layout.channels);
     if adj.args.len() != np + ns + 1 + nc {
@@ -490,6 +493,57 @@ pub fn backward<M: SplatMethod>(
         "{wgsl}\n{}\n{body}",
         tile_pass(&layout, tile, &b, rule)
     ))
+}
+
+/// Values per render target of the hardware-rasterized forward pass: three, then the alpha
+/// each target blends by.
+pub const RASTER_VALUES: usize = 3;
+
+/// The hardware-rasterized forward pass (`quad_vertex`, `splat_fragment`): the color channels
+/// in `color_targets` targets, then (with `depth`) the depth in one more target. Returns the
+/// source and the number of color targets.
+pub fn raster<M: SplatMethod>(depth: bool, rule: Blend) -> Result<(String, usize), GpuError> {
+    let wgsl = M::SOURCE.wgsl;
+    let layout = Layout::of::<M>();
+    let (camera, pixel_code, pixel_args) = pixel::<M>(3)?;
+    let (call, eval) = evaluate_call::<M>(&pixel_args, "projected")?;
+    let color: Vec<String> = (0..layout.channels)
+        .map(|c| format!("r.{}", eval.results[1 + c].0))
+        .collect();
+    let mut targets: Vec<Vec<String>> = color
+        .chunks(RASTER_VALUES)
+        .map(<[String]>::to_vec)
+        .collect();
+    let color_targets = targets.len();
+    if depth {
+        targets.push(vec!["depth".into()]);
+    }
+    let mut decls = String::new();
+    let mut write = String::new();
+    for (t, values) in targets.iter_mut().enumerate() {
+        values.resize(RASTER_VALUES, "0.0".into());
+        decls += &format!("    @location({t}) t{t}: vec4<f32>,\n");
+        write += &format!(
+            "    out.t{t} = vec4<f32>(a * {}, a * {}, a * {}, a);\n",
+            values[0], values[1], values[2]
+        );
+    }
+    let body = fill(
+        RASTER,
+        &[
+            ("STRIDE", layout.stride.to_string()),
+            ("SHADE_AT", layout.shade_at.to_string()),
+            ("ALPHA_MIN", format!("{:?}", rule.alpha_min)),
+            ("CAMERA_BINDING", camera),
+            ("TARGETS", decls),
+            ("PIXEL", pixel_code),
+            ("EVALUATE", call),
+            ("VALID", eval.results[layout.channels + 1].0.to_string()),
+            ("ALPHA", eval.results[0].0.to_string()),
+            ("WRITE", write),
+        ],
+    );
+    Ok((format!("{wgsl}\n{body}"), color_targets))
 }
 
 /// `project_backward`: `project`'s adjoint per primitive, camera gradients per workgroup; and

@@ -7,6 +7,8 @@
 //!   per-tile shading, backward blend, `project`'s adjoint) around the generated WGSL.
 //! - [`resident`]: the device-resident pipeline: [`GpuScene`] (parameters on the device) and
 //!   [`GpuRenderer`] (kernels built once, buffers kept across frames, forward and backward).
+//! - [`raster`]: the hardware-rasterized forward pass: quads drawn in depth order, blended
+//!   by fixed-function blending into render targets of each precision.
 //! - [`render`]: one-shot render and backward for parameters on the host, over `resident`.
 //! - [`timing`]: stage times from GPU timestamps.
 //! - [`train`]: the loss, Adam and density control's statistics on the device.
@@ -14,7 +16,9 @@
 pub mod device;
 pub mod dispatch;
 pub mod entries;
+mod front;
 pub mod kernel;
+pub mod raster;
 pub mod render;
 pub mod resident;
 pub mod sort;
@@ -22,6 +26,7 @@ pub mod timing;
 pub mod train;
 
 pub use device::Gpu;
+pub use raster::HardwareRenderer;
 pub use resident::{GpuRenderError, GpuRenderer, GpuScene};
 
 /// The tile sizes the GPU backend renders with: one invocation per pixel of a tile.
@@ -68,4 +73,6 @@ pub enum GpuError {
         "the GPU backend stores its per-pixel state as f32 only, not {0} (the CPU has every format)"
     )]
     Precision(&'static str),
+    #[error("the hardware-rasterized forward pass: {0}")]
+    Hardware(String),
 }

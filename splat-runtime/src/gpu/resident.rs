@@ -14,13 +14,13 @@
 
 use super::device::{Grown, Kernel, dispatch};
 use super::entries::{self, Accumulation, Layout, Reduction};
-use super::sort::{RadixSort, Scan, TileRanges};
+use super::front::{FrameWords, Front};
+use super::sort::TileRanges;
 use super::timing::StageTimer;
 use super::{Gpu, GpuError};
 use crate::flat::Flat;
 use crate::method::SplatMethod;
 use crate::pipeline::grid::TileGrid;
-use crate::pipeline::rasterize::MAX_INTERSECTIONS;
 use crate::pipeline::{
     BackwardStats, Frame, FrameGrad, Gradients, Image, RenderError, RenderOptions, Stats,
 };
@@ -141,9 +141,7 @@ pub struct GpuRenderer<'g, M: SplatMethod> {
     /// Accumulate weight * depth per pixel (for the depth output or its gradient).
     depth_sums: bool,
     layout: Layout,
-    project: Kernel,
-    count: Kernel,
-    emit: Kernel,
+    front: Front,
     shade: Kernel,
     project_backward: Kernel,
     /// Parameter float slots (gradient words per primitive).
@@ -151,22 +149,8 @@ pub struct GpuRenderer<'g, M: SplatMethod> {
     pixel_backward: Option<Kernel>,
     /// Backward blends built on first use, per (depth gradient, accumulation).
     blends: HashMap<(bool, Accumulation), Kernel>,
-    camera: wgpu::Buffer,
-    /// (primitives, width, height, tile size), (tiles_x, P_max, tiles, 0).
-    frame_info: wgpu::Buffer,
-    /// (primitives, 0, 0, 0).
-    count_info: wgpu::Buffer,
     /// (width, height, 0, 0).
     pixel_info: wgpu::Buffer,
-    projected: Grown,
-    counts: Grown,
-    /// Intersections (low, high word), primitives with a tile rectangle.
-    totals: wgpu::Buffer,
-    totals_staging: wgpu::Buffer,
-    scan: Scan,
-    keys: Grown,
-    prims: Grown,
-    sort: RadixSort,
     tiles: TileRanges,
     /// Per pixel: color, final T, sum of weight * depth.
     pixels: Grown,
@@ -210,21 +194,12 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             false => None,
         };
         let grown = |what, words| Grown::new(gpu, what, words);
-        let totals = gpu.buffer("intersection totals", 3)?;
-        let totals_staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("intersection totals readback"),
-            size: 12,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
         Ok(GpuRenderer {
             gpu,
             opts: *opts,
             depth_sums,
             layout,
-            project: gpu.kernel(&entries::project::<M>()?, "splat_harness")?,
-            count: gpu.kernel(&entries::tiles::<M>(false, opts.tile_cull)?, "count_tiles")?,
-            emit: gpu.kernel(&entries::tiles::<M>(true, opts.tile_cull)?, "emit_tiles")?,
+            front: Front::new::<M>(gpu, opts.tile_cull)?,
             shade: gpu.kernel(
                 &entries::shade::<M>(gpu, opts.tile_size, depth_sums, opts.blend)?,
                 "shade_tiles",
@@ -233,18 +208,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             param_floats,
             pixel_backward,
             blends: HashMap::new(),
-            camera: gpu.buffer("camera", Camera::LEN)?,
-            frame_info: gpu.uniform_buffer(8),
-            count_info: gpu.uniform_buffer(4),
             pixel_info: gpu.uniform_buffer(4),
-            projected: grown("projected primitives", 1)?,
-            counts: grown("tiles per primitive", 1)?,
-            totals,
-            totals_staging,
-            scan: Scan::new(gpu)?,
-            keys: grown("intersection keys", 2)?,
-            prims: grown("intersection primitives", 1)?,
-            sort: RadixSort::new(gpu)?,
             tiles: TileRanges::new(gpu)?,
             pixels: grown("pixels", 1)?,
             pixel_grad: grown("pixel gradients", 1)?,
@@ -276,100 +240,39 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         let gpu = self.gpu;
         let grid = crate::pipeline::check::<M>(camera, &self.opts)?;
         let (n, layout) = (scene.len(), self.layout);
-        let n32 = n as u32;
         let tiles = grid.tile_count() as u32;
         let p_max = self
             .opts
             .p_max
             .map_or(u32::MAX, |p| p.min(u32::MAX as usize) as u32);
-        self.projected.ensure(gpu, n * layout.stride)?;
-        self.counts.ensure(gpu, n)?;
-        self.scan.prepare(gpu, n32)?;
-        gpu.write(&self.camera, &words_of(std::slice::from_ref(camera)));
-        gpu.write(
-            &self.frame_info,
-            &[
-                n32,
-                grid.width,
-                grid.height,
-                grid.size,
-                grid.tiles_x,
-                p_max,
-                tiles,
-                0,
-            ],
-        );
-        gpu.write(&self.count_info, &[n32, 0, 0, 0]);
-
+        let words = FrameWords {
+            width: grid.width,
+            height: grid.height,
+            tile_size: grid.size,
+            tiles_x: grid.tiles_x,
+            p_max,
+            tiles,
+        };
         // Submission 1: project, count, prefix sum; the total comes back.
-        let mut enc = gpu.device.create_command_encoder(&Default::default());
-        enc.clear_buffer(&self.totals, 0, None);
-        self.timer.start(&mut enc, PROJECT);
-        let bind = gpu.bind_named(
-            &self.project,
-            &[
-                ("harness_rows", scene.buffer()),
-                ("harness_shared", &self.camera),
-                ("harness_out", &self.projected),
-                ("harness_count", &self.count_info),
-            ],
-        )?;
-        dispatch(&mut enc, &self.project.pipeline, &bind, n32.div_ceil(64));
-        self.timer.end(&mut enc, PROJECT);
-        self.timer.start(&mut enc, COUNT);
-        let bind = gpu.bind_named(
-            &self.count,
-            &[
-                ("projected", &self.projected),
-                ("counts", &self.counts),
-                ("frame", &self.frame_info),
-                ("totals", &self.totals),
-            ],
-        )?;
-        dispatch(&mut enc, &self.count.pipeline, &bind, n32.div_ceil(256));
-        self.scan.record(gpu, &mut enc, &self.counts)?;
-        self.timer.end(&mut enc, COUNT);
-        enc.copy_buffer_to_buffer(&self.totals, 0, &self.totals_staging, 0, 12);
-        gpu.queue.submit([enc.finish()]);
-        let t = gpu.read_mappable(&self.totals_staging, 3)?;
-        let total = t[0] as u64 | (t[1] as u64) << 32;
-        if total > MAX_INTERSECTIONS {
-            return Err(RenderError::TooManyIntersections {
-                count: total,
-                limit: MAX_INTERSECTIONS,
-            }
-            .into());
-        }
-        let total32 = total as u32;
+        let counted = self
+            .front
+            .count(gpu, scene, camera, words, &self.timer, (PROJECT, COUNT))?;
 
         // Submission 2: emit, sort, ranges, bins, shade.
-        self.keys.ensure(gpu, 2 * total as usize)?;
-        self.prims.ensure(gpu, total as usize)?;
-        self.sort.prepare(gpu, total32, tiles)?;
+        let total32 = counted.intersections as u32;
         self.tiles.prepare(gpu, total32, tiles, p_max)?;
         let pixels = (grid.width * grid.height) as usize;
         self.pixels.ensure(gpu, pixels * (layout.channels + 2))?;
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         self.timer.start(&mut enc, SORT);
-        let bind = gpu.bind_named(
-            &self.emit,
-            &[
-                ("projected", &self.projected),
-                ("counts", &self.counts),
-                ("frame", &self.frame_info),
-                ("keys", &self.keys),
-                ("vals", &self.prims),
-            ],
-        )?;
-        dispatch(&mut enc, &self.emit.pipeline, &bind, n32.div_ceil(256));
-        self.sort.record(gpu, &mut enc, &self.keys, &self.prims)?;
-        self.tiles.record(gpu, &mut enc, &self.keys)?;
+        self.front.emit_sorted(gpu, &mut enc, counted, tiles)?;
+        self.tiles.record(gpu, &mut enc, &self.front.keys)?;
         self.timer.end(&mut enc, SORT);
         self.timer.start(&mut enc, SHADE);
         let mut inputs = self.tile_pass_inputs();
         inputs.push(("pixel_out", &self.pixels));
         if M::HAS_PIXEL_INFO {
-            inputs.push(("camera_words", &self.camera));
+            inputs.push(("camera_words", &self.front.camera));
         }
         let bind = gpu.bind_named(&self.shade, &inputs)?;
         dispatch(&mut enc, &self.shade.pipeline, &bind, tiles);
@@ -379,8 +282,8 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         let info = FrameInfo {
             grid,
             primitives: n,
-            visible: t[2] as usize,
-            intersections: total as usize,
+            visible: counted.visible,
+            intersections: counted.intersections as usize,
         };
         self.frame = Some(info);
         Ok(info)
@@ -491,12 +394,12 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
     /// `project`'s results of the last frame, [`Layout`]'s stride per primitive (the first
     /// word nonzero where the primitive is visible).
     pub fn projected(&self) -> (&wgpu::Buffer, usize) {
-        (&self.projected, self.layout.stride)
+        (&self.front.projected, self.layout.stride)
     }
 
     /// The last frame's camera, as its words.
     pub fn camera_buffer(&self) -> &wgpu::Buffer {
-        &self.camera
+        &self.front.camera
     }
 
     /// Float slots of `M::Params` (the gradient words per primitive).
@@ -552,7 +455,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             ("issued", &self.issued),
         ]);
         if M::HAS_PIXEL_INFO {
-            inputs.push(("camera_words", &self.camera));
+            inputs.push(("camera_words", &self.front.camera));
             inputs.push(("pixel_cotangent", &self.pixel_cotangent));
         }
         let tiles = grid.tile_count() as u32;
@@ -565,12 +468,12 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             k,
             &[
                 ("params", scene.buffer()),
-                ("camera_words", &self.camera),
-                ("projected", &self.projected),
+                ("camera_words", &self.front.camera),
+                ("projected", &self.front.projected),
                 ("grads", &self.grads),
                 ("param_grads", &self.param_grads),
                 ("camera_partials", &self.camera_partials),
-                ("info", &self.count_info),
+                ("info", &self.front.count_info),
             ],
         )?;
         dispatch(&mut enc, &k.pipeline, &bind, groups);
@@ -578,7 +481,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             let bind = gpu.bind_named(
                 k,
                 &[
-                    ("camera_words", &self.camera),
+                    ("camera_words", &self.front.camera),
                     ("pixel_cotangent", &self.pixel_cotangent),
                     ("camera_partials", &self.ray_partials),
                     ("info", &self.pixel_info),
@@ -595,11 +498,11 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
     /// The bindings every tile pass (forward and backward blend) shares (`tile_pass.wgsl`).
     fn tile_pass_inputs(&self) -> Vec<(&'static str, &wgpu::Buffer)> {
         vec![
-            ("projected", &*self.projected),
-            ("tile_prims", &*self.prims),
+            ("projected", &*self.front.projected),
+            ("tile_prims", &*self.front.prims),
             ("tile_ranges", &*self.tiles.ranges),
             ("tile_order", &*self.tiles.order),
-            ("frame", &self.frame_info),
+            ("frame", &self.front.frame_info),
         ]
     }
 

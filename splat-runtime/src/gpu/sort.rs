@@ -128,6 +128,12 @@ impl RadixSort {
         })
     }
 
+    /// Bytes a sort of `n` keys holds: the keys (two words) and values, and their scratch
+    /// copies (the digit histograms aside).
+    pub fn bytes_for(n: usize) -> usize {
+        2 * 12 * n
+    }
+
     /// Sizes the buffers for `n` keys over `tiles` tiles and writes each pass's uniform.
     pub fn prepare(&mut self, gpu: &Gpu, n: u32, tiles: u32) -> Result<(), GpuError> {
         let tile_bits = 32 - tiles.saturating_sub(1).leading_zeros();

@@ -1,0 +1,69 @@
+//! The hardware-rasterized forward pass (quads in depth order, fixed-function blending into
+//! render targets of each precision) against the tile-based forward on the GPU, within the
+//! bound each target format implies (`hardware_forward_matches_tiles`): 3DGS (no pixel data)
+//! and 3DGUT (its `pixel_info` rays, on a fisheye) through the same check.
+//!
+//! Needs a wgpu adapter (lavapipe is enough); with `SPLAT_REQUIRE_GPU=1` a missing adapter
+//! fails the test, otherwise it skips.
+
+mod common;
+
+use common::{as_method, spread_gaussians, wide_camera};
+use splat_methods::{gs3d, gut};
+use splat_runtime::CameraModel;
+use splat_runtime::checks::forward::hardware_forward_matches_tiles;
+use splat_runtime::gpu::raster::HardwareRenderer;
+use splat_runtime::gpu::{GpuScene, adapter_or_skip};
+use splat_runtime::pipeline::precision::Precision;
+use splat_runtime::{RenderOptions, render};
+
+#[test]
+fn hardware_forward_matches_the_tile_path_in_every_format() {
+    let cam = wide_camera(64, 48, CameraModel::Pinhole);
+    let params = spread_gaussians(&cam, 300, 4);
+    let formats = hardware_forward_matches_tiles::<gs3d::Method>("3dgs", &params, &cam);
+    if adapter_or_skip().is_some() {
+        // Rgba16Float and Rgba8Unorm blend on every adapter.
+        assert!(formats.iter().any(|(p, _)| *p == Precision::F16));
+        assert!(formats.iter().any(|(p, _)| *p == Precision::Unorm8));
+    }
+    let fisheye = wide_camera(64, 48, CameraModel::KannalaBrandt);
+    let rays = as_method::<gut::Params>(spread_gaussians(&fisheye, 300, 5));
+    hardware_forward_matches_tiles::<gut::Method>("3dgut, fisheye", &rays, &fisheye);
+}
+
+/// The image of the default hardware path equals the CPU's (with its transmittance stop)
+/// within what the stop leaves out, and options it cannot honour are refused by name.
+#[test]
+fn hardware_forward_renders_what_the_cpu_renders_and_refuses_p_max() {
+    let Some(gpu) = adapter_or_skip() else {
+        return;
+    };
+    let cam = wide_camera(40, 32, CameraModel::Pinhole);
+    let params = spread_gaussians(&cam, 120, 6);
+    let opts = RenderOptions::default();
+    let cpu = render::<gs3d::Method>(&params, &cam, &opts).unwrap();
+    let precision = if splat_runtime::gpu::raster::supports(&gpu, Precision::F32) {
+        Precision::F32
+    } else {
+        Precision::F16
+    };
+    let mut hw =
+        HardwareRenderer::<gs3d::Method>::new(&gpu, &RenderOptions { precision, ..opts }).unwrap();
+    let scene = GpuScene::new(&gpu, &params).unwrap();
+    hw.forward(&scene, &cam).unwrap();
+    let frame = hw.download_frame().unwrap();
+    // Past the stop, at most T_MIN of transmittance is left to add color; f16 rounds too.
+    let bound = 1e-4 + 2.0 * 64.0 * precision.unit_error().max(2f32.powi(-24)) + 1e-5;
+    for (a, b) in cpu.color.data.iter().zip(&frame.color.data) {
+        assert!((a - b).abs() <= bound, "{a} / {b}");
+    }
+    let capped = RenderOptions {
+        p_max: Some(8),
+        ..opts
+    };
+    let err = HardwareRenderer::<gs3d::Method>::new(&gpu, &capped)
+        .err()
+        .unwrap();
+    assert!(err.to_string().contains("P_max"), "{err}");
+}
