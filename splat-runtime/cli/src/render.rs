@@ -4,8 +4,10 @@ use crate::methods::{self, Method};
 use crate::{Backend, Model, pick_gpu, scene};
 use anyhow::{Result, bail};
 use plotters::prelude::RGBColor;
+use splat_runtime::gpu::{GpuScene, HardwareRenderer};
 use splat_runtime::io::ply::{FromStored, GaussianCloud};
 use splat_runtime::io::{camera as camera_io, image as image_io, ply};
+use splat_runtime::pipeline::precision::Precision;
 use splat_runtime::{Camera, CameraModel, Frame, Image, RenderOptions, SplatMethod, render};
 use std::path::PathBuf;
 use std::time::Instant;
@@ -38,6 +40,14 @@ pub struct RenderArgs {
     /// Blend at most this many primitives per tile.
     #[arg(long)]
     p_max: Option<usize>,
+    /// How the per-pixel state is stored: f32, f16, unorm16 or unorm8 (the GPU's tile path
+    /// stores f32 only; the hardware path blends into targets of each).
+    #[arg(long, default_value = "f32", value_parser = parse_precision)]
+    precision: Precision,
+    /// On the GPU, rasterize with the graphics pipeline: quads in depth order, blended by
+    /// fixed-function blending (no tile lists; no transmittance stop).
+    #[arg(long)]
+    hardware: bool,
     /// Where to render: the CPU backend (rayon + SIMD) or the wgpu backend (any adapter,
     /// software ones included); `auto` picks a hardware GPU when there is one.
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
@@ -54,6 +64,17 @@ pub struct Render<'a> {
     camera: &'a Camera,
     opts: &'a RenderOptions,
     backend: Backend,
+    /// The hardware-rasterized forward pass (GPU only).
+    hardware: bool,
+}
+
+/// A precision by its name.
+fn parse_precision(name: &str) -> Result<Precision, String> {
+    let all = Precision::ALL;
+    all.into_iter().find(|p| p.name() == name).ok_or_else(|| {
+        let names: Vec<&str> = all.iter().map(|p| p.name()).collect();
+        format!("expected one of {}", names.join(", "))
+    })
 }
 
 impl Render<'_> {
@@ -63,7 +84,21 @@ impl Render<'_> {
         M::Params: FromStored,
     {
         let params: Vec<M::Params> = self.cloud.params();
-        Ok(match pick_gpu(self.backend)? {
+        // The hardware rasterizer needs a GPU: `auto` takes a software one too.
+        let backend = match (self.hardware, self.backend) {
+            (true, Backend::Auto) => Backend::Gpu,
+            (_, backend) => backend,
+        };
+        Ok(match pick_gpu(backend)? {
+            None if self.hardware => {
+                bail!("--hardware rasterizes with the GPU: use --backend gpu or auto")
+            }
+            Some(gpu) if self.hardware => {
+                let mut renderer = HardwareRenderer::<M>::new(&gpu, self.opts)?;
+                renderer.forward(&GpuScene::new(&gpu, &params)?, self.camera)?;
+                let frame = renderer.download_frame()?;
+                (frame, format!("GPU (hardware rasterizer), {}", gpu.adapter))
+            }
             None => (
                 render::<M>(&params, self.camera, self.opts)?,
                 "CPU".to_string(),
@@ -84,12 +119,14 @@ fn render_method(
     camera: &Camera,
     opts: &RenderOptions,
     backend: Backend,
+    hardware: bool,
 ) -> Result<(Frame, String)> {
     let task = Render {
         cloud,
         camera,
         opts,
         backend,
+        hardware,
     };
     (method.for_degree(cloud.sh_degree).render)(&task)
 }
@@ -132,7 +169,7 @@ pub(crate) fn gallery(
     for (r, method) in methods.iter().enumerate() {
         for (c, model) in CameraModel::ALL.into_iter().enumerate() {
             let camera = scene::camera(width, height, model);
-            let panel = match render_method(method, &cloud, &camera, &opts, Backend::Cpu) {
+            let panel = match render_method(method, &cloud, &camera, &opts, Backend::Cpu, false) {
                 Ok((frame, _)) => {
                     println!(
                         "{} / {model}: {} visible, {} intersections, shade {:.1} ms",
@@ -239,21 +276,26 @@ pub(crate) fn render_cmd(args: &RenderArgs, methods: &[Method]) -> Result<()> {
         p_max: args.p_max,
         alpha: args.alpha,
         depth: args.depth,
+        precision: args.precision,
         ..Default::default()
     };
-    let (frame, backend) = render_method(method, &cloud, &camera, &opts, args.backend)?;
+    let (frame, backend) =
+        render_method(method, &cloud, &camera, &opts, args.backend, args.hardware)?;
     let written = image_io::write_frame(&args.out, &frame)?;
     let s = &frame.stats;
     let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+    let raster = match args.hardware {
+        true => format!("{} render targets", args.precision.name()),
+        false => format!("tile {}", args.tile),
+    };
     println!(
-        "{} on {backend}: {} primitives (SH degree {}) from {source}, {}x{} {} camera, tile {}",
+        "{} on {backend}: {} primitives (SH degree {}) from {source}, {}x{} {} camera, {raster}",
         method.name,
         s.primitives,
         cloud.sh_degree,
         frame.color.width,
         frame.color.height,
         camera.model,
-        args.tile
     );
     let pairs = if backend == "CPU" {
         s.pairs.to_string()

@@ -1,7 +1,9 @@
 //! `splat tradeoff`: what each accuracy knob of the renderer costs in time and memory and what
 //! it buys in image and gradient accuracy, on one scene, camera and backend.
 //!
-//! Each knob is swept alone from the defaults. The reference is the f32 render with every
+//! Each knob is swept alone from the defaults. On the GPU one more knob is the forward path:
+//! the hardware-rasterized pass (quads blended into render targets, one sort key per visible
+//! primitive) at each target precision the adapter can blend into; it has no backward pass. The reference is the f32 render with every
 //! knob at its most accurate ([`reference_options`]); the f64 brute-force renderer would take
 //! minutes on a real scene. Gradients are those of one fixed random linear loss on the color
 //! (uniform in [-0.5, 0.5) per channel, as `splat bench`), compared per parameter group.
@@ -12,7 +14,8 @@ use crate::plot;
 use anyhow::{Context, Result, bail};
 use plotters::prelude::*;
 use splat_runtime::gpu::entries::Accumulation;
-use splat_runtime::gpu::{Gpu, GpuRenderer, GpuScene};
+use splat_runtime::gpu::sort::RadixSort;
+use splat_runtime::gpu::{Gpu, GpuRenderer, GpuScene, HardwareRenderer};
 use splat_runtime::io::ply::FromStored;
 use splat_runtime::io::{ply, write_atomic};
 use splat_runtime::pipeline::precision::Precision;
@@ -48,16 +51,32 @@ pub struct TradeoffArgs {
     height: u32,
 }
 
-/// One point of the sweep: a knob, its setting as the table and the CSV name it, the options.
+/// One point of the sweep: a knob, its setting as the table and the CSV name it, the options
+/// and the forward path.
 pub(crate) struct Setting {
     pub knob: &'static str,
     pub value: String,
     pub opts: RenderOptions,
+    pub path: Forward,
+}
+
+/// How a setting's forward pass rasterizes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Forward {
+    /// Per-tile lists blended in compute (or on the CPU), with a backward pass.
+    Tiles,
+    /// The GPU's rasterizer and blending into render targets of `RenderOptions::precision`;
+    /// forward only.
+    Hardware,
 }
 
 /// The defaults, then each knob alone at its other settings (the tile sizes and precisions
-/// the backend has).
-pub(crate) fn sweep(tile_sizes: &[u32], precisions: &[Precision]) -> Vec<Setting> {
+/// the backend has, and the hardware path at the precisions in `hardware`).
+pub(crate) fn sweep(
+    tile_sizes: &[u32],
+    precisions: &[Precision],
+    hardware: &[Precision],
+) -> Vec<Setting> {
     let base = RenderOptions::default();
     let mut out = vec![Setting {
         knob: "default",
@@ -69,8 +88,16 @@ pub(crate) fn sweep(tile_sizes: &[u32], precisions: &[Precision]) -> Vec<Setting
             base.precision.name()
         ),
         opts: base,
+        path: Forward::Tiles,
     }];
-    let mut add = |knob, value: String, opts| out.push(Setting { knob, value, opts });
+    let mut add = |knob, value: String, opts| {
+        out.push(Setting {
+            knob,
+            value,
+            opts,
+            path: Forward::Tiles,
+        })
+    };
     for p in [512, 128, 32, 8] {
         let opts = RenderOptions {
             p_max: Some(p),
@@ -100,6 +127,14 @@ pub(crate) fn sweep(tile_sizes: &[u32], precisions: &[Precision]) -> Vec<Setting
     for &precision in precisions.iter().filter(|&&p| p != base.precision) {
         let opts = RenderOptions { precision, ..base };
         add("precision", precision.name().into(), opts);
+    }
+    for &precision in hardware {
+        out.push(Setting {
+            knob: "raster",
+            value: format!("hardware {}", precision.name()),
+            opts: RenderOptions { precision, ..base },
+            path: Forward::Hardware,
+        });
     }
     out
 }
@@ -157,9 +192,19 @@ pub fn tradeoff_cmd(args: &TradeoffArgs, methods: &[Method]) -> Result<()> {
         args.iters
     );
     println!("reference: the f32 render with no P_max, t_min 0 and no extra alpha skip");
-    let settings = match gpu {
-        Some(_) => sweep(&splat_runtime::gpu::TILE_SIZES, &[Precision::F32]),
-        None => sweep(&splat_runtime::pipeline::TILE_SIZES, &Precision::ALL),
+    let settings = match &gpu {
+        Some(gpu) => {
+            let blendable = Precision::ALL.into_iter();
+            let hardware: Vec<Precision> = blendable
+                .filter(|p| splat_runtime::gpu::raster::supports(gpu, *p))
+                .collect();
+            sweep(
+                &splat_runtime::gpu::TILE_SIZES,
+                &[Precision::F32],
+                &hardware,
+            )
+        }
+        None => sweep(&splat_runtime::pipeline::TILE_SIZES, &Precision::ALL, &[]),
     };
     // The other methods the camera allows, for the evaluation-model knob.
     let models: Vec<&Method> = methods
@@ -168,20 +213,22 @@ pub fn tradeoff_cmd(args: &TradeoffArgs, methods: &[Method]) -> Result<()> {
         .collect();
     let runs = 1 + settings.len() + cloud.sh_degree as usize + models.len() + 1;
     let bar = indicatif::ProgressBar::new(runs as u64);
-    let task = |method: &Method, cloud: &ply::GaussianCloud, options: Vec<RenderOptions>| {
-        let task = Tradeoff {
-            cloud,
-            camera: &camera,
-            gpu: gpu.as_ref(),
-            iters: args.iters,
-            options,
-            bar: &bar,
+    let task =
+        |method: &Method, cloud: &ply::GaussianCloud, options: Vec<(RenderOptions, Forward)>| {
+            let task = Tradeoff {
+                cloud,
+                camera: &camera,
+                gpu: gpu.as_ref(),
+                iters: args.iters,
+                options,
+                bar: &bar,
+            };
+            (method.for_degree(cloud.sh_degree).tradeoff)(&task)
         };
-        (method.for_degree(cloud.sh_degree).tradeoff)(&task)
-    };
 
-    let mut options = vec![reference_options()];
-    options.extend(settings.iter().map(|s| s.opts));
+    let tiles = |opts| vec![(opts, Forward::Tiles)];
+    let mut options = tiles(reference_options());
+    options.extend(settings.iter().map(|s| (s.opts, s.path)));
     let mut outcomes = task(method, &cloud, options)?.into_iter();
     let reference = outcomes.next().context("the reference frame")?;
     let mut rows: Vec<Row> = settings
@@ -192,16 +239,16 @@ pub fn tradeoff_cmd(args: &TradeoffArgs, methods: &[Method]) -> Result<()> {
     // SH degree: the scene's colors truncated to each lower degree, default options.
     for degree in (0..cloud.sh_degree).rev() {
         let lower = truncated(&cloud, degree);
-        let o = one(task(method, &lower, vec![RenderOptions::default()])?)?;
+        let o = one(task(method, &lower, tiles(RenderOptions::default()))?)?;
         rows.push(compare("sh_degree", degree.to_string(), &o, &reference));
     }
     // Evaluation model: every method on the same Gaussians, default options.
     let exact_reference = match exact {
-        Some(e) => one(task(e, &cloud, vec![reference_options()])?)?,
+        Some(e) => one(task(e, &cloud, tiles(reference_options()))?)?,
         None => reference,
     };
     for m in models {
-        let o = one(task(m, &cloud, vec![RenderOptions::default()])?)?;
+        let o = one(task(m, &cloud, tiles(RenderOptions::default()))?)?;
         rows.push(compare("model", m.name.to_string(), &o, &exact_reference));
     }
     bar.finish_and_clear();
@@ -236,17 +283,21 @@ pub struct Tradeoff<'a> {
     camera: &'a Camera,
     gpu: Option<&'a Gpu>,
     iters: usize,
-    options: Vec<RenderOptions>,
+    options: Vec<(RenderOptions, Forward)>,
     bar: &'a indicatif::ProgressBar,
 }
 
 /// What one setting's frames gave.
 pub(crate) struct Outcome {
     forward: Duration,
-    backward: Duration,
+    /// None on the hardware path, which has no backward pass.
+    backward: Option<Duration>,
     /// Bytes the frame holds (CPU: kept for the backward pass; GPU: allocated on the device).
     bytes: usize,
+    /// Sorted keys: (primitive, tile) pairs, or visible primitives on the hardware path.
     intersections: usize,
+    /// Bytes the GPU's sort held (its keys, values and their scratch copies).
+    sort_bytes: Option<usize>,
     color: Vec<f32>,
     /// Parameter gradient words per group (`param_groups`), primitive after primitive.
     gradients: Vec<(String, Vec<f64>)>,
@@ -257,9 +308,10 @@ struct Row {
     knob: &'static str,
     value: String,
     forward_ms: f64,
-    backward_ms: f64,
+    backward_ms: Option<f64>,
     mib: f64,
     intersections: usize,
+    sort_mib: Option<f64>,
     psnr: f64,
     max_abs: f64,
     /// Per parameter group: RMSE relative to the reference's RMS, and the mean relative error
@@ -269,9 +321,10 @@ struct Row {
 }
 
 impl Row {
-    /// The worst group's relative RMSE.
-    fn gradient_error(&self) -> f64 {
-        self.groups.iter().map(|g| g.1).fold(0.0, f64::max)
+    /// The worst group's relative RMSE (None without gradients).
+    fn gradient_error(&self) -> Option<f64> {
+        let worst = self.groups.iter().map(|g| g.1).fold(0.0, f64::max);
+        (!self.groups.is_empty()).then_some(worst)
     }
 }
 
@@ -296,9 +349,10 @@ impl Tradeoff<'_> {
         let groups = param_groups::<M>();
         let len = <M::Params as splat_runtime::Flat>::LEN;
         let mut out = vec![];
-        for opts in &self.options {
-            let (mut outcome, gradients) = match (self.gpu, &scene) {
-                (Some(gpu), Some(scene)) => self.on_gpu(gpu, scene, opts, &grad)?,
+        for (opts, path) in &self.options {
+            let (mut outcome, gradients) = match (self.gpu, &scene, path) {
+                (Some(gpu), Some(scene), Forward::Hardware) => self.hardware(gpu, scene, opts)?,
+                (Some(gpu), Some(scene), _) => self.on_gpu(gpu, scene, opts, &grad)?,
                 _ => self.on_cpu::<M>(&params, opts, &grad)?,
             };
             let words: Vec<f64> = gradients
@@ -341,9 +395,10 @@ impl Tradeoff<'_> {
         let gradients = splat_runtime::backward::<M>(&state, params, camera, grad)?;
         let outcome = Outcome {
             forward,
-            backward,
+            backward: Some(backward),
             bytes: state.bytes(),
             intersections: frame.stats.intersections,
+            sort_bytes: None,
             color: frame.color.data,
             gradients: vec![],
         };
@@ -376,41 +431,79 @@ impl Tradeoff<'_> {
         })?;
         let frame = renderer.download_frame()?;
         let gradients = renderer.download_gradients()?.gradients;
-        let bytes = gpu
-            .device
-            .generate_allocator_report()
-            .map_or(0, |r| r.total_allocated_bytes as usize);
         let outcome = Outcome {
             forward,
-            backward,
-            bytes,
+            backward: Some(backward),
+            bytes: allocated(gpu),
             intersections: frame.stats.intersections,
+            sort_bytes: Some(RadixSort::bytes_for(frame.stats.intersections)),
             color: frame.color.data,
             gradients: vec![],
         };
         Ok((outcome, gradients.params))
     }
+
+    /// The hardware-rasterized forward pass: no backward, so no gradients.
+    fn hardware<M: SplatMethod>(
+        &self,
+        gpu: &Gpu,
+        scene: &GpuScene<M>,
+        opts: &RenderOptions,
+    ) -> Result<(Outcome, Vec<M::Params>)> {
+        let mut renderer = HardwareRenderer::<M>::new(gpu, opts)?;
+        let forward = median(self.iters, || {
+            let t = Instant::now();
+            renderer.forward(scene, self.camera)?;
+            gpu.wait()?;
+            Ok(t.elapsed())
+        })?;
+        let frame = renderer.download_frame()?;
+        let outcome = Outcome {
+            forward,
+            backward: None,
+            bytes: allocated(gpu),
+            intersections: frame.stats.intersections,
+            sort_bytes: Some(renderer.sort_bytes()),
+            color: frame.color.data,
+            gradients: vec![],
+        };
+        Ok((outcome, vec![]))
+    }
+}
+
+/// Bytes allocated on the device (0 where the backend does not report them).
+fn allocated(gpu: &Gpu) -> usize {
+    gpu.device
+        .generate_allocator_report()
+        .map_or(0, |r| r.total_allocated_bytes as usize)
+}
+
+/// A time in milliseconds, or empty.
+fn ms(d: Option<f64>, digits: usize) -> String {
+    d.map_or("-".into(), |v| format!("{v:.digits$}"))
 }
 
 fn write_outputs(dir: &std::path::Path, rows: &[Row], method: &str) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let mut summary = String::from(
-        "knob,setting,forward_ms,backward_ms,memory_mib,intersections,psnr_db,max_abs,gradient_rel_rmse\n",
+        "knob,setting,forward_ms,backward_ms,memory_mib,intersections,sort_mib,psnr_db,max_abs,gradient_rel_rmse\n",
     );
     let mut detail = String::from("knob,setting,group,rel_rmse,range,mre\n");
     for r in rows {
+        let empty = |v: Option<String>| v.unwrap_or_default();
         writeln!(
             summary,
-            "{},{},{:.4},{:.4},{:.3},{},{:.3},{:.6e},{:.6e}",
+            "{},{},{:.4},{},{:.3},{},{},{:.3},{:.6e},{}",
             r.knob,
             r.value,
             r.forward_ms,
-            r.backward_ms,
+            empty(r.backward_ms.map(|v| format!("{v:.4}"))),
             r.mib,
             r.intersections,
+            empty(r.sort_mib.map(|v| format!("{v:.3}"))),
             r.psnr,
             r.max_abs,
-            r.gradient_error()
+            empty(r.gradient_error().map(|v| format!("{v:.6e}")))
         )?;
         for (group, rmse, mres) in &r.groups {
             for ((_, _, range), mre) in RANGES.iter().zip(mres) {
@@ -464,9 +557,10 @@ fn compare(knob: &'static str, value: String, o: &Outcome, reference: &Outcome) 
         knob,
         value,
         forward_ms: o.forward.as_secs_f64() * 1e3,
-        backward_ms: o.backward.as_secs_f64() * 1e3,
+        backward_ms: o.backward.map(|d| d.as_secs_f64() * 1e3),
         mib: o.bytes as f64 / 1048576.0,
         intersections: o.intersections,
+        sort_mib: o.sort_bytes.map(|b| b as f64 / 1048576.0),
         psnr: -10.0 * mse.log10(),
         max_abs,
         groups,
@@ -508,21 +602,23 @@ fn gradient_errors(got: &[f64], want: &[f64]) -> (f64, Vec<Option<f64>>) {
 
 fn print_table(rows: &[Row]) {
     println!(
-        "\n| knob | setting | forward ms | backward ms | MiB | intersections | PSNR dB | max abs | gradient rel. RMSE (worst group) |"
+        "\n| knob | setting | forward ms | backward ms | MiB | sorted keys | sort MiB | PSNR dB | max abs | gradient rel. RMSE (worst group) |"
     );
-    println!("|---|---|---:|---:|---:|---:|---:|---:|---:|");
+    println!("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|");
     for r in rows {
         println!(
-            "| {} | {} | {:.2} | {:.2} | {:.1} | {} | {:.1} | {:.1e} | {:.1e} |",
+            "| {} | {} | {:.2} | {} | {:.1} | {} | {} | {:.1} | {:.1e} | {} |",
             r.knob,
             r.value,
             r.forward_ms,
-            r.backward_ms,
+            ms(r.backward_ms, 2),
             r.mib,
             r.intersections,
+            ms(r.sort_mib, 1),
             r.psnr,
             r.max_abs,
             r.gradient_error()
+                .map_or("-".into(), |e| format!("{e:.1e}"))
         );
     }
     println!("(PSNR and errors against the reference; inf: the same image)");
@@ -557,27 +653,35 @@ fn draw(path: &std::path::Path, rows: &[Row], method: &str) -> Result<()> {
         .iter()
         .map(|r| (r.forward_ms, 10f64.powf(-r.psnr / 20.0)))
         .collect();
-    let gradient: Vec<(f64, f64)> = rows
+    // Only the settings with a backward pass have a gradient point.
+    let with_gradients: Vec<&Row> = rows.iter().filter(|r| r.backward_ms.is_some()).collect();
+    let gradient: Vec<(f64, f64)> = with_gradients
         .iter()
-        .map(|r| (r.forward_ms + r.backward_ms, r.gradient_error()))
+        .map(|r| {
+            let time = r.forward_ms + r.backward_ms.unwrap_or(0.0);
+            (time, r.gradient_error().unwrap_or(0.0))
+        })
         .collect();
     plot::png(path, (1400, 560), |root| {
         let panels = root.split_evenly((1, 2));
+        let all: Vec<&Row> = rows.iter().collect();
         let series = [
             (
                 "image against forward time",
                 "forward ms",
                 "image RMSE",
                 &image,
+                &all,
             ),
             (
                 "gradients against forward + backward time",
                 "forward + backward ms",
                 "gradient rel. RMSE, worst group",
                 &gradient,
+                &with_gradients,
             ),
         ];
-        for (area, (caption, x_desc, y_desc, points)) in panels.iter().zip(series) {
+        for (area, (caption, x_desc, y_desc, points, rows)) in panels.iter().zip(series) {
             let caption = format!("{method}: {caption}");
             let axes = (x_desc, y_desc);
             panel(area, &caption, axes, points, rows, &knobs)?;
@@ -591,7 +695,7 @@ fn panel(
     caption: &str,
     (x_desc, y_desc): (&str, &str),
     points: &[(f64, f64)],
-    rows: &[Row],
+    rows: &[&Row],
     knobs: &[&str],
 ) -> Result<()> {
     let y = |v: f64| v.max(FLOOR).log10();
@@ -606,7 +710,8 @@ fn panel(
         .margin_right(24)
         .x_label_area_size(40)
         .y_label_area_size(76)
-        .build_cartesian_2d(0.0..x_hi * 1.1, (y_lo - 0.5)..(y_hi + 0.5))
+        // Room on the right for the legend, past the slowest setting.
+        .build_cartesian_2d(0.0..x_hi * 1.45, (y_lo - 0.5)..(y_hi + 0.5))
         .map_err(&err)?;
     chart
         .configure_mesh()
@@ -641,6 +746,9 @@ fn panel(
             .filter(|(r, _)| r.knob == *knob)
             .map(|(r, &(x, v))| (x, y(v), r.value.as_str()))
             .collect();
+        if mine.is_empty() {
+            continue;
+        }
         chart
             .draw_series(
                 mine.iter()
@@ -663,7 +771,7 @@ fn panel(
         .background_style(WHITE.mix(0.8))
         .border_style(BLACK.mix(0.3))
         .label_font(plot::text(13))
-        .position(SeriesLabelPosition::LowerLeft)
+        .position(SeriesLabelPosition::LowerRight)
         .draw()
         .map_err(&err)?;
     Ok(())

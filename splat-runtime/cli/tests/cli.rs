@@ -456,6 +456,43 @@ fn gpu_backend_renders_when_an_adapter_exists() {
         .map(|(a, b)| (a - b).abs())
         .fold(0.0f32, f32::max);
     assert!(worst < 0.02, "GPU and CPU renders differ by {worst}");
+
+    // The hardware rasterizer, blending into f16 targets (every adapter has them).
+    let hardware = [
+        "--hardware",
+        "--precision",
+        "f16",
+        "--width",
+        "96",
+        "--height",
+        "64",
+    ];
+    let stdout = ok(&splat(
+        &[&["render", "--out", "h.npy"][..], &hardware].concat(),
+        dir.path(),
+    ));
+    assert!(stdout.contains("hardware rasterizer"), "{stdout}");
+    assert!(stdout.contains("f16 render targets"), "{stdout}");
+    let (hs, h) = read_npy(&dir.path().join("h.npy"));
+    assert_eq!(hs, cs);
+    let worst = h
+        .iter()
+        .zip(&c)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
+    assert!(worst < 0.02, "hardware and CPU renders differ by {worst}");
+    fails(
+        &splat(
+            &[
+                &["render", "--backend", "cpu", "--out", "x.png"][..],
+                &hardware,
+            ]
+            .concat(),
+            dir.path(),
+        ),
+        "--hardware rasterizes with the GPU",
+        &dir.path().join("x.png"),
+    );
 }
 
 /// A minimal Blender-format dataset: `views` uniform gray RGBA images of 16 x 16 pixels, with
@@ -974,7 +1011,7 @@ fn tradeoff_sweeps_every_knob_and_writes_its_table_and_plot() {
             .find(|r| r[0] == knob && (r[1] == value || knob == "default"));
         row.unwrap()[column].parse().unwrap()
     };
-    let (psnr, gradient) = (6, 8);
+    let (psnr, gradient) = (7, 9);
     for tile in ["8", "32", "64"] {
         assert_eq!(field("tile", tile, psnr), field("default", "", psnr));
     }
@@ -1015,12 +1052,32 @@ fn tradeoff_sweeps_every_knob_and_writes_its_table_and_plot() {
         assert!(std::env::var("SPLAT_REQUIRE_GPU").map_or(true, |v| v != "1"));
         return;
     }
-    // The GPU renders tiles of 8 and 16 only, and stores f32 only.
+    // The GPU renders tiles of 8 and 16 only, and stores f32 only in the tile path; the
+    // hardware path adds a row per target format (all four on lavapipe).
     let gpu = csv_rows(&dir.path().join("gpu/tradeoff.csv"));
-    assert_eq!(gpu.len(), rows.len() - 2 - 3);
+    let hardware: Vec<&Vec<String>> = gpu.iter().filter(|r| r[0] == "raster").collect();
+    assert_eq!(gpu.len(), rows.len() - 2 - 3 + hardware.len());
     let tile = gpu.iter().find(|r| r[0] == "tile").unwrap();
     assert_eq!(tile[1], "8");
     assert!(tile[psnr].parse::<f64>().unwrap() > 60.0, "{tile:?}");
+    let default = &gpu[0];
+    let number = |r: &[String], c: usize| r[c].parse::<f64>().unwrap();
+    for r in &hardware {
+        // Forward only; one sort key per visible primitive, fewer than the tile pairs.
+        assert_eq!((&*r[3], &*r[gradient]), ("", ""), "{r:?}");
+        assert!(number(r, 5) < number(default, 5), "{r:?}");
+        assert!(number(r, 6) < number(default, 6), "{r:?}");
+    }
+    let format = |name: &str| hardware.iter().find(|r| r[1] == format!("hardware {name}"));
+    let (f16, unorm8) = (format("f16").unwrap(), format("unorm8").unwrap());
+    assert!(
+        number(f16, psnr) > number(unorm8, psnr),
+        "{f16:?} {unorm8:?}"
+    );
+    if let Some(f32) = format("f32") {
+        // Without the transmittance stop, as the reference: the same image up to rounding.
+        assert!(number(f32, psnr) > 80.0, "{f32:?}");
+    }
     fails(
         &splat(&["tradeoff", "--iters", "0", "--out", "never"], dir.path()),
         "--iters must be at least 1",
