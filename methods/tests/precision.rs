@@ -1,4 +1,5 @@
-//! The per-pixel state in each storage format (f16, unorm16, unorm8) against f32 on the CPU:
+//! The per-pixel state in each storage format (f16, unorm16, unorm8) against f32, on the CPU
+//! and on the GPU's tile path:
 //! the outputs within the format's rounding step (unorm colors saturating at 1 instead of
 //! wrapping), the bytes held shrinking by the format's width, and the backward pass, which
 //! replays against the stored state, staying close to f32's.
@@ -10,7 +11,7 @@ use splat_methods::gs3d::{Method, Params};
 use splat_runtime::checks::{group_error, words};
 use splat_runtime::glam::{Vec2, Vec3};
 use splat_runtime::pipeline::precision::Precision;
-use splat_runtime::{FrameGrad, RenderOptions, backward, render_for_backward};
+use splat_runtime::{Frame, FrameGrad, RenderOptions, backward, render_for_backward};
 
 /// 400 Gaussians over a 48 x 40 image; with `bright`, some push the color past 1.
 fn scene(bright: bool) -> (splat_runtime::Camera, Vec<Params>) {
@@ -28,6 +29,44 @@ fn scene(bright: bool) -> (splat_runtime::Camera, Vec<Params>) {
         })
         .collect();
     (cam, params)
+}
+
+/// A fixed random linear loss on color and alpha.
+fn loss_gradient(pixels: usize) -> FrameGrad {
+    let mut rng = fastrand::Rng::with_seed(2);
+    FrameGrad {
+        color: (0..pixels * 3).map(|_| rng.f32() - 0.5).collect(),
+        alpha: Some((0..pixels).map(|_| rng.f32() - 0.5).collect()),
+        depth: None,
+    }
+}
+
+fn flat(ps: &[Params]) -> Vec<f64> {
+    ps.iter().flat_map(words).collect()
+}
+
+/// `frame`'s color and alpha stored at `precision` against `full`'s f32 values: f16 rounds
+/// within 2^-11 of the value (its unit roundoff; subnormals within 2^-25); unorm saturates to
+/// [0, 1] and rounds within half a step.
+fn assert_within_step(precision: Precision, frame: &Frame, full: &Frame) {
+    let unorm = precision != Precision::F16;
+    for (got, f32_value) in frame.color.data.iter().zip(&full.color.data) {
+        let (stored, step) = match unorm {
+            true => (f32_value.clamp(0.0, 1.0), precision.unit_error()),
+            false => (*f32_value, 2f32.powi(-11) * f32_value.abs() + 3e-8),
+        };
+        assert!(
+            (got - stored).abs() <= step,
+            "{precision:?}: {got} for {f32_value}"
+        );
+    }
+    let alpha = frame.alpha.as_ref().unwrap().data.iter();
+    for (got, f32_value) in alpha.zip(&full.alpha.as_ref().unwrap().data) {
+        assert!(
+            (got - f32_value).abs() <= precision.unit_error() + 1e-7,
+            "{precision:?}"
+        );
+    }
 }
 
 /// Colors past 1 saturate in the unorm formats, and the backward pass then replays against
@@ -54,38 +93,13 @@ fn check_formats(bright: bool) {
         render_for_backward::<Method>(&params, &cam, &opts(Precision::F32)).unwrap();
     let brighter = full.color.data.iter().filter(|c| **c > 1.0).count();
     assert_eq!(brighter > 50, bright, "{brighter} color values past 1");
-    let mut rng = fastrand::Rng::with_seed(2);
     let pixels = full.color.data.len() / 3;
-    let grad = FrameGrad {
-        color: (0..pixels * 3).map(|_| rng.f32() - 0.5).collect(),
-        alpha: Some((0..pixels).map(|_| rng.f32() - 0.5).collect()),
-        depth: None,
-    };
+    let grad = loss_gradient(pixels);
     let want = backward::<Method>(&full_state, &params, &cam, &grad).unwrap();
-    let flat = |ps: &[Params]| -> Vec<f64> { ps.iter().flat_map(words).collect() };
     for precision in [Precision::F16, Precision::Unorm16, Precision::Unorm8] {
         let (frame, state) =
             render_for_backward::<Method>(&params, &cam, &opts(precision)).unwrap();
-        let unorm = precision != Precision::F16;
-        for (got, f32_value) in frame.color.data.iter().zip(&full.color.data) {
-            // f16 rounds within 2^-11 of the value (its unit roundoff; subnormals within
-            // 2^-25); unorm saturates to [0, 1] and rounds within half a step.
-            let (stored, step) = match unorm {
-                true => (f32_value.clamp(0.0, 1.0), precision.unit_error()),
-                false => (*f32_value, 2f32.powi(-11) * f32_value.abs() + 3e-8),
-            };
-            assert!(
-                (got - stored).abs() <= step,
-                "{precision:?}: {got} for {f32_value}"
-            );
-        }
-        let alpha = frame.alpha.as_ref().unwrap().data.iter();
-        for (got, f32_value) in alpha.zip(&full.alpha.as_ref().unwrap().data) {
-            assert!(
-                (got - f32_value).abs() <= precision.unit_error() + 1e-7,
-                "{precision:?}"
-            );
-        }
+        assert_within_step(precision, &frame, &full);
         // Color and transmittance at the format's width; depth sums as f16 in the unorm formats.
         let n = pixels as isize;
         let width = |p: Precision| match p {
@@ -112,17 +126,49 @@ fn check_formats(bright: bool) {
     }
 }
 
+/// The GPU's tile path stores the same formats in packed words (`gpu::state`): its outputs
+/// against its own f32 frame within the format's step, its per-pixel buffer smaller, and its
+/// backward pass, which replays against the packed state, within the CPU's bound.
 #[test]
-fn the_gpu_refuses_what_it_cannot_store() {
+fn the_gpu_stores_each_format_within_its_step_in_fewer_bytes() {
     let Some(gpu) = splat_runtime::gpu::adapter_or_skip() else {
         return;
     };
-    let opts = RenderOptions {
-        precision: Precision::F16,
-        ..RenderOptions::default()
-    };
-    let err = splat_runtime::gpu::GpuRenderer::<Method>::new(&gpu, &opts)
-        .err()
-        .unwrap();
-    assert!(err.to_string().contains("f32 only, not f16"), "{err}");
+    use splat_runtime::gpu::entries::Accumulation;
+    use splat_runtime::gpu::render::{backward, render_for_backward};
+    let acc = Accumulation::default_for(&gpu);
+    for bright in [false, true] {
+        let (cam, params) = scene(bright);
+        let opts = |precision| RenderOptions {
+            alpha: true,
+            depth: true,
+            precision,
+            ..RenderOptions::default()
+        };
+        let (full, mut full_state) =
+            render_for_backward::<Method>(&gpu, &params, &cam, &opts(Precision::F32)).unwrap();
+        let grad = loss_gradient(full.color.data.len() / 3);
+        let want = backward(&mut full_state, &grad, acc).unwrap().gradients;
+        let f32_bytes = full_state.renderer.pixel_state().size();
+        for precision in [Precision::F16, Precision::Unorm16, Precision::Unorm8] {
+            let (frame, mut state) =
+                render_for_backward::<Method>(&gpu, &params, &cam, &opts(precision)).unwrap();
+            assert_within_step(precision, &frame, &full);
+            // 5 words per pixel in f32; 3, 3 and 2 packed (colors, T, then depth's word).
+            let words = state.renderer.state_layout().words() as u64;
+            assert_eq!(state.renderer.pixel_state().size(), f32_bytes * words / 5);
+            let got = backward(&mut state, &grad, acc).unwrap().gradients;
+            let err = group_error(&flat(&got.params), &flat(&want.params));
+            println!(
+                "GPU {precision:?}, bright {bright}: gradients {err:.2e} of the largest off f32's"
+            );
+            assert!(got.params.iter().all(splat_runtime::Flat::is_finite));
+            if !bright {
+                assert!(
+                    err <= 100.0 * precision.unit_error() as f64,
+                    "{precision:?}: {err}"
+                );
+            }
+        }
+    }
 }

@@ -40,8 +40,8 @@ pub struct RenderArgs {
     /// Blend at most this many primitives per tile.
     #[arg(long)]
     p_max: Option<usize>,
-    /// How the per-pixel state is stored: f32, f16, unorm16 or unorm8 (the GPU's tile path
-    /// stores f32 only; the hardware path blends into targets of each).
+    /// How the per-pixel state is stored: f32, f16, unorm16 or unorm8 (with --hardware, the
+    /// render targets' format).
     #[arg(long, default_value = "f32", value_parser = parse_precision)]
     precision: Precision,
     /// On the GPU, rasterize with the graphics pipeline: quads in depth order, blended by

@@ -198,11 +198,7 @@ pub fn tradeoff_cmd(args: &TradeoffArgs, methods: &[Method]) -> Result<()> {
             let hardware: Vec<Precision> = blendable
                 .filter(|p| splat_runtime::gpu::raster::supports(gpu, *p))
                 .collect();
-            sweep(
-                &splat_runtime::gpu::TILE_SIZES,
-                &[Precision::F32],
-                &hardware,
-            )
+            sweep(&splat_runtime::gpu::TILE_SIZES, &Precision::ALL, &hardware)
         }
         None => sweep(&splat_runtime::pipeline::TILE_SIZES, &Precision::ALL, &[]),
     };

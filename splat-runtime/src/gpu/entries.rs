@@ -7,6 +7,7 @@
 //! changes between backends.
 
 use super::kernel::{self, load};
+use super::state::PixelState;
 use super::{Gpu, GpuError};
 use crate::flat::Flat;
 use crate::method::{SplatMethod, WgslFunction};
@@ -255,12 +256,14 @@ fn tile_pass(layout: &Layout, tile: u32, b: &BlendSizes, rule: Blend) -> String 
     )
 }
 
-/// `shade_tiles`: the forward blend, one workgroup per tile of `tile` x `tile` pixels.
+/// `shade_tiles`: the forward blend, one workgroup per tile of `tile` x `tile` pixels, storing
+/// each pixel as `state` says.
 pub fn shade<M: SplatMethod>(
     gpu: &Gpu,
     tile: u32,
     want_depth: bool,
     rule: Blend,
+    state: PixelState,
 ) -> Result<String, GpuError> {
     let wgsl = M::SOURCE.wgsl;
     let layout = Layout::of::<M>();
@@ -292,6 +295,7 @@ pub fn shade<M: SplatMethod>(
             ("ALPHA", eval.results[0].0.to_string()),
             ("ACCUMULATE", accumulate),
             ("DEPTH", depth.into()),
+            ("STORE", state.wgsl_store("pixel_out")),
         ],
     );
     Ok(format!(
@@ -300,13 +304,15 @@ pub fn shade<M: SplatMethod>(
     ))
 }
 
-/// `backward_tiles`: the backward blend with the gradient accumulation `acc`.
+/// `backward_tiles`: the backward blend with the gradient accumulation `acc`, replaying
+/// against the pixels stored as `state` says.
 pub fn backward<M: SplatMethod>(
     gpu: &Gpu,
     tile: u32,
     want_depth: bool,
     acc: Accumulation,
     rule: Blend,
+    state: PixelState,
 ) -> Result<String, GpuError> {
     let wgsl = M::SOURCE.wgsl;
     let layout = Layout::of::<M>();
@@ -487,6 +493,7 @@ pub fn backward<M: SplatMethod>(
             ),
             ("SHADE_GRADS", shade_grads),
             ("SCATTER", scatter.into()),
+            ("STATE", state.wgsl_load("pixel_state")),
         ],
     );
     Ok(format!(

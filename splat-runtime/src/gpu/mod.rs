@@ -10,6 +10,7 @@
 //! - [`raster`]: the hardware-rasterized forward pass: quads drawn in depth order, blended
 //!   by fixed-function blending into render targets of each precision.
 //! - [`render`]: one-shot render and backward for parameters on the host, over `resident`.
+//! - [`state`]: the per-pixel state of the tile path, packed at each precision.
 //! - [`timing`]: stage times from GPU timestamps.
 //! - [`train`]: the loss, Adam and density control's statistics on the device.
 
@@ -22,6 +23,7 @@ pub mod raster;
 pub mod render;
 pub mod resident;
 pub mod sort;
+pub mod state;
 pub mod timing;
 pub mod train;
 
@@ -69,10 +71,6 @@ pub enum GpuError {
         "the GPU backend supports tile sizes {TILE_SIZES:?} (one invocation per pixel), not {0}"
     )]
     TileSize(u32),
-    #[error(
-        "the GPU backend stores its per-pixel state as f32 only, not {0} (the CPU has every format)"
-    )]
-    Precision(&'static str),
     #[error("the hardware-rasterized forward pass: {0}")]
     Hardware(String),
 }

@@ -16,6 +16,7 @@ use super::device::{Grown, Kernel, dispatch};
 use super::entries::{self, Accumulation, Layout, Reduction};
 use super::front::{FrameWords, Front};
 use super::sort::TileRanges;
+use super::state::PixelState;
 use super::timing::StageTimer;
 use super::{Gpu, GpuError};
 use crate::flat::Flat;
@@ -141,6 +142,8 @@ pub struct GpuRenderer<'g, M: SplatMethod> {
     /// Accumulate weight * depth per pixel (for the depth output or its gradient).
     depth_sums: bool,
     layout: Layout,
+    /// How the per-pixel state is stored.
+    state: PixelState,
     front: Front,
     shade: Kernel,
     project_backward: Kernel,
@@ -184,10 +187,11 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         if !super::TILE_SIZES.contains(&opts.tile_size) {
             return Err(GpuError::TileSize(opts.tile_size).into());
         }
-        if opts.precision != crate::pipeline::precision::Precision::F32 {
-            return Err(GpuError::Precision(opts.precision.name()).into());
-        }
         let layout = Layout::of::<M>();
+        let state = PixelState {
+            precision: opts.precision,
+            channels: layout.channels,
+        };
         let (source, param_floats) = entries::project_backward::<M>()?;
         let pixel_backward = match M::HAS_PIXEL_INFO {
             true => Some(gpu.kernel(&entries::pixel_backward::<M>()?, "pixel_backward")?),
@@ -199,9 +203,10 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             opts: *opts,
             depth_sums,
             layout,
+            state,
             front: Front::new::<M>(gpu, opts.tile_cull)?,
             shade: gpu.kernel(
-                &entries::shade::<M>(gpu, opts.tile_size, depth_sums, opts.blend)?,
+                &entries::shade::<M>(gpu, opts.tile_size, depth_sums, opts.blend, state)?,
                 "shade_tiles",
             )?,
             project_backward: gpu.kernel(&source, "project_backward")?,
@@ -239,7 +244,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         self.frame = None;
         let gpu = self.gpu;
         let grid = crate::pipeline::check::<M>(camera, &self.opts)?;
-        let (n, layout) = (scene.len(), self.layout);
+        let n = scene.len();
         let tiles = grid.tile_count() as u32;
         let p_max = self
             .opts
@@ -262,7 +267,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         let total32 = counted.intersections as u32;
         self.tiles.prepare(gpu, total32, tiles, p_max)?;
         let pixels = (grid.width * grid.height) as usize;
-        self.pixels.ensure(gpu, pixels * (layout.channels + 2))?;
+        self.pixels.ensure(gpu, pixels * self.state.words())?;
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         self.timer.start(&mut enc, SORT);
         self.front.emit_sorted(gpu, &mut enc, counted, tiles)?;
@@ -294,16 +299,16 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         let info = self.frame.ok_or(GpuRenderError::NoFrame)?;
         let (grid, channels) = (info.grid, self.layout.channels);
         let pixels = (grid.width * grid.height) as usize;
-        let out = self.gpu.read(&self.pixels, pixels * (channels + 2))?;
+        let words = self.gpu.read(&self.pixels, pixels * self.state.words())?;
+        let out = self.state.decode(&words);
         let tiles = grid.tile_count();
         let ranges = self.gpu.read(&self.tiles.ranges, 2 * tiles)?;
-        let f = f32::from_bits;
         let mut color = Vec::with_capacity(pixels * channels);
         let (mut t, mut dacc) = (Vec::with_capacity(pixels), Vec::with_capacity(pixels));
         for px in out.chunks_exact(channels + 2) {
-            color.extend(px[..channels].iter().map(|w| f(*w)));
-            t.push(f(px[channels]));
-            dacc.push(f(px[channels + 1]));
+            color.extend(&px[..channels]);
+            t.push(px[channels]);
+            dacc.push(px[channels + 1]);
         }
         let (alpha, depth) = crate::pipeline::alpha_and_depth(&grid, &self.opts, &t, &dacc);
         let times = self.timer.read(self.gpu)?.unwrap_or_default();
@@ -386,9 +391,16 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         Ok(&self.pixel_grad)
     }
 
-    /// The last frame's per-pixel state: the color channels, final T, sum of weight * depth.
+    /// The last frame's per-pixel state: the color channels, final T, sum of weight * depth,
+    /// stored as [`GpuRenderer::state_layout`] says (f32 words unless the options chose a
+    /// narrower precision).
     pub fn pixel_state(&self) -> &wgpu::Buffer {
         &self.pixels
+    }
+
+    /// How [`GpuRenderer::pixel_state`] stores each pixel.
+    pub fn state_layout(&self) -> PixelState {
+        self.state
     }
 
     /// `project`'s results of the last frame, [`Layout`]'s stride per primitive (the first
@@ -517,8 +529,8 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         if let Some(p) = self.blends.get(&(want_depth, acc)) {
             return Ok(p.clone());
         }
-        let source =
-            entries::backward::<M>(gpu, self.opts.tile_size, want_depth, acc, self.opts.blend)?;
+        let (tile, rule) = (self.opts.tile_size, self.opts.blend);
+        let source = entries::backward::<M>(gpu, tile, want_depth, acc, rule, self.state)?;
         let k = gpu.kernel(&source, "backward_tiles")?;
         self.blends.insert((want_depth, acc), k.clone());
         Ok(k)

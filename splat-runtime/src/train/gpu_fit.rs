@@ -72,6 +72,13 @@ pub fn fit_gpu_from<M: Trainable>(
         ))
     })?;
     let mut renderer = GpuRenderer::<M>::new(gpu, &with_alpha(&opts.render))?;
+    // The loss on the device reads the frame as f32 words.
+    if opts.render.precision != crate::pipeline::precision::Precision::F32 {
+        return Err(FitError::Unsupported(format!(
+            "GPU training reads its frames as f32, not {}: render at another precision with `splat render` or `splat tradeoff`",
+            opts.render.precision.name()
+        )));
+    }
     if renderer.param_floats() != words || M::Color::LEN != 3 {
         return Err(FitError::Unsupported(format!(
             "{}: GPU training needs all-float parameters and RGB color",

@@ -6,8 +6,8 @@
 const NG: u32 = {{NG}}u; // gradient words per primitive: shade float slots, then depth
 const RC: u32 = {{RC}}u; // gradient words reduced per round
 
-// Per pixel: the forward output (color, final T, sum of weight * depth) and its gradient
-// (color, alpha, depth).
+// Per pixel: the forward output (color, final T, sum of weight * depth, as `gpu::state` packs
+// them) and its gradient (color, alpha, depth, f32).
 @group(0) @binding(5) var<storage, read> pixel_state: array<u32>;
 @group(0) @binding(6) var<storage, read> pixel_grad: array<u32>;
 @group(0) @binding(7) var<storage, read_write> grads: array<{{GRAD_ATOMIC}}>;
@@ -15,6 +15,8 @@ const RC: u32 = {{RC}}u; // gradient words reduced per round
 @group(0) @binding(8) var<storage, read_write> issued: array<atomic<u32>, 2>;
 {{CAMERA_BINDING}}
 {{PIXEL_GRAD_BINDING}}
+
+{{STATE}}
 
 var<workgroup> red: array<f32, {{RED_WORDS}}>;
 var<workgroup> group_issued: atomic<u32>;
@@ -30,20 +32,21 @@ fn backward_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
     let py = f32(at.y) + 0.5;
     {{PIXEL}}
     // Pixels past the image edge read pixel 0 and stay done.
-    let pix = select(0u, at.y * frame[0].y + at.x, at.inside) * (CHANNELS + 2u);
+    let pix = select(0u, at.y * frame[0].y + at.x, at.inside);
+    let grad_at = pix * (CHANNELS + 2u);
     var c_final: array<f32, CHANNELS>;
     var d_color: array<f32, CHANNELS>;
     var c_acc: array<f32, CHANNELS>;
     for (var c = 0u; c < CHANNELS; c++) {
-        c_final[c] = bitcast<f32>(pixel_state[pix + c]);
-        d_color[c] = bitcast<f32>(pixel_grad[pix + c]);
+        c_final[c] = state_value(pix, c);
+        d_color[c] = bitcast<f32>(pixel_grad[grad_at + c]);
     }
-    let t_final = bitcast<f32>(pixel_state[pix + CHANNELS]);
-    let d_final = bitcast<f32>(pixel_state[pix + CHANNELS + 1u]);
-    var d_alpha_out = bitcast<f32>(pixel_grad[pix + CHANNELS]);
+    let t_final = state_value(pix, CHANNELS);
+    let d_final = state_value(pix, CHANNELS + 1u);
+    var d_alpha_out = bitcast<f32>(pixel_grad[grad_at + CHANNELS]);
     // depth = D / A with D = sum of w z and A = 1 - T: split its gradient into D and A.
     var d_d = 0.0;
-    let gd = bitcast<f32>(pixel_grad[pix + CHANNELS + 1u]);
+    let gd = bitcast<f32>(pixel_grad[grad_at + CHANNELS + 1u]);
     let a_final = 1.0 - t_final;
     if ({{WANT_DEPTH}} && a_final > 0.0) {
         d_d = gd / a_final;

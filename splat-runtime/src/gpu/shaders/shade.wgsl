@@ -1,6 +1,7 @@
 // The forward blend: front to back, stop once T would fall to T_MIN or below (as on the CPU).
 
-// Per pixel: color (CHANNELS), final T, sum of weight * depth.
+// Per pixel: color (CHANNELS), final T, sum of weight * depth, stored as `gpu::state` packs
+// them.
 @group(0) @binding(5) var<storage, read_write> pixel_out: array<u32>;
 {{CAMERA_BINDING}}
 
@@ -41,11 +42,13 @@ fn shade_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_
         }
     }
     if (at.inside) {
-        let out = (at.y * frame[0].y + at.x) * (CHANNELS + 2u);
+        let pix = at.y * frame[0].y + at.x;
+        var v: array<f32, CHANNELS + 2u>;
         for (var c = 0u; c < CHANNELS; c++) {
-            pixel_out[out + c] = bitcast<u32>(color[c]);
+            v[c] = color[c];
         }
-        pixel_out[out + CHANNELS] = bitcast<u32>(t);
-        pixel_out[out + CHANNELS + 1u] = bitcast<u32>(depth_acc);
+        v[CHANNELS] = t;
+        v[CHANNELS + 1u] = depth_acc;
+        {{STORE}}
     }
 }

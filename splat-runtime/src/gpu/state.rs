@@ -1,0 +1,181 @@
+//! The per-pixel state of the GPU's tile path, stored at `RenderOptions::precision` (the
+//! CPU's `precision::Stored` on the device): per pixel the color channels, the final
+//! transmittance and the sum of weight x depth, packed into 32-bit words with WGSL's pack
+//! builtins. The forward blend writes it, the backward blend replays against it, and the
+//! host reads the frame from it; this module is the one place its layout is defined, for the
+//! shaders (generated WGSL) and for the host (decoding).
+//!
+//! Layout per pixel, values v = (colors, T, depth sum):
+//! - f32: one word per value;
+//! - f16: two values per word (`pack2x16float`);
+//! - unorm16 / unorm8: colors and T two or four per word (`pack2x16unorm` / `pack4x8unorm`,
+//!   saturating to [0, 1]), then the depth sum, which is not bounded, as f16 in a word of its
+//!   own.
+
+use crate::pipeline::precision::Precision;
+use half::f16;
+
+/// How one frame's pixels are stored.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PixelState {
+    pub precision: Precision,
+    pub channels: usize,
+}
+
+impl PixelState {
+    /// Values per pixel: the colors, T, the depth sum.
+    fn values(&self) -> usize {
+        self.channels + 2
+    }
+
+    /// Values packed per word for the colors and T (the depth sum's word aside in unorm).
+    fn per_word(&self) -> usize {
+        match self.precision {
+            Precision::F32 => 1,
+            Precision::F16 | Precision::Unorm16 => 2,
+            Precision::Unorm8 => 4,
+        }
+    }
+
+    /// Whether the depth sum has a word of its own (f16, in the unorm formats).
+    fn separate_depth(&self) -> bool {
+        matches!(self.precision, Precision::Unorm16 | Precision::Unorm8)
+    }
+
+    /// The values packed with the colors and T.
+    fn packed(&self) -> usize {
+        self.values() - self.separate_depth() as usize
+    }
+
+    /// 32-bit words per pixel.
+    pub fn words(&self) -> usize {
+        self.packed().div_ceil(self.per_word()) + self.separate_depth() as usize
+    }
+
+    /// WGSL: `const STATE_WORDS`, and `fn state_value(pix: u32, k: u32) -> f32` reading value
+    /// `k` of pixel `pix` from the `u32` array `buffer`.
+    pub fn wgsl_load(&self, buffer: &str) -> String {
+        let n = self.packed();
+        let packed = match self.precision {
+            Precision::F32 => format!("bitcast<f32>({buffer}[at + k])"),
+            Precision::F16 => format!("unpack2x16float({buffer}[at + k / 2u])[k % 2u]"),
+            Precision::Unorm16 => format!("unpack2x16unorm({buffer}[at + k / 2u])[k % 2u]"),
+            Precision::Unorm8 => format!("unpack4x8unorm({buffer}[at + k / 4u])[k % 4u]"),
+        };
+        let depth = match self.separate_depth() {
+            true => format!(
+                "    if (k == {n}u) {{
+        return unpack2x16float({buffer}[at + STATE_WORDS - 1u]).x;
+    }}
+"
+            ),
+            false => String::new(),
+        };
+        format!(
+            "const STATE_WORDS: u32 = {words}u;
+
+// Value k (colors, T, depth sum) of pixel `pix`'s stored state.
+fn state_value(pix: u32, k: u32) -> f32 {{
+    let at = pix * STATE_WORDS;
+{depth}    return {packed};
+}}
+",
+            words = self.words()
+        )
+    }
+
+    /// WGSL statements storing the pixel `pix`'s values `v` (an `array<f32, N>` of the colors,
+    /// T and the depth sum) into the `u32` array `buffer`.
+    pub fn wgsl_store(&self, buffer: &str) -> String {
+        let n = self.packed();
+        let value = |k: usize| match k < n {
+            true => format!("v[{k}]"),
+            false => "0.0".into(),
+        };
+        let mut out = format!("let at = pix * {}u;\n", self.words());
+        for w in 0..n.div_ceil(self.per_word()) {
+            let k = w * self.per_word();
+            let word = match self.precision {
+                Precision::F32 => format!("bitcast<u32>(v[{k}])"),
+                Precision::F16 => {
+                    format!("pack2x16float(vec2<f32>({}, {}))", value(k), value(k + 1))
+                }
+                Precision::Unorm16 => {
+                    format!("pack2x16unorm(vec2<f32>({}, {}))", value(k), value(k + 1))
+                }
+                Precision::Unorm8 => format!(
+                    "pack4x8unorm(vec4<f32>({}, {}, {}, {}))",
+                    value(k),
+                    value(k + 1),
+                    value(k + 2),
+                    value(k + 3)
+                ),
+            };
+            out += &format!("        {buffer}[at + {w}u] = {word};\n");
+        }
+        if self.separate_depth() {
+            out += &format!(
+                "        {buffer}[at + {}u] = pack2x16float(vec2<f32>(v[{n}], 0.0));\n",
+                self.words() - 1
+            );
+        }
+        out
+    }
+
+    /// The stored words of a frame, decoded: per pixel the colors, T and the depth sum.
+    pub fn decode(&self, words: &[u32]) -> Vec<f32> {
+        let (n, per) = (self.packed(), self.per_word());
+        let half = |bits: u32| f16::from_bits(bits as u16).to_f32();
+        let mut out = Vec::with_capacity(words.len() / self.words().max(1) * self.values());
+        for px in words.chunks_exact(self.words()) {
+            for k in 0..n {
+                let w = px[k / per];
+                let lane = (k % per) as u32;
+                out.push(match self.precision {
+                    Precision::F32 => f32::from_bits(w),
+                    Precision::F16 => half(w >> (16 * lane)),
+                    Precision::Unorm16 => ((w >> (16 * lane)) & 0xffff) as f32 / 65535.0,
+                    Precision::Unorm8 => ((w >> (8 * lane)) & 0xff) as f32 / 255.0,
+                });
+            }
+            if self.separate_depth() {
+                out.push(half(px[self.words() - 1]));
+            }
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_format_packs_into_fewer_words_and_decodes_what_it_stored() {
+        let state = |precision| PixelState {
+            precision,
+            channels: 3,
+        };
+        let words: Vec<usize> = Precision::ALL.map(|p| state(p).words()).into();
+        // (3 colors, T, depth): 5 words; 3 halves; 2 + 1; 1 + 1.
+        assert_eq!(words, [5, 3, 3, 2]);
+        let half = |a: f32, b: f32| {
+            f16::from_f32(a).to_bits() as u32 | (f16::from_f32(b).to_bits() as u32) << 16
+        };
+        let v = [0.25f32, 0.5, 1.0, 0.75, 3.5];
+        assert_eq!(
+            state(Precision::F16).decode(&[half(v[0], v[1]), half(v[2], v[3]), half(v[4], 0.0)]),
+            v
+        );
+        let unorm8 = 64 | 128 << 8 | 255 << 16 | 191 << 24;
+        let got = state(Precision::Unorm8).decode(&[unorm8, half(3.5, 0.0)]);
+        let want = [64.0 / 255.0, 128.0 / 255.0, 1.0, 191.0 / 255.0, 3.5];
+        assert_eq!(got, want);
+        let unorm16 = [16384 | 32768 << 16, 65535 | 49151 << 16, half(3.5, 0.0)];
+        let got = state(Precision::Unorm16).decode(&unorm16);
+        assert!(
+            got.iter().zip(v).all(|(a, b)| (a - b).abs() < 1e-4),
+            "{got:?}"
+        );
+    }
+}
