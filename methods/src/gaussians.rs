@@ -6,16 +6,30 @@
 //! The SH degree is a compile-time property of the method: `gaussians_3d!` instantiates one
 //! method per degree (`gs3d_sh0` .. `gs3d_sh2`, and `gs3d` for degree 3), so a scene without
 //! view-dependent color carries and evaluates no higher-order coefficients.
+//!
+//! So is anti-aliasing (Mip-Splatting's 2D filter, gsplat's `antialiased` mode): the 0.3 px
+//! dilation that every 3DGS footprint gets also scales the opacity by
+//! sqrt(det(cov) / det(cov + 0.3 I)), so a Gaussian smaller than a pixel fades instead of
+//! growing. `gs3d_aa` has it; in the others the constant `ANTIALIASED` is false and the
+//! compensation folds away.
 
-/// One 3DGS method with `$n` SH coefficients per channel ((degree + 1)^2).
+/// One 3DGS method with `$n` SH coefficients per channel ((degree + 1)^2), with or without
+/// anti-aliasing.
 macro_rules! gaussians_3d {
     ($name:ident, sh_coefficients = $n:literal) => {
+        gaussians_3d!($name, sh_coefficients = $n, antialiased = false);
+    };
+    ($name:ident, sh_coefficients = $n:literal, antialiased = $aa:literal) => {
         #[splat_macros::splat_method]
         pub mod $name {
             use splat_runtime::prelude::*;
 
             pub const NEAR: f32 = 0.01;
             pub const ALPHA_MIN: f32 = 1.0 / 255.0;
+            /// The screen-space dilation, px^2 on the covariance's diagonal.
+            pub const DILATION: f32 = 0.3;
+            /// Scale the opacity by the dilation's change of the footprint's area.
+            pub const ANTIALIASED: bool = $aa;
 
             pub struct Params {
                 pub mean: Vec3,
@@ -62,13 +76,19 @@ macro_rules! gaussians_3d {
                     .normalize();
                 let m = cam.rotation * Mat3::from_quat(q) * Mat3::from_diagonal(p.log_scale.exp());
                 let cov = j * (m * m.transpose()) * j.transpose();
-                let (a, b, d) = (cov.x_axis.x + 0.3, cov.y_axis.x, cov.y_axis.y + 0.3);
+                let (a0, b, d0) = (cov.x_axis.x, cov.y_axis.x, cov.y_axis.y);
+                let (a, d) = (a0 + DILATION, d0 + DILATION);
                 let det = a * d - b * b;
                 let conic = Vec3::new(d, -b, a) / det;
+                let compensation = if ANTIALIASED {
+                    ((a0 * d0 - b * b) / det).max(0.0).sqrt()
+                } else {
+                    1.0
+                };
                 // Opacity-aware extent: every pixel where alpha >= ALPHA_MIN lies within `radius` of
                 // the centre (0.5 d^T conic d <= max_power along the major axis), so the box culls
                 // nothing the threshold would keep.
-                let opacity = sigmoid(p.opacity_logit);
+                let opacity = sigmoid(p.opacity_logit) * compensation;
                 let max_power = (opacity / ALPHA_MIN).ln();
                 let mid = 0.5 * (a + d);
                 let lambda = mid + (mid * mid - det).max(0.1).sqrt();
@@ -230,3 +250,4 @@ gaussians_3d!(gs3d, sh_coefficients = 16);
 gaussians_3d!(gs3d_sh0, sh_coefficients = 1);
 gaussians_3d!(gs3d_sh1, sh_coefficients = 4);
 gaussians_3d!(gs3d_sh2, sh_coefficients = 9);
+gaussians_3d!(gs3d_aa, sh_coefficients = 16, antialiased = true);

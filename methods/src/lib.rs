@@ -6,7 +6,7 @@ mod linear;
 mod unscented;
 
 pub use exact::geer;
-pub use gaussians::{gs3d, gs3d_sh0, gs3d_sh1, gs3d_sh2};
+pub use gaussians::{gs3d, gs3d_aa, gs3d_sh0, gs3d_sh1, gs3d_sh2};
 pub use linear::linprim;
 pub use unscented::gut;
 

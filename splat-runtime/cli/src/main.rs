@@ -1,7 +1,7 @@
 //! `splat`: the command line with the built-in methods.
 
 use splat_cli::{Instance, Method};
-use splat_methods::{geer, gs3d, gs3d_sh0, gs3d_sh1, gs3d_sh2, gut, linprim};
+use splat_methods::{geer, gs3d, gs3d_aa, gs3d_sh0, gs3d_sh1, gs3d_sh2, gut, linprim};
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
@@ -15,6 +15,11 @@ fn main() -> ExitCode {
                 Instance::of::<gs3d_sh2::Method>(),
                 Instance::trainable::<gs3d::Method>(),
             ],
+        ),
+        Method::new(
+            "3dgs-aa",
+            "3DGS anti-aliased (Mip-Splatting's 2D filter, gsplat's `antialiased`); pinhole only",
+            Instance::trainable::<gs3d_aa::Method>(),
         ),
         Method::new(
             "3dgut",

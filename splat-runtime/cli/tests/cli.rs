@@ -101,6 +101,7 @@ fn every_method_renders_on_the_cameras_it_supports() {
         ("3dgut", "kannala_brandt"),
         ("3dgeer", "equiangular"),
         ("linprim", "pinhole"),
+        ("3dgs-aa", "pinhole"),
     ] {
         let out = format!("{method}.png");
         let stdout = ok(&splat(
@@ -164,17 +165,17 @@ fn the_gallery_renders_every_method_and_camera() {
         ],
         dir.path(),
     ));
-    assert_eq!(stdout.matches("intersections").count(), 8, "{stdout}");
-    assert_eq!(stdout.matches("pinhole camera only").count(), 4, "{stdout}");
-    // 4 methods by 3 camera models, with a 96-pixel strip of method names on the left and a
+    assert_eq!(stdout.matches("intersections").count(), 9, "{stdout}");
+    assert_eq!(stdout.matches("pinhole camera only").count(), 6, "{stdout}");
+    // 5 methods by 3 camera models, with a 96-pixel strip of method names on the left and a
     // 26-pixel strip of model names on top: each row and column has dark text in its strip.
     let g = image::open(dir.path().join("g.png")).unwrap().to_rgb8();
-    assert_eq!(g.dimensions(), (96 + 3 * 48, 26 + 4 * 32));
+    assert_eq!(g.dimensions(), (96 + 3 * 48, 26 + 5 * 32));
     let inked = |xs: std::ops::Range<u32>, ys: std::ops::Range<u32>| {
         ys.flat_map(|y| xs.clone().map(move |x| (x, y)))
             .any(|(x, y)| g.get_pixel(x, y).0.iter().all(|c| *c < 128))
     };
-    for r in 0..4 {
+    for r in 0..5 {
         assert!(
             inked(0..96, 26 + 32 * r..26 + 32 * (r + 1)),
             "row {r} label"
@@ -999,6 +1000,7 @@ fn tradeoff_sweeps_every_knob_and_writes_its_table_and_plot() {
         ("precision", "unorm8"),
         ("sh_degree", "0"),
         ("model", "3dgs"),
+        ("model", "3dgs-aa"),
         ("model", "3dgut"),
         ("model", "linprim"),
         ("model", "3dgeer"),

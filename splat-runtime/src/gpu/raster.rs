@@ -138,6 +138,14 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
         self.frame = None;
         let gpu = self.gpu;
         let grid = crate::pipeline::check::<M>(camera, &self.opts)?;
+        let side = gpu.limits().max_texture_dimension_2d;
+        if grid.width > side || grid.height > side {
+            let why = format!(
+                "a {}x{} frame exceeds this adapter's {side}-pixel render targets: use the tile path",
+                grid.width, grid.height
+            );
+            return Err(GpuError::Hardware(why).into());
+        }
         // One tile over the whole image: one key per visible primitive, sorted by depth.
         let words = FrameWords {
             width: grid.width,
