@@ -484,6 +484,7 @@ fn write_outputs(dir: &std::path::Path, rows: &[Row], method: &str) -> Result<()
     let mut summary = String::from(
         "knob,setting,forward_ms,backward_ms,memory_mib,intersections,sort_mib,psnr_db,max_abs,gradient_rel_rmse\n",
     );
+    // The ranges hold a comma: quoted, as CSV quotes such fields.
     let mut detail = String::from("knob,setting,group,rel_rmse,range,mre\n");
     for r in rows {
         let empty = |v: Option<String>| v.unwrap_or_default();
@@ -506,7 +507,7 @@ fn write_outputs(dir: &std::path::Path, rows: &[Row], method: &str) -> Result<()
                 let mre = mre.map_or(String::new(), |v| format!("{v:.6e}"));
                 writeln!(
                     detail,
-                    "{},{},{group},{rmse:.6e},{range},{mre}",
+                    "{},{},{group},{rmse:.6e},\"{range}\",{mre}",
                     r.knob, r.value
                 )?;
             }

@@ -958,12 +958,22 @@ fn the_depth_png_records_its_mapping() {
 }
 
 /// The rows of a CSV file after its header, as fields.
+/// The rows of a CSV file after its header (fields split at commas outside double quotes).
 fn csv_rows(path: &Path) -> Vec<Vec<String>> {
     let text = std::fs::read_to_string(path).unwrap();
-    text.lines()
-        .skip(1)
-        .map(|l| l.split(',').map(str::to_owned).collect())
-        .collect()
+    let fields = |line: &str| {
+        let (mut out, mut field, mut quoted) = (vec![], String::new(), false);
+        for c in line.chars() {
+            match c {
+                '"' => quoted = !quoted,
+                ',' if !quoted => out.push(std::mem::take(&mut field)),
+                c => field.push(c),
+            }
+        }
+        out.push(field);
+        out
+    };
+    text.lines().skip(1).map(fields).collect()
 }
 
 /// `splat tradeoff` end to end on a small view: every knob and setting in the CSV, gradient
@@ -1028,6 +1038,7 @@ fn tradeoff_sweeps_every_knob_and_writes_its_table_and_plot() {
     assert!(field("model", "3dgs", psnr) < 50.0);
 
     let detail = csv_rows(&dir.path().join("cpu/gradients.csv"));
+    assert!(detail.iter().all(|r| r.len() == 6), "{detail:?}");
     let groups: Vec<&str> = detail
         .iter()
         .filter(|r| r[0] == "default")
