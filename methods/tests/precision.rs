@@ -137,6 +137,9 @@ fn the_gpu_stores_each_format_within_its_step_in_fewer_bytes() {
     use splat_runtime::gpu::entries::Accumulation;
     use splat_runtime::gpu::render::{backward, render_for_backward};
     let acc = Accumulation::default_for(&gpu);
+    // A frame that keeps no depth sum (no depth output, no backward) has no word for it.
+    let shallow = splat_runtime::gpu::GpuRenderer::<Method>::new(&gpu, &RenderOptions::default());
+    assert_eq!(shallow.unwrap().state_layout().words(), 4);
     for bright in [false, true] {
         let (cam, params) = scene(bright);
         let opts = |precision| RenderOptions {

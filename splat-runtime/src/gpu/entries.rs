@@ -494,6 +494,14 @@ pub fn backward<M: SplatMethod>(
             ("SHADE_GRADS", shade_grads),
             ("SCATTER", scatter.into()),
             ("STATE", state.wgsl_load("pixel_state")),
+            (
+                "D_FINAL",
+                match state.depth {
+                    true => "state_value(pix, CHANNELS + 1u)",
+                    false => "0.0",
+                }
+                .into(),
+            ),
         ],
     );
     Ok(format!(

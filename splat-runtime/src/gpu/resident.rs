@@ -191,6 +191,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         let state = PixelState {
             precision: opts.precision,
             channels: layout.channels,
+            depth: depth_sums,
         };
         let (source, param_floats) = entries::project_backward::<M>()?;
         let pixel_backward = match M::HAS_PIXEL_INFO {

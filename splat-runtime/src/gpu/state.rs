@@ -5,7 +5,8 @@
 //! host reads the frame from it; this module is the one place its layout is defined, for the
 //! shaders (generated WGSL) and for the host (decoding).
 //!
-//! Layout per pixel, values v = (colors, T, depth sum):
+//! Layout per pixel, values v = (colors, T, depth sum), the depth sum only where the frame
+//! keeps one (an output not asked for has no word):
 //! - f32: one word per value;
 //! - f16: two values per word (`pack2x16float`);
 //! - unorm16 / unorm8: colors and T two or four per word (`pack2x16unorm` / `pack4x8unorm`,
@@ -20,12 +21,14 @@ use half::f16;
 pub struct PixelState {
     pub precision: Precision,
     pub channels: usize,
+    /// Whether the depth sum is kept.
+    pub depth: bool,
 }
 
 impl PixelState {
-    /// Values per pixel: the colors, T, the depth sum.
+    /// Values stored per pixel: the colors, T, the depth sum if kept.
     fn values(&self) -> usize {
-        self.channels + 2
+        self.channels + 1 + self.depth as usize
     }
 
     /// Values packed per word for the colors and T (the depth sum's word aside in unorm).
@@ -39,7 +42,7 @@ impl PixelState {
 
     /// Whether the depth sum has a word of its own (f16, in the unorm formats).
     fn separate_depth(&self) -> bool {
-        matches!(self.precision, Precision::Unorm16 | Precision::Unorm8)
+        self.depth && matches!(self.precision, Precision::Unorm16 | Precision::Unorm8)
     }
 
     /// The values packed with the colors and T.
@@ -53,7 +56,8 @@ impl PixelState {
     }
 
     /// WGSL: `const STATE_WORDS`, and `fn state_value(pix: u32, k: u32) -> f32` reading value
-    /// `k` of pixel `pix` from the `u32` array `buffer`.
+    /// `k` of pixel `pix` from the `u32` array `buffer` (k = channels + 1, the depth sum, only
+    /// where it is kept).
     pub fn wgsl_load(&self, buffer: &str) -> String {
         let n = self.packed();
         let packed = match self.precision {
@@ -122,7 +126,8 @@ fn state_value(pix: u32, k: u32) -> f32 {{
         out
     }
 
-    /// The stored words of a frame, decoded: per pixel the colors, T and the depth sum.
+    /// The stored words of a frame, decoded: per pixel the colors, T and the depth sum (zero
+    /// where it is not kept).
     pub fn decode(&self, words: &[u32]) -> Vec<f32> {
         let (n, per) = (self.packed(), self.per_word());
         let half = |bits: u32| f16::from_bits(bits as u16).to_f32();
@@ -140,6 +145,8 @@ fn state_value(pix: u32, k: u32) -> f32 {{
             }
             if self.separate_depth() {
                 out.push(half(px[self.words() - 1]));
+            } else if !self.depth {
+                out.push(0.0);
             }
         }
         out
@@ -155,10 +162,22 @@ mod tests {
         let state = |precision| PixelState {
             precision,
             channels: 3,
+            depth: true,
         };
         let words: Vec<usize> = Precision::ALL.map(|p| state(p).words()).into();
         // (3 colors, T, depth): 5 words; 3 halves; 2 + 1; 1 + 1.
         assert_eq!(words, [5, 3, 3, 2]);
+        // Without the depth sum: 4 words; 2 halves; 2; 1.
+        let shallow = |precision| PixelState {
+            depth: false,
+            ..state(precision)
+        };
+        let words: Vec<usize> = Precision::ALL.map(|p| shallow(p).words()).into();
+        assert_eq!(words, [4, 2, 2, 1]);
+        assert_eq!(
+            shallow(Precision::Unorm8).decode(&[64 | 128 << 8 | 255 << 16 | 191 << 24]),
+            [64.0 / 255.0, 128.0 / 255.0, 1.0, 191.0 / 255.0, 0.0]
+        );
         let half = |a: f32, b: f32| {
             f16::from_f32(a).to_bits() as u32 | (f16::from_f32(b).to_bits() as u32) << 16
         };

@@ -105,18 +105,17 @@ impl GpuLoss {
         })
     }
 
-    /// Records the loss of the frame in `pixel_state` (per pixel: 3 colors, T, depth sum)
-    /// against target `view`, both composited on `background`, writing its gradient into
-    /// `pixel_grad` (per pixel: 3 colors, alpha, depth).
-    #[allow(clippy::too_many_arguments)]
+    /// Records the loss of the frame of `size` in `pixel_state` (per pixel `state_words` f32
+    /// words: 3 colors, T, the depth sum if kept) against target `view`, both composited on
+    /// `background`, writing its gradient into `pixel_grad` (per pixel: 3 colors, alpha,
+    /// depth).
     pub fn record(
         &mut self,
         gpu: &Gpu,
         encoder: &mut wgpu::CommandEncoder,
-        view: usize,
-        background: Vec3,
-        size: (u32, u32),
+        (view, background, size): (usize, Vec3, (u32, u32)),
         pixel_state: &wgpu::Buffer,
+        state_words: u32,
         pixel_grad: &wgpu::Buffer,
     ) -> Result<(), GpuTrainError> {
         let t = &self.views[view];
@@ -135,7 +134,7 @@ impl GpuLoss {
         self.sums.ensure(gpu, 2 * groups as usize)?;
         let (b, b0) = (background, t.background);
         let floats = [b.x, b.y, b.z, self.ssim_weight, b0.x, b0.y, b0.z, 0.0].map(f32::to_bits);
-        let ints = [w, h, 5, t.offset, vw, vh, valid, t.coverage];
+        let ints = [w, h, state_words, t.offset, vw, vh, valid, t.coverage];
         gpu.write(&self.info, &[&ints[..], &floats].concat());
         encoder.clear_buffer(&self.sums, 0, None);
         let mut inputs = vec![
@@ -533,7 +532,7 @@ mod tests {
         let state_buf = gpu.buffer_from("state", &words(&state)).unwrap();
         let grad_buf = gpu.buffer("grad", pixels * 5).unwrap();
         let mut enc = gpu.device.create_command_encoder(&Default::default());
-        loss.record(&gpu, &mut enc, 1, bg, (w, h), &state_buf, &grad_buf)
+        loss.record(&gpu, &mut enc, (1, bg, (w, h)), &state_buf, 5, &grad_buf)
             .unwrap();
         gpu.queue.submit([enc.finish()]);
         let got = loss.value(&gpu).unwrap();
@@ -565,7 +564,14 @@ mod tests {
         }
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         let err = loss
-            .record(&gpu, &mut enc, 0, bg, (w + 1, h), &state_buf, &grad_buf)
+            .record(
+                &gpu,
+                &mut enc,
+                (0, bg, (w + 1, h)),
+                &state_buf,
+                5,
+                &grad_buf,
+            )
             .unwrap_err();
         assert!(matches!(err, GpuTrainError::Size { view: 0, .. }), "{err}");
     }

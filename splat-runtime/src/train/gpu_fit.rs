@@ -107,8 +107,11 @@ pub fn fit_gpu_from<M: Trainable>(
         let size = (frame.grid.width, frame.grid.height);
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         let grad = renderer.pixel_gradients()?.clone();
+        // Words per pixel of the frame's state (not `words`, the parameters' per primitive).
+        let state_words = renderer.state_layout().words() as u32;
         let pixel_state = renderer.pixel_state();
-        loss.record(gpu, &mut enc, k, background, size, pixel_state, &grad)?;
+        let target = (k, background, size);
+        loss.record(gpu, &mut enc, target, pixel_state, state_words, &grad)?;
         gpu.queue.submit([enc.finish()]);
         renderer.backward_on_device(&scene, acc)?;
 

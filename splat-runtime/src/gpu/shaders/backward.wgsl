@@ -42,7 +42,7 @@ fn backward_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
         d_color[c] = bitcast<f32>(pixel_grad[grad_at + c]);
     }
     let t_final = state_value(pix, CHANNELS);
-    let d_final = state_value(pix, CHANNELS + 1u);
+    let d_final = {{D_FINAL}};
     var d_alpha_out = bitcast<f32>(pixel_grad[grad_at + CHANNELS]);
     // depth = D / A with D = sum of w z and A = 1 - T: split its gradient into D and A.
     var d_d = 0.0;

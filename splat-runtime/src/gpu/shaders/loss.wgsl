@@ -11,7 +11,8 @@
 // cotangents spread back over the windows holding the pixel (the transposed filter).
 
 struct LossInfo {
-    // width, height, pixel state words per pixel (3 colors, T, depth sum), target offset
+    // width, height, pixel state words per pixel (3 colors, T, the depth sum if kept; f32),
+    // target offset
     size: vec4<u32>,
     // valid window positions: width, height, count; the target's coverage offset (or
     // 0xffffffff: opaque)
