@@ -31,6 +31,16 @@ fn scene(bright: bool) -> (splat_runtime::Camera, Vec<Params>) {
     (cam, params)
 }
 
+/// Color, alpha and depth, stored at `precision`.
+fn all_outputs(precision: Precision) -> RenderOptions {
+    RenderOptions {
+        alpha: true,
+        depth: true,
+        precision,
+        ..RenderOptions::default()
+    }
+}
+
 /// A fixed random linear loss on color and alpha.
 fn loss_gradient(pixels: usize) -> FrameGrad {
     let mut rng = fastrand::Rng::with_seed(2);
@@ -83,12 +93,7 @@ fn each_format_rounds_the_outputs_within_its_step_and_holds_fewer_bytes() {
 
 fn check_formats(bright: bool) {
     let (cam, params) = scene(bright);
-    let opts = |precision| RenderOptions {
-        alpha: true,
-        depth: true,
-        precision,
-        ..RenderOptions::default()
-    };
+    let opts = all_outputs;
     let (full, full_state) =
         render_for_backward::<Method>(&params, &cam, &opts(Precision::F32)).unwrap();
     let brighter = full.color.data.iter().filter(|c| **c > 1.0).count();
@@ -142,12 +147,7 @@ fn the_gpu_stores_each_format_within_its_step_in_fewer_bytes() {
     assert_eq!(shallow.unwrap().state_layout().words(), 4);
     for bright in [false, true] {
         let (cam, params) = scene(bright);
-        let opts = |precision| RenderOptions {
-            alpha: true,
-            depth: true,
-            precision,
-            ..RenderOptions::default()
-        };
+        let opts = all_outputs;
         let (full, mut full_state) =
             render_for_backward::<Method>(&gpu, &params, &cam, &opts(Precision::F32)).unwrap();
         let grad = loss_gradient(full.color.data.len() / 3);
