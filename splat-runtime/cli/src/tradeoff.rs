@@ -3,9 +3,9 @@
 //!
 //! Each knob is swept alone from the defaults. On the GPU one more knob is the forward path:
 //! the hardware-rasterized pass (quads blended into render targets, one sort key per visible
-//! primitive) at each target precision the adapter can blend into; it has no backward pass. The reference is the f32 render with every
-//! knob at its most accurate ([`reference_options`]); the f64 brute-force renderer would take
-//! minutes on a real scene. Gradients are those of one fixed random linear loss on the color
+//! primitive) at each target precision the adapter can blend into; it has no backward pass.
+//! The reference is the f32 render with every knob at its most accurate
+//! ([`reference_options`]); the f64 brute-force renderer would take minutes on a real scene. Gradients are those of one fixed random linear loss on the color
 //! (uniform in [-0.5, 0.5) per channel, as `splat bench`), compared per parameter group.
 
 use crate::Backend;

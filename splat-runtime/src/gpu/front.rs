@@ -13,19 +13,15 @@ use super::{Gpu, GpuError};
 use crate::flat::Flat;
 use crate::method::SplatMethod;
 use crate::pipeline::RenderError;
+use crate::pipeline::grid::TileGrid;
 use crate::pipeline::rasterize::MAX_INTERSECTIONS;
 use crate::types::Camera;
 
-/// The frame's sizes, as the shaders read them (`frame` uniform).
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct FrameWords {
-    pub width: u32,
-    pub height: u32,
-    pub tile_size: u32,
-    pub tiles_x: u32,
-    pub p_max: u32,
-    pub tiles: u32,
-}
+// The front's timed stages, the first of every renderer's timer (two timestamps each).
+pub(crate) const PROJECT: u32 = 0;
+pub(crate) const COUNT: u32 = 1;
+/// Emit and sort (and whatever the renderer adds before its next stage).
+pub(crate) const SORT: u32 = 2;
 
 /// What the count found.
 #[derive(Clone, Copy, Debug)]
@@ -55,7 +51,9 @@ pub(crate) struct Front {
     /// The primitive of each sorted key.
     pub prims: Grown,
     sort: RadixSort,
+    /// Primitives and tiles of the frame counted last.
     n: u32,
+    tiles: u32,
 }
 
 impl Front {
@@ -83,23 +81,25 @@ impl Front {
             prims: grown("intersection primitives", 1)?,
             sort: RadixSort::new(gpu)?,
             n: 0,
+            tiles: 0,
         })
     }
 
-    /// Submission 1: project `scene` through `camera`, count, prefix sum (timed as the stages
-    /// `stages.0` and `stages.1`); waits for the total.
+    /// Submission 1: project `scene` through `camera`, count each primitive's tiles of `grid`,
+    /// prefix sum (timed as `PROJECT` and `COUNT`); waits for the total. Lists are read
+    /// capped at `p_max` entries.
     pub fn count<M: SplatMethod>(
         &mut self,
         gpu: &Gpu,
         scene: &GpuScene<M>,
         camera: &Camera,
-        f: FrameWords,
+        (grid, p_max): (&TileGrid, u32),
         timer: &StageTimer,
-        stages: (u32, u32),
     ) -> Result<Counted, GpuRenderError> {
         let n = scene.len();
         let n32 = n as u32;
         self.n = n32;
+        self.tiles = grid.tile_count() as u32;
         self.projected.ensure(gpu, n * Layout::of::<M>().stride)?;
         self.counts.ensure(gpu, n)?;
         self.scan.prepare(gpu, n32)?;
@@ -108,12 +108,12 @@ impl Front {
             &self.frame_info,
             &[
                 n32,
-                f.width,
-                f.height,
-                f.tile_size,
-                f.tiles_x,
-                f.p_max,
-                f.tiles,
+                grid.width,
+                grid.height,
+                grid.size,
+                grid.tiles_x,
+                p_max,
+                self.tiles,
                 0,
             ],
         );
@@ -121,7 +121,7 @@ impl Front {
 
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         enc.clear_buffer(&self.totals, 0, None);
-        timer.start(&mut enc, stages.0);
+        timer.start(&mut enc, PROJECT);
         let bind = gpu.bind_named(
             &self.project,
             &[
@@ -132,8 +132,8 @@ impl Front {
             ],
         )?;
         dispatch(&mut enc, &self.project.pipeline, &bind, n32.div_ceil(64));
-        timer.end(&mut enc, stages.0);
-        timer.start(&mut enc, stages.1);
+        timer.end(&mut enc, PROJECT);
+        timer.start(&mut enc, COUNT);
         let bind = gpu.bind_named(
             &self.count,
             &[
@@ -145,7 +145,7 @@ impl Front {
         )?;
         dispatch(&mut enc, &self.count.pipeline, &bind, n32.div_ceil(256));
         self.scan.record(gpu, &mut enc, &self.counts)?;
-        timer.end(&mut enc, stages.1);
+        timer.end(&mut enc, COUNT);
         enc.copy_buffer_to_buffer(&self.totals, 0, &self.totals_staging, 0, 12);
         gpu.queue.submit([enc.finish()]);
         let t = gpu.read_mappable(&self.totals_staging, 3)?;
@@ -169,12 +169,11 @@ impl Front {
         gpu: &Gpu,
         enc: &mut wgpu::CommandEncoder,
         counted: Counted,
-        tiles: u32,
     ) -> Result<(), GpuError> {
         let total = counted.intersections as usize;
         self.keys.ensure(gpu, 2 * total)?;
         self.prims.ensure(gpu, total)?;
-        self.sort.prepare(gpu, total as u32, tiles)?;
+        self.sort.prepare(gpu, total as u32, self.tiles)?;
         let bind = gpu.bind_named(
             &self.emit,
             &[

@@ -12,21 +12,19 @@
 //! and there is no P_max. wgpu has no fragment-shader interlock, so there is no hardware
 //! backward pass: gradients come from the tile path ([`super::GpuRenderer`]).
 
-use super::front::{Counted, FrameWords, Front};
+use super::front::{COUNT, Front, PROJECT, SORT};
 use super::resident::{FrameInfo, GpuRenderError, GpuScene};
 use super::timing::StageTimer;
 use super::{Gpu, GpuError, entries};
 use crate::method::SplatMethod;
+use crate::pipeline::grid::TileGrid;
 use crate::pipeline::precision::Precision;
 use crate::pipeline::{Frame, Image, RenderOptions, Stats};
 use crate::types::Camera;
 use half::f16;
 use std::marker::PhantomData;
 
-// The renderer's timed stages (two timestamps each).
-const PROJECT: u32 = 0;
-const COUNT: u32 = 1;
-const SORT: u32 = 2;
+// The renderer's timed stage after the front's (two timestamps each).
 const DRAW: u32 = 3;
 const STAGES: u32 = 4;
 
@@ -61,8 +59,8 @@ pub struct HardwareRenderer<'g, M: SplatMethod> {
     /// Per target: its format (the color targets, then depth's).
     formats: Vec<wgpu::TextureFormat>,
     color_targets: usize,
-    /// The targets, for the size they were made for.
-    targets: Option<((u32, u32), Vec<wgpu::Texture>)>,
+    /// The render targets, made for the last frame's size.
+    targets: Vec<wgpu::Texture>,
     timer: StageTimer,
     frame: Option<FrameInfo>,
     method: PhantomData<M>,
@@ -121,7 +119,7 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
             slots: super::device::binding_slots(&source),
             formats,
             color_targets,
-            targets: None,
+            targets: vec![],
             timer: StageTimer::new(gpu, STAGES),
             frame: None,
             method: PhantomData,
@@ -147,24 +145,18 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
             return Err(GpuError::Hardware(why).into());
         }
         // One tile over the whole image: one key per visible primitive, sorted by depth.
-        let words = FrameWords {
-            width: grid.width,
-            height: grid.height,
-            tile_size: grid.width.max(grid.height),
-            tiles_x: 1,
-            p_max: u32::MAX,
-            tiles: 1,
-        };
-        let counted: Counted =
-            self.front
-                .count(gpu, scene, camera, words, &self.timer, (PROJECT, COUNT))?;
+        let whole = TileGrid::new(grid.width, grid.height, grid.width.max(grid.height));
+        let counted = self
+            .front
+            .count(gpu, scene, camera, (&whole, u32::MAX), &self.timer)?;
         let size = (grid.width, grid.height);
-        if self.targets.as_ref().is_none_or(|(s, _)| *s != size) {
-            self.targets = Some((size, self.make_targets(size)));
+        let made_for = |t: &wgpu::Texture| (t.width(), t.height());
+        if self.targets.first().map(made_for) != Some(size) {
+            self.targets = self.make_targets(size);
         }
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         self.timer.start(&mut enc, SORT);
-        self.front.emit_sorted(gpu, &mut enc, counted, 1)?;
+        self.front.emit_sorted(gpu, &mut enc, counted)?;
         self.timer.end(&mut enc, SORT);
         self.timer.start(&mut enc, DRAW);
         let mut inputs: Vec<(&str, &wgpu::Buffer)> = vec![
@@ -177,11 +169,11 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
         }
         let layout = self.pipeline.get_bind_group_layout(0);
         let bind = gpu.bind_slots("splat_fragment", &layout, &self.slots, &inputs)?;
-        let views: Vec<wgpu::TextureView> = self.targets.as_ref().map_or(vec![], |(_, ts)| {
-            ts.iter()
-                .map(|t| t.create_view(&Default::default()))
-                .collect()
-        });
+        let views: Vec<wgpu::TextureView> = self
+            .targets
+            .iter()
+            .map(|t| t.create_view(&Default::default()))
+            .collect();
         let attachments: Vec<Option<wgpu::RenderPassColorAttachment>> = views
             .iter()
             .map(|view| {
@@ -230,8 +222,7 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
         let info = self.frame.ok_or(GpuRenderError::NoFrame)?;
         let grid = info.grid;
         let pixels = (grid.width * grid.height) as usize;
-        let targets = self.targets.as_ref().map_or(&[][..], |(_, t)| t);
-        let values = read_targets(self.gpu, targets, (grid.width, grid.height))?;
+        let values = read_targets(self.gpu, &self.targets, (grid.width, grid.height))?;
         let mut color = Vec::with_capacity(pixels * self.channels);
         let (mut t, mut dacc) = (Vec::with_capacity(pixels), vec![0.0; pixels]);
         for p in 0..pixels {

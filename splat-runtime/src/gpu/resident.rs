@@ -14,7 +14,7 @@
 
 use super::device::{Grown, Kernel, dispatch};
 use super::entries::{self, Accumulation, Layout, Reduction};
-use super::front::{FrameWords, Front};
+use super::front::{COUNT, Front, PROJECT, SORT};
 use super::sort::TileRanges;
 use super::state::PixelState;
 use super::timing::StageTimer;
@@ -111,10 +111,7 @@ pub(crate) fn words_of<T: Flat>(values: &[T]) -> Vec<u32> {
     w.into_iter().map(f32::to_bits).collect()
 }
 
-// The renderer's timed stages (two timestamps each).
-const PROJECT: u32 = 0;
-const COUNT: u32 = 1;
-const SORT: u32 = 2;
+// The renderer's timed stages after the front's (two timestamps each).
 const SHADE: u32 = 3;
 const BLEND: u32 = 4;
 const ADJOINT: u32 = 5;
@@ -251,18 +248,10 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             .opts
             .p_max
             .map_or(u32::MAX, |p| p.min(u32::MAX as usize) as u32);
-        let words = FrameWords {
-            width: grid.width,
-            height: grid.height,
-            tile_size: grid.size,
-            tiles_x: grid.tiles_x,
-            p_max,
-            tiles,
-        };
         // Submission 1: project, count, prefix sum; the total comes back.
         let counted = self
             .front
-            .count(gpu, scene, camera, words, &self.timer, (PROJECT, COUNT))?;
+            .count(gpu, scene, camera, (&grid, p_max), &self.timer)?;
 
         // Submission 2: emit, sort, ranges, bins, shade.
         let total32 = counted.intersections as u32;
@@ -271,7 +260,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         self.pixels.ensure(gpu, pixels * self.state.words())?;
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         self.timer.start(&mut enc, SORT);
-        self.front.emit_sorted(gpu, &mut enc, counted, tiles)?;
+        self.front.emit_sorted(gpu, &mut enc, counted)?;
         self.tiles.record(gpu, &mut enc, &self.front.keys)?;
         self.timer.end(&mut enc, SORT);
         self.timer.start(&mut enc, SHADE);
