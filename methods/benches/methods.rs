@@ -6,9 +6,8 @@
 //!
 //! `cargo bench -p splat-methods --bench methods [-- N WIDTH HEIGHT]`
 
-use splat_methods::{FromStored, geer, gs3d, gut, linprim};
+use splat_methods::{geer, gs3d, gut, linprim};
 use splat_runtime::glam::Vec2;
-use splat_runtime::io::ply::StoredGaussian;
 use splat_runtime::{
     Camera, CameraModel, Frame, FrameGrad, RenderOptions, SplatMethod, backward, render,
     render_for_backward,
@@ -16,7 +15,7 @@ use splat_runtime::{
 use std::time::{Duration, Instant};
 
 mod common;
-use common::{camera, scene, size_args};
+use common::{as_method, camera, scene, size_args};
 
 fn best_of_3(mut f: impl FnMut()) -> Duration {
     f();
@@ -74,23 +73,6 @@ fn psnr(a: &[f32], b: &[f32]) -> f64 {
         .sum::<f64>()
         / a.len() as f64;
     10.0 * (1.0 / mse).log10()
-}
-
-/// The same Gaussians as another method's parameters, through its `FromStored` (as the CLI
-/// converts a PLY scene: LinPrim's octahedra get their vertices at two standard deviations).
-fn as_method<P: FromStored>(gaussians: &[gs3d::Params]) -> Vec<P> {
-    gaussians
-        .iter()
-        .map(|g| {
-            P::from_stored(&StoredGaussian {
-                mean: g.mean,
-                log_scale: g.log_scale,
-                rotation: g.rotation,
-                opacity_logit: g.opacity_logit,
-                sh: g.sh,
-            })
-        })
-        .collect()
 }
 
 fn main() {

@@ -158,9 +158,9 @@ pub mod geer {
             .min(1.0)
             .asin();
         let (fish_lo, fish_hi) = fisheye_box(cam, mean, reach);
-        let (box_lo, box_hi) = if cam.model == 2u32 {
+        let (box_lo, box_hi) = if cam.is_equiangular() {
             (f * lo + c - open, f * hi + c + open)
-        } else if cam.model == 1u32 {
+        } else if cam.is_kannala_brandt() {
             (fish_lo, fish_hi)
         } else {
             (
@@ -169,7 +169,7 @@ pub mod geer {
             )
         };
         // The fisheye's cone bound covers everything once it reaches a half space.
-        let whole = inside || (cam.model == 1u32 && reach >= PI / 2.0);
+        let whole = inside || (cam.is_kannala_brandt() && reach >= PI / 2.0);
         let whiten = Mat3::from_diagonal(Vec3::ONE / scale) * rot.transpose();
         Projected {
             visible: mean.length() > NEAR && cam.can_project(mean) && opacity >= ALPHA_MIN,
@@ -181,7 +181,11 @@ pub mod geer {
                 contour,
                 focal: f,
                 principal: c,
-                edges: select(cam.model == 2u32, 2.0, select(cam.model == 1u32, 1.0, 0.0)),
+                edges: select(
+                    cam.is_equiangular(),
+                    2.0,
+                    select(cam.is_kannala_brandt(), 1.0, 0.0),
+                ),
             },
             shade: Shade {
                 origin: whiten * (cam.center() - p.mean),

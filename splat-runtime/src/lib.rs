@@ -15,7 +15,9 @@
 //!   a harness running generated WGSL functions on batches.
 //! - [`train`]: what training shares across methods: the loss, metrics, Adam.
 
+pub mod cameras;
 pub mod checks;
+pub mod effects;
 pub mod flat;
 #[cfg(feature = "gpu")]
 pub mod gpu;
@@ -28,6 +30,7 @@ pub mod prelude;
 pub mod train;
 pub mod types;
 
+pub use effects::Effects;
 pub use flat::Flat;
 pub use glam;
 pub use lanes::{F32x8, I32x8, LANES, LaneArray, M32x8, U32x8};

@@ -97,6 +97,31 @@ pub trait SplatMethod: Send + Sync + 'static {
         d_out: &Projected<Self::Cull, Self::Shade>,
     ) -> (Self::Params, Camera);
 
+    /// `project` compiled for the camera model with code `MODEL` (`CameraModel as u32`) only:
+    /// the runtime's loops call it inside [`with_camera_model!`](crate::with_camera_model), so
+    /// each model's loop contains no other model's code. Equal to `project` for that model.
+    fn project_as<const MODEL: u32>(
+        params: &Self::Params,
+        camera: &Camera,
+    ) -> Projected<Self::Cull, Self::Shade>;
+
+    /// `project_adjoint` for the camera model `MODEL` only (see [`SplatMethod::project_as`]).
+    fn project_adjoint_as<const MODEL: u32>(
+        params: &Self::Params,
+        camera: &Camera,
+        d_out: &Projected<Self::Cull, Self::Shade>,
+    ) -> (Self::Params, Camera);
+
+    /// `pixel_info` for the camera model `MODEL` only (see [`SplatMethod::project_as`]).
+    fn pixel_info_as<const MODEL: u32>(pixel: Vec2, camera: &Camera) -> Self::Pixel;
+
+    /// `pixel_info_adjoint` for the camera model `MODEL` only.
+    fn pixel_info_adjoint_as<const MODEL: u32>(
+        pixel: Vec2,
+        camera: &Camera,
+        d_out: &Self::Pixel,
+    ) -> Camera;
+
     fn tile_cull(tile: &Tile, cull: &Self::Cull) -> bool;
 
     fn pixel_info(pixel: Vec2, camera: &Camera) -> Self::Pixel;

@@ -3,21 +3,22 @@
 //! `splat-compiler/src/types.rs`, `builtin_struct`); the generated code builds and reads them
 //! by field name, so a change here that the compiler does not mirror fails to compile.
 
+use crate::cameras;
 use crate::lanes::{F32x8, M32x8};
 use glam::{Mat3, Vec2, Vec3, Vec4};
 
 /// How a camera maps camera-space directions to pixels (3DGEER, Huang et al. 2025, §3.3).
+/// Each model is defined in [`cameras`] (its code, name and functions); this enum names them.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 #[repr(u32)]
 pub enum CameraModel {
-    /// `focal * (x / z, y / z) + principal`.
+    /// [`cameras::pinhole`].
     #[default]
-    Pinhole = 0,
-    /// OpenCV fisheye: θ = atan2(√(x² + y²), z), r = θ (1 + k1 θ² + k2 θ⁴ + k3 θ⁶ + k4 θ⁸),
-    /// pixel = `focal * r * (x, y) / √(x² + y²) + principal`; valid past 180° field of view.
-    KannalaBrandt = 1,
-    /// Equiangular (BEAP): `focal * (atan2(x, z), atan2(y, z)) + principal`.
-    Equiangular = 2,
+    Pinhole = cameras::pinhole::CODE,
+    /// [`cameras::kannala_brandt`]: the OpenCV fisheye.
+    KannalaBrandt = cameras::kannala_brandt::CODE,
+    /// [`cameras::equiangular`].
+    Equiangular = cameras::equiangular::CODE,
 }
 
 impl CameraModel {
@@ -30,9 +31,18 @@ impl CameraModel {
     /// The name used in camera files and on the command line.
     pub fn name(self) -> &'static str {
         match self {
-            CameraModel::Pinhole => "pinhole",
-            CameraModel::KannalaBrandt => "kannala_brandt",
-            CameraModel::Equiangular => "equiangular",
+            CameraModel::Pinhole => cameras::pinhole::NAME,
+            CameraModel::KannalaBrandt => cameras::kannala_brandt::NAME,
+            CameraModel::Equiangular => cameras::equiangular::NAME,
+        }
+    }
+
+    /// Whether the model reads the camera's `distortion` coefficients.
+    pub fn has_distortion(self) -> bool {
+        match self {
+            CameraModel::Pinhole => cameras::pinhole::DISTORTION,
+            CameraModel::KannalaBrandt => cameras::kannala_brandt::DISTORTION,
+            CameraModel::Equiangular => cameras::equiangular::DISTORTION,
         }
     }
 
@@ -46,6 +56,30 @@ impl CameraModel {
     }
 }
 
+/// Evaluates `$body` with `$code` a `const u32` equal to the code of `$model` (a
+/// [`CameraModel`]), so generic code in it that calls a method's `*_as::<$code>` functions
+/// (e.g. [`SplatMethod::project_as`](crate::SplatMethod::project_as)) is compiled once per
+/// model, each copy with only its model's code. The model is matched once, outside the loop.
+#[macro_export]
+macro_rules! with_camera_model {
+    ($model:expr, $code:ident => $body:expr) => {
+        match $model {
+            $crate::CameraModel::Pinhole => {
+                const $code: u32 = $crate::CameraModel::Pinhole as u32;
+                $body
+            }
+            $crate::CameraModel::KannalaBrandt => {
+                const $code: u32 = $crate::CameraModel::KannalaBrandt as u32;
+                $body
+            }
+            $crate::CameraModel::Equiangular => {
+                const $code: u32 = $crate::CameraModel::Equiangular as u32;
+                $body
+            }
+        }
+    };
+}
+
 impl std::fmt::Display for CameraModel {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(self.name())
@@ -56,9 +90,10 @@ impl std::fmt::Display for CameraModel {
 ///
 /// A world point `p` maps to camera space as `rotation * p + translation`, and to a pixel by
 /// the camera `model` ([`Camera::project_point`]); pixel (col j, row i) is sampled at
-/// `(j + 0.5, i + 0.5)`. Methods reach the model through `cam.project_point(p)` and
-/// `cam.pixel_ray(pixel)`, which the `#[splat_method]` compiler knows (and differentiates);
-/// a method that uses neither is pinhole-only, and the runtime refuses other models for it.
+/// `(j + 0.5, i + 0.5)`. Methods reach the model through `cam.project_point(p)`,
+/// `cam.pixel_ray(pixel)` and `cam.is_{model}()`, which the `#[splat_method]` compiler knows
+/// (and differentiates) from [`cameras`]; a method that uses none of them is pinhole-only, and
+/// the runtime refuses other models for it.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Camera {
     /// World-to-camera rotation.
@@ -107,77 +142,46 @@ impl Camera {
         -(self.rotation.transpose() * self.translation)
     }
 
-    /// The pixel of a camera-space point. The `#[splat_method]` compiler's version of this
-    /// function (`splat-compiler/src/builtins.rs`) is the one kernels run; tests keep the two equal.
+    /// The pixel of a camera-space point under the camera's model.
     pub fn project_point(&self, p: Vec3) -> Vec2 {
-        let (f, c) = (self.focal, self.principal);
         match self.model {
-            CameraModel::Pinhole => f * Vec2::new(p.x, p.y) / p.z + c,
-            CameraModel::KannalaBrandt => {
-                let rxy = (p.x * p.x + p.y * p.y).sqrt();
-                let theta = rxy.atan2(p.z);
-                let scale = if rxy > 1e-20 {
-                    self.kb_distort(theta) / rxy
-                } else {
-                    1.0 / p.z
-                };
-                f * Vec2::new(p.x, p.y) * scale + c
-            }
-            CameraModel::Equiangular => f * Vec2::new(p.x.atan2(p.z), p.y.atan2(p.z)) + c,
+            CameraModel::Pinhole => cameras::pinhole::project_point(self, p),
+            CameraModel::KannalaBrandt => cameras::kannala_brandt::project_point(self, p),
+            CameraModel::Equiangular => cameras::equiangular::project_point(self, p),
         }
     }
 
     /// The camera-space unit direction through a pixel position (the inverse of
-    /// [`Camera::project_point`]). For Kannala-Brandt, θ is found by Newton's method.
+    /// [`Camera::project_point`]).
     pub fn pixel_ray(&self, pixel: Vec2) -> Vec3 {
-        let m = (pixel - self.principal) / self.focal;
         match self.model {
-            CameraModel::Pinhole => m.extend(1.0).normalize(),
-            CameraModel::KannalaBrandt => {
-                let r = m.length();
-                let mut theta = r;
-                for _ in 0..KB_NEWTON_STEPS {
-                    let k = self.distortion;
-                    let t2 = theta * theta;
-                    let slope = 1.0
-                        + t2 * (3.0 * k.x + t2 * (5.0 * k.y + t2 * (7.0 * k.z + t2 * 9.0 * k.w)));
-                    // Past the polynomial's fold the steps would run off: keep a direction.
-                    theta = (theta - (self.kb_distort(theta) - r) / slope)
-                        .clamp(0.0, std::f32::consts::PI);
-                }
-                let dir = if r > 1e-20 { m / r } else { Vec2::ZERO };
-                (dir * theta.sin()).extend(theta.cos())
-            }
-            CameraModel::Equiangular => Vec3::new(
-                m.x.sin() * m.y.cos(),
-                m.x.cos() * m.y.sin(),
-                m.x.cos() * m.y.cos(),
-            )
-            .normalize(),
+            CameraModel::Pinhole => cameras::pinhole::pixel_ray(self, pixel),
+            CameraModel::KannalaBrandt => cameras::kannala_brandt::pixel_ray(self, pixel),
+            CameraModel::Equiangular => cameras::equiangular::pixel_ray(self, pixel),
         }
     }
 
-    /// Whether [`Camera::project_point`] maps the camera-space point `p` to a meaningful pixel:
-    /// in front of the image plane (pinhole, equiangular), or up to 3 rad (172°) off axis for
-    /// the fisheye, whose polynomial folds back near 180°.
+    /// Whether [`Camera::project_point`] maps the camera-space point `p` to a meaningful pixel.
     pub fn can_project(&self, p: Vec3) -> bool {
         match self.model {
-            CameraModel::KannalaBrandt => (p.x * p.x + p.y * p.y).sqrt().atan2(p.z) < 3.0,
-            _ => p.z > 0.0,
+            CameraModel::Pinhole => cameras::pinhole::can_project(self, p),
+            CameraModel::KannalaBrandt => cameras::kannala_brandt::can_project(self, p),
+            CameraModel::Equiangular => cameras::equiangular::can_project(self, p),
         }
     }
 
-    /// r(θ) = θ (1 + k1 θ² + k2 θ⁴ + k3 θ⁶ + k4 θ⁸).
-    fn kb_distort(&self, theta: f32) -> f32 {
-        let k = self.distortion;
-        let t2 = theta * theta;
-        theta * (1.0 + t2 * (k.x + t2 * (k.y + t2 * (k.z + t2 * k.w))))
+    pub fn is_pinhole(&self) -> bool {
+        self.model == CameraModel::Pinhole
+    }
+
+    pub fn is_kannala_brandt(&self) -> bool {
+        self.model == CameraModel::KannalaBrandt
+    }
+
+    pub fn is_equiangular(&self) -> bool {
+        self.model == CameraModel::Equiangular
     }
 }
-
-/// Newton steps that invert the Kannala-Brandt distortion in [`Camera::pixel_ray`] (from
-/// θ = r; converges to f32 precision in a few steps for the usual coefficients).
-pub const KB_NEWTON_STEPS: usize = 8;
 
 /// What `project` returns for one primitive.
 ///

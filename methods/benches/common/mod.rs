@@ -1,8 +1,13 @@
 //! The procedural benchmark scene shared by the benches.
 
+// Each bench uses part of it.
+#![allow(dead_code)]
+
+use splat_methods::FromStored;
 use splat_methods::gs3d::Params;
 use splat_runtime::Camera;
 use splat_runtime::glam::{Mat3, Vec2, Vec3, Vec4};
+use splat_runtime::io::ply::StoredGaussian;
 
 /// `N WIDTH HEIGHT` from the command line, each defaulting when absent.
 pub fn size_args(n: usize, width: usize, height: usize) -> (usize, f32, f32) {
@@ -71,6 +76,23 @@ pub fn scene(n: usize) -> Vec<Params> {
                 opacity_logit,
                 sh,
             }
+        })
+        .collect()
+}
+
+/// The Gaussians as another method's parameters, through its own `FromStored` (as the CLI
+/// converts a PLY scene: LinPrim's octahedra get their vertices at two standard deviations).
+pub fn as_method<P: FromStored>(gaussians: &[Params]) -> Vec<P> {
+    gaussians
+        .iter()
+        .map(|g| {
+            P::from_stored(&StoredGaussian {
+                mean: g.mean,
+                log_scale: g.log_scale,
+                rotation: g.rotation,
+                opacity_logit: g.opacity_logit,
+                sh: g.sh,
+            })
         })
         .collect()
 }

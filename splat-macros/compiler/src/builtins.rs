@@ -1,19 +1,85 @@
 //! Functions every module can call: the methods of the built-in `Camera` and
 //! `spherical_harmonics`, written in the accepted subset itself so they lower, differentiate
-//! and emit (Rust, lanes, WGSL) like user code. Each camera model follows `CameraModel` in
-//! `splat-runtime/src/types.rs`, whose plain-Rust twins of these functions (and of
-//! `spherical_harmonics` in its prelude) the tests keep equal to the compiled ones.
+//! and emit (Rust, lanes, WGSL) like user code.
+//!
+//! The camera models come from `splat-runtime/src/cameras.rs`, which the runtime compiles as
+//! plain Rust: one module per model with its `CODE`, `NAME` and functions. Each model's
+//! functions become builtins named `__{model}_{function}`, and `cam.project_point(p)` lowers to
+//! a helper that picks the model by its code; a kernel specialized to one model
+//! (`Kernel::models`) keeps only that model's branch. `spherical_harmonics` has its plain-Rust
+//! twin in the runtime's prelude; the tests keep the two equal.
 
 use crate::diag::Diag;
 use crate::model::FnDef;
+use quote::{format_ident, quote};
 
-/// The `Camera` methods a kernel may call: (method, builtin helper it lowers to).
-pub const CAMERA_METHODS: &[(&str, &str)] = &[
-    ("project_point", "__camera_project_point"),
-    ("pixel_ray", "__camera_pixel_ray"),
-    ("center", "__camera_center"),
-    ("can_project", "__camera_can_project"),
-];
+/// The camera models' source, shared with the runtime.
+const CAMERAS: &str = include_str!("../../../splat-runtime/src/cameras.rs");
+
+/// The functions every camera model defines: `cam.{name}(..)` in a kernel.
+const MODEL_FUNCTIONS: &[&str] = &["project_point", "pixel_ray", "can_project"];
+
+/// A camera model of `cameras.rs`.
+pub struct CameraModel {
+    /// Its module name (`pinhole`), as in camera files and `CameraModel::name`.
+    pub name: String,
+    /// Its `CODE`, the camera's `model` word.
+    pub code: u32,
+    fns: Vec<syn::ItemFn>,
+}
+
+/// The camera models, in the order `cameras.rs` defines them.
+pub fn camera_models() -> Vec<CameraModel> {
+    let file: syn::File = syn::parse_str(CAMERAS).expect("cameras.rs parses");
+    file.items
+        .into_iter()
+        .filter_map(|item| match item {
+            syn::Item::Mod(m) => Some(m),
+            _ => None,
+        })
+        .map(|m| {
+            let items = m.content.map(|(_, items)| items).unwrap_or_default();
+            let code = items.iter().find_map(|item| match item {
+                syn::Item::Const(c) if c.ident == "CODE" => match &*c.expr {
+                    syn::Expr::Lit(syn::ExprLit {
+                        lit: syn::Lit::Int(i),
+                        ..
+                    }) => i.base10_parse().ok(),
+                    _ => None,
+                },
+                _ => None,
+            });
+            let fns = items
+                .into_iter()
+                .filter_map(|item| match item {
+                    syn::Item::Fn(f) => Some(f),
+                    _ => None,
+                })
+                .collect();
+            CameraModel {
+                name: m.ident.to_string(),
+                code: code.expect("every camera model has an integer `CODE`"),
+                fns,
+            }
+        })
+        .collect()
+}
+
+/// The builtin helper a `Camera` method call `cam.{method}(..)` lowers to, if it is one:
+/// a model function, `center`, or `is_{model}` (whether the camera is of that model).
+pub fn camera_helper(method: &str) -> Option<String> {
+    let known = MODEL_FUNCTIONS.contains(&method)
+        || method == "center"
+        || method
+            .strip_prefix("is_")
+            .is_some_and(|m| camera_models().iter().any(|c| c.name == m));
+    known.then(|| format!("__camera_{method}"))
+}
+
+/// Camera methods that read the camera model: a kernel calling them works with every model.
+pub fn model_aware(method: &str) -> bool {
+    method == "project_point" || method == "pixel_ray" || method.starts_with("is_")
+}
 
 /// Coefficient counts `spherical_harmonics` accepts: degrees 0 to 3.
 pub const SH_COEFFICIENTS: &[usize] = &[1, 4, 9, 16];
@@ -23,71 +89,73 @@ pub fn sh_helper(n: usize) -> String {
     format!("__spherical_harmonics_{n}")
 }
 
-/// Methods that read the camera model: a kernel calling them works with every model.
-pub const MODEL_AWARE: &[&str] = &["project_point", "pixel_ray"];
-
-/// Model codes are `CameraModel as u32`: 0 pinhole, 1 Kannala-Brandt, 2 equiangular.
-const SOURCE: &str = r#"
-/// The pixel of a camera-space point under the camera's model.
-fn __camera_project_point(cam: &Camera, p: Vec3) -> Vec2 {
-    let (f, c) = (cam.focal, cam.principal);
-    if cam.model == 1u32 {
-        let rxy = (p.x * p.x + p.y * p.y).sqrt();
-        let theta = rxy.atan2(p.z);
-        let k = cam.distortion;
-        let t2 = theta * theta;
-        let r = theta * (1.0 + t2 * (k.x + t2 * (k.y + t2 * (k.z + t2 * k.w))));
-        // r / rxy -> 1 / z on the optical axis.
-        let scale = select(rxy > 1e-20, r / rxy, 1.0 / p.z);
-        f * Vec2::new(p.x, p.y) * scale + c
-    } else if cam.model == 2u32 {
-        f * Vec2::new(p.x.atan2(p.z), p.y.atan2(p.z)) + c
-    } else {
-        f * Vec2::new(p.x, p.y) / p.z + c
-    }
-}
-
-/// The camera-space unit direction through a pixel position.
-fn __camera_pixel_ray(cam: &Camera, pixel: Vec2) -> Vec3 {
-    let m = (pixel - cam.principal) / cam.focal;
-    if cam.model == 1u32 {
-        // Invert r(theta) by Newton's method from theta = r (KB_NEWTON_STEPS in the runtime).
-        let r = m.length();
-        let k = cam.distortion;
-        let mut theta = r;
-        for _step in 0..8 {
-            let t2 = theta * theta;
-            let value = theta * (1.0 + t2 * (k.x + t2 * (k.y + t2 * (k.z + t2 * k.w))));
-            let slope = 1.0 + t2 * (3.0 * k.x + t2 * (5.0 * k.y + t2 * (7.0 * k.z + t2 * 9.0 * k.w)));
-            // Past the polynomial's fold (a pixel no ray reaches) the steps would run off:
-            // keep theta a direction.
-            theta = (theta - (value - r) / slope).clamp(0.0, 3.14159265);
+/// The camera builtins: every model's functions (renamed `__{model}_{function}`), the
+/// `__camera_{function}` helpers choosing among them by the model's code, `__camera_is_{model}`
+/// and `__camera_center`.
+fn camera_items() -> Vec<syn::ItemFn> {
+    let models = camera_models();
+    let mut out = vec![];
+    for function in MODEL_FUNCTIONS {
+        let mut sig = None;
+        for m in &models {
+            let mut f = m
+                .fns
+                .iter()
+                .find(|f| f.sig.ident == function)
+                .unwrap_or_else(|| panic!("camera model `{}` has no `{function}`", m.name))
+                .clone();
+            f.sig.ident = format_ident!("__{}_{function}", m.name);
+            sig.get_or_insert_with(|| f.sig.clone());
+            out.push(f);
         }
-        let dir = select(r > 1e-20, m / r, Vec2::ZERO);
-        (dir * theta.sin()).extend(theta.cos())
-    } else if cam.model == 2u32 {
-        Vec3::new(m.x.sin() * m.y.cos(), m.x.cos() * m.y.sin(), m.x.cos() * m.y.cos()).normalize()
-    } else {
-        m.extend(1.0).normalize()
+        let sig = sig.expect("at least one camera model");
+        let args: Vec<syn::Ident> = sig
+            .inputs
+            .iter()
+            .filter_map(|a| match a {
+                syn::FnArg::Typed(t) => match &*t.pat {
+                    syn::Pat::Ident(i) => Some(format_ident!(
+                        "{}",
+                        i.ident.to_string().trim_start_matches('_')
+                    )),
+                    _ => None,
+                },
+                _ => None,
+            })
+            .collect();
+        let params = sig.inputs.iter().zip(&args).map(|(p, a)| match p {
+            syn::FnArg::Typed(t) => {
+                let ty = &t.ty;
+                quote!(#a: #ty)
+            }
+            other => quote!(#other),
+        });
+        let ret = &sig.output;
+        // The last model is the `else` of the chain.
+        let mut chain = {
+            let last = models.last().expect("a model");
+            let f = format_ident!("__{}_{function}", last.name);
+            quote!(#f(#(#args),*))
+        };
+        for m in models.iter().rev().skip(1) {
+            let (f, code) = (format_ident!("__{}_{function}", m.name), m.code);
+            chain = quote!(if cam.model == #code { #f(#(#args),*) } else { #chain });
+        }
+        let name = format_ident!("__camera_{function}");
+        out.push(syn::parse_quote!(fn #name(#(#params),*) #ret { #chain }));
     }
-}
-
-/// Whether `project_point` maps the camera-space point `p` to a meaningful pixel: in front
-/// of the image plane for pinhole and equiangular cameras; up to 172 degrees off axis for the
-/// fisheye (the Kannala-Brandt polynomial folds back near 180).
-fn __camera_can_project(cam: &Camera, p: Vec3) -> bool {
-    if cam.model == 1u32 {
-        (p.x * p.x + p.y * p.y).sqrt().atan2(p.z) < 3.0
-    } else {
-        p.z > 0.0
+    for m in &models {
+        let (name, code) = (format_ident!("__camera_is_{}", m.name), m.code);
+        out.push(syn::parse_quote!(fn #name(cam: &Camera) -> bool { cam.model == #code }));
     }
+    out.push(syn::parse_quote! {
+        /// The camera centre in world space.
+        fn __camera_center(cam: &Camera) -> Vec3 {
+            -(cam.rotation.transpose() * cam.translation)
+        }
+    });
+    out
 }
-
-/// The camera centre in world space.
-fn __camera_center(cam: &Camera) -> Vec3 {
-    -(cam.rotation.transpose() * cam.translation)
-}
-"#;
 
 /// Real spherical harmonics up to degree 3 in direction `dir` (normalized here), summed with
 /// the coefficients `sh` (one `Vec3` per basis function; the 3DGS constants and signs).
@@ -129,19 +197,17 @@ fn {name}(sh: [Vec3; {n}], dir: Vec3) -> Vec3 {{
 
 /// The builtin helpers, parsed like a module's own functions.
 pub fn builtin_fns(mut parse: impl FnMut(syn::ItemFn) -> Option<FnDef>, diag: &Diag) -> Vec<FnDef> {
-    let mut source = SOURCE.to_string();
-    for n in SH_COEFFICIENTS {
-        source += &sh_source(*n);
-    }
+    let source: String = SH_COEFFICIENTS.iter().map(|n| sh_source(*n)).collect();
     let file: syn::File = syn::parse_str(&source).expect("the builtin source parses");
+    let sh = file.items.into_iter().filter_map(|item| match item {
+        syn::Item::Fn(f) => Some(f),
+        _ => None,
+    });
     let errors_before = diag.messages().len();
-    let fns: Vec<FnDef> = file
-        .items
+    let fns: Vec<FnDef> = camera_items()
         .into_iter()
-        .filter_map(|item| match item {
-            syn::Item::Fn(f) => parse(f),
-            _ => None,
-        })
+        .chain(sh)
+        .filter_map(&mut parse)
         .collect();
     debug_assert_eq!(
         diag.messages().len(),

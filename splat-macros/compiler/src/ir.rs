@@ -179,6 +179,24 @@ impl Block {
         }
     }
 
+    /// Whether `v` is read anywhere in the block or nested in it.
+    pub fn uses(&self, v: Var) -> bool {
+        let mut used = self.yields.contains(&v);
+        self.visit(&mut |s| {
+            used |= match s {
+                Stmt::Let { op, .. } => op.operands().contains(&v),
+                Stmt::If {
+                    cond,
+                    then_block,
+                    else_block,
+                    ..
+                } => *cond == v || then_block.yields.contains(&v) || else_block.yields.contains(&v),
+                Stmt::Call { args, body, .. } => args.contains(&v) || body.yields.contains(&v),
+            }
+        });
+        used
+    }
+
     /// Every constant defined in the block or nested in it.
     pub fn constants(&self) -> HashMap<Var, Const> {
         let mut out = HashMap::new();

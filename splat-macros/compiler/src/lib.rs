@@ -155,37 +155,70 @@ fn build_kernels<'m>(
     };
     let mut kernels = vec![];
     for def in defs {
-        let Some(l) = lower::lower_fn(m, diag, def, &custom.names) else {
+        let Some((mut kernel, model_slot)) = build_kernel(m, def, custom, diag, None) else {
             continue;
         };
-        let mut primal = l.func;
-        let has_float_in = primal
-            .params
-            .iter()
-            .any(|p| primal.ty(*p) == ir::Scalar::F32);
-        let out_names: Vec<String> = l
-            .ret
-            .slot_names("d_out")
-            .into_iter()
-            .zip(l.ret.slots())
-            .filter(|(_, s)| *s == ir::Scalar::F32)
-            .map(|(n, _)| n)
-            .collect();
-        let adjoint = (has_float_in && !out_names.is_empty()).then(|| {
-            let mut g = ad::adjoint(&primal, &custom.adjoints, &out_names);
-            opt::dce(&mut g);
-            g
+        let reads_model = model_slot.is_some_and(|v| {
+            kernel.primal.body.uses(v) || kernel.adjoint.as_ref().is_some_and(|g| g.body.uses(v))
         });
-        opt::dce(&mut primal);
-        kernels.push(Kernel {
-            def,
-            primal,
-            adjoint,
-            ret: l.ret,
-            camera_model: l.camera_model,
-        });
+        if kind == Kind::Method && reads_model {
+            for builtins::CameraModel {
+                name: model, code, ..
+            } in builtins::camera_models()
+            {
+                let Some((mut variant, _)) = build_kernel(m, def, custom, diag, Some(code)) else {
+                    continue;
+                };
+                variant.primal.name = format!("{}_{model}", def.name);
+                if let Some(g) = &mut variant.adjoint {
+                    g.name = format!("{}_adjoint_{model}", def.name);
+                }
+                kernel.models.push((model, code, variant));
+            }
+        }
+        kernels.push(kernel);
     }
     (!diag.has_errors()).then_some(kernels)
+}
+
+/// Lowers, differentiates and cleans one kernel, for every camera model or for the one with
+/// code `model`; also returns the parameter slot of the camera's model code.
+fn build_kernel<'m>(
+    m: &'m Module,
+    def: &'m model::FnDef,
+    custom: &Custom,
+    diag: &Diag,
+    model: Option<u32>,
+) -> Option<(Kernel<'m>, Option<ir::Var>)> {
+    let l = lower::lower_for_model(m, diag, def, &custom.names, model)?;
+    let mut primal = l.func;
+    let has_float_in = primal
+        .params
+        .iter()
+        .any(|p| primal.ty(*p) == ir::Scalar::F32);
+    let out_names: Vec<String> = l
+        .ret
+        .slot_names("d_out")
+        .into_iter()
+        .zip(l.ret.slots())
+        .filter(|(_, s)| *s == ir::Scalar::F32)
+        .map(|(n, _)| n)
+        .collect();
+    let adjoint = (has_float_in && !out_names.is_empty()).then(|| {
+        let mut g = ad::adjoint(&primal, &custom.adjoints, &out_names);
+        opt::dce(&mut g);
+        g
+    });
+    opt::dce(&mut primal);
+    let kernel = Kernel {
+        def,
+        primal,
+        adjoint,
+        ret: l.ret,
+        camera_model: l.camera_model,
+        models: vec![],
+    };
+    Some((kernel, l.model_slot))
 }
 
 fn expand_module(kind: Kind, item: syn::ItemMod, diag: &Diag) -> Option<TokenStream> {
@@ -205,9 +238,21 @@ fn expand_module(kind: Kind, item: syn::ItemMod, diag: &Diag) -> Option<TokenStr
     let mut twin = TokenStream::new();
     let mut lanes = TokenStream::new();
     let mut scalar = TokenStream::new();
+    let mut by_model: Vec<(&str, TokenStream)> = vec![];
     for k in &kernels {
         items.extend(k.forward());
         items.extend(k.adjoint_fn());
+        for (model, _, v) in &k.models {
+            let at = match by_model.iter().position(|(m, _)| *m == model.as_str()) {
+                Some(at) => at,
+                None => {
+                    by_model.push((model, TokenStream::new()));
+                    by_model.len() - 1
+                }
+            };
+            by_model[at].1.extend(v.forward());
+            by_model[at].1.extend(v.adjoint_fn());
+        }
         twin.extend(k.flat(Flavor::F64));
         if lanes_for(k) {
             lanes.extend(k.flat(Flavor::Lanes));
@@ -215,6 +260,20 @@ fn expand_module(kind: Kind, item: syn::ItemMod, diag: &Diag) -> Option<TokenStr
         if kind == Kind::Functions {
             scalar.extend(k.flat(Flavor::F32));
         }
+    }
+    for (model, fns) in by_model {
+        let doc = format!(
+            " The kernels that read the camera model, compiled for the {model} camera only: the other models' branches are not in them."
+        );
+        let module = quote::format_ident!("{model}");
+        items.extend(quote! {
+            #[doc = #doc]
+            pub mod #module {
+                #[allow(unused_imports)]
+                use super::*;
+                #fns
+            }
+        });
     }
     items.extend(quote! {
         /// The f64 twin of every kernel, in flat form, for finite-difference tests.
@@ -286,7 +345,11 @@ fn function_literal(f: &emit::naga::Signature) -> TokenStream {
 /// adjoint's are `d_` + the parameter slots).
 fn wgsl_kernels<'k>(kernels: &'k [Kernel]) -> Vec<(&'k ir::Function, Vec<String>)> {
     let mut out = vec![];
-    for k in kernels {
+    for k in kernels.iter().chain(
+        kernels
+            .iter()
+            .flat_map(|k| k.models.iter().map(|(_, _, v)| v)),
+    ) {
         out.push((&k.primal, k.ret.slot_names("")));
         if let Some(adj) = &k.adjoint {
             let names = k

@@ -196,6 +196,11 @@ pub fn builtin_enum_field(s: &StructTy, field: &str) -> Option<TokenStream> {
     (s.display == "Camera" && field == "model").then(|| quote!(::splat_runtime::CameraModel))
 }
 
+/// Whether `ty` is the built-in `Camera`.
+pub fn is_camera(ty: &Ty) -> bool {
+    matches!(ty, Ty::Struct(s) if s.display == "Camera")
+}
+
 /// The names of the built-in generic structs and their parameters.
 pub const BUILTIN_STRUCTS: &[&str] = &["Camera", "Tile", "Projected", "Contribution"];
 

@@ -9,7 +9,9 @@ use crate::tradeoff::{Outcome, Tradeoff};
 use anyhow::{Result, bail};
 use splat_runtime::io::ply::{FromStored, ToStored};
 use splat_runtime::train::Trainable;
-use splat_runtime::{CameraModel, Frame, GeneratedSource, SplatMethod};
+use splat_runtime::{
+    Camera, CameraModel, Effects, Frame, GeneratedSource, RenderOptions, SplatMethod,
+};
 
 /// A method on the command line.
 pub struct Method {
@@ -33,6 +35,8 @@ pub struct Instance {
     pub(crate) bench: fn(&Bench) -> Result<()>,
     pub(crate) tradeoff: fn(&Tradeoff) -> Result<Vec<Outcome>>,
     pub(crate) fit: Option<fn(&Fit) -> Result<()>>,
+    /// The effects a render with this instance simulates (`splat render --explain`).
+    pub(crate) effects: fn(&Camera, &RenderOptions) -> Effects,
 }
 
 impl Instance {
@@ -48,6 +52,7 @@ impl Instance {
             bench: |b| b.run::<M>(),
             tradeoff: |t| t.run::<M>(),
             fit: None,
+            effects: Effects::of::<M>,
         }
     }
 

@@ -48,6 +48,9 @@ pub struct RenderArgs {
     /// fixed-function blending (no tile lists; no transmittance stop).
     #[arg(long)]
     hardware: bool,
+    /// Also print the effects the frame simulates and the kernel variants that carry them.
+    #[arg(long)]
+    explain: bool,
     /// Where to render: the CPU backend (rayon + SIMD) or the wgpu backend (any adapter,
     /// software ones included); `auto` picks a hardware GPU when there is one.
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
@@ -282,6 +285,10 @@ pub(crate) fn render_cmd(args: &RenderArgs, methods: &[Method]) -> Result<()> {
     let (frame, backend) =
         render_method(method, &cloud, &camera, &opts, args.backend, args.hardware)?;
     let written = image_io::write_frame(&args.out, &frame)?;
+    if args.explain {
+        let effects = (method.for_degree(cloud.sh_degree).effects)(&camera, &opts);
+        println!("{effects}");
+    }
     let s = &frame.stats;
     let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
     let raster = match args.hardware {

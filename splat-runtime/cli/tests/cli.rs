@@ -126,6 +126,56 @@ fn every_method_renders_on_the_cameras_it_supports() {
         assert!(stdout.contains(&format!("{model} camera")), "{stdout}");
         assert!(dir.path().join(&out).exists());
     }
+    // --explain names the effects and the kernels compiled for the camera model alone.
+    let stdout = ok(&splat(
+        &[
+            "render",
+            "--method",
+            "3dgut",
+            "--camera-model",
+            "kannala_brandt",
+            "--width",
+            "32",
+            "--height",
+            "24",
+            "--backend",
+            "cpu",
+            "--explain",
+            "--out",
+            "explained.png",
+        ],
+        dir.path(),
+    ));
+    for line in [
+        "camera model      kannala_brandt (kernels compiled for it alone: project_kannala_brandt, project_adjoint_kannala_brandt, pixel_info_kannala_brandt",
+        "depth output      off (no depth sums, no depth buffer)",
+    ] {
+        assert!(stdout.contains(line), "`{line}` is not in:\n{stdout}");
+    }
+    let stdout = ok(&splat(
+        &[
+            "render",
+            "--method",
+            "3dgs",
+            "--width",
+            "32",
+            "--height",
+            "24",
+            "--backend",
+            "cpu",
+            "--explain",
+            "--depth",
+            "--out",
+            "explained.png",
+        ],
+        dir.path(),
+    ));
+    assert!(
+        stdout
+            .contains("camera model      pinhole (the method reads no camera model: pinhole only)"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("depth output      on"), "{stdout}");
     // A pinhole-only method refuses a fisheye by name and writes nothing.
     let out = splat(
         &[

@@ -8,7 +8,8 @@
 //! - [`gradients`]: the backward pass against finite differences of the reference (on smooth
 //!   scenes, away from thresholds), against the reference's analytic adjoint (on realistic
 //!   scenes, with thresholds crossed and lists stopped at the T-stop), invalid pairs leaving no
-//!   trace, and the GPU backward against the CPU's.
+//!   trace, and the GPU backward against the CPU's;
+//! - [`variants`]: the kernels compiled for one camera model against the generic ones.
 //!
 //! Each check panics with a message naming the pixel, primitive or parameter group that is
 //! off, so it reads as a test:
@@ -34,6 +35,7 @@ pub mod adjoint;
 pub mod forward;
 pub mod gradients;
 pub mod reference;
+pub mod variants;
 
 use crate::flat::Flat;
 use crate::method::SplatMethod;

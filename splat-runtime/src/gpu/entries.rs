@@ -12,7 +12,7 @@ use super::{Gpu, GpuError};
 use crate::flat::Flat;
 use crate::method::{SplatMethod, WgslFunction};
 use crate::pipeline::shade::Blend;
-use crate::types::Camera;
+use crate::types::{Camera, CameraModel};
 
 const TILES: &str = include_str!("shaders/tiles.wgsl");
 const COUNT: &str = include_str!("shaders/count.wgsl");
@@ -70,13 +70,22 @@ fn sig<M: SplatMethod>(name: &str) -> Result<&'static WgslFunction, GpuError> {
     kernel::function(M::SOURCE.functions, name)
 }
 
-/// `project` over one primitive per invocation (the kernel harness: parameters per row, the
-/// camera shared).
-pub fn project<M: SplatMethod>() -> Result<String, GpuError> {
+/// `M`'s kernel `name` compiled for the camera `model` only, where the kernel reads the model
+/// (the compiler names that variant `{name}_{model}`); otherwise the kernel itself.
+fn sig_for<M: SplatMethod>(
+    name: &str,
+    model: CameraModel,
+) -> Result<&'static WgslFunction, GpuError> {
+    kernel::function(M::SOURCE.functions, &format!("{name}_{model}")).or_else(|_| sig::<M>(name))
+}
+
+/// `project` for the camera `model` over one primitive per invocation (the kernel harness:
+/// parameters per row, the camera shared).
+pub fn project<M: SplatMethod>(model: CameraModel) -> Result<String, GpuError> {
     let wgsl = M::SOURCE.wgsl;
     Ok(kernel::harness_source(
         wgsl,
-        sig::<M>("project")?,
+        sig_for::<M>("project", model)?,
         M::Params::LEN,
     ))
 }
@@ -196,13 +205,16 @@ fn blend_sizes(
     Ok(BlendSizes { wg, batch, rc })
 }
 
-/// The pixel data: its binding (camera words, only with `pixel_info`), the code computing it
-/// from `px, py`, and its slot expressions.
-fn pixel<M: SplatMethod>(camera_binding: u32) -> Result<(String, String, Vec<String>), GpuError> {
+/// The pixel data under the camera `model`: its binding (camera words, only with
+/// `pixel_info`), the code computing it from `px, py`, and its slot expressions.
+fn pixel<M: SplatMethod>(
+    camera_binding: u32,
+    model: CameraModel,
+) -> Result<(String, String, Vec<String>), GpuError> {
     if !M::HAS_PIXEL_INFO {
         return Ok((String::new(), String::new(), vec!["px".into(), "py".into()]));
     }
-    let info = sig::<M>("pixel_info")?;
+    let info = sig_for::<M>("pixel_info", model)?;
     let cam: Vec<String> = info.args[2..]
         .iter()
         .enumerate()
@@ -256,10 +268,11 @@ fn tile_pass(layout: &Layout, tile: u32, b: &BlendSizes, rule: Blend) -> String 
     )
 }
 
-/// `shade_tiles`: the forward blend, one workgroup per tile of `tile` x `tile` pixels, storing
-/// each pixel as `state` says.
+/// `shade_tiles`: the forward blend under the camera `model`, one workgroup per tile of
+/// `tile` x `tile` pixels, storing each pixel as `state` says.
 pub fn shade<M: SplatMethod>(
     gpu: &Gpu,
+    model: CameraModel,
     tile: u32,
     want_depth: bool,
     rule: Blend,
@@ -268,7 +281,7 @@ pub fn shade<M: SplatMethod>(
     let wgsl = M::SOURCE.wgsl;
     let layout = Layout::of::<M>();
     let b = blend_sizes(gpu, tile, &layout, false)?;
-    let (camera, pixel_code, pixel_args) = pixel::<M>(6)?;
+    let (camera, pixel_code, pixel_args) = pixel::<M>(6, model)?;
     let (call, eval) = evaluate_call::<M>(&pixel_args, "batch_words")?;
     let nc = layout.channels;
     let accumulate: String = (0..nc)
@@ -304,10 +317,11 @@ pub fn shade<M: SplatMethod>(
     ))
 }
 
-/// `backward_tiles`: the backward blend with the gradient accumulation `acc`, replaying
-/// against the pixels stored as `state` says.
+/// `backward_tiles`: the backward blend under the camera `model` with the gradient
+/// accumulation `acc`, replaying against the pixels stored as `state` says.
 pub fn backward<M: SplatMethod>(
     gpu: &Gpu,
+    model: CameraModel,
     tile: u32,
     want_depth: bool,
     acc: Accumulation,
@@ -317,7 +331,7 @@ pub fn backward<M: SplatMethod>(
     let wgsl = M::SOURCE.wgsl;
     let layout = Layout::of::<M>();
     let b = blend_sizes(gpu, tile, &layout, acc.reduce == Reduction::Workgroup)?;
-    let (camera, pixel_code, pixel_args) = pixel::<M>(9)?;
+    let (camera, pixel_code, pixel_args) = pixel::<M>(9, model)?;
     let (call, eval) = evaluate_call::<M>(&pixel_args, "batch_words")?;
     let adj = sig::<M>("evaluate_adjoint")?;
     let (np, ns, nc) = (pixel_args.len(), layout.shade_words, layout.channels);
@@ -514,13 +528,22 @@ pub fn backward<M: SplatMethod>(
 /// each target blends by.
 pub const RASTER_VALUES: usize = 3;
 
-/// The hardware-rasterized forward pass (`quad_vertex`, `splat_fragment`): the color channels
-/// in `color_targets` targets, then (with `depth`) the depth in one more target. Returns the
-/// source and the number of color targets.
-pub fn raster<M: SplatMethod>(depth: bool, rule: Blend) -> Result<(String, usize), GpuError> {
+/// The render targets holding `M`'s color channels, [`RASTER_VALUES`] per target.
+pub fn raster_color_targets<M: SplatMethod>() -> usize {
+    M::Color::LEN.div_ceil(RASTER_VALUES)
+}
+
+/// The hardware-rasterized forward pass under the camera `model` (`quad_vertex`,
+/// `splat_fragment`): the color channels in `color_targets` targets, then (with `depth`) the
+/// depth in one more target ([`raster_color_targets`] of them for the colors).
+pub fn raster<M: SplatMethod>(
+    model: CameraModel,
+    depth: bool,
+    rule: Blend,
+) -> Result<String, GpuError> {
     let wgsl = M::SOURCE.wgsl;
     let layout = Layout::of::<M>();
-    let (camera, pixel_code, pixel_args) = pixel::<M>(3)?;
+    let (camera, pixel_code, pixel_args) = pixel::<M>(3, model)?;
     let (call, eval) = evaluate_call::<M>(&pixel_args, "projected")?;
     let color: Vec<String> = (0..layout.channels)
         .map(|c| format!("r.{}", eval.results[1 + c].0))
@@ -529,7 +552,6 @@ pub fn raster<M: SplatMethod>(depth: bool, rule: Blend) -> Result<(String, usize
         .chunks(RASTER_VALUES)
         .map(<[String]>::to_vec)
         .collect();
-    let color_targets = targets.len();
     if depth {
         targets.push(vec!["depth".into()]);
     }
@@ -558,18 +580,27 @@ pub fn raster<M: SplatMethod>(depth: bool, rule: Blend) -> Result<(String, usize
             ("WRITE", write),
         ],
     );
-    Ok((format!("{wgsl}\n{body}"), color_targets))
+    Ok(format!("{wgsl}\n{body}"))
 }
 
-/// `project_backward`: `project`'s adjoint per primitive, camera gradients per workgroup; and
-/// the number of float slots of the parameters (gradient words per primitive).
-pub fn project_backward<M: SplatMethod>() -> Result<(String, usize), GpuError> {
+/// The float slots of `M::Params` (gradient words per primitive): `project_adjoint`'s
+/// results are the parameters' float slots, then the camera's (its leading words).
+pub fn param_floats<M: SplatMethod>() -> Result<usize, GpuError> {
+    let adj = sig::<M>("project_adjoint")?;
+    adj.results
+        .len()
+        .checked_sub(Camera::FLOAT_SLOTS)
+        .ok_or_else(|| GpuError::Shader("project_adjoint has too few results".into()))
+}
+
+/// `project_backward`: `project`'s adjoint under the camera `model` per primitive, camera
+/// gradients per workgroup.
+pub fn project_backward<M: SplatMethod>(model: CameraModel) -> Result<String, GpuError> {
     let wgsl = M::SOURCE.wgsl;
     let layout = Layout::of::<M>();
-    let adj = sig::<M>("project_adjoint")?;
+    let adj = sig_for::<M>("project_adjoint", model)?;
     let (np, ncam) = (M::Params::LEN, Camera::LEN);
-    // Results: the parameters' float slots, then the camera's (its leading words).
-    let npf = adj.results.len() - Camera::FLOAT_SLOTS;
+    let npf = param_floats::<M>()?;
     // Arguments: parameters, camera, then the cotangent's float slots: depth, bbox (4), cull
     // (zero: no gradient flows through culling), shade.
     let cull_floats = adj
@@ -615,14 +646,14 @@ pub fn project_backward<M: SplatMethod>() -> Result<(String, usize), GpuError> {
             ("WRITE", write),
         ],
     );
-    Ok((format!("{wgsl}\n{body}"), npf))
+    Ok(format!("{wgsl}\n{body}"))
 }
 
-/// `pixel_backward`: `pixel_info`'s adjoint per pixel, camera gradients per workgroup (only
-/// for methods with `pixel_info`).
-pub fn pixel_backward<M: SplatMethod>() -> Result<String, GpuError> {
+/// `pixel_backward`: `pixel_info`'s adjoint under the camera `model` per pixel, camera
+/// gradients per workgroup (only for methods with `pixel_info`).
+pub fn pixel_backward<M: SplatMethod>(model: CameraModel) -> Result<String, GpuError> {
     let wgsl = M::SOURCE.wgsl;
-    let adj = sig::<M>("pixel_info_adjoint")?;
+    let adj = sig_for::<M>("pixel_info_adjoint", model)?;
     let ncam = Camera::LEN;
     // Arguments: the pixel centre, the camera, the pixel data's cotangent. Results: the
     // centre's cotangent (2), then the camera's float slots.

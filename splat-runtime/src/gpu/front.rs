@@ -6,6 +6,7 @@
 
 use super::device::{Grown, Kernel, dispatch};
 use super::entries::{self, Layout};
+use super::per_model::PerModel;
 use super::resident::{GpuRenderError, GpuScene, words_of};
 use super::sort::{RadixSort, Scan};
 use super::timing::StageTimer;
@@ -15,7 +16,7 @@ use crate::method::SplatMethod;
 use crate::pipeline::RenderError;
 use crate::pipeline::grid::TileGrid;
 use crate::pipeline::rasterize::MAX_INTERSECTIONS;
-use crate::types::Camera;
+use crate::types::{Camera, CameraModel};
 
 // The front's timed stages, the first of every renderer's timer (two timestamps each).
 pub(crate) const PROJECT: u32 = 0;
@@ -33,7 +34,7 @@ pub(crate) struct Counted {
 }
 
 pub(crate) struct Front {
-    project: Kernel,
+    project: PerModel<Kernel>,
     count: Kernel,
     emit: Kernel,
     pub camera: wgpu::Buffer,
@@ -51,9 +52,10 @@ pub(crate) struct Front {
     /// The primitive of each sorted key.
     pub prims: Grown,
     sort: RadixSort,
-    /// Primitives and tiles of the frame counted last.
+    /// Primitives, tiles and camera model of the frame counted last.
     n: u32,
     tiles: u32,
+    pub model: CameraModel,
 }
 
 impl Front {
@@ -61,7 +63,7 @@ impl Front {
     pub fn new<M: SplatMethod>(gpu: &Gpu, use_cull: bool) -> Result<Front, GpuError> {
         let grown = |what, words| Grown::new(gpu, what, words);
         Ok(Front {
-            project: gpu.kernel(&entries::project::<M>()?, "splat_harness")?,
+            project: PerModel::new(),
             count: gpu.kernel(&entries::tiles::<M>(false, use_cull)?, "count_tiles")?,
             emit: gpu.kernel(&entries::tiles::<M>(true, use_cull)?, "emit_tiles")?,
             camera: gpu.buffer("camera", Camera::LEN)?,
@@ -82,6 +84,7 @@ impl Front {
             sort: RadixSort::new(gpu)?,
             n: 0,
             tiles: 0,
+            model: CameraModel::Pinhole,
         })
     }
 
@@ -98,7 +101,12 @@ impl Front {
     ) -> Result<Counted, GpuRenderError> {
         let n = scene.len();
         let n32 = n as u32;
+        let model = camera.model;
+        let project = self.project.get(model, || {
+            gpu.kernel(&entries::project::<M>(model)?, "splat_harness")
+        })?;
         self.n = n32;
+        self.model = model;
         self.tiles = grid.tile_count() as u32;
         self.projected.ensure(gpu, n * Layout::of::<M>().stride)?;
         self.counts.ensure(gpu, n)?;
@@ -123,7 +131,7 @@ impl Front {
         enc.clear_buffer(&self.totals, 0, None);
         timer.start(&mut enc, PROJECT);
         let bind = gpu.bind_named(
-            &self.project,
+            &project,
             &[
                 ("harness_rows", scene.buffer()),
                 ("harness_shared", &self.camera),
@@ -131,7 +139,7 @@ impl Front {
                 ("harness_count", &self.count_info),
             ],
         )?;
-        dispatch(&mut enc, &self.project.pipeline, &bind, n32.div_ceil(64));
+        dispatch(&mut enc, &project.pipeline, &bind, n32.div_ceil(64));
         timer.end(&mut enc, PROJECT);
         timer.start(&mut enc, COUNT);
         let bind = gpu.bind_named(

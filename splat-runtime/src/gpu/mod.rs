@@ -19,6 +19,7 @@ pub mod dispatch;
 pub mod entries;
 mod front;
 pub mod kernel;
+mod per_model;
 pub mod raster;
 pub mod render;
 pub mod resident;

@@ -13,6 +13,7 @@
 //! backward pass: gradients come from the tile path ([`super::GpuRenderer`]).
 
 use super::front::{COUNT, Front, PROJECT, SORT};
+use super::per_model::PerModel;
 use super::resident::{FrameInfo, GpuRenderError, GpuScene};
 use super::timing::StageTimer;
 use super::{Gpu, GpuError, entries};
@@ -54,8 +55,8 @@ pub struct HardwareRenderer<'g, M: SplatMethod> {
     opts: RenderOptions,
     channels: usize,
     front: Front,
-    pipeline: wgpu::RenderPipeline,
-    slots: Vec<(String, u32)>,
+    /// The render pipeline and its binding slots, per camera model used.
+    pipelines: PerModel<(wgpu::RenderPipeline, Vec<(String, u32)>)>,
     /// Per target: its format (the color targets, then depth's).
     formats: Vec<wgpu::TextureFormat>,
     color_targets: usize,
@@ -84,7 +85,7 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
             ))
             .into());
         }
-        let (source, color_targets) = entries::raster::<M>(opts.depth, opts.blend)?;
+        let color_targets = entries::raster_color_targets::<M>();
         let mut formats = vec![target_format(opts.precision); color_targets];
         if opts.depth {
             // Depth sums are not bounded: f16 where the colors are unorm, as on the CPU.
@@ -109,14 +110,12 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
             ))
             .into());
         }
-        let pipeline = build_pipeline(gpu, &source, &formats)?;
         Ok(HardwareRenderer {
             gpu,
             opts: *opts,
             channels: entries::Layout::of::<M>().channels,
             front: Front::new::<M>(gpu, false)?,
-            pipeline,
-            slots: super::device::binding_slots(&source),
+            pipelines: PerModel::new(),
             formats,
             color_targets,
             targets: vec![],
@@ -167,8 +166,14 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
         if M::HAS_PIXEL_INFO {
             inputs.push(("camera_words", &self.front.camera));
         }
-        let layout = self.pipeline.get_bind_group_layout(0);
-        let bind = gpu.bind_slots("splat_fragment", &layout, &self.slots, &inputs)?;
+        let (model, opts, formats) = (camera.model, self.opts, &self.formats);
+        let (pipeline, slots) = self.pipelines.get(model, || {
+            let source = entries::raster::<M>(model, opts.depth, opts.blend)?;
+            let pipeline = build_pipeline(gpu, &source, formats)?;
+            Ok::<_, GpuError>((pipeline, super::device::binding_slots(&source)))
+        })?;
+        let layout = pipeline.get_bind_group_layout(0);
+        let bind = gpu.bind_slots("splat_fragment", &layout, &slots, &inputs)?;
         let views: Vec<wgpu::TextureView> = self
             .targets
             .iter()
@@ -194,7 +199,7 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
                 color_attachments: &attachments,
                 ..Default::default()
             });
-            pass.set_pipeline(&self.pipeline);
+            pass.set_pipeline(&pipeline);
             pass.set_bind_group(0, &bind, &[]);
             pass.draw(0..4, 0..counted.intersections as u32);
         }

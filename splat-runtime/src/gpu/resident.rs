@@ -15,6 +15,7 @@
 use super::device::{Grown, Kernel, dispatch};
 use super::entries::{self, Accumulation, Layout, Reduction};
 use super::front::{COUNT, Front, PROJECT, SORT};
+use super::per_model::PerModel;
 use super::sort::TileRanges;
 use super::state::PixelState;
 use super::timing::StageTimer;
@@ -25,7 +26,7 @@ use crate::pipeline::grid::TileGrid;
 use crate::pipeline::{
     BackwardStats, Frame, FrameGrad, Gradients, Image, RenderError, RenderOptions, Stats,
 };
-use crate::types::Camera;
+use crate::types::{Camera, CameraModel};
 use std::collections::HashMap;
 use std::marker::PhantomData;
 
@@ -142,13 +143,14 @@ pub struct GpuRenderer<'g, M: SplatMethod> {
     /// How the per-pixel state is stored.
     state: PixelState,
     front: Front,
-    shade: Kernel,
-    project_backward: Kernel,
+    /// The kernels that call the method's model-aware functions, per camera model used.
+    shade: PerModel<Kernel>,
+    project_backward: PerModel<Kernel>,
+    pixel_backward: PerModel<Kernel>,
     /// Parameter float slots (gradient words per primitive).
     param_floats: usize,
-    pixel_backward: Option<Kernel>,
-    /// Backward blends built on first use, per (depth gradient, accumulation).
-    blends: HashMap<(bool, Accumulation), Kernel>,
+    /// Backward blends built on first use, per (camera model, depth gradient, accumulation).
+    blends: HashMap<(CameraModel, bool, Accumulation), Kernel>,
     /// (width, height, 0, 0).
     pixel_info: wgpu::Buffer,
     tiles: TileRanges,
@@ -190,11 +192,6 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             channels: layout.channels,
             depth: depth_sums,
         };
-        let (source, param_floats) = entries::project_backward::<M>()?;
-        let pixel_backward = match M::HAS_PIXEL_INFO {
-            true => Some(gpu.kernel(&entries::pixel_backward::<M>()?, "pixel_backward")?),
-            false => None,
-        };
         let grown = |what, words| Grown::new(gpu, what, words);
         Ok(GpuRenderer {
             gpu,
@@ -203,13 +200,10 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             layout,
             state,
             front: Front::new::<M>(gpu, opts.tile_cull)?,
-            shade: gpu.kernel(
-                &entries::shade::<M>(gpu, opts.tile_size, depth_sums, opts.blend, state)?,
-                "shade_tiles",
-            )?,
-            project_backward: gpu.kernel(&source, "project_backward")?,
-            param_floats,
-            pixel_backward,
+            shade: PerModel::new(),
+            project_backward: PerModel::new(),
+            pixel_backward: PerModel::new(),
+            param_floats: entries::param_floats::<M>()?,
             blends: HashMap::new(),
             pixel_info: gpu.uniform_buffer(4),
             tiles: TileRanges::new(gpu)?,
@@ -264,13 +258,18 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         self.tiles.record(gpu, &mut enc, &self.front.keys)?;
         self.timer.end(&mut enc, SORT);
         self.timer.start(&mut enc, SHADE);
+        let (model, opts, state, depth) = (camera.model, self.opts, self.state, self.depth_sums);
+        let shade = self.shade.get(model, || {
+            let source = entries::shade::<M>(gpu, model, opts.tile_size, depth, opts.blend, state)?;
+            gpu.kernel(&source, "shade_tiles")
+        })?;
         let mut inputs = self.tile_pass_inputs();
         inputs.push(("pixel_out", &self.pixels));
         if M::HAS_PIXEL_INFO {
             inputs.push(("camera_words", &self.front.camera));
         }
-        let bind = gpu.bind_named(&self.shade, &inputs)?;
-        dispatch(&mut enc, &self.shade.pipeline, &bind, tiles);
+        let bind = gpu.bind_named(&shade, &inputs)?;
+        dispatch(&mut enc, &shade.pipeline, &bind, tiles);
         self.timer.end(&mut enc, SHADE);
         self.timer.resolve(&mut enc, PROJECT..BLEND);
         gpu.queue.submit([enc.finish()]);
@@ -465,9 +464,12 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         dispatch(&mut enc, &blend.pipeline, &bind, tiles);
         self.timer.end(&mut enc, BLEND);
         self.timer.start(&mut enc, ADJOINT);
-        let k = &self.project_backward;
+        let model = self.front.model;
+        let k = self.project_backward.get(model, || {
+            gpu.kernel(&entries::project_backward::<M>(model)?, "project_backward")
+        })?;
         let bind = gpu.bind_named(
-            k,
+            &k,
             &[
                 ("params", scene.buffer()),
                 ("camera_words", &self.front.camera),
@@ -479,9 +481,12 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             ],
         )?;
         dispatch(&mut enc, &k.pipeline, &bind, groups);
-        if let Some(k) = &self.pixel_backward {
+        if M::HAS_PIXEL_INFO {
+            let k = self.pixel_backward.get(model, || {
+                gpu.kernel(&entries::pixel_backward::<M>(model)?, "pixel_backward")
+            })?;
             let bind = gpu.bind_named(
-                k,
+                &k,
                 &[
                     ("camera_words", &self.front.camera),
                     ("pixel_cotangent", &self.pixel_cotangent),
@@ -516,13 +521,14 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         if acc.reduce == Reduction::Subgroup && !gpu.subgroups {
             return Err(GpuError::Shader("this adapter has no subgroup operations".into()).into());
         }
-        if let Some(p) = self.blends.get(&(want_depth, acc)) {
+        let key = (self.front.model, want_depth, acc);
+        if let Some(p) = self.blends.get(&key) {
             return Ok(p.clone());
         }
         let (tile, rule) = (self.opts.tile_size, self.opts.blend);
-        let source = entries::backward::<M>(gpu, tile, want_depth, acc, rule, self.state)?;
+        let source = entries::backward::<M>(gpu, key.0, tile, want_depth, acc, rule, self.state)?;
         let k = gpu.kernel(&source, "backward_tiles")?;
-        self.blends.insert((want_depth, acc), k.clone());
+        self.blends.insert(key, k.clone());
         Ok(k)
     }
 

@@ -41,11 +41,12 @@ pub enum CameraError {
         path: String,
         error: serde_json::Error,
     },
-    #[error(
-        "camera model `{0}` is not supported (supported: pinhole, kannala_brandt, equiangular)"
-    )]
+    #[error("camera model `{0}` is not supported (supported: {names})", names = model_names(false))]
     Model(String),
-    #[error("camera coefficients `k` are only for the kannala_brandt model, not {0}")]
+    #[error(
+        "camera coefficients `k` are only for models with distortion ({names}), not {0}",
+        names = model_names(true)
+    )]
     Coefficients(CameraModel),
     #[error("camera image size {0}x{1} is out of range (1..={MAX_SIDE} per side)")]
     Size(u32, u32),
@@ -58,20 +59,30 @@ pub enum CameraError {
     )]
     NotRigid(f32),
     #[error(
-        "camera model kannala_brandt needs its coefficients `k`: [k1, k2, k3, k4] ([0, 0, 0, 0] is the equidistant fisheye)"
+        "camera model {0} needs its coefficients `k`: [k1, k2, k3, k4] (for kannala_brandt, [0, 0, 0, 0] is the equidistant fisheye)"
     )]
-    NoCoefficients,
+    NoCoefficients(CameraModel),
+}
+
+/// The models' names, all of them or (`distortion`) those with distortion coefficients.
+fn model_names(distortion: bool) -> String {
+    let names: Vec<&str> = CameraModel::ALL
+        .iter()
+        .filter(|m| !distortion || m.has_distortion())
+        .map(|m| m.name())
+        .collect();
+    names.join(", ")
 }
 
 impl CameraFile {
     pub fn to_camera(&self) -> Result<Camera, CameraError> {
         let model = CameraModel::from_name(&self.model)
             .ok_or_else(|| CameraError::Model(self.model.clone()))?;
-        if self.k.is_some() && model != CameraModel::KannalaBrandt {
+        if self.k.is_some() && !model.has_distortion() {
             return Err(CameraError::Coefficients(model));
         }
-        if self.k.is_none() && model == CameraModel::KannalaBrandt {
-            return Err(CameraError::NoCoefficients);
+        if self.k.is_none() && model.has_distortion() {
+            return Err(CameraError::NoCoefficients(model));
         }
         let k = self.k.unwrap_or_default();
         if !k.iter().all(|v| v.is_finite()) {
@@ -125,7 +136,7 @@ impl CameraFile {
             cy: c.principal.y,
             world_to_camera: [row(0), row(1), row(2), [0.0, 0.0, 0.0, 1.0]],
             model: c.model.name().into(),
-            k: (c.model == CameraModel::KannalaBrandt).then(|| c.distortion.to_array()),
+            k: c.model.has_distortion().then(|| c.distortion.to_array()),
         }
     }
 }
@@ -185,7 +196,7 @@ mod tests {
             bad.to_camera()
                 .unwrap_err()
                 .to_string()
-                .contains("only for the kannala_brandt")
+                .contains("only for models with distortion (kannala_brandt), not pinhole")
         );
     }
 

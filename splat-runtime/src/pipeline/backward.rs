@@ -70,28 +70,30 @@ pub fn backward_tile<M: SplatMethod>(
     tile: u32,
     acc: &mut Accum,
 ) {
-    #[cfg(target_arch = "x86_64")]
-    if crate::lanes::has_avx2() {
-        // SAFETY: the CPU supports the features the function is compiled for.
-        return unsafe { backward_tile_avx2::<M>(state, camera, grad, tile, acc) };
-    }
-    backward_tile_body::<M>(state, camera, grad, tile, acc)
+    crate::with_camera_model!(camera.model, MODEL => {
+        #[cfg(target_arch = "x86_64")]
+        if crate::lanes::has_avx2() {
+            // SAFETY: the CPU supports the features the function is compiled for.
+            return unsafe { backward_tile_avx2::<M, MODEL>(state, camera, grad, tile, acc) };
+        }
+        backward_tile_body::<M, MODEL>(state, camera, grad, tile, acc)
+    })
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-fn backward_tile_avx2<M: SplatMethod>(
+fn backward_tile_avx2<M: SplatMethod, const MODEL: u32>(
     state: &ForwardState<M>,
     camera: &Camera,
     grad: &FrameGrad,
     tile: u32,
     acc: &mut Accum,
 ) {
-    backward_tile_body::<M>(state, camera, grad, tile, acc)
+    backward_tile_body::<M, MODEL>(state, camera, grad, tile, acc)
 }
 
 #[inline(always)]
-fn backward_tile_body<M: SplatMethod>(
+fn backward_tile_body<M: SplatMethod, const MODEL: u32>(
     state: &ForwardState<M>,
     camera: &Camera,
     grad: &FrameGrad,
@@ -110,7 +112,7 @@ fn backward_tile_body<M: SplatMethod>(
     for row in 0..s {
         for gx in (0..s).step_by(LANES) {
             let (x0, y) = (tx * s + gx, ty * s + row);
-            let (pixels, inside) = group_pixels::<M>(grid, camera, x0, y);
+            let (pixels, inside) = group_pixels::<M, MODEL>(grid, camera, x0, y);
             // Per-lane image index, clamped for lanes past the edge (they are masked out).
             let px = |l: usize| {
                 let x = (x0 + l as u32).min(grid.width - 1);
@@ -194,7 +196,7 @@ fn backward_tile_body<M: SplatMethod>(
                 t = st.take.select_f32(t * one_minus, t);
             }
             if M::HAS_PIXEL_INFO {
-                add_ray_gradient::<M>(camera, &d_pixel, inside, x0, y, &mut acc.camera);
+                add_ray_gradient::<M, MODEL>(camera, &d_pixel, inside, x0, y, &mut acc.camera);
             }
         }
     }
@@ -221,7 +223,7 @@ fn backward_tile_body<M: SplatMethod>(
 
 /// Adds the camera's cotangent through each inside lane's pixel data (`pixel_info`'s adjoint
 /// at the pixel centre, given the pixel data's summed cotangent).
-fn add_ray_gradient<M: SplatMethod>(
+fn add_ray_gradient<M: SplatMethod, const MODEL: u32>(
     camera: &Camera,
     d_pixel: &M::PixelLanes,
     inside: M32x8,
@@ -247,7 +249,7 @@ fn add_ray_gradient<M: SplatMethod>(
             continue;
         }
         let centre = glam::Vec2::new((x0 + l as u32) as f32 + 0.5, y as f32 + 0.5);
-        let d = M::pixel_info_adjoint(centre, camera, &M::Pixel::read_words(&words));
+        let d = M::pixel_info_adjoint_as::<MODEL>(centre, camera, &M::Pixel::read_words(&words));
         *out = out.add_cotangent(&d);
     }
 }

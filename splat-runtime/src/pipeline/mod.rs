@@ -464,7 +464,7 @@ pub fn backward<M: SplatMethod>(
     let t2 = Instant::now();
     let (zero_params, zero_cull) = (M::Params::zero(), M::Cull::zero());
     // Each gradient is written once (no zero-filled buffer first: that alone cost 0.1 s at 1M).
-    let (param_grads, camera_grads): (Vec<M::Params>, Vec<Camera>) = (0..n)
+    let (param_grads, camera_grads): (Vec<M::Params>, Vec<Camera>) = crate::with_camera_model!(camera.model, MODEL => (0..n)
         .into_par_iter()
         .map(|i| {
             let d_words = &shade[i * words..(i + 1) * words];
@@ -481,9 +481,9 @@ pub fn backward<M: SplatMethod>(
                 cull: zero_cull,
                 shade: M::Shade::read_words(d_words),
             };
-            M::project_adjoint(&params[i], camera, &d_out)
+            M::project_adjoint_as::<MODEL>(&params[i], camera, &d_out)
         })
-        .unzip();
+        .unzip());
     // Summed in fixed chunks, in order: the same gradient whatever the thread count.
     let camera_grad = camera_grads
         .par_chunks(CHUNK)

@@ -18,7 +18,10 @@ pub fn preprocess<M: SplatMethod>(
     camera: &Camera,
     grid: &TileGrid,
 ) -> Preprocessed<M> {
-    let projected: Vec<_> = params.par_iter().map(|p| M::project(p, camera)).collect();
+    let projected: Vec<_> = crate::with_camera_model!(camera.model, MODEL => params
+        .par_iter()
+        .map(|p| M::project_as::<MODEL>(p, camera))
+        .collect());
     filter::<M>(projected, grid)
 }
 

@@ -49,7 +49,7 @@ pub struct TileOutput {
 }
 
 /// The pixel data of the eight pixels of a group, as lanes, and the lanes inside the image.
-pub fn group_pixels<M: SplatMethod>(
+pub fn group_pixels<M: SplatMethod, const MODEL: u32>(
     grid: &TileGrid,
     camera: &Camera,
     x0: u32,
@@ -65,7 +65,7 @@ pub fn group_pixels<M: SplatMethod>(
     for (l, ok) in inside.iter_mut().enumerate() {
         let x = x0 + l as u32;
         *ok = x < grid.width && y < grid.height;
-        let pixel = M::pixel_info(Vec2::new(x as f32 + 0.5, y as f32 + 0.5), camera);
+        let pixel = M::pixel_info_as::<MODEL>(Vec2::new(x as f32 + 0.5, y as f32 + 0.5), camera);
         pixel.write_words(&mut words);
         for (w, lane) in lanes.as_mut().iter_mut().enumerate() {
             lane.0[l] = words[w];
@@ -121,19 +121,21 @@ pub fn shade_tile<M: SplatMethod>(
     want_depth: bool,
     blend: Blend,
 ) -> TileOutput {
-    #[cfg(target_arch = "x86_64")]
-    if crate::lanes::has_avx2() {
-        // SAFETY: the CPU supports the features the function is compiled for.
-        return unsafe {
-            shade_tile_avx2::<M>(grid, camera, tile, list, projected, want_depth, blend)
-        };
-    }
-    shade_tile_body::<M>(grid, camera, tile, list, projected, want_depth, blend)
+    crate::with_camera_model!(camera.model, MODEL => {
+        #[cfg(target_arch = "x86_64")]
+        if crate::lanes::has_avx2() {
+            // SAFETY: the CPU supports the features the function is compiled for.
+            return unsafe {
+                shade_tile_avx2::<M, MODEL>(grid, camera, tile, list, projected, want_depth, blend)
+            };
+        }
+        shade_tile_body::<M, MODEL>(grid, camera, tile, list, projected, want_depth, blend)
+    })
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-fn shade_tile_avx2<M: SplatMethod>(
+fn shade_tile_avx2<M: SplatMethod, const MODEL: u32>(
     grid: &TileGrid,
     camera: &Camera,
     tile: u32,
@@ -142,11 +144,11 @@ fn shade_tile_avx2<M: SplatMethod>(
     want_depth: bool,
     blend: Blend,
 ) -> TileOutput {
-    shade_tile_body::<M>(grid, camera, tile, list, projected, want_depth, blend)
+    shade_tile_body::<M, MODEL>(grid, camera, tile, list, projected, want_depth, blend)
 }
 
 #[inline(always)]
-fn shade_tile_body<M: SplatMethod>(
+fn shade_tile_body<M: SplatMethod, const MODEL: u32>(
     grid: &TileGrid,
     camera: &Camera,
     tile: u32,
@@ -167,7 +169,7 @@ fn shade_tile_body<M: SplatMethod>(
     for row in 0..s {
         for gx in (0..s).step_by(LANES) {
             let (x0, y) = (tx * grid.size + gx as u32, ty * grid.size + row as u32);
-            let (pixels, inside) = group_pixels::<M>(grid, camera, x0, y);
+            let (pixels, inside) = group_pixels::<M, MODEL>(grid, camera, x0, y);
             let mut done = !inside;
             let mut t = F32x8::splat(1.0);
             let mut color = M::ColorLanes::default();

@@ -15,8 +15,12 @@ pub struct Kernel<'m> {
     /// `None` when the kernel has no float input or no float output.
     pub adjoint: Option<Function>,
     pub ret: Ty,
-    /// Whether the kernel reads the camera model (see `builtins::MODEL_AWARE`).
+    /// Whether the kernel reads the camera model (see `builtins::model_aware`).
     pub camera_model: bool,
+    /// For a method kernel that reads the camera's model code: the kernel specialized to each
+    /// model (`builtins::camera_models` order) with the model's code, its IR functions named
+    /// `{kernel}_{model}` and `{kernel}_adjoint_{model}`.
+    pub models: Vec<(String, u32, Kernel<'m>)>,
 }
 
 /// Expressions reading each slot of a value of type `ty` called `base`.

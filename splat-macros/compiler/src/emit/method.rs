@@ -302,6 +302,22 @@ pub fn method_impl(m: &Module, kernels: &[Kernel], diag: &Diag) -> Option<TokenS
         }
         _ => quote!(#rt::Camera::ZERO),
     };
+    // The same calls through the kernels specialized to the camera model `MODEL`.
+    let project_as = by_model(project, quote!(project(#(#project_call),*)));
+    let project_adjoint_as = match project.adjoint {
+        Some(_) => by_model(project, project_adjoint.clone()),
+        None => project_adjoint.clone(),
+    };
+    let (pixel_info_as, pixel_info_adjoint_as) = match pixel_info {
+        Some(pi) => (
+            by_model(pi, pixel_info_body.clone()),
+            match pi.adjoint {
+                Some(_) => by_model(pi, pixel_info_adjoint_body.clone()),
+                None => pixel_info_adjoint_body.clone(),
+            },
+        ),
+        None => (pixel_info_body.clone(), pixel_info_adjoint_body.clone()),
+    };
     let eval_call = call_args(
         evaluate.def,
         &[quote!(pixel), quote!(shade)],
@@ -432,6 +448,22 @@ pub fn method_impl(m: &Module, kernels: &[Kernel], diag: &Diag) -> Option<TokenS
                 #project_adjoint
             }
             #[inline]
+            fn project_as<const MODEL: u32>(params: &#p_t, camera: &#rt::Camera) -> #rt::Projected<#c_t, #s_t> {
+                #project_as
+            }
+            #[inline]
+            fn project_adjoint_as<const MODEL: u32>(params: &#p_t, camera: &#rt::Camera, d_out: &#rt::Projected<#c_t, #s_t>) -> (#p_t, #rt::Camera) {
+                #project_adjoint_as
+            }
+            #[inline]
+            fn pixel_info_as<const MODEL: u32>(pixel: #rt::glam::Vec2, camera: &#rt::Camera) -> #px_t {
+                #pixel_info_as
+            }
+            #[inline]
+            fn pixel_info_adjoint_as<const MODEL: u32>(pixel: #rt::glam::Vec2, camera: &#rt::Camera, d_out: &#px_t) -> #rt::Camera {
+                #pixel_info_adjoint_as
+            }
+            #[inline]
             fn tile_cull(tile: &#rt::Tile, cull: &#c_t) -> bool {
                 #tile_cull_body
             }
@@ -490,6 +522,25 @@ pub fn method_impl(m: &Module, kernels: &[Kernel], diag: &Diag) -> Option<TokenS
             }
         }
     })
+}
+
+/// `call`, a call of a kernel's module-level function (`project(params, camera)`), made
+/// through the kernel's variant for the camera model `MODEL` where it has variants (a const
+/// generic: each instantiation keeps one arm).
+fn by_model(k: &Kernel, call: TokenStream) -> TokenStream {
+    if k.models.is_empty() {
+        return call;
+    }
+    let arms = k.models.iter().map(|(model, code, _)| {
+        let module = quote::format_ident!("{model}");
+        quote!(#code => #module::#call)
+    });
+    quote! {
+        match MODEL {
+            #(#arms,)*
+            _ => unreachable!("camera model codes are those of CameraModel"),
+        }
+    }
 }
 
 /// `sums[k]` for the k-th float slot of `slots`, zero for the others (cotangents of bools and

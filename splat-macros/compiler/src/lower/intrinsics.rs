@@ -7,7 +7,7 @@
 //! is infinite; `select` and `if` differentiate only the side taken.
 
 use super::{Failed, Lowerer, R, Val};
-use crate::builtins::{CAMERA_METHODS, MODEL_AWARE, SH_COEFFICIENTS, sh_helper};
+use crate::builtins::{SH_COEFFICIENTS, camera_helper, model_aware, sh_helper};
 use crate::ir::{Binary, Const, Unary, Var};
 use crate::types::Ty;
 use proc_macro2::Span;
@@ -241,15 +241,13 @@ impl Lowerer<'_> {
             |s: &Self, a: &Val| s.check_ty(a, &recv.ty, span, &format!("the argument of `{name}`"));
         match (&recv.ty, name) {
             (Ty::Error, _) => Err(Failed),
-            (Ty::Struct(s), _)
-                if s.display == "Camera" && CAMERA_METHODS.iter().any(|(m, _)| *m == name) =>
-            {
-                let helper = CAMERA_METHODS.iter().find(|(m, _)| *m == name).unwrap().1;
+            (Ty::Struct(s), _) if s.display == "Camera" && camera_helper(name).is_some() => {
+                let helper = camera_helper(name).unwrap();
                 let def = self
                     .module
-                    .find_fn(helper)
+                    .find_fn(&helper)
                     .expect("builtin camera helpers are in every module");
-                self.camera_model |= MODEL_AWARE.contains(&name);
+                self.camera_model |= model_aware(name);
                 let mut all = vec![recv];
                 all.extend(args);
                 self.call_helper(def, all, span)

@@ -57,6 +57,8 @@ pub struct Lowered {
     pub ret: Ty,
     /// Whether the function reads the camera model (`cam.project_point` / `cam.pixel_ray`).
     pub camera_model: bool,
+    /// The parameter slot holding the camera's model code, if a parameter is a `Camera`.
+    pub model_slot: Option<Var>,
 }
 
 /// Most iterations all unrolled loops of one function may have together.
@@ -80,6 +82,19 @@ pub struct Lowerer<'m> {
 
 /// Lowers one function of `module`. Returns `None` if it had errors (recorded in `diag`).
 pub fn lower_fn(module: &Module, diag: &Diag, def: &FnDef, custom: &[String]) -> Option<Lowered> {
+    lower_for_model(module, diag, def, custom, None)
+}
+
+/// Lowers one function with the camera's model code known to be `model` (when given): every
+/// comparison with it folds, so only that model's branches are lowered (the specialized
+/// variant of a model-aware kernel; the model slot stays a parameter).
+pub fn lower_for_model(
+    module: &Module,
+    diag: &Diag,
+    def: &FnDef,
+    custom: &[String],
+    model: Option<u32>,
+) -> Option<Lowered> {
     let mut l = Lowerer {
         module,
         diag,
@@ -94,16 +109,25 @@ pub fn lower_fn(module: &Module, diag: &Diag, def: &FnDef, custom: &[String]) ->
         camera_model: false,
     };
     let mut params = vec![];
+    let mut model_slot = None;
     for p in &def.params {
         let names = p.ty.slot_names(&p.name);
+        let model_name = crate::types::is_camera(&p.ty).then(|| format!("{}_model", p.name));
         let comps: Vec<Var> =
             p.ty.slots()
                 .into_iter()
                 .zip(names)
                 .map(|(s, n)| {
+                    let is_model = model_name.as_ref() == Some(&n);
                     let v = l.f.new_var(s, n);
                     if s == Scalar::F32 {
                         l.active.insert(v);
+                    }
+                    if is_model {
+                        model_slot = Some(v);
+                        if let Some(code) = model {
+                            l.consts.insert(v, Const::U(code));
+                        }
                     }
                     v
                 })
@@ -142,6 +166,7 @@ pub fn lower_fn(module: &Module, diag: &Diag, def: &FnDef, custom: &[String]) ->
                     params,
                     ret: def.ret.clone(),
                     camera_model: l.camera_model,
+                    model_slot,
                 });
             }
         }

@@ -1,0 +1,102 @@
+//! What compiling the camera model in saves: each model-aware kernel of 3DGUT and 3DGEER
+//! timed as the generic kernel (branching on the model inside) and as the variant compiled
+//! for that model alone (what the runtime calls), one primitive or pixel at a time, on every
+//! camera model. Times are best of 5 after a warm-up, single thread; the ratio is generic /
+//! variant in the same run.
+//!
+//! `cargo bench -p splat-methods --bench variants [-- N WIDTH HEIGHT]`
+
+use splat_methods::{geer, gut};
+use splat_runtime::glam::{Vec2, Vec4};
+use splat_runtime::{Camera, CameraModel, Flat, Projected, SplatMethod, with_camera_model};
+use std::hint::black_box;
+use std::time::{Duration, Instant};
+
+mod common;
+use common::{as_method, camera, scene, size_args};
+
+fn best_of_5(mut f: impl FnMut()) -> Duration {
+    f();
+    (0..5)
+        .map(|_| {
+            let t = Instant::now();
+            f();
+            t.elapsed()
+        })
+        .min()
+        .unwrap()
+}
+
+/// (kernel, generic, variant) times for `M` under `cam`.
+fn time<M: SplatMethod>(
+    params: &[M::Params],
+    cam: &Camera,
+) -> Vec<(&'static str, Duration, Duration)> {
+    let ones = Projected {
+        visible: false,
+        depth: 1.0,
+        bbox_min: Vec2::ZERO,
+        bbox_max: Vec2::ZERO,
+        cull: M::Cull::read_words(&vec![1.0; M::Cull::LEN]),
+        shade: M::Shade::read_words(&vec![1.0; M::Shade::LEN]),
+    };
+    let (w, h) = (cam.size.x as u32, cam.size.y as u32);
+    let pixels =
+        || (0..h).flat_map(move |y| (0..w).map(move |x| Vec2::new(x as f32 + 0.5, y as f32 + 0.5)));
+    let d_pixel = M::Pixel::read_words(&vec![1.0; M::Pixel::LEN]);
+    with_camera_model!(cam.model, MODEL => vec![
+        (
+            "project",
+            best_of_5(|| params.iter().for_each(|p| { black_box(M::project(black_box(p), cam)); })),
+            best_of_5(|| params.iter().for_each(|p| { black_box(M::project_as::<MODEL>(black_box(p), cam)); })),
+        ),
+        (
+            "project adjoint",
+            best_of_5(|| params.iter().for_each(|p| { black_box(M::project_adjoint(black_box(p), cam, &ones)); })),
+            best_of_5(|| params.iter().for_each(|p| { black_box(M::project_adjoint_as::<MODEL>(black_box(p), cam, &ones)); })),
+        ),
+        (
+            "pixel_info",
+            best_of_5(|| pixels().for_each(|px| { black_box(M::pixel_info(black_box(px), cam)); })),
+            best_of_5(|| pixels().for_each(|px| { black_box(M::pixel_info_as::<MODEL>(black_box(px), cam)); })),
+        ),
+        (
+            "pixel_info adjoint",
+            best_of_5(|| pixels().for_each(|px| { black_box(M::pixel_info_adjoint(black_box(px), cam, &d_pixel)); })),
+            best_of_5(|| pixels().for_each(|px| { black_box(M::pixel_info_adjoint_as::<MODEL>(black_box(px), cam, &d_pixel)); })),
+        ),
+    ])
+}
+
+fn main() {
+    let (n, w, h) = size_args(100_000, 800, 600);
+    let gaussians = scene(n);
+    let (gut_params, geer_params) = (
+        as_method::<gut::Params>(&gaussians),
+        as_method::<geer::Params>(&gaussians),
+    );
+    println!("{n} primitives, {w}x{h} pixels, one thread; ms, generic / variant");
+    println!("| method | camera | kernel | generic ms | variant ms | ratio |");
+    println!("|---|---|---|---:|---:|---:|");
+    for model in CameraModel::ALL {
+        let mut cam = camera(w, h);
+        cam.model = model;
+        if model == CameraModel::KannalaBrandt {
+            cam.distortion = Vec4::new(0.02, -0.002, 0.0002, -0.00001);
+        }
+        for (method, rows) in [
+            ("3dgut", time::<gut::Method>(&gut_params, &cam)),
+            ("3dgeer", time::<geer::Method>(&geer_params, &cam)),
+        ] {
+            for (kernel, generic, variant) in rows {
+                let ms = |d: Duration| d.as_secs_f64() * 1e3;
+                println!(
+                    "| {method} | {model} | {kernel} | {:.2} | {:.2} | {:.2} |",
+                    ms(generic),
+                    ms(variant),
+                    generic.as_secs_f64() / variant.as_secs_f64()
+                );
+            }
+        }
+    }
+}

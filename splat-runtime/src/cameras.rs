@@ -1,0 +1,115 @@
+//! The camera models, each defined once: its code, its name, where it projects a camera-space
+//! point, the ray through a pixel, and which points it can project. Written in the subset
+//! `#[splat_method]` accepts, this file is both the runtime's own code (what
+//! [`Camera::project_point`] and its siblings call) and the source of the compiler's camera
+//! builtins (`splat-compiler` includes it and compiles each model's functions like a kernel's),
+//! so the kernels and the runtime cannot drift apart.
+//!
+//! A model is a module here with `CODE` (its word in buffers and generated code), `NAME` (the
+//! module's name: in camera files, on the command line, in the names of the kernels compiled
+//! for it), `DISTORTION` (whether it reads the camera's `distortion`, `k` in camera files) and
+//! the three functions; adding one adds a module here
+//! and a variant to [`CameraModel`](crate::CameraModel), whose matches the compiler then points
+//! at. Methods never name a model's code: they call `cam.project_point(p)`, `cam.pixel_ray(px)`,
+//! `cam.can_project(p)`, or test `cam.is_pinhole()` (one `is_` per model here).
+
+use crate::prelude::*;
+
+/// `focal * (x / z, y / z) + principal`.
+pub mod pinhole {
+    use super::*;
+
+    pub const CODE: u32 = 0;
+    pub const NAME: &str = "pinhole";
+    pub const DISTORTION: bool = false;
+
+    pub fn project_point(cam: &Camera, p: Vec3) -> Vec2 {
+        cam.focal * Vec2::new(p.x, p.y) / p.z + cam.principal
+    }
+
+    pub fn pixel_ray(cam: &Camera, pixel: Vec2) -> Vec3 {
+        ((pixel - cam.principal) / cam.focal)
+            .extend(1.0)
+            .normalize()
+    }
+
+    /// In front of the image plane.
+    pub fn can_project(_cam: &Camera, p: Vec3) -> bool {
+        p.z > 0.0
+    }
+}
+
+/// OpenCV fisheye: θ = atan2(√(x² + y²), z), r = θ (1 + k1 θ² + k2 θ⁴ + k3 θ⁶ + k4 θ⁸) with
+/// (k1, k2, k3, k4) the camera's `distortion`, pixel = `focal * r * (x, y) / √(x² + y²) +
+/// principal`; valid past 180° field of view.
+pub mod kannala_brandt {
+    use super::*;
+
+    pub const CODE: u32 = 1;
+    pub const NAME: &str = "kannala_brandt";
+    pub const DISTORTION: bool = true;
+
+    pub fn project_point(cam: &Camera, p: Vec3) -> Vec2 {
+        let rxy = (p.x * p.x + p.y * p.y).sqrt();
+        let theta = rxy.atan2(p.z);
+        let k = cam.distortion;
+        let t2 = theta * theta;
+        let r = theta * (1.0 + t2 * (k.x + t2 * (k.y + t2 * (k.z + t2 * k.w))));
+        // r / rxy -> 1 / z on the optical axis.
+        let scale = select(rxy > 1e-20, r / rxy, 1.0 / p.z);
+        cam.focal * Vec2::new(p.x, p.y) * scale + cam.principal
+    }
+
+    /// Inverts r(θ) by eight Newton steps from θ = r (f32 precision for the usual
+    /// coefficients).
+    pub fn pixel_ray(cam: &Camera, pixel: Vec2) -> Vec3 {
+        let m = (pixel - cam.principal) / cam.focal;
+        let r = m.length();
+        let k = cam.distortion;
+        let mut theta = r;
+        for _step in 0..8 {
+            let t2 = theta * theta;
+            let value = theta * (1.0 + t2 * (k.x + t2 * (k.y + t2 * (k.z + t2 * k.w))));
+            let slope =
+                1.0 + t2 * (3.0 * k.x + t2 * (5.0 * k.y + t2 * (7.0 * k.z + t2 * 9.0 * k.w)));
+            // Past the polynomial's fold (a pixel no ray reaches) the steps would run off:
+            // keep theta a direction.
+            theta = (theta - (value - r) / slope).clamp(0.0, std::f32::consts::PI);
+        }
+        let dir = select(r > 1e-20, m / r, Vec2::ZERO);
+        (dir * theta.sin()).extend(theta.cos())
+    }
+
+    /// Up to 3 rad (172°) off axis: the polynomial folds back near 180°.
+    pub fn can_project(_cam: &Camera, p: Vec3) -> bool {
+        (p.x * p.x + p.y * p.y).sqrt().atan2(p.z) < 3.0
+    }
+}
+
+/// Equiangular (BEAP): `focal * (atan2(x, z), atan2(y, z)) + principal`.
+pub mod equiangular {
+    use super::*;
+
+    pub const CODE: u32 = 2;
+    pub const NAME: &str = "equiangular";
+    pub const DISTORTION: bool = false;
+
+    pub fn project_point(cam: &Camera, p: Vec3) -> Vec2 {
+        cam.focal * Vec2::new(p.x.atan2(p.z), p.y.atan2(p.z)) + cam.principal
+    }
+
+    pub fn pixel_ray(cam: &Camera, pixel: Vec2) -> Vec3 {
+        let m = (pixel - cam.principal) / cam.focal;
+        Vec3::new(
+            m.x.sin() * m.y.cos(),
+            m.x.cos() * m.y.sin(),
+            m.x.cos() * m.y.cos(),
+        )
+        .normalize()
+    }
+
+    /// In front of the image plane.
+    pub fn can_project(_cam: &Camera, p: Vec3) -> bool {
+        p.z > 0.0
+    }
+}

@@ -1,0 +1,87 @@
+//! The effects a frame simulates, as the scene and the request switch them on, and how each
+//! is carried: by a kernel variant compiled for it, by a method instance, or by a buffer that
+//! exists only when asked for. What `splat render --explain` prints.
+
+use crate::method::SplatMethod;
+use crate::pipeline::RenderOptions;
+use crate::types::{Camera, CameraModel};
+use std::fmt;
+
+/// The effects of rendering with one method, camera and set of options.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Effects {
+    pub method: &'static str,
+    pub camera_model: CameraModel,
+    /// The fisheye's distortion coefficients are not all zero.
+    pub distortion: bool,
+    /// The kernels compiled for `camera_model` alone that the frame runs (`project_pinhole`,
+    /// ...): empty when the method reads no camera model (it is pinhole-only).
+    pub model_variants: Vec<&'static str>,
+    /// Color (or feature) channels.
+    pub channels: usize,
+    pub alpha: bool,
+    /// The expected depth: without it no depth is summed and no buffer holds it.
+    pub depth: bool,
+    pub options: RenderOptions,
+}
+
+impl Effects {
+    pub fn of<M: SplatMethod>(camera: &Camera, options: &RenderOptions) -> Effects {
+        let suffix = format!("_{}", camera.model);
+        Effects {
+            method: M::NAME,
+            camera_model: camera.model,
+            distortion: camera.model == CameraModel::KannalaBrandt
+                && camera.distortion.abs().max_element() > 0.0,
+            model_variants: M::SOURCE
+                .functions
+                .iter()
+                .map(|f| f.kernel)
+                .filter(|k| k.ends_with(&suffix))
+                .collect(),
+            channels: <M::Color as crate::Flat>::LEN,
+            alpha: options.alpha,
+            depth: options.depth,
+            options: *options,
+        }
+    }
+}
+
+impl fmt::Display for Effects {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let on = |b: bool| if b { "on" } else { "off" };
+        writeln!(f, "method            {}", self.method)?;
+        let camera = match self.model_variants.is_empty() {
+            true => "the method reads no camera model: pinhole only".to_string(),
+            false => format!(
+                "kernels compiled for it alone: {}",
+                self.model_variants.join(", ")
+            ),
+        };
+        writeln!(f, "camera model      {} ({camera})", self.camera_model)?;
+        if self.camera_model == CameraModel::KannalaBrandt {
+            writeln!(
+                f,
+                "distortion        {} (the fisheye polynomial is evaluated either way)",
+                on(self.distortion)
+            )?;
+        }
+        writeln!(f, "color channels    {}", self.channels)?;
+        writeln!(f, "alpha output      {}", on(self.alpha))?;
+        let depth = match self.depth {
+            true => "on",
+            false => "off (no depth sums, no depth buffer)",
+        };
+        writeln!(f, "depth output      {depth}")?;
+        let o = &self.options;
+        writeln!(f, "state precision   {}", o.precision.name())?;
+        let p_max = o.p_max.map_or("off".to_string(), |p| p.to_string());
+        writeln!(f, "P_max             {p_max}")?;
+        write!(
+            f,
+            "tile              {} px, tile cull {}",
+            o.tile_size,
+            on(o.tile_cull)
+        )
+    }
+}
