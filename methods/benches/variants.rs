@@ -1,8 +1,8 @@
 //! What compiling the camera model in saves: each model-aware kernel of 3DGUT and 3DGEER
 //! timed as the generic kernel (branching on the model inside) and as the variant compiled
 //! for that model alone (what the runtime calls), one primitive or pixel at a time, on every
-//! camera model. Times are best of 5 after a warm-up, single thread; the ratio is generic /
-//! variant in the same run.
+//! camera model. Times are best of 5, generic and variant alternating after a warm-up of each,
+//! single thread; the ratio is generic / variant in the same run.
 //!
 //! `cargo bench -p splat-methods --bench variants [-- N WIDTH HEIGHT]`
 
@@ -15,23 +15,35 @@ use std::time::{Duration, Instant};
 mod common;
 use common::{as_method, camera, scene, size_args};
 
-fn best_of_5(mut f: impl FnMut()) -> Duration {
-    f();
-    (0..5)
-        .map(|_| {
-            let t = Instant::now();
-            f();
-            t.elapsed()
-        })
-        .min()
-        .unwrap()
+/// (generic, variant): the best of 5 runs of each, the two alternating after a warm-up of
+/// each, so neither gains from running second.
+fn compare(mut generic: impl FnMut(), mut variant: impl FnMut()) -> (Duration, Duration) {
+    let timed = |f: &mut dyn FnMut()| {
+        let t = Instant::now();
+        f();
+        t.elapsed()
+    };
+    generic();
+    variant();
+    let (mut g, mut v) = (Duration::MAX, Duration::MAX);
+    for _ in 0..5 {
+        g = g.min(timed(&mut generic));
+        v = v.min(timed(&mut variant));
+    }
+    (g, v)
 }
 
-/// (kernel, generic, variant) times for `M` under `cam`.
-fn time<M: SplatMethod>(
+/// (kernel, (generic, variant)) times for `M` under `cam`.
+fn time<M: SplatMethod>(params: &[M::Params], cam: &Camera) -> Vec<(&'static str, Times)> {
+    with_camera_model!(cam.model, MODEL => time_as::<M, MODEL>(params, cam))
+}
+
+type Times = (Duration, Duration);
+
+fn time_as<M: SplatMethod, const MODEL: u32>(
     params: &[M::Params],
     cam: &Camera,
-) -> Vec<(&'static str, Duration, Duration)> {
+) -> Vec<(&'static str, Times)> {
     let ones = Projected {
         visible: false,
         depth: 1.0,
@@ -44,28 +56,54 @@ fn time<M: SplatMethod>(
     let pixels =
         || (0..h).flat_map(move |y| (0..w).map(move |x| Vec2::new(x as f32 + 0.5, y as f32 + 0.5)));
     let d_pixel = M::Pixel::read_words(&vec![1.0; M::Pixel::LEN]);
-    with_camera_model!(cam.model, MODEL => vec![
+    let per_primitive = |f: &dyn Fn(&M::Params)| params.iter().for_each(|p| f(black_box(p)));
+    let per_pixel = |f: &dyn Fn(Vec2)| pixels().for_each(|px| f(black_box(px)));
+    // The pixel data consumed as the blend consumes it: written out as words.
+    let consume = |pixel: M::Pixel| {
+        let mut words = [0.0f32; 64];
+        pixel.write_words(&mut words);
+        black_box(words.iter().sum::<f32>());
+    };
+    vec![
         (
             "project",
-            best_of_5(|| params.iter().for_each(|p| { black_box(M::project(black_box(p), cam)); })),
-            best_of_5(|| params.iter().for_each(|p| { black_box(M::project_as::<MODEL>(black_box(p), cam)); })),
+            compare(
+                || per_primitive(&|p| drop(black_box(M::project(p, cam)))),
+                || per_primitive(&|p| drop(black_box(M::project_as::<MODEL>(p, cam)))),
+            ),
         ),
         (
             "project adjoint",
-            best_of_5(|| params.iter().for_each(|p| { black_box(M::project_adjoint(black_box(p), cam, &ones)); })),
-            best_of_5(|| params.iter().for_each(|p| { black_box(M::project_adjoint_as::<MODEL>(black_box(p), cam, &ones)); })),
+            compare(
+                || per_primitive(&|p| drop(black_box(M::project_adjoint(p, cam, &ones)))),
+                || {
+                    per_primitive(&|p| {
+                        drop(black_box(M::project_adjoint_as::<MODEL>(p, cam, &ones)))
+                    })
+                },
+            ),
         ),
         (
             "pixel_info",
-            best_of_5(|| pixels().for_each(|px| { black_box(M::pixel_info(black_box(px), cam)); })),
-            best_of_5(|| pixels().for_each(|px| { black_box(M::pixel_info_as::<MODEL>(black_box(px), cam)); })),
+            compare(
+                || per_pixel(&|px| consume(M::pixel_info(px, cam))),
+                || per_pixel(&|px| consume(M::pixel_info_as::<MODEL>(px, cam))),
+            ),
         ),
         (
             "pixel_info adjoint",
-            best_of_5(|| pixels().for_each(|px| { black_box(M::pixel_info_adjoint(black_box(px), cam, &d_pixel)); })),
-            best_of_5(|| pixels().for_each(|px| { black_box(M::pixel_info_adjoint_as::<MODEL>(black_box(px), cam, &d_pixel)); })),
+            compare(
+                || per_pixel(&|px| drop(black_box(M::pixel_info_adjoint(px, cam, &d_pixel)))),
+                || {
+                    per_pixel(&|px| {
+                        drop(black_box(M::pixel_info_adjoint_as::<MODEL>(
+                            px, cam, &d_pixel,
+                        )))
+                    })
+                },
+            ),
         ),
-    ])
+    ]
 }
 
 fn main() {
@@ -88,7 +126,7 @@ fn main() {
             ("3dgut", time::<gut::Method>(&gut_params, &cam)),
             ("3dgeer", time::<geer::Method>(&geer_params, &cam)),
         ] {
-            for (kernel, generic, variant) in rows {
+            for (kernel, (generic, variant)) in rows {
                 let ms = |d: Duration| d.as_secs_f64() * 1e3;
                 println!(
                     "| {method} | {model} | {kernel} | {:.2} | {:.2} | {:.2} |",
