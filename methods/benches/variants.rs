@@ -1,14 +1,18 @@
-//! What compiling the camera model in saves: each model-aware kernel of 3DGUT and 3DGEER
-//! timed as the generic kernel (branching on the model inside) and as the variant compiled
-//! for that model alone (what the runtime calls), one primitive or pixel at a time, on every
-//! camera model. Times are best of 5, generic and variant alternating after a warm-up of each,
+//! What compiling effects in (or leaving them out) saves. The camera model: each model-aware
+//! kernel of 3DGUT and 3DGEER timed as the generic kernel (branching on the model inside) and
+//! as the variant compiled for that model alone (what the runtime calls), one primitive or
+//! pixel at a time, on every camera model. The camera gradient: the whole CPU backward pass
+//! with and without it (`RenderOptions::camera_gradient`, off in training). Times are best of 5, generic and variant alternating after a warm-up of each,
 //! single thread; the ratio is generic / variant in the same run.
 //!
 //! `cargo bench -p splat-methods --bench variants [-- N WIDTH HEIGHT]`
 
 use splat_methods::{geer, gut};
 use splat_runtime::glam::{Vec2, Vec4};
-use splat_runtime::{Camera, CameraModel, Flat, Projected, SplatMethod, with_camera_model};
+use splat_runtime::{
+    Camera, CameraModel, Flat, FrameGrad, Projected, RenderOptions, SplatMethod, backward,
+    render_for_backward, with_camera_model,
+};
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
@@ -68,17 +72,29 @@ fn time_as<M: SplatMethod, const MODEL: u32>(
         (
             "project",
             compare(
-                || per_primitive(&|p| drop(black_box(M::project(p, cam)))),
-                || per_primitive(&|p| drop(black_box(M::project_as::<MODEL>(p, cam)))),
+                || {
+                    per_primitive(&|p| {
+                        let _ = black_box(M::project(p, cam));
+                    })
+                },
+                || {
+                    per_primitive(&|p| {
+                        let _ = black_box(M::project_as::<MODEL>(p, cam));
+                    })
+                },
             ),
         ),
         (
             "project adjoint",
             compare(
-                || per_primitive(&|p| drop(black_box(M::project_adjoint(p, cam, &ones)))),
                 || {
                     per_primitive(&|p| {
-                        drop(black_box(M::project_adjoint_as::<MODEL>(p, cam, &ones)))
+                        let _ = black_box(M::project_adjoint(p, cam, &ones));
+                    })
+                },
+                || {
+                    per_primitive(&|p| {
+                        let _ = black_box(M::project_adjoint_as::<MODEL>(p, cam, &ones));
                     })
                 },
             ),
@@ -93,17 +109,39 @@ fn time_as<M: SplatMethod, const MODEL: u32>(
         (
             "pixel_info adjoint",
             compare(
-                || per_pixel(&|px| drop(black_box(M::pixel_info_adjoint(px, cam, &d_pixel)))),
                 || {
                     per_pixel(&|px| {
-                        drop(black_box(M::pixel_info_adjoint_as::<MODEL>(
-                            px, cam, &d_pixel,
-                        )))
+                        let _ = black_box(M::pixel_info_adjoint(px, cam, &d_pixel));
+                    })
+                },
+                || {
+                    per_pixel(&|px| {
+                        let _ = black_box(M::pixel_info_adjoint_as::<MODEL>(px, cam, &d_pixel));
                     })
                 },
             ),
         ),
     ]
+}
+
+/// The CPU backward pass (all threads) with and without the camera gradient.
+fn backward_times<M: SplatMethod>(params: &[M::Params], cam: &Camera) -> Times {
+    let pass = |camera_gradient: bool| {
+        let opts = RenderOptions {
+            camera_gradient,
+            ..Default::default()
+        };
+        let (frame, state) = render_for_backward::<M>(params, cam, &opts).unwrap();
+        let grad = FrameGrad {
+            color: vec![1.0; frame.color.data.len()],
+            alpha: None,
+            depth: None,
+        };
+        move || {
+            let _ = black_box(backward::<M>(&state, params, cam, &grad).unwrap());
+        }
+    };
+    compare(pass(true), pass(false))
 }
 
 fn main() {
@@ -137,4 +175,31 @@ fn main() {
             }
         }
     }
+    println!();
+    println!("the CPU backward pass, {} threads; ms", threads());
+    println!("| method | camera | with camera gradient | without | ratio |");
+    println!("|---|---|---:|---:|---:|");
+    for model in CameraModel::ALL {
+        let mut cam = camera(w, h);
+        cam.model = model;
+        if model == CameraModel::KannalaBrandt {
+            cam.distortion = Vec4::new(0.02, -0.002, 0.0002, -0.00001);
+        }
+        for (method, (with, without)) in [
+            ("3dgut", backward_times::<gut::Method>(&gut_params, &cam)),
+            ("3dgeer", backward_times::<geer::Method>(&geer_params, &cam)),
+        ] {
+            let ms = |d: Duration| d.as_secs_f64() * 1e3;
+            println!(
+                "| {method} | {model} | {:.1} | {:.1} | {:.2} |",
+                ms(with),
+                ms(without),
+                with.as_secs_f64() / without.as_secs_f64()
+            );
+        }
+    }
+}
+
+fn threads() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
 }

@@ -140,3 +140,15 @@ fn gpu_gradients_match_cpu_on_realistic_scenes() {
         );
     }
 }
+
+/// Without the camera gradient (training without pose refinement) the rays' adjoint does not
+/// run, and the parameter gradients are exactly the full pass's, on both backends.
+#[test]
+fn camera_gradient_off_changes_only_the_camera() {
+    let cam = wide_camera(24, 16, CameraModel::KannalaBrandt);
+    splat_runtime::checks::gradients::camera_gradient_off_changes_only_the_camera::<Method>(
+        "3dgut fisheye",
+        &covering_scene(&cam),
+        &cam,
+    );
+}

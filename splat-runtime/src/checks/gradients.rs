@@ -271,3 +271,53 @@ pub fn gpu_gradients_match_cpu_with<M: SplatMethod>(
         );
     }
 }
+
+/// With [`RenderOptions::camera_gradient`](crate::RenderOptions::camera_gradient) off, the
+/// backward pass gives exactly the parameter gradients of the full pass (bit for bit) and a
+/// zero camera gradient, on the CPU and (where there is an adapter) on the GPU.
+pub fn camera_gradient_off_changes_only_the_camera<M: SplatMethod>(
+    label: &str,
+    params: &[M::Params],
+    cam: &Camera,
+) {
+    let n = (cam.size.x * cam.size.y) as usize;
+    let grad = frame_grad(&weights(n, <M::Color as Flat>::LEN));
+    let full = super::options(16);
+    let without = crate::RenderOptions {
+        camera_gradient: false,
+        ..full
+    };
+    let cpu = |opts: &crate::RenderOptions| {
+        let (_, state) = render_for_backward::<M>(params, cam, opts).unwrap();
+        backward::<M>(&state, params, cam, &grad).unwrap()
+    };
+    let mut runs = vec![("CPU", cpu(&full), cpu(&without))];
+    #[cfg(feature = "gpu")]
+    if let Some(gpu) = crate::gpu::adapter_or_skip() {
+        let gpu_run = |opts: &crate::RenderOptions| {
+            let (_, mut state) =
+                crate::gpu::render::render_for_backward::<M>(&gpu, params, cam, opts).unwrap();
+            let acc = crate::gpu::entries::Accumulation::default_for(&gpu);
+            crate::gpu::render::backward(&mut state, &grad, acc)
+                .unwrap()
+                .gradients
+        };
+        runs.push(("GPU", gpu_run(&full), gpu_run(&without)));
+    }
+    for (backend, all, params_only) in runs {
+        let flat =
+            |g: &crate::Gradients<M>| -> Vec<f64> { g.params.iter().flat_map(words).collect() };
+        assert!(
+            flat(&all) == flat(&params_only),
+            "{label} on the {backend}: the parameter gradients changed without the camera's"
+        );
+        assert!(
+            camera_words(&params_only.camera).iter().all(|v| *v == 0.0),
+            "{label} on the {backend}: a camera gradient was computed though not asked for"
+        );
+        assert!(
+            camera_words(&all.camera).iter().any(|v| *v != 0.0),
+            "{label} on the {backend}: the full pass should have a camera gradient"
+        );
+    }
+}

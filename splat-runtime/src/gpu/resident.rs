@@ -481,7 +481,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             ],
         )?;
         dispatch(&mut enc, &k.pipeline, &bind, groups);
-        if M::HAS_PIXEL_INFO {
+        if M::HAS_PIXEL_INFO && self.opts.camera_gradient {
             let k = self.pixel_backward.get(model, || {
                 gpu.kernel(&entries::pixel_backward::<M>(model)?, "pixel_backward")
             })?;
@@ -555,8 +555,11 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             .map(M::params_from_float_slots)
             .collect();
         let groups = (n as u32).div_ceil(64).max(1) as usize;
-        let mut partials = gpu.read(&self.camera_partials, groups * Camera::FLOAT_SLOTS)?;
-        if M::HAS_PIXEL_INFO {
+        let mut partials = match self.opts.camera_gradient {
+            true => gpu.read(&self.camera_partials, groups * Camera::FLOAT_SLOTS)?,
+            false => vec![],
+        };
+        if M::HAS_PIXEL_INFO && self.opts.camera_gradient {
             let pixels = info.grid.width * info.grid.height;
             let ray_groups = pixels.div_ceil(64).max(1) as usize;
             partials.extend(gpu.read(&self.ray_partials, ray_groups * Camera::FLOAT_SLOTS)?);

@@ -51,6 +51,10 @@ pub struct RenderOptions {
     /// How the per-pixel state (color, transmittance, depth sums) is stored: what the outputs
     /// are read from and the backward pass replays against (CPU only for now).
     pub precision: precision::Precision,
+    /// Compute the camera's gradient in the backward pass. Off (training without pose
+    /// refinement), the rays' share (`pixel_info`'s adjoint per pixel) is not computed and
+    /// [`Gradients::camera`] is zero.
+    pub camera_gradient: bool,
 }
 
 impl Default for RenderOptions {
@@ -63,6 +67,7 @@ impl Default for RenderOptions {
             tile_cull: true,
             blend: shade::Blend::default(),
             precision: precision::Precision::F32,
+            camera_gradient: true,
         }
     }
 }
@@ -139,6 +144,8 @@ pub struct ForwardState<M: SplatMethod> {
     pub lists: TileLists,
     pub p_max: Option<usize>,
     pub blend: shade::Blend,
+    /// The backward pass computes the camera's gradient ([`RenderOptions::camera_gradient`]).
+    pub camera_gradient: bool,
     /// Final transmittance, color and sum of weight * depth per pixel, in the frame's precision.
     pub transmittance: precision::Stored,
     pub color: precision::Stored,
@@ -171,6 +178,7 @@ impl<M: SplatMethod> ForwardState<M> {
 /// Per-primitive gradients and the camera's.
 pub struct Gradients<M: SplatMethod> {
     pub params: Vec<M::Params>,
+    /// Zero when [`RenderOptions::camera_gradient`] is off.
     pub camera: Camera,
     pub stats: BackwardStats,
 }
@@ -338,6 +346,7 @@ fn forward<M: SplatMethod>(
                 lists,
                 p_max: opts.p_max,
                 blend: opts.blend,
+                camera_gradient: opts.camera_gradient,
                 transmittance,
                 color,
                 depth_acc,
@@ -404,7 +413,8 @@ pub(crate) fn alpha_and_depth(
     (alpha, depth)
 }
 
-/// Gradients of the parameters and the camera, given the gradient of each output.
+/// Gradients of the parameters and (unless the render's options turned it off) the camera,
+/// given the gradient of each output.
 pub fn backward<M: SplatMethod>(
     state: &ForwardState<M>,
     params: &[M::Params],
@@ -481,7 +491,8 @@ pub fn backward<M: SplatMethod>(
                 cull: zero_cull,
                 shade: M::Shade::read_words(d_words),
             };
-            M::project_adjoint_as::<MODEL>(&params[i], camera, &d_out)
+            let (d_params, d_camera) = M::project_adjoint_as::<MODEL>(&params[i], camera, &d_out);
+            (d_params, if state.camera_gradient { d_camera } else { Camera::ZERO })
         })
         .unzip());
     // Summed in fixed chunks, in order: the same gradient whatever the thread count.

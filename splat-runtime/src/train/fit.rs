@@ -179,7 +179,7 @@ pub fn render_view<M: SplatMethod>(
     view: &View,
     opts: &FitOptions,
 ) -> Result<Image, FitError> {
-    let frame = crate::pipeline::render::<M>(params, &view.camera, &with_alpha(&opts.render))?;
+    let frame = crate::pipeline::render::<M>(params, &view.camera, &for_training(&opts.render))?;
     Ok(composite(
         frame.color,
         frame.alpha.as_ref(),
@@ -187,8 +187,14 @@ pub fn render_view<M: SplatMethod>(
     ))
 }
 
-pub(crate) fn with_alpha(r: &RenderOptions) -> RenderOptions {
-    RenderOptions { alpha: true, ..*r }
+/// The render options a training step uses: alpha for compositing the background, and no
+/// camera gradient (the poses are not refined).
+pub(crate) fn for_training(r: &RenderOptions) -> RenderOptions {
+    RenderOptions {
+        alpha: true,
+        camera_gradient: false,
+        ..*r
+    }
 }
 
 pub(crate) fn composite(mut color: Image, alpha: Option<&Image>, background: Vec3) -> Image {
@@ -305,7 +311,7 @@ pub fn fit_from<M: Trainable>(
         .map(|d| Densifier::resume(d.clone(), params.len(), &state.grad2d, &state.seen));
     let mcmc = opts.mcmc::<M>()?;
     let mut rng = fastrand::Rng::with_seed(state.rng);
-    let render_opts = with_alpha(&opts.render);
+    let render_opts = for_training(&opts.render);
     for step in state.step..opts.steps {
         let view = &data.train[rng.usize(..data.train.len())];
         let background = step_background(opts, &mut rng);

@@ -9,7 +9,7 @@ use super::checkpoint::Checkpoint;
 use super::densify::Densifier;
 use super::fit::{
     Evaluation, FitError, FitOptions, StepReport, Trainable, adopt, after_every, composite,
-    flatten, rates_for, saves_at, step_background, with_alpha,
+    flatten, for_training, rates_for, saves_at, step_background,
 };
 use crate::flat::Flat;
 use crate::gpu::entries::Accumulation;
@@ -71,7 +71,7 @@ pub fn fit_gpu_from<M: Trainable>(
             M::NAME
         ))
     })?;
-    let mut renderer = GpuRenderer::<M>::new(gpu, &with_alpha(&opts.render))?;
+    let mut renderer = GpuRenderer::<M>::new(gpu, &for_training(&opts.render))?;
     // The loss on the device reads the frame as f32 words.
     if opts.render.precision != crate::pipeline::precision::Precision::F32 {
         return Err(FitError::Unsupported(format!(
@@ -234,7 +234,7 @@ pub fn render_views_gpu<M: SplatMethod>(
     views: &[View],
     opts: &FitOptions,
 ) -> Result<Vec<Image>, FitError> {
-    let mut renderer = GpuRenderer::<M>::new(gpu, &with_alpha(&opts.render))?;
+    let mut renderer = GpuRenderer::<M>::new(gpu, &for_training(&opts.render))?;
     let scene = GpuScene::<M>::new(gpu, params)?;
     render_resident(&mut renderer, &scene, views, opts.background)
 }
