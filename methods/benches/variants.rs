@@ -8,9 +8,10 @@
 //! `cargo bench -p splat-methods --bench variants [-- N WIDTH HEIGHT]`
 
 use splat_methods::{geer, gut};
+use splat_runtime::checks::variants::unit_cotangent;
 use splat_runtime::glam::{Vec2, Vec4};
 use splat_runtime::{
-    Camera, CameraModel, Flat, FrameGrad, Projected, RenderOptions, SplatMethod, backward,
+    Camera, CameraModel, Flat, FrameGrad, RenderOptions, SplatMethod, backward,
     render_for_backward, with_camera_model,
 };
 use std::hint::black_box;
@@ -48,14 +49,7 @@ fn time_as<M: SplatMethod, const MODEL: u32>(
     params: &[M::Params],
     cam: &Camera,
 ) -> Vec<(&'static str, Times)> {
-    let ones = Projected {
-        visible: false,
-        depth: 1.0,
-        bbox_min: Vec2::ZERO,
-        bbox_max: Vec2::ZERO,
-        cull: M::Cull::read_words(&vec![1.0; M::Cull::LEN]),
-        shade: M::Shade::read_words(&vec![1.0; M::Shade::LEN]),
-    };
+    let ones = unit_cotangent::<M>();
     let (w, h) = (cam.size.x as u32, cam.size.y as u32);
     let pixels =
         || (0..h).flat_map(move |y| (0..w).map(move |x| Vec2::new(x as f32 + 0.5, y as f32 + 0.5)));

@@ -22,14 +22,7 @@ pub fn specialized_kernels_match_generic<M: SplatMethod>(
     params: &[M::Params],
     cam: &Camera,
 ) {
-    let ones = Projected {
-        visible: false,
-        depth: 1.0,
-        bbox_min: Vec2::ZERO,
-        bbox_max: Vec2::ZERO,
-        cull: M::Cull::read_words(&vec![1.0; M::Cull::LEN]),
-        shade: M::Shade::read_words(&vec![1.0; M::Shade::LEN]),
-    };
+    let ones = unit_cotangent::<M>();
     crate::with_camera_model!(cam.model, MODEL => {
         for (i, p) in params.iter().enumerate() {
             let (a, b) = (M::project(p, cam), M::project_as::<MODEL>(p, cam));
@@ -57,6 +50,19 @@ pub fn specialized_kernels_match_generic<M: SplatMethod>(
             close(&words(&ca), &words(&cb), &format!("{what}: adjoint"));
         }
     });
+}
+
+/// A cotangent of `project`'s output that is one in every word that carries a gradient
+/// (depth, cull and shade data): what the checks and the benches run the adjoints under.
+pub fn unit_cotangent<M: SplatMethod>() -> Projected<M::Cull, M::Shade> {
+    Projected {
+        visible: false,
+        depth: 1.0,
+        bbox_min: Vec2::ZERO,
+        bbox_max: Vec2::ZERO,
+        cull: M::Cull::read_words(&vec![1.0; M::Cull::LEN]),
+        shade: M::Shade::read_words(&vec![1.0; M::Shade::LEN]),
+    }
 }
 
 fn words<T: Flat>(v: &T) -> Vec<f32> {
