@@ -19,9 +19,8 @@ pub struct Effects {
     pub model_variants: Vec<&'static str>,
     /// Color (or feature) channels.
     pub channels: usize,
-    pub alpha: bool,
-    /// The expected depth: without it no depth is summed and no buffer holds it.
-    pub depth: bool,
+    /// The outputs asked for (alpha, depth: without it no depth is summed and no buffer holds
+    /// it) and the renderer's settings.
     pub options: RenderOptions,
 }
 
@@ -40,8 +39,6 @@ impl Effects {
                 .filter(|k| k.ends_with(&suffix))
                 .collect(),
             channels: <M::Color as crate::Flat>::LEN,
-            alpha: options.alpha,
-            depth: options.depth,
             options: *options,
         }
     }
@@ -67,13 +64,13 @@ impl fmt::Display for Effects {
             )?;
         }
         writeln!(f, "color channels    {}", self.channels)?;
-        writeln!(f, "alpha output      {}", on(self.alpha))?;
-        let depth = match self.depth {
+        let o = &self.options;
+        writeln!(f, "alpha output      {}", on(o.alpha))?;
+        let depth = match o.depth {
             true => "on",
             false => "off (no depth sums, no depth buffer)",
         };
         writeln!(f, "depth output      {depth}")?;
-        let o = &self.options;
         writeln!(f, "state precision   {}", o.precision.name())?;
         let p_max = o.p_max.map_or("off".to_string(), |p| p.to_string());
         writeln!(f, "P_max             {p_max}")?;
