@@ -20,6 +20,7 @@ pub mod entries;
 mod front;
 pub mod kernel;
 mod per_model;
+mod prune;
 pub mod raster;
 pub mod render;
 pub mod resident;
