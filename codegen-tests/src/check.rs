@@ -81,8 +81,16 @@ pub fn gradient<const NF: usize, const NI: usize, const MF: usize, const MI: usi
                 report.jacobian = report.jacobian.max(rel(col[j], rows[j][i]));
             }
         }
-        // <y, J x> = <J^T y, x> for random x, y.
-        let xd: [f64; NF] = std::array::from_fn(|_| rng.f64() * 2.0 - 1.0);
+        // <y, J x> = <J^T y, x> for random x, y; x of unit length, so the difference steps as
+        // far as the Jacobian's columns do however many inputs there are.
+        let mut xd: [f64; NF] = std::array::from_fn(|_| rng.f64() * 2.0 - 1.0);
+        let norm = xd
+            .iter()
+            .map(|v| v * v)
+            .sum::<f64>()
+            .sqrt()
+            .max(f64::MIN_POSITIVE);
+        xd.iter_mut().for_each(|v| *v /= norm);
         let yb: [f64; MF] = std::array::from_fn(|_| rng.f64() * 2.0 - 1.0);
         let jx = directional(f, &x, &ints, &xd);
         let jty = adj(&x, &ints, &yb);

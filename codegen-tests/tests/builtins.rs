@@ -1,13 +1,15 @@
 //! The compiler's builtins as kernels see them (compiled from `splat-compiler/src/builtins.rs`):
 //! the camera models (`cam.project_point`, `cam.pixel_ray`) equal to the runtime's plain-Rust
 //! `Camera` methods, inverse to each other (also past 90° off axis for the fisheye), and
-//! differentiated correctly (f64 finite differences) for every model; `spherical_harmonics`
-//! equal to the runtime prelude's.
+//! differentiated correctly (f64 finite differences) for every model; the rolling shutter's
+//! pose per row likewise; `spherical_harmonics` equal to the runtime prelude's.
 
 use codegen_tests::check::{gradient, uniform};
 use splat_macros::splat_functions;
 use splat_runtime::glam::{Mat3, Vec2, Vec3, Vec4};
 use splat_runtime::{Camera, CameraModel};
+
+const FLOAT_SLOTS: usize = Camera::FLOAT_SLOTS;
 
 #[splat_functions]
 mod cameras {
@@ -19,6 +21,20 @@ mod cameras {
 
     pub fn pixel_ray(cam: &Camera, pixel: Vec2) -> Vec3 {
         cam.pixel_ray(pixel)
+    }
+
+    /// The rolling shutter's pose at the pixel's row, applied to its ray (one output that
+    /// depends on every shutter function).
+    pub fn shutter_ray(cam: &Camera, pixel: Vec2) -> Vec3 {
+        let t = cam.shutter_time(pixel);
+        cam.rotation_at(t).transpose() * cam.pixel_ray(pixel) + cam.translation_at(t)
+    }
+
+    /// The pose at the pixel's row applied to a point made of the pixel: smooth in every
+    /// input, and independent of the model (whose rays are checked on their own).
+    pub fn shutter_pose(cam: &Camera, pixel: Vec2) -> Vec3 {
+        let t = cam.shutter_time(pixel);
+        cam.rotation_at(t) * Vec3::new(pixel.x, pixel.y, 1.0) + cam.translation_at(t)
     }
 
     pub fn sh3(sh: [Vec3; 16], dir: Vec3) -> Vec3 {
@@ -51,6 +67,7 @@ fn camera(model: CameraModel) -> Camera {
         size: Vec2::new(32.0, 24.0),
         distortion: Vec4::new(0.04, -0.01, 0.002, -0.0005),
         model,
+        ..Default::default()
     }
 }
 
@@ -117,23 +134,49 @@ fn the_fisheye_sees_behind_the_image_plane() {
     assert!(cameras::pixel_ray(&cam, px).cross(p.normalize()).length() < 1e-4);
 }
 
+/// A camera turning and moving during its readout.
+fn rolling(model: CameraModel) -> Camera {
+    Camera {
+        shutter_turn: Vec3::new(0.02, -0.03, 0.01),
+        shutter_shift: Vec3::new(0.05, 0.0, -0.02),
+        ..camera(model)
+    }
+}
+
+#[test]
+fn compiled_shutter_pose_matches_the_runtime() {
+    for model in CameraModel::ALL {
+        let cam = rolling(model);
+        for y in [0.0, 3.5, 12.0, 23.5, 24.0] {
+            let pixel = Vec2::new(10.5, y);
+            let t = cam.shutter_time(pixel);
+            assert_eq!(t, y / 24.0);
+            let want =
+                cam.rotation_at(t).transpose() * cam.pixel_ray(pixel) + cam.translation_at(t);
+            let got = cameras::shutter_ray(&cam, pixel);
+            assert!((got - want).length() < 1e-5, "{model}: {got} vs {want}");
+        }
+    }
+}
+
 /// Inputs: the camera's float slots (rotation 9, translation 3, focal 2, principal 2, size 2,
-/// distortion 4) and a point or pixel; the model is the integer slot.
+/// distortion 4, shutter turn 3 and shift 3) and a point or pixel; the model is the integer
+/// slot.
 fn sample<const N: usize>(
-    model: CameraModel,
+    cam: Camera,
     tail: impl Fn(&mut fastrand::Rng) -> Vec<f64>,
 ) -> impl Fn(&mut fastrand::Rng) -> ([f64; N], [u32; 1]) {
     move |r: &mut fastrand::Rng| {
         let mut x: [f64; N] = uniform(r, -0.1, 0.1);
-        let cam = camera(model).float_slots();
-        for (i, v) in x[..22].iter_mut().enumerate() {
+        let slots = cam.float_slots();
+        for (v, slot) in x.iter_mut().zip(slots) {
             // Perturb every camera slot by up to 1% (rotation off orthogonality included).
-            *v = cam[i] as f64 * (1.0 + 0.02 * (*v));
+            *v = slot as f64 * (1.0 + 0.02 * (*v));
         }
-        for (d, s) in x[22..].iter_mut().zip(tail(r)) {
+        for (d, s) in x[FLOAT_SLOTS..].iter_mut().zip(tail(r)) {
             *d = s;
         }
-        (x, [model as u32])
+        (x, [cam.model as u32])
     }
 }
 
@@ -156,7 +199,7 @@ fn camera_model_gradients_match_finite_differences() {
         let report = gradient(
             cameras::twin::project_point,
             cameras::twin::project_point_adjoint,
-            sample::<25>(model, point),
+            sample::<{ FLOAT_SLOTS + 3 }>(camera(model), point),
             7,
             30,
         );
@@ -170,7 +213,7 @@ fn camera_model_gradients_match_finite_differences() {
         let report = gradient(
             cameras::twin::pixel_ray,
             cameras::twin::pixel_ray_adjoint,
-            sample::<24>(model, pixel),
+            sample::<{ FLOAT_SLOTS + 2 }>(camera(model), pixel),
             8,
             30,
         );
@@ -180,4 +223,21 @@ fn camera_model_gradients_match_finite_differences() {
             "{model}: {report:?}"
         );
     }
+}
+
+#[test]
+fn shutter_pose_gradients_match_finite_differences() {
+    let pixel = |r: &mut fastrand::Rng| vec![1.0 + 30.0 * r.f64(), 1.0 + 22.0 * r.f64()];
+    let report = gradient(
+        cameras::twin::shutter_pose,
+        cameras::twin::shutter_pose_adjoint,
+        sample::<{ FLOAT_SLOTS + 2 }>(rolling(CameraModel::Pinhole), pixel),
+        9,
+        30,
+    );
+    println!("shutter_pose: {report:?}");
+    assert!(
+        report.jacobian <= 1e-6 && report.dot_product <= 1e-6,
+        "{report:?}"
+    );
 }

@@ -93,10 +93,10 @@ fn evaluate_adjoint_lanes_sums_the_active_lanes() {
 #[test]
 fn project_gradient_matches_finite_differences_including_the_camera() {
     // Inputs: params (mean 3, log_radius, color 3, opacity_logit) then the camera (rotation 9,
-    // translation 3, focal 2, principal 2, size 2, distortion 4), all perturbed; the camera
-    // model (the one integer slot) is pinhole.
+    // translation 3, focal 2, principal 2, size 2, distortion 4, shutter turn 3 and shift 3),
+    // all perturbed; the camera model (the one integer slot) is pinhole.
     let sample = |r: &mut fastrand::Rng| {
-        let mut x: [f64; 30] = uniform(r, -0.5, 0.5);
+        let mut x: [f64; 8 + splat_runtime::Camera::FLOAT_SLOTS] = uniform(r, -0.5, 0.5);
         for (i, v) in x[8..17].iter_mut().enumerate() {
             *v = if i % 4 == 0 { 1.0 } else { 0.1 * *v };
         }

@@ -8,7 +8,7 @@ mod unscented;
 pub use exact::geer;
 pub use gaussians::{gs3d, gs3d_aa, gs3d_sh0, gs3d_sh1, gs3d_sh2};
 pub use linear::linprim;
-pub use unscented::gut;
+pub use unscented::{gut, gut_rs};
 
 pub use splat_runtime::io::ply::{FromStored, ToStored};
 
@@ -42,7 +42,7 @@ macro_rules! stored_as_is {
     )*};
 }
 
-stored_as_is!(gut::Params, geer::Params);
+stored_as_is!(gut::Params, gut_rs::Params, geer::Params);
 
 /// 3DGUT, 3DGEER and LinPrim train like 3DGS (their parameters are the same Gaussian's, or
 /// for LinPrim's octahedra the Gaussian they are stored as): the same learning rates and

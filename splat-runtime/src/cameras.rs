@@ -12,8 +12,40 @@
 //! and a variant to [`CameraModel`](crate::CameraModel), whose matches the compiler then points
 //! at. Methods never name a model's code: they call `cam.project_point(p)`, `cam.pixel_ray(px)`,
 //! `cam.can_project(p)`, or test `cam.is_pinhole()` (one `is_` per model here).
+//!
+//! The functions outside the modules hold for every model (the pose, the rolling shutter): a
+//! kernel calls them as `cam.center()`, `cam.shutter_time(pixel)`, `cam.rotation_at(t)`,
+//! and so do they (each other: the compiler renames them).
 
 use crate::prelude::*;
+
+/// The camera centre in world space (at the first row's time, `t = 0`).
+pub fn center(cam: &Camera) -> Vec3 {
+    -(cam.rotation.transpose() * cam.translation)
+}
+
+/// When the sensor reads the row of `pixel` out, from 0 (the top edge) to 1 (the bottom):
+/// rows are read top to bottom at a constant rate.
+pub fn shutter_time(cam: &Camera, pixel: Vec2) -> f32 {
+    (pixel.y / cam.size.y).clamp(0.0, 1.0)
+}
+
+/// The world-to-camera rotation at shutter time `t`: `rotation` turned (in camera space) by
+/// the unit quaternion `normalize(1, t * shutter_turn / 2)`, so by `shutter_turn`'s full turn
+/// at `t = 1` and about one fixed axis in between. With `shutter_turn = 2 tan(angle / 2) *
+/// axis` the turn at `t = 1` is `angle` about `axis`; between, it is off a constant angular
+/// speed by under 1% of the turn for turns up to 30°.
+pub fn rotation_at(cam: &Camera, t: f32) -> Mat3 {
+    let half = cam.shutter_turn * (0.5 * t);
+    let turn = Quat::from_xyzw(half.x, half.y, half.z, 1.0).normalize();
+    Mat3::from_quat(turn) * cam.rotation
+}
+
+/// The world-to-camera translation at shutter time `t`: the centre moves by `t *
+/// shutter_shift` (in world space) and the camera turns as [`rotation_at`] says.
+pub fn translation_at(cam: &Camera, t: f32) -> Vec3 {
+    -(cam.rotation_at(t) * (cam.center() + cam.shutter_shift * t))
+}
 
 /// `focal * (x / z, y / z) + principal`.
 pub mod pinhole {

@@ -17,6 +17,9 @@ pub struct Effects {
     /// The kernels compiled for `camera_model` alone that the frame runs (`project_pinhole`,
     /// ...): empty when the method reads no camera model (it is pinhole-only).
     pub model_variants: Vec<&'static str>,
+    /// The camera moves during its readout (the method is one that renders it: the runtime
+    /// refuses the others).
+    pub rolling_shutter: bool,
     /// Color (or feature) channels.
     pub channels: usize,
     /// The outputs asked for (alpha, depth: without it no depth is summed and no buffer holds
@@ -38,6 +41,7 @@ impl Effects {
                 .map(|f| f.kernel)
                 .filter(|k| k.ends_with(&suffix))
                 .collect(),
+            rolling_shutter: camera.has_rolling_shutter(),
             channels: <M::Color as crate::Flat>::LEN,
             options: *options,
         }
@@ -63,6 +67,11 @@ impl fmt::Display for Effects {
                 on(self.distortion)
             )?;
         }
+        let shutter = match self.rolling_shutter {
+            true => "on (each row seen from the camera's pose at its readout)",
+            false => "off (a global shutter)",
+        };
+        writeln!(f, "rolling shutter   {shutter}")?;
         writeln!(f, "color channels    {}", self.channels)?;
         let o = &self.options;
         writeln!(f, "alpha output      {}", on(o.alpha))?;

@@ -136,7 +136,7 @@ impl FromArrayRef<4> for Quat {
 /// float slots come first (`FLOAT_SLOTS` of them, the camera's gradient words), the model's
 /// code last.
 impl Flat for crate::types::Camera {
-    const LEN: usize = 23;
+    const LEN: usize = 29;
     fn write_words(&self, out: &mut [f32]) {
         self.rotation.write_words(out);
         self.translation.write_words(&mut out[9..]);
@@ -144,7 +144,9 @@ impl Flat for crate::types::Camera {
         self.principal.write_words(&mut out[14..]);
         self.size.write_words(&mut out[16..]);
         self.distortion.write_words(&mut out[18..]);
-        (self.model as u32).write_words(&mut out[22..]);
+        self.shutter_turn.write_words(&mut out[22..]);
+        self.shutter_shift.write_words(&mut out[25..]);
+        (self.model as u32).write_words(&mut out[28..]);
     }
     /// An unknown model code reads as pinhole (cotangents carry zero there).
     fn read_words(words: &[f32]) -> Self {
@@ -155,7 +157,9 @@ impl Flat for crate::types::Camera {
             principal: Vec2::read_words(&words[14..]),
             size: Vec2::read_words(&words[16..]),
             distortion: Vec4::read_words(&words[18..]),
-            model: crate::types::CameraModel::from_code(u32::read_words(&words[22..]))
+            shutter_turn: Vec3::read_words(&words[22..]),
+            shutter_shift: Vec3::read_words(&words[25..]),
+            model: crate::types::CameraModel::from_code(u32::read_words(&words[28..]))
                 .unwrap_or_default(),
         }
     }
@@ -166,12 +170,14 @@ impl Flat for crate::types::Camera {
             && self.principal.is_finite()
             && self.size.is_finite()
             && self.distortion.is_finite()
+            && self.shutter_turn.is_finite()
+            && self.shutter_shift.is_finite()
     }
 }
 
 impl crate::types::Camera {
     /// The camera's float slots: every word but the model code (the last).
-    pub const FLOAT_SLOTS: usize = 22;
+    pub const FLOAT_SLOTS: usize = <Self as Flat>::LEN - 1;
 
     /// The float slots in the compiler's order: the camera's float arguments of a generated
     /// flat function (its integer argument is `model as u32`).
@@ -232,6 +238,8 @@ mod tests {
             principal: Vec2::new(15., 16.),
             size: Vec2::new(17., 18.),
             distortion: Vec4::new(19., 20., 21., 22.),
+            shutter_turn: Vec3::new(23., 24., 25.),
+            shutter_shift: Vec3::new(26., 27., 28.),
             model: crate::types::CameraModel::Equiangular,
         });
     }

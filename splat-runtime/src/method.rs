@@ -64,6 +64,10 @@ pub trait SplatMethod: Send + Sync + 'static {
     /// `cam.pixel_ray` (so it works with every [`CameraModel`](crate::CameraModel)); otherwise
     /// it is pinhole-only and rendering with another model is refused.
     const GENERIC_CAMERA: bool;
+    /// Whether it renders a camera's rolling shutter (a kernel reads the pose per row, with
+    /// `cam.shutter_time` and `cam.rotation_at`); the runtime refuses a camera that moves
+    /// during the readout to the others.
+    const ROLLING_SHUTTER: bool;
     /// What the macro generated, as text.
     const SOURCE: GeneratedSource;
     /// The f64 twins of the method's functions and their adjoints, for the reference renderer

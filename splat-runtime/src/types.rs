@@ -108,6 +108,12 @@ pub struct Camera {
     pub size: Vec2,
     /// Kannala-Brandt coefficients (k1, k2, k3, k4); unused by the other models.
     pub distortion: Vec4,
+    /// Rolling shutter: how the camera turns while the sensor reads its rows out, top to
+    /// bottom (see [`cameras::rotation_at`]); `rotation` and `translation` are the pose of the
+    /// first row. Zero with `shutter_shift`: a global shutter.
+    pub shutter_turn: Vec3,
+    /// Rolling shutter: how far the camera centre moves (world space) during the readout.
+    pub shutter_shift: Vec3,
     pub model: CameraModel,
 }
 
@@ -120,6 +126,8 @@ impl Camera {
         principal: Vec2::ZERO,
         size: Vec2::ZERO,
         distortion: Vec4::ZERO,
+        shutter_turn: Vec3::ZERO,
+        shutter_shift: Vec3::ZERO,
         model: CameraModel::Pinhole,
     };
 
@@ -133,13 +141,35 @@ impl Camera {
             principal: self.principal + other.principal,
             size: self.size + other.size,
             distortion: self.distortion + other.distortion,
+            shutter_turn: self.shutter_turn + other.shutter_turn,
+            shutter_shift: self.shutter_shift + other.shutter_shift,
             model: self.model,
         }
     }
 
-    /// The camera centre in world space, `-rotation^T * translation`.
+    /// The camera centre in world space, `-rotation^T * translation` (of the first row).
     pub fn center(&self) -> Vec3 {
-        -(self.rotation.transpose() * self.translation)
+        cameras::center(self)
+    }
+
+    /// Whether the camera moves during the readout (a rolling shutter).
+    pub fn has_rolling_shutter(&self) -> bool {
+        self.shutter_turn != Vec3::ZERO || self.shutter_shift != Vec3::ZERO
+    }
+
+    /// When the sensor reads the row of `pixel`: 0 the top edge, 1 the bottom.
+    pub fn shutter_time(&self, pixel: Vec2) -> f32 {
+        cameras::shutter_time(self, pixel)
+    }
+
+    /// The world-to-camera rotation at shutter time `t`.
+    pub fn rotation_at(&self, t: f32) -> Mat3 {
+        cameras::rotation_at(self, t)
+    }
+
+    /// The world-to-camera translation at shutter time `t`.
+    pub fn translation_at(&self, t: f32) -> Vec3 {
+        cameras::translation_at(self, t)
     }
 
     /// The pixel of a camera-space point under the camera's model.

@@ -103,6 +103,10 @@ pub const CAMERA_GROUPS: [(&str, std::ops::Range<usize>); 5] = [
     ("distortion", 18..22),
 ];
 
+/// The rolling shutter's camera groups (ranges of its float slots).
+pub const SHUTTER_GROUPS: [(&str, std::ops::Range<usize>); 2] =
+    [("shutter_turn", 22..25), ("shutter_shift", 25..28)];
+
 /// The camera groups a model's gradient has: the distortion coefficients only on the fisheye.
 pub fn camera_groups(model: CameraModel) -> &'static [(&'static str, std::ops::Range<usize>)] {
     if model == CameraModel::KannalaBrandt {

@@ -65,11 +65,25 @@ pub fn camera_models() -> Vec<CameraModel> {
         .collect()
 }
 
+/// The functions of `cameras.rs` outside the models' modules: they hold for every model
+/// (`center`, the rolling shutter's pose), and `cam.{name}(..)` calls them.
+fn shared_camera_fns() -> Vec<syn::ItemFn> {
+    let file: syn::File = syn::parse_str(CAMERAS).expect("cameras.rs parses");
+    file.items
+        .into_iter()
+        .filter_map(|item| match item {
+            syn::Item::Fn(f) => Some(f),
+            _ => None,
+        })
+        .collect()
+}
+
 /// The builtin helper a `Camera` method call `cam.{method}(..)` lowers to, if it is one:
-/// a model function, `center`, or `is_{model}` (whether the camera is of that model).
+/// a model function, a shared camera function, or `is_{model}` (whether the camera is of
+/// that model).
 pub fn camera_helper(method: &str) -> Option<String> {
     let known = MODEL_FUNCTIONS.contains(&method)
-        || method == "center"
+        || shared_camera_fns().iter().any(|f| f.sig.ident == method)
         || method
             .strip_prefix("is_")
             .is_some_and(|m| camera_models().iter().any(|c| c.name == m));
@@ -79,6 +93,11 @@ pub fn camera_helper(method: &str) -> Option<String> {
 /// Camera methods that read the camera model: a kernel calling them works with every model.
 pub fn model_aware(method: &str) -> bool {
     method == "project_point" || method == "pixel_ray" || method.starts_with("is_")
+}
+
+/// Camera methods that read the rolling shutter: a kernel calling them models it.
+pub fn shutter_aware(method: &str) -> bool {
+    matches!(method, "shutter_time" | "rotation_at" | "translation_at")
 }
 
 /// Coefficient counts `spherical_harmonics` accepts: degrees 0 to 3.
@@ -91,7 +110,7 @@ pub fn sh_helper(n: usize) -> String {
 
 /// The camera builtins: every model's functions (renamed `__{model}_{function}`), the
 /// `__camera_{function}` helpers choosing among them by the model's code, `__camera_is_{model}`
-/// and `__camera_center`.
+/// and the shared functions (renamed `__camera_{function}`).
 fn camera_items() -> Vec<syn::ItemFn> {
     let models = camera_models();
     let mut out = vec![];
@@ -148,12 +167,10 @@ fn camera_items() -> Vec<syn::ItemFn> {
         let (name, code) = (format_ident!("__camera_is_{}", m.name), m.code);
         out.push(syn::parse_quote!(fn #name(cam: &Camera) -> bool { cam.model == #code }));
     }
-    out.push(syn::parse_quote! {
-        /// The camera centre in world space.
-        fn __camera_center(cam: &Camera) -> Vec3 {
-            -(cam.rotation.transpose() * cam.translation)
-        }
-    });
+    for mut f in shared_camera_fns() {
+        f.sig.ident = format_ident!("__camera_{}", f.sig.ident);
+        out.push(f);
+    }
     out
 }
 

@@ -216,6 +216,7 @@ fn build_kernel<'m>(
         adjoint,
         ret: l.ret,
         camera_model: l.camera_model,
+        rolling_shutter: l.rolling_shutter,
         models: vec![],
     };
     Some((kernel, l.model_slot))

@@ -218,6 +218,8 @@ pub fn builtin_struct(name: &str, args: &[Ty]) -> Option<Result<Ty, String>> {
                 ("principal", v2.clone()),
                 ("size", v2.clone()),
                 ("distortion", Ty::Vec(4)),
+                ("shutter_turn", Ty::Vec(3)),
+                ("shutter_shift", Ty::Vec(3)),
                 // `CameraModel as u32`, last so the float slots are the leading words.
                 ("model", Ty::U32),
             ],

@@ -58,7 +58,7 @@ pub fn bench_cmd(args: &BenchArgs, methods: &[Method]) -> Result<()> {
         args.camera.as_deref(),
         (args.width, args.height),
     )?;
-    methods::check_camera(method, methods, camera.model)?;
+    methods::check_camera(method, methods, &camera)?;
     let gpu = crate::pick_gpu(args.backend)?;
     let task = Bench {
         args,

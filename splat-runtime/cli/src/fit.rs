@@ -190,7 +190,7 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
         bail!("{name}: no training views");
     }
     let first = &data.train[0];
-    methods::check_camera(method, methods, first.camera.model)?;
+    methods::check_camera(method, methods, &first.camera)?;
     println!(
         "{name}: {} training and {} test views of {}x{}, read in {:.1} s",
         data.train.len(),

@@ -1,7 +1,7 @@
 //! `splat`: the command line with the built-in methods.
 
 use splat_cli::{Instance, Method};
-use splat_methods::{geer, gs3d, gs3d_aa, gs3d_sh0, gs3d_sh1, gs3d_sh2, gut, linprim};
+use splat_methods::{geer, gs3d, gs3d_aa, gs3d_sh0, gs3d_sh1, gs3d_sh2, gut, gut_rs, linprim};
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
@@ -25,6 +25,11 @@ fn main() -> ExitCode {
             "3dgut",
             "3DGUT: unscented-transform projection, evaluation along camera rays; every camera",
             Instance::trainable::<gut::Method>(),
+        ),
+        Method::new(
+            "3dgut-rs",
+            "3DGUT with a rolling shutter: each row seen from the camera's pose at its readout",
+            Instance::of::<gut_rs::Method>(),
         ),
         Method::new(
             "linprim",

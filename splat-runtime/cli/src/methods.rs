@@ -31,6 +31,8 @@ pub struct Instance {
     pub(crate) source: GeneratedSource,
     /// Whether it renders every camera model (else pinhole only).
     pub(crate) generic_camera: bool,
+    /// Whether it renders a rolling shutter (else global shutters only).
+    pub(crate) rolling_shutter: bool,
     pub(crate) render: fn(&Render) -> Result<(Frame, String)>,
     pub(crate) bench: fn(&Bench) -> Result<()>,
     pub(crate) tradeoff: fn(&Tradeoff) -> Result<Vec<Outcome>>,
@@ -48,6 +50,7 @@ impl Instance {
         Instance {
             source: M::SOURCE,
             generic_camera: M::GENERIC_CAMERA,
+            rolling_shutter: M::ROLLING_SHUTTER,
             render: |r| r.run::<M>(),
             bench: |b| b.run::<M>(),
             tradeoff: |t| t.run::<M>(),
@@ -110,25 +113,37 @@ impl Method {
     }
 }
 
-/// Refuses a camera model `method` cannot render, by the names the user typed, suggesting
-/// the methods that can.
-pub(crate) fn check_camera(method: &Method, methods: &[Method], model: CameraModel) -> Result<()> {
-    if model == CameraModel::Pinhole || method.full().generic_camera {
+/// Refuses a camera `method` cannot render (its model, a rolling shutter), by the names the
+/// user typed, suggesting the methods that can.
+pub(crate) fn check_camera(method: &Method, methods: &[Method], camera: &Camera) -> Result<()> {
+    let renders = |m: &Method| {
+        let i = m.full();
+        (camera.model == CameraModel::Pinhole || i.generic_camera)
+            && (!camera.has_rolling_shutter() || i.rolling_shutter)
+    };
+    if renders(method) {
         return Ok(());
     }
     let can: Vec<String> = methods
         .iter()
-        .filter(|m| m.full().generic_camera)
+        .filter(|m| renders(m))
         .map(|m| format!("--method {}", m.name))
         .collect();
     let hint = match can.is_empty() {
         true => String::new(),
         false => format!(": use {}", can.join(" or ")),
     };
-    bail!(
-        "{} renders with a pinhole camera only, and the camera is {model}{hint}",
-        method.name
-    )
+    let model = camera.model;
+    match camera.model == CameraModel::Pinhole || method.full().generic_camera {
+        true => bail!(
+            "{} renders global shutters only, and the camera moves during its readout (shutter_turn, shutter_shift){hint}",
+            method.name
+        ),
+        false => bail!(
+            "{} renders with a pinhole camera only, and the camera is {model}{hint}",
+            method.name
+        ),
+    }
 }
 
 /// The method called `name`.

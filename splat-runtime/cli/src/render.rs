@@ -272,7 +272,7 @@ pub(crate) fn render_cmd(args: &RenderArgs, methods: &[Method]) -> Result<()> {
             scene::camera(args.width, args.height, model.into())
         }
     };
-    methods::check_camera(method, methods, camera.model)?;
+    methods::check_camera(method, methods, &camera)?;
     let load = t0.elapsed();
     let opts = RenderOptions {
         tile_size: args.tile,

@@ -174,6 +174,7 @@ fn looking_from(eye: Vec3, width: u32, height: u32, model: CameraModel) -> Camer
         size: Vec2::new(w, height as f32),
         distortion,
         model,
+        ..Default::default()
     }
 }
 

@@ -173,7 +173,7 @@ pub fn tradeoff_cmd(args: &TradeoffArgs, methods: &[Method]) -> Result<()> {
         args.camera.as_deref(),
         (args.width, args.height),
     )?;
-    methods::check_camera(method, methods, camera.model)?;
+    methods::check_camera(method, methods, &camera)?;
     let gpu = crate::pick_gpu(args.backend)?;
     let (w, h) = (camera.size.x as usize, camera.size.y as usize);
     let backend = match &gpu {
@@ -205,7 +205,7 @@ pub fn tradeoff_cmd(args: &TradeoffArgs, methods: &[Method]) -> Result<()> {
     // The other methods the camera allows, for the evaluation-model knob.
     let models: Vec<&Method> = methods
         .iter()
-        .filter(|m| methods::check_camera(m, methods, camera.model).is_ok())
+        .filter(|m| methods::check_camera(m, methods, &camera).is_ok())
         .collect();
     let runs = 1 + settings.len() + cloud.sh_degree as usize + models.len() + 1;
     let bar = indicatif::ProgressBar::new(runs as u64);

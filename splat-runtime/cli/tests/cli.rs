@@ -1147,3 +1147,35 @@ fn tradeoff_sweeps_every_knob_and_writes_its_table_and_plot() {
         &dir.path().join("never"),
     );
 }
+
+/// A camera that moves during its readout renders with a method that models it, and the
+/// others refuse it by name, pointing at the one that does.
+#[test]
+fn a_rolling_shutter_camera_needs_a_method_that_renders_it() {
+    let dir = temp();
+    let camera = r#"{"width": 64, "height": 48, "fx": 60, "fy": 60, "cx": 32, "cy": 24,
+        "world_to_camera": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 6], [0, 0, 0, 1]],
+        "world_to_camera_last_row": [[1, 0, 0, -0.2], [0, 1, 0, 0], [0, 0, 1, 6], [0, 0, 0, 1]]}"#;
+    write(dir.path(), "rolling.json", camera.as_bytes());
+    let render = |method: &str, out: &str| {
+        let args = ["render", "--camera", "rolling.json", "--method", method];
+        let args: Vec<&str> = args
+            .iter()
+            .copied()
+            .chain(["--backend", "cpu", "--explain", "--out", out])
+            .collect();
+        splat(&args, dir.path())
+    };
+    fails(
+        &render("3dgut", "global.png"),
+        "3dgut renders global shutters only, and the camera moves during its readout (shutter_turn, shutter_shift): use --method 3dgut-rs",
+        &dir.path().join("global.png"),
+    );
+    let stdout = ok(&render("3dgut-rs", "rolling.png"));
+    assert!(
+        stdout
+            .contains("rolling shutter   on (each row seen from the camera's pose at its readout)"),
+        "{stdout}"
+    );
+    assert!(dir.path().join("rolling.png").exists());
+}

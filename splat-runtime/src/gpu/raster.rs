@@ -301,7 +301,7 @@ fn build_pipeline(
         .device
         .create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("splat quads"),
-            source: wgpu::ShaderSource::Wgsl(super::prune::reachable_only(&source).into()),
+            source: wgpu::ShaderSource::Wgsl(super::prune::reachable_only(source).into()),
         });
     let under = wgpu::BlendComponent {
         src_factor: wgpu::BlendFactor::OneMinusDstAlpha,

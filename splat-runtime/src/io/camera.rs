@@ -4,6 +4,12 @@
 //! `model` is `pinhole` (the default), `kannala_brandt` (with `"k": [k1, k2, k3, k4]`, required;
 //! zeros are the equidistant fisheye) or `equiangular`; see [`CameraModel`]. The pose must be
 //! rigid (a rotation and a translation).
+//!
+//! A rolling shutter (rows read out top to bottom while the camera moves; `world_to_camera`
+//! is the first row's pose) is given by the last row's pose, `"world_to_camera_last_row":
+//! [[4 rows of 4]]`, or as the camera stores it, `"shutter_turn": [x, y, z], "shutter_shift":
+//! [x, y, z]` (see [`Camera::shutter_turn`]; what `write` writes). Without either the shutter
+//! is global.
 
 use crate::pipeline::MAX_SIDE;
 use crate::types::{Camera, CameraModel};
@@ -26,6 +32,14 @@ pub struct CameraFile {
     /// Kannala-Brandt coefficients; only with `"model": "kannala_brandt"`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub k: Option<[f32; 4]>,
+    /// A rolling shutter's last row pose.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub world_to_camera_last_row: Option<[[f32; 4]; 4]>,
+    /// A rolling shutter's turn and shift ([`Camera::shutter_turn`], [`Camera::shutter_shift`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shutter_turn: Option<[f32; 3]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shutter_shift: Option<[f32; 3]>,
 }
 
 fn pinhole() -> String {
@@ -52,8 +66,16 @@ pub enum CameraError {
     Size(u32, u32),
     #[error("camera {0} must be finite and positive")]
     Intrinsics(&'static str),
-    #[error("camera world_to_camera must be finite with last row [0, 0, 0, 1]")]
-    Pose,
+    #[error("camera {0} must be finite with last row [0, 0, 0, 1]")]
+    Pose(&'static str),
+    #[error(
+        "camera rolling shutter: give world_to_camera_last_row or shutter_turn and shutter_shift, not both"
+    )]
+    Shutter,
+    #[error(
+        "camera world_to_camera_last_row turns {0:.0}° from world_to_camera: a rolling shutter turns less than 180° during a readout"
+    )]
+    ShutterTurn(f32),
     #[error(
         "camera world_to_camera is not rigid: its 3x3 part is off a rotation by {0:.2e} (R^T R - I, or a reflection); scale or shear would distort the render"
     )]
@@ -98,29 +120,29 @@ impl CameraFile {
         if !(self.cx.is_finite() && self.cy.is_finite()) {
             return Err(CameraError::Intrinsics("principal point cx, cy"));
         }
-        let m = self.world_to_camera;
-        let finite = m.iter().flatten().all(|v| v.is_finite());
-        if !finite || m[3] != [0.0, 0.0, 0.0, 1.0] {
-            return Err(CameraError::Pose);
-        }
-        let col = |c: usize| Vec3::new(m[0][c], m[1][c], m[2][c]);
-        let rotation = Mat3::from_cols(col(0), col(1), col(2));
-        let off = (rotation.transpose() * rotation - Mat3::IDENTITY)
-            .to_cols_array()
-            .iter()
-            .fold(0.0f32, |a, v| a.max(v.abs()));
-        if off > 1e-3 || rotation.determinant() < 0.0 {
-            return Err(CameraError::NotRigid(off));
-        }
-        Ok(Camera {
+        let (rotation, translation) = rigid(&self.world_to_camera, "world_to_camera")?;
+        let camera = Camera {
             rotation,
-            translation: col(3),
+            translation,
             focal: Vec2::new(self.fx, self.fy),
             principal: Vec2::new(self.cx, self.cy),
             size: Vec2::new(self.width as f32, self.height as f32),
             distortion: Vec4::from_array(k),
+            shutter_turn: Vec3::from_array(self.shutter_turn.unwrap_or_default()),
+            shutter_shift: Vec3::from_array(self.shutter_shift.unwrap_or_default()),
             model,
-        })
+        };
+        if !(camera.shutter_turn.is_finite() && camera.shutter_shift.is_finite()) {
+            return Err(CameraError::Intrinsics("rolling shutter turn and shift"));
+        }
+        match &self.world_to_camera_last_row {
+            None => Ok(camera),
+            Some(_) if camera.has_rolling_shutter() => Err(CameraError::Shutter),
+            Some(last) => {
+                let (r1, t1) = rigid(last, "world_to_camera_last_row")?;
+                with_last_row_pose(camera, r1, t1)
+            }
+        }
     }
 
     pub fn from_camera(c: &Camera) -> CameraFile {
@@ -137,8 +159,53 @@ impl CameraFile {
             world_to_camera: [row(0), row(1), row(2), [0.0, 0.0, 0.0, 1.0]],
             model: c.model.name().into(),
             k: c.model.has_distortion().then(|| c.distortion.to_array()),
+            world_to_camera_last_row: None,
+            shutter_turn: c.has_rolling_shutter().then(|| c.shutter_turn.to_array()),
+            shutter_shift: c.has_rolling_shutter().then(|| c.shutter_shift.to_array()),
         }
     }
+}
+
+/// The rotation and translation of a rigid 4x4 world-to-camera matrix (row-major).
+fn rigid(m: &[[f32; 4]; 4], name: &'static str) -> Result<(Mat3, Vec3), CameraError> {
+    let finite = m.iter().flatten().all(|v| v.is_finite());
+    if !finite || m[3] != [0.0, 0.0, 0.0, 1.0] {
+        return Err(CameraError::Pose(name));
+    }
+    let col = |c: usize| Vec3::new(m[0][c], m[1][c], m[2][c]);
+    let rotation = Mat3::from_cols(col(0), col(1), col(2));
+    let off = (rotation.transpose() * rotation - Mat3::IDENTITY)
+        .to_cols_array()
+        .iter()
+        .fold(0.0f32, |a, v| a.max(v.abs()));
+    if off > 1e-3 || rotation.determinant() < 0.0 {
+        return Err(CameraError::NotRigid(off));
+    }
+    Ok((rotation, col(3)))
+}
+
+/// `camera` with the rolling shutter that ends at the last row's pose `(rotation,
+/// translation)`: the turn from the first row's rotation as [`Camera::shutter_turn`] encodes it
+/// (twice the vector part over the scalar part of its quaternion), the centre's move as
+/// [`Camera::shutter_shift`].
+pub fn with_last_row_pose(
+    camera: Camera,
+    rotation: Mat3,
+    translation: Vec3,
+) -> Result<Camera, CameraError> {
+    let turn = glam::DQuat::from_mat3(&(rotation * camera.rotation.transpose()).as_dmat3());
+    let turn = if turn.w < 0.0 { -turn } else { turn };
+    if turn.w < 1e-6 {
+        return Err(CameraError::ShutterTurn(
+            turn.angle_between(glam::DQuat::IDENTITY).to_degrees() as f32,
+        ));
+    }
+    let center = -(rotation.transpose() * translation);
+    Ok(Camera {
+        shutter_turn: (2.0 * turn.xyz() / turn.w).as_vec3(),
+        shutter_shift: center - camera.center(),
+        ..camera
+    })
 }
 
 pub fn read(path: &Path) -> Result<Camera, CameraError> {
@@ -189,7 +256,7 @@ mod tests {
         assert!(matches!(bad.to_camera(), Err(CameraError::Intrinsics(_))));
         let mut bad = file.clone();
         bad.world_to_camera[3] = [0.0, 0.0, 1.0, 1.0];
-        assert!(matches!(bad.to_camera(), Err(CameraError::Pose)));
+        assert!(matches!(bad.to_camera(), Err(CameraError::Pose(_))));
         let mut bad = file;
         bad.k = Some([0.1, 0.0, 0.0, 0.0]);
         assert!(
@@ -198,6 +265,36 @@ mod tests {
                 .to_string()
                 .contains("only for models with distortion (kannala_brandt), not pinhole")
         );
+    }
+
+    #[test]
+    fn rolling_shutters_read_from_the_last_row_pose_and_round_trip() {
+        let first = r#"{"width": 64, "height": 48, "fx": 60, "fy": 60, "cx": 32, "cy": 24,
+            "world_to_camera": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 6], [0, 0, 0, 1]]"#;
+        // The last row turned 90° about z and moved.
+        let json = format!(
+            r#"{first}, "world_to_camera_last_row": [[0, -1, 0, 0.5], [1, 0, 0, 0], [0, 0, 1, 6], [0, 0, 0, 1]]}}"#
+        );
+        let file: CameraFile = serde_json::from_str(&json).unwrap();
+        let cam = file.to_camera().unwrap();
+        let last = Mat3::from_cols(Vec3::Y, -Vec3::X, Vec3::Z);
+        assert!(cam.rotation_at(1.0).abs_diff_eq(last, 1e-6));
+        assert!(
+            cam.translation_at(1.0)
+                .abs_diff_eq(Vec3::new(0.5, 0.0, 6.0), 1e-6)
+        );
+        let back = CameraFile::from_camera(&cam);
+        assert_eq!(back.to_camera().unwrap(), cam);
+        assert!(back.shutter_turn.is_some() && back.world_to_camera_last_row.is_none());
+
+        let mut both = file.clone();
+        both.shutter_shift = Some([0.1, 0.0, 0.0]);
+        assert!(matches!(both.to_camera(), Err(CameraError::Shutter)));
+        let half_turn = format!(
+            r#"{first}, "world_to_camera_last_row": [[-1, 0, 0, 0], [0, -1, 0, 0], [0, 0, 1, 6], [0, 0, 0, 1]]}}"#
+        );
+        let file: CameraFile = serde_json::from_str(&half_turn).unwrap();
+        assert!(matches!(file.to_camera(), Err(CameraError::ShutterTurn(_))));
     }
 
     #[test]

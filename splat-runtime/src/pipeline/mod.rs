@@ -93,6 +93,10 @@ pub enum RenderError {
         method: &'static str,
         model: crate::types::CameraModel,
     },
+    #[error(
+        "method `{0}` renders global shutters only (no kernel calls `cam.shutter_time` or `cam.rotation_at`); the camera moves during its readout (shutter_turn, shutter_shift)"
+    )]
+    RollingShutter(&'static str),
     #[error("primitive {0} has a NaN or infinite parameter")]
     NonFinite(usize),
     #[error(
@@ -233,6 +237,12 @@ pub(crate) fn check<M: SplatMethod>(
     }
     if !camera.distortion.is_finite() {
         return Err(RenderError::Camera("distortion"));
+    }
+    if !(camera.shutter_turn.is_finite() && camera.shutter_shift.is_finite()) {
+        return Err(RenderError::Camera("rolling shutter motion"));
+    }
+    if camera.has_rolling_shutter() && !M::ROLLING_SHUTTER {
+        return Err(RenderError::RollingShutter(M::NAME));
     }
     Ok(TileGrid::new(size.x as u32, size.y as u32, opts.tile_size))
 }

@@ -17,6 +17,8 @@ pub struct Kernel<'m> {
     pub ret: Ty,
     /// Whether the kernel reads the camera model (see `builtins::model_aware`).
     pub camera_model: bool,
+    /// Whether the kernel reads the camera's rolling shutter (see `builtins::shutter_aware`).
+    pub rolling_shutter: bool,
     /// For a method kernel that reads the camera's model code: the kernel specialized to each
     /// model (`builtins::camera_models` order) with the model's code, its IR functions named
     /// `{kernel}_{model}` and `{kernel}_adjoint_{model}`.

@@ -415,6 +415,7 @@ pub fn method_impl(m: &Module, kernels: &[Kernel], diag: &Diag) -> Option<TokenS
     };
     let (has_tc, has_pi) = (tile_cull.is_some(), pixel_info.is_some());
     let generic_camera = kernels.iter().any(|k| k.camera_model);
+    let rolling_shutter = kernels.iter().any(|k| k.rolling_shutter);
     let twin = twin_const(has_pi);
     let (np, nc) = (idx(np), idx(nc));
     Some(quote! {
@@ -428,6 +429,7 @@ pub fn method_impl(m: &Module, kernels: &[Kernel], diag: &Diag) -> Option<TokenS
             const HAS_TILE_CULL: bool = #has_tc;
             const HAS_PIXEL_INFO: bool = #has_pi;
             const GENERIC_CAMERA: bool = #generic_camera;
+            const ROLLING_SHUTTER: bool = #rolling_shutter;
             const SOURCE: #rt::GeneratedSource = #rt::GeneratedSource { rust: GENERATED_RUST, wgsl: GENERATED_WGSL, functions: GENERATED_FUNCTIONS };
             const TWIN: #rt::checks::Twin = #twin;
             type Params = #p_t;

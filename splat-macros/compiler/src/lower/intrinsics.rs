@@ -7,7 +7,7 @@
 //! is infinite; `select` and `if` differentiate only the side taken.
 
 use super::{Failed, Lowerer, R, Val};
-use crate::builtins::{SH_COEFFICIENTS, camera_helper, model_aware, sh_helper};
+use crate::builtins::{SH_COEFFICIENTS, camera_helper, model_aware, sh_helper, shutter_aware};
 use crate::ir::{Binary, Const, Unary, Var};
 use crate::types::Ty;
 use proc_macro2::Span;
@@ -248,6 +248,7 @@ impl Lowerer<'_> {
                     .find_fn(&helper)
                     .expect("builtin camera helpers are in every module");
                 self.camera_model |= model_aware(name);
+                self.rolling_shutter |= shutter_aware(name);
                 let mut all = vec![recv];
                 all.extend(args);
                 self.call_helper(def, all, span)

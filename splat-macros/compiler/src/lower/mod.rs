@@ -57,6 +57,8 @@ pub struct Lowered {
     pub ret: Ty,
     /// Whether the function reads the camera model (`cam.project_point` / `cam.pixel_ray`).
     pub camera_model: bool,
+    /// Whether the function reads the camera's rolling shutter (`builtins::shutter_aware`).
+    pub rolling_shutter: bool,
     /// The parameter slot holding the camera's model code, if a parameter is a `Camera`.
     pub model_slot: Option<Var>,
 }
@@ -78,6 +80,8 @@ pub struct Lowerer<'m> {
     custom: &'m [String],
     /// Set when a model-aware camera method is called.
     camera_model: bool,
+    /// Set when a camera method reading the rolling shutter is called.
+    rolling_shutter: bool,
 }
 
 /// Lowers one function of `module`. Returns `None` if it had errors (recorded in `diag`).
@@ -107,6 +111,7 @@ pub fn lower_for_model(
         unrolled: 0,
         custom,
         camera_model: false,
+        rolling_shutter: false,
     };
     let mut params = vec![];
     let mut model_slot = None;
@@ -166,6 +171,7 @@ pub fn lower_for_model(
                     params,
                     ret: def.ret.clone(),
                     camera_model: l.camera_model,
+                    rolling_shutter: l.rolling_shutter,
                     model_slot,
                 });
             }
