@@ -67,7 +67,7 @@ pub fn bench_cmd(args: &BenchArgs, methods: &[Method]) -> Result<()> {
         camera: &camera,
         gpu: gpu.as_ref(),
     };
-    (method.for_degree(cloud.sh_degree).bench)(&task)
+    (method.instance(cloud.sh_degree, &camera).bench)(&task)
 }
 
 pub struct Bench<'a> {

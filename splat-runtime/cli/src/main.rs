@@ -25,12 +25,8 @@ fn main() -> ExitCode {
             "3dgut",
             "3DGUT: unscented-transform projection, evaluation along camera rays; every camera",
             Instance::trainable::<gut::Method>(),
-        ),
-        Method::new(
-            "3dgut-rs",
-            "3DGUT with a rolling shutter: each row seen from the camera's pose at its readout",
-            Instance::of::<gut_rs::Method>(),
-        ),
+        )
+        .with_rolling_shutter(Instance::of::<gut_rs::Method>()),
         Method::new(
             "linprim",
             "LinPrim: octahedra (each Gaussian of the scene becomes one); pinhole only",

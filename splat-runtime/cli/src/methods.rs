@@ -20,6 +20,8 @@ pub struct Method {
     /// `instances[k]` renders scenes of SH degree k; the last one higher degrees, training and
     /// `inspect`.
     instances: Vec<Instance>,
+    /// What renders a camera with a rolling shutter, if the method can.
+    rolling_shutter: Option<Instance>,
     /// Whether it evaluates its primitives exactly: `splat tradeoff` compares every method's
     /// render of the same Gaussians with this one's.
     pub(crate) exact: bool,
@@ -88,7 +90,21 @@ impl Method {
             name,
             help,
             instances,
+            rolling_shutter: None,
             exact: false,
+        }
+    }
+
+    /// The instance that renders cameras with a rolling shutter (the others keep theirs).
+    pub fn with_rolling_shutter(self, instance: Instance) -> Method {
+        assert!(
+            instance.rolling_shutter,
+            "{}: not a rolling-shutter instance",
+            self.name
+        );
+        Method {
+            rolling_shutter: Some(instance),
+            ..self
         }
     }
 
@@ -101,10 +117,16 @@ impl Method {
         }
     }
 
-    /// The instance for a scene of SH degree `degree`.
-    pub(crate) fn for_degree(&self, degree: u32) -> &Instance {
-        let last = self.instances.len() - 1;
-        &self.instances[(degree as usize).min(last)]
+    /// The instance for a scene of SH degree `degree` seen by `camera`: the rolling-shutter
+    /// one when the camera moves during its readout.
+    pub(crate) fn instance(&self, degree: u32, camera: &Camera) -> &Instance {
+        match &self.rolling_shutter {
+            Some(rolling) if camera.has_rolling_shutter() => rolling,
+            _ => {
+                let last = self.instances.len() - 1;
+                &self.instances[(degree as usize).min(last)]
+            }
+        }
     }
 
     /// The full instance (the highest degree).
@@ -117,7 +139,7 @@ impl Method {
 /// user typed, suggesting the methods that can.
 pub(crate) fn check_camera(method: &Method, methods: &[Method], camera: &Camera) -> Result<()> {
     let renders = |m: &Method| {
-        let i = m.full();
+        let i = m.instance(u32::MAX, camera); // every degree renders the same cameras
         (camera.model == CameraModel::Pinhole || i.generic_camera)
             && (!camera.has_rolling_shutter() || i.rolling_shutter)
     };
@@ -134,7 +156,7 @@ pub(crate) fn check_camera(method: &Method, methods: &[Method], camera: &Camera)
         false => format!(": use {}", can.join(" or ")),
     };
     let model = camera.model;
-    match camera.model == CameraModel::Pinhole || method.full().generic_camera {
+    match camera.model == CameraModel::Pinhole || method.instance(u32::MAX, camera).generic_camera {
         true => bail!(
             "{} renders global shutters only, and the camera moves during its readout (shutter_turn, shutter_shift){hint}",
             method.name

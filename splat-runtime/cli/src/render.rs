@@ -131,7 +131,7 @@ fn render_method(
         backend,
         hardware,
     };
-    (method.for_degree(cloud.sh_degree).render)(&task)
+    (method.instance(cloud.sh_degree, camera).render)(&task)
 }
 
 /// The gallery's label margins, pixels: the methods' names on the left, the camera models'
@@ -286,7 +286,7 @@ pub(crate) fn render_cmd(args: &RenderArgs, methods: &[Method]) -> Result<()> {
         render_method(method, &cloud, &camera, &opts, args.backend, args.hardware)?;
     let written = image_io::write_frame(&args.out, &frame)?;
     if args.explain {
-        let effects = (method.for_degree(cloud.sh_degree).effects)(&camera, &opts);
+        let effects = (method.instance(cloud.sh_degree, &camera).effects)(&camera, &opts);
         println!("{effects}");
     }
     let s = &frame.stats;

@@ -219,7 +219,7 @@ pub fn tradeoff_cmd(args: &TradeoffArgs, methods: &[Method]) -> Result<()> {
                 options,
                 bar: &bar,
             };
-            (method.for_degree(cloud.sh_degree).tradeoff)(&task)
+            (method.instance(cloud.sh_degree, &camera).tradeoff)(&task)
         };
 
     let tiles = |opts| vec![(opts, Forward::Tiles)];

@@ -1148,8 +1148,8 @@ fn tradeoff_sweeps_every_knob_and_writes_its_table_and_plot() {
     );
 }
 
-/// A camera that moves during its readout renders with a method that models it, and the
-/// others refuse it by name, pointing at the one that does.
+/// A camera that moves during its readout renders with the method's rolling-shutter instance,
+/// and methods without one refuse it by name, pointing at those with one.
 #[test]
 fn a_rolling_shutter_camera_needs_a_method_that_renders_it() {
     let dir = temp();
@@ -1167,15 +1167,16 @@ fn a_rolling_shutter_camera_needs_a_method_that_renders_it() {
         splat(&args, dir.path())
     };
     fails(
-        &render("3dgut", "global.png"),
-        "3dgut renders global shutters only, and the camera moves during its readout (shutter_turn, shutter_shift): use --method 3dgut-rs",
+        &render("3dgs", "global.png"),
+        "3dgs renders global shutters only, and the camera moves during its readout (shutter_turn, shutter_shift): use --method 3dgut",
         &dir.path().join("global.png"),
     );
-    let stdout = ok(&render("3dgut-rs", "rolling.png"));
-    assert!(
-        stdout
-            .contains("rolling shutter   on (each row seen from the camera's pose at its readout)"),
-        "{stdout}"
-    );
+    let stdout = ok(&render("3dgut", "rolling.png"));
+    for line in [
+        "method            gut_rs",
+        "rolling shutter   on (each row seen from the camera's pose at its readout)",
+    ] {
+        assert!(stdout.contains(line), "`{line}` is not in:\n{stdout}");
+    }
     assert!(dir.path().join("rolling.png").exists());
 }
