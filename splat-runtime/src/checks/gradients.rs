@@ -273,8 +273,10 @@ pub fn gpu_gradients_match_cpu_with<M: SplatMethod>(
 }
 
 /// With [`RenderOptions::camera_gradient`](crate::RenderOptions::camera_gradient) off, the
-/// backward pass gives exactly the parameter gradients of the full pass (bit for bit) and a
-/// zero camera gradient, on the CPU and (where there is an adapter) on the GPU.
+/// backward pass gives exactly the parameter gradients of the full pass and a zero camera
+/// gradient, on the CPU (bit for bit) and, where there is an adapter, on the GPU: there the
+/// blend sums with float atomics in whatever order the invocations run, so two identical
+/// passes agree to that order's rounding, 1e-6 of the largest gradient.
 pub fn camera_gradient_off_changes_only_the_camera<M: SplatMethod>(
     label: &str,
     params: &[M::Params],
@@ -291,7 +293,8 @@ pub fn camera_gradient_off_changes_only_the_camera<M: SplatMethod>(
         let (_, state) = render_for_backward::<M>(params, cam, opts).unwrap();
         backward::<M>(&state, params, cam, &grad).unwrap()
     };
-    let mut runs = vec![("CPU", cpu(&full), cpu(&without))];
+    // The largest difference allowed, relative to the largest gradient.
+    let mut runs = vec![("CPU", 0.0, cpu(&full), cpu(&without))];
     #[cfg(feature = "gpu")]
     if let Some(gpu) = crate::gpu::adapter_or_skip() {
         let gpu_run = |opts: &crate::RenderOptions| {
@@ -302,14 +305,20 @@ pub fn camera_gradient_off_changes_only_the_camera<M: SplatMethod>(
                 .unwrap()
                 .gradients
         };
-        runs.push(("GPU", gpu_run(&full), gpu_run(&without)));
+        runs.push(("GPU", 1e-6, gpu_run(&full), gpu_run(&without)));
     }
-    for (backend, all, params_only) in runs {
+    for (backend, rounding, all, params_only) in runs {
         let flat =
             |g: &crate::Gradients<M>| -> Vec<f64> { g.params.iter().flat_map(words).collect() };
+        let (all_words, without_words) = (flat(&all), flat(&params_only));
+        let largest = all_words.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let off = all_words
+            .iter()
+            .zip(&without_words)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
         assert!(
-            flat(&all) == flat(&params_only),
-            "{label} on the {backend}: the parameter gradients changed without the camera's"
+            off <= rounding * largest,
+            "{label} on the {backend}: the parameter gradients changed without the camera's ({off:.2e} of {largest:.2e})"
         );
         assert!(
             camera_words(&params_only.camera).iter().all(|v| *v == 0.0),
