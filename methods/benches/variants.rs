@@ -2,12 +2,17 @@
 //! kernel of 3DGUT and 3DGEER timed as the generic kernel (branching on the model inside) and
 //! as the variant compiled for that model alone (what the runtime calls), one primitive or
 //! pixel at a time, on every camera model. The camera gradient: the whole CPU backward pass
-//! with and without it (`RenderOptions::camera_gradient`, off in training). Times are best of 5, generic and variant alternating after a warm-up of each,
-//! single thread; the ratio is generic / variant in the same run.
+//! with and without it (`RenderOptions::camera_gradient`, off in training). The SH degree:
+//! `project`, its adjoint and the whole CPU frame (forward and backward, all threads) of each
+//! method's full instance against the instance for the scene's degree, on Gaussians of that
+//! degree. Times are best of 5, the two alternating after a warm-up of each, kernels on a
+//! single thread; the ratio is generic (or full) / variant in the same run.
 //!
 //! `cargo bench -p splat-methods --bench variants [-- N WIDTH HEIGHT]`
 
-use splat_methods::{geer, gut};
+use splat_methods::{
+    FromStored, geer, geer_sh0, geer_sh1, gs3d, gs3d_sh0, gs3d_sh1, gut, gut_sh0, gut_sh1,
+};
 use splat_runtime::checks::variants::unit_cotangent;
 use splat_runtime::glam::{Vec2, Vec4};
 use splat_runtime::{
@@ -19,6 +24,8 @@ use std::time::{Duration, Instant};
 
 mod common;
 use common::{as_method, camera, scene, size_args};
+use splat_methods::gs3d::Params as Gaussian;
+use splat_runtime::io::ply::sh_coefficients;
 
 /// (generic, variant): the best of 5 runs of each, the two alternating after a warm-up of
 /// each, so neither gains from running second.
@@ -138,6 +145,79 @@ fn backward_times<M: SplatMethod>(params: &[M::Params], cam: &Camera) -> Times {
     compare(pass(true), pass(false))
 }
 
+/// (kernel, (full, instance)) times of `project`, its adjoint (one thread) and a whole CPU
+/// frame (all threads) for `Full` and `Low` (its instance for SH degree `degree`) on
+/// `gaussians` cut to that degree.
+fn sh_times<Full: SplatMethod, Low: SplatMethod>(
+    gaussians: &[Gaussian],
+    degree: u32,
+    cam: &Camera,
+) -> Vec<(&'static str, Times)>
+where
+    Full::Params: FromStored,
+    Low::Params: FromStored,
+{
+    let mut cut = gaussians.to_vec();
+    for g in &mut cut {
+        g.sh[sh_coefficients(degree)..].fill(Default::default());
+    }
+    let (full, low) = (
+        as_method::<Full::Params>(&cut),
+        as_method::<Low::Params>(&cut),
+    );
+    let (full_ones, low_ones) = (unit_cotangent::<Full>(), unit_cotangent::<Low>());
+    vec![
+        (
+            "project",
+            compare(
+                || {
+                    for p in &full {
+                        let _ = black_box(Full::project(black_box(p), cam));
+                    }
+                },
+                || {
+                    for p in &low {
+                        let _ = black_box(Low::project(black_box(p), cam));
+                    }
+                },
+            ),
+        ),
+        (
+            "project adjoint",
+            compare(
+                || {
+                    for p in &full {
+                        let _ = black_box(Full::project_adjoint(black_box(p), cam, &full_ones));
+                    }
+                },
+                || {
+                    for p in &low {
+                        let _ = black_box(Low::project_adjoint(black_box(p), cam, &low_ones));
+                    }
+                },
+            ),
+        ),
+        (
+            "frame",
+            compare(frame::<Full>(&full, cam), frame::<Low>(&low, cam)),
+        ),
+    ]
+}
+
+/// A whole CPU frame of `M`: the forward pass keeping its state, and the backward pass.
+fn frame<'a, M: SplatMethod>(params: &'a [M::Params], cam: &'a Camera) -> impl FnMut() + 'a {
+    move || {
+        let opts = RenderOptions::default();
+        let (frame, state) = render_for_backward::<M>(params, cam, &opts).unwrap();
+        let grad = FrameGrad {
+            color: vec![1.0; frame.color.data.len()],
+            alpha: None,
+            depth: None,
+        };
+        let _ = black_box(backward::<M>(&state, params, cam, &grad).unwrap());
+    }
+}
+
 fn main() {
     let (n, w, h) = size_args(100_000, 800, 600);
     let gaussians = scene(n);
@@ -189,6 +269,53 @@ fn main() {
                 ms(with),
                 ms(without),
                 with.as_secs_f64() / without.as_secs_f64()
+            );
+        }
+    }
+    println!();
+    println!("the SH degree: the full instance (degree 3) against the degree's own; ms");
+    println!("| method | scene's degree | kernel | full | instance | ratio |");
+    println!("|---|---:|---|---:|---:|---:|");
+    let cam = camera(w, h);
+    for (method, degree, rows) in [
+        (
+            "3dgs",
+            0,
+            sh_times::<gs3d::Method, gs3d_sh0::Method>(&gaussians, 0, &cam),
+        ),
+        (
+            "3dgs",
+            1,
+            sh_times::<gs3d::Method, gs3d_sh1::Method>(&gaussians, 1, &cam),
+        ),
+        (
+            "3dgut",
+            0,
+            sh_times::<gut::Method, gut_sh0::Method>(&gaussians, 0, &cam),
+        ),
+        (
+            "3dgut",
+            1,
+            sh_times::<gut::Method, gut_sh1::Method>(&gaussians, 1, &cam),
+        ),
+        (
+            "3dgeer",
+            0,
+            sh_times::<geer::Method, geer_sh0::Method>(&gaussians, 0, &cam),
+        ),
+        (
+            "3dgeer",
+            1,
+            sh_times::<geer::Method, geer_sh1::Method>(&gaussians, 1, &cam),
+        ),
+    ] {
+        for (kernel, (full, instance)) in rows {
+            let ms = |d: Duration| d.as_secs_f64() * 1e3;
+            println!(
+                "| {method} | {degree} | {kernel} | {:.2} | {:.2} | {:.2} |",
+                ms(full),
+                ms(instance),
+                full.as_secs_f64() / instance.as_secs_f64()
             );
         }
     }

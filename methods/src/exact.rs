@@ -16,241 +16,258 @@
 //! - `tile_cull`: the contour against the four planes through the camera and the tile's edges
 //!   (the PBF-CSF test); exact for pinhole and BEAP, every tile kept for the fisheye, whose
 //!   tile edges are not planes.
+//!
+//! The SH degree is one instance per degree, as for 3DGS: `geer_sh0` .. `geer_sh2`, and `geer`
+//! for degree 3.
 
-#[splat_macros::splat_method]
-pub mod geer {
-    use splat_runtime::prelude::*;
+/// One 3DGEER method with `$n` SH coefficients per channel.
+macro_rules! exact {
+    ($name:ident, sh_coefficients = $n:literal) => {
+        #[splat_macros::splat_method]
+        pub mod $name {
+            use splat_runtime::prelude::*;
 
-    pub const NEAR: f32 = 0.01;
-    pub const ALPHA_MIN: f32 = 1.0 / 255.0;
-    pub const PI: f32 = std::f32::consts::PI;
-    /// Stands for an unbounded box side (the runtime clamps boxes to the image).
-    pub const FAR: f32 = 1e6;
+            pub const NEAR: f32 = 0.01;
+            pub const ALPHA_MIN: f32 = 1.0 / 255.0;
+            pub const PI: f32 = std::f32::consts::PI;
+            /// Stands for an unbounded box side (the runtime clamps boxes to the image).
+            pub const FAR: f32 = 1e6;
 
-    pub struct Params {
-        pub mean: Vec3,
-        pub log_scale: Vec3,
-        /// Rotation quaternion (w, x, y, z), normalized here.
-        pub rotation: Vec4,
-        pub opacity_logit: f32,
-        pub sh: [Vec3; 16],
-    }
+            pub struct Params {
+                pub mean: Vec3,
+                pub log_scale: Vec3,
+                /// Rotation quaternion (w, x, y, z), normalized here.
+                pub rotation: Vec4,
+                pub opacity_logit: f32,
+                pub sh: [Vec3; $n],
+            }
 
-    pub struct Ray {
-        /// World-space direction; the origin is the camera centre.
-        pub dir: Vec3,
-    }
+            pub struct Ray {
+                /// World-space direction; the origin is the camera centre.
+                pub dir: Vec3,
+            }
 
-    pub struct Cull {
-        /// Camera-space mean and λ² Σ (the contour where alpha reaches ALPHA_MIN).
-        pub mean: Vec3,
-        pub contour: Mat3,
-        pub focal: Vec2,
-        pub principal: Vec2,
-        /// How tile edges map to angles: 0 atan (pinhole), 1 none (fisheye), 2 linear (BEAP).
-        pub edges: f32,
-    }
+            pub struct Cull {
+                /// Camera-space mean and λ² Σ (the contour where alpha reaches ALPHA_MIN).
+                pub mean: Vec3,
+                pub contour: Mat3,
+                pub focal: Vec2,
+                pub principal: Vec2,
+                /// How tile edges map to angles: 0 atan (pinhole), 1 none (fisheye), 2 linear (BEAP).
+                pub edges: f32,
+            }
 
-    pub struct Shade {
-        /// The camera centre in the canonical frame, and world to canonical (S^-1 R^T).
-        pub origin: Vec3,
-        pub whiten: Mat3,
-        pub opacity: f32,
-        pub color: Vec3,
-    }
+            pub struct Shade {
+                /// The camera centre in the canonical frame, and world to canonical (S^-1 R^T).
+                pub origin: Vec3,
+                pub whiten: Mat3,
+                pub opacity: f32,
+                pub color: Vec3,
+            }
 
-    /// Angular bounds (lo, hi) of the wedge holding the contour, from the tangent condition
-    /// a c² - 2 b c + e = 0 in c = tan(angle). Each root is a plane, known mod pi; on the
-    /// branches nearest `centre` both can land on one side of it (a wedge reaching past 90°
-    /// from the centre's angle, as for particles beside a wide camera): then the wedge
-    /// holding the centre is the narrower one, and the farther bound moves by pi.
-    fn bounds(a: f32, b: f32, e: f32, centre: f32) -> Vec2 {
-        let root = (b * b - a * e).max(0.0).sqrt();
-        let one = nearest_branch(a, b + root, centre);
-        let other = nearest_branch(a, b - root, centre);
-        let (lo, hi) = (one.min(other), one.max(other));
-        let (below, above) = (hi < centre, lo > centre);
-        Vec2::new(
-            select(below, hi, select(above, hi - PI, lo)),
-            select(below, lo + PI, select(above, lo, hi)),
-        )
-    }
+            /// Angular bounds (lo, hi) of the wedge holding the contour, from the tangent condition
+            /// a c² - 2 b c + e = 0 in c = tan(angle). Each root is a plane, known mod pi; on the
+            /// branches nearest `centre` both can land on one side of it (a wedge reaching past 90°
+            /// from the centre's angle, as for particles beside a wide camera): then the wedge
+            /// holding the centre is the narrower one, and the farther bound moves by pi.
+            fn bounds(a: f32, b: f32, e: f32, centre: f32) -> Vec2 {
+                let root = (b * b - a * e).max(0.0).sqrt();
+                let one = nearest_branch(a, b + root, centre);
+                let other = nearest_branch(a, b - root, centre);
+                let (lo, hi) = (one.min(other), one.max(other));
+                let (below, above) = (hi < centre, lo > centre);
+                Vec2::new(
+                    select(below, hi, select(above, hi - PI, lo)),
+                    select(below, lo + PI, select(above, lo, hi)),
+                )
+            }
 
-    /// The angle with tangent num / a closest to `centre` (tan repeats every pi).
-    fn nearest_branch(a: f32, num: f32, centre: f32) -> f32 {
-        let (s, c) = (centre.sin(), centre.cos());
-        let rel = (num * c - a * s).atan2(a * c + num * s);
-        centre
-            + select(
-                rel > PI / 2.0,
-                rel - PI,
-                select(rel < -PI / 2.0, rel + PI, rel),
-            )
-    }
+            /// The angle with tangent num / a closest to `centre` (tan repeats every pi).
+            fn nearest_branch(a: f32, num: f32, centre: f32) -> f32 {
+                let (s, c) = (centre.sin(), centre.cos());
+                let rel = (num * c - a * s).atan2(a * c + num * s);
+                centre
+                    + select(
+                        rel > PI / 2.0,
+                        rel - PI,
+                        select(rel < -PI / 2.0, rel + PI, rel),
+                    )
+            }
 
-    /// r(θ) of the fisheye, in focal units.
-    fn fisheye_radius(k: Vec4, theta: f32) -> f32 {
-        let t2 = theta * theta;
-        theta * (1.0 + t2 * (k.x + t2 * (k.y + t2 * (k.z + t2 * k.w))))
-    }
+            /// r(θ) of the fisheye, in focal units.
+            fn fisheye_radius(k: Vec4, theta: f32) -> f32 {
+                let t2 = theta * theta;
+                theta * (1.0 + t2 * (k.x + t2 * (k.y + t2 * (k.z + t2 * k.w))))
+            }
 
-    /// The fisheye image of the cone of half-angle `half` around camera-space `dir`: an
-    /// annular sector; its box from the sector's corners and the outer arc's axis crossings.
-    fn fisheye_box(cam: &Camera, dir: Vec3, half: f32) -> (Vec2, Vec2) {
-        let polar = (dir.x * dir.x + dir.y * dir.y).sqrt().atan2(dir.z);
-        let azimuth = dir.y.atan2(dir.x);
-        let outer = fisheye_radius(cam.distortion, (polar + half).min(PI));
-        let inner = fisheye_radius(cam.distortion, (polar - half).max(0.0));
-        // The sector's half-width in azimuth; all around when the cone holds the axis (either
-        // end of it).
-        let around = half >= polar || polar + half >= PI;
-        let spread = select(around, PI, (half.sin() / polar.sin()).min(1.0).asin());
-        let mut lo = Vec2::splat(FAR);
-        let mut hi = Vec2::splat(-FAR);
-        let sides = [-1.0, 1.0, -1.0, 1.0];
-        let radii = [inner, inner, outer, outer];
-        for k in 0..4 {
-            let angle = azimuth + sides[k] * spread;
-            let p = cam.principal + cam.focal * Vec2::new(angle.cos(), angle.sin()) * radii[k];
-            lo = lo.min(p);
-            hi = hi.max(p);
+            /// The fisheye image of the cone of half-angle `half` around camera-space `dir`: an
+            /// annular sector; its box from the sector's corners and the outer arc's axis crossings.
+            fn fisheye_box(cam: &Camera, dir: Vec3, half: f32) -> (Vec2, Vec2) {
+                let polar = (dir.x * dir.x + dir.y * dir.y).sqrt().atan2(dir.z);
+                let azimuth = dir.y.atan2(dir.x);
+                let outer = fisheye_radius(cam.distortion, (polar + half).min(PI));
+                let inner = fisheye_radius(cam.distortion, (polar - half).max(0.0));
+                // The sector's half-width in azimuth; all around when the cone holds the axis (either
+                // end of it).
+                let around = half >= polar || polar + half >= PI;
+                let spread = select(around, PI, (half.sin() / polar.sin()).min(1.0).asin());
+                let mut lo = Vec2::splat(FAR);
+                let mut hi = Vec2::splat(-FAR);
+                let sides = [-1.0, 1.0, -1.0, 1.0];
+                let radii = [inner, inner, outer, outer];
+                for k in 0..4 {
+                    let angle = azimuth + sides[k] * spread;
+                    let p =
+                        cam.principal + cam.focal * Vec2::new(angle.cos(), angle.sin()) * radii[k];
+                    lo = lo.min(p);
+                    hi = hi.max(p);
+                }
+                for k in 0..4 {
+                    // The outer arc's axis crossings inside the sector.
+                    let angle = PI / 2.0 * k as f32;
+                    let off = (angle - azimuth).sin().atan2((angle - azimuth).cos()).abs();
+                    let p = cam.principal + cam.focal * Vec2::new(angle.cos(), angle.sin()) * outer;
+                    lo = select(off <= spread, lo.min(p), lo);
+                    hi = select(off <= spread, hi.max(p), hi);
+                }
+                (lo, hi)
+            }
+
+            pub fn project(p: &Params, cam: &Camera) -> Projected<Cull, Shade> {
+                let q = Quat::from_xyzw(p.rotation.y, p.rotation.z, p.rotation.w, p.rotation.x)
+                    .normalize();
+                let rot = Mat3::from_quat(q);
+                let scale = p.log_scale.exp();
+                let mean = cam.rotation * p.mean + cam.translation;
+                let axes = cam.rotation * rot * Mat3::from_diagonal(scale);
+                let opacity = sigmoid(p.opacity_logit);
+                // λ-contour: where exp(-λ²/2) opacity = ALPHA_MIN.
+                let lambda2 = 2.0 * (opacity / ALPHA_MIN).ln().max(0.0);
+                let contour = axes * axes.transpose() * lambda2;
+                let t = contour - Mat3::from_cols(mean * mean.x, mean * mean.y, mean * mean.z);
+                // No tangent plane through the camera's y (x) axis when that axis crosses the
+                // contour: every horizontal (vertical) angle is reached. Both: the camera is inside.
+                let open = Vec2::new(
+                    select(t.z_axis.x * t.z_axis.x < t.z_axis.z * t.x_axis.x, FAR, 0.0),
+                    select(t.z_axis.y * t.z_axis.y < t.z_axis.z * t.y_axis.y, FAR, 0.0),
+                );
+                let inside = open.min_element() > 0.0;
+                let theta = bounds(t.z_axis.z, t.z_axis.x, t.x_axis.x, mean.x.atan2(mean.z));
+                let phi = bounds(t.z_axis.z, t.z_axis.y, t.y_axis.y, mean.y.atan2(mean.z));
+                let (f, c) = (cam.focal, cam.principal);
+                let lo = Vec2::new(theta.x, phi.x);
+                let hi = Vec2::new(theta.y, phi.y);
+                let ahead = hi.max_element() < 1.5 && lo.min_element() > -1.5;
+                let (pin_lo, pin_hi) = (
+                    f * Vec2::new(lo.x.tan(), lo.y.tan()) + c,
+                    f * Vec2::new(hi.x.tan(), hi.y.tan()) + c,
+                );
+                let reach = (lambda2.sqrt() * scale.max_element() / mean.length())
+                    .min(1.0)
+                    .asin();
+                let (fish_lo, fish_hi) = fisheye_box(cam, mean, reach);
+                let (box_lo, box_hi) = if cam.is_equiangular() {
+                    (f * lo + c - open, f * hi + c + open)
+                } else if cam.is_kannala_brandt() {
+                    (fish_lo, fish_hi)
+                } else {
+                    (
+                        select(ahead, pin_lo, c - FAR),
+                        select(ahead, pin_hi, c + FAR),
+                    )
+                };
+                // The fisheye's cone bound covers everything once it reaches a half space.
+                let whole = inside || (cam.is_kannala_brandt() && reach >= PI / 2.0);
+                let whiten = Mat3::from_diagonal(Vec3::ONE / scale) * rot.transpose();
+                Projected {
+                    visible: mean.length() > NEAR && cam.can_project(mean) && opacity >= ALPHA_MIN,
+                    depth: mean.length(),
+                    bbox_min: select(whole, c - FAR, box_lo),
+                    bbox_max: select(whole, c + FAR, box_hi),
+                    cull: Cull {
+                        mean,
+                        contour,
+                        focal: f,
+                        principal: c,
+                        edges: select(
+                            cam.is_equiangular(),
+                            2.0,
+                            select(cam.is_kannala_brandt(), 1.0, 0.0),
+                        ),
+                    },
+                    shade: Shade {
+                        origin: whiten * (cam.center() - p.mean),
+                        whiten,
+                        opacity,
+                        color: (spherical_harmonics(p.sh, p.mean - cam.center()) + 0.5)
+                            .max(Vec3::ZERO),
+                    },
+                }
+            }
+
+            /// Whether the contour reaches the side of the plane through the camera with normal `n`
+            /// that the tile is on.
+            fn reaches(n: Vec3, c: &Cull) -> bool {
+                n.dot(c.mean) + n.dot(c.contour * n).max(0.0).sqrt() >= 0.0
+            }
+
+            /// The PBF-CSF test: the tile's rays lie between the planes through the camera at its
+            /// edges' horizontal and vertical angles; keep the tile unless the contour is wholly
+            /// outside one of them.
+            pub fn tile_cull(tile: &Tile, c: &Cull) -> bool {
+                let lo = (tile.min - c.principal) / c.focal;
+                let hi = (tile.max - c.principal) / c.focal;
+                let linear = c.edges == 2.0;
+                let (l, r) = (
+                    select(linear, lo.x, lo.x.atan()),
+                    select(linear, hi.x, hi.x.atan()),
+                );
+                let (t, b) = (
+                    select(linear, lo.y, lo.y.atan()),
+                    select(linear, hi.y, hi.y.atan()),
+                );
+                c.edges == 1.0
+                    || reaches(Vec3::new(l.cos(), 0.0, -l.sin()), c)
+                        && reaches(Vec3::new(-r.cos(), 0.0, r.sin()), c)
+                        && reaches(Vec3::new(0.0, t.cos(), -t.sin()), c)
+                        && reaches(Vec3::new(0.0, -b.cos(), b.sin()), c)
+            }
+
+            pub fn pixel_info(pixel: Vec2, cam: &Camera) -> Ray {
+                Ray {
+                    dir: cam.rotation.transpose() * cam.pixel_ray(pixel),
+                }
+            }
+
+            /// Φ(s), the standard normal CDF (Abramowitz-Stegun 7.1.26, error below 1.5e-7).
+            fn normal_cdf(s: f32) -> f32 {
+                let x = s.abs() * 0.70710678;
+                let t = 1.0 / (1.0 + 0.3275911 * x);
+                let poly = t
+                    * (0.254829592
+                        + t * (-0.284496736
+                            + t * (1.421413741 + t * (-1.453152027 + t * 1.061405429))));
+                let tail = 0.5 * poly * (-x * x).exp();
+                select(s >= 0.0, 1.0 - tail, tail)
+            }
+
+            pub fn evaluate(ray: Ray, s: &Shade) -> Contribution<Vec3> {
+                let d = s.whiten * ray.dir;
+                let m = s.origin.cross(d);
+                let d2 = m.dot(m) / d.dot(d);
+                let ahead = -s.origin.dot(d) / d.length();
+                let alpha = (s.opacity * (-0.5 * d2).exp() * normal_cdf(ahead)).min(0.99);
+                Contribution {
+                    alpha,
+                    color: s.color,
+                    valid: alpha >= ALPHA_MIN,
+                }
+            }
         }
-        for k in 0..4 {
-            // The outer arc's axis crossings inside the sector.
-            let angle = PI / 2.0 * k as f32;
-            let off = (angle - azimuth).sin().atan2((angle - azimuth).cos()).abs();
-            let p = cam.principal + cam.focal * Vec2::new(angle.cos(), angle.sin()) * outer;
-            lo = select(off <= spread, lo.min(p), lo);
-            hi = select(off <= spread, hi.max(p), hi);
-        }
-        (lo, hi)
-    }
-
-    pub fn project(p: &Params, cam: &Camera) -> Projected<Cull, Shade> {
-        let q = Quat::from_xyzw(p.rotation.y, p.rotation.z, p.rotation.w, p.rotation.x).normalize();
-        let rot = Mat3::from_quat(q);
-        let scale = p.log_scale.exp();
-        let mean = cam.rotation * p.mean + cam.translation;
-        let axes = cam.rotation * rot * Mat3::from_diagonal(scale);
-        let opacity = sigmoid(p.opacity_logit);
-        // λ-contour: where exp(-λ²/2) opacity = ALPHA_MIN.
-        let lambda2 = 2.0 * (opacity / ALPHA_MIN).ln().max(0.0);
-        let contour = axes * axes.transpose() * lambda2;
-        let t = contour - Mat3::from_cols(mean * mean.x, mean * mean.y, mean * mean.z);
-        // No tangent plane through the camera's y (x) axis when that axis crosses the
-        // contour: every horizontal (vertical) angle is reached. Both: the camera is inside.
-        let open = Vec2::new(
-            select(t.z_axis.x * t.z_axis.x < t.z_axis.z * t.x_axis.x, FAR, 0.0),
-            select(t.z_axis.y * t.z_axis.y < t.z_axis.z * t.y_axis.y, FAR, 0.0),
-        );
-        let inside = open.min_element() > 0.0;
-        let theta = bounds(t.z_axis.z, t.z_axis.x, t.x_axis.x, mean.x.atan2(mean.z));
-        let phi = bounds(t.z_axis.z, t.z_axis.y, t.y_axis.y, mean.y.atan2(mean.z));
-        let (f, c) = (cam.focal, cam.principal);
-        let lo = Vec2::new(theta.x, phi.x);
-        let hi = Vec2::new(theta.y, phi.y);
-        let ahead = hi.max_element() < 1.5 && lo.min_element() > -1.5;
-        let (pin_lo, pin_hi) = (
-            f * Vec2::new(lo.x.tan(), lo.y.tan()) + c,
-            f * Vec2::new(hi.x.tan(), hi.y.tan()) + c,
-        );
-        let reach = (lambda2.sqrt() * scale.max_element() / mean.length())
-            .min(1.0)
-            .asin();
-        let (fish_lo, fish_hi) = fisheye_box(cam, mean, reach);
-        let (box_lo, box_hi) = if cam.is_equiangular() {
-            (f * lo + c - open, f * hi + c + open)
-        } else if cam.is_kannala_brandt() {
-            (fish_lo, fish_hi)
-        } else {
-            (
-                select(ahead, pin_lo, c - FAR),
-                select(ahead, pin_hi, c + FAR),
-            )
-        };
-        // The fisheye's cone bound covers everything once it reaches a half space.
-        let whole = inside || (cam.is_kannala_brandt() && reach >= PI / 2.0);
-        let whiten = Mat3::from_diagonal(Vec3::ONE / scale) * rot.transpose();
-        Projected {
-            visible: mean.length() > NEAR && cam.can_project(mean) && opacity >= ALPHA_MIN,
-            depth: mean.length(),
-            bbox_min: select(whole, c - FAR, box_lo),
-            bbox_max: select(whole, c + FAR, box_hi),
-            cull: Cull {
-                mean,
-                contour,
-                focal: f,
-                principal: c,
-                edges: select(
-                    cam.is_equiangular(),
-                    2.0,
-                    select(cam.is_kannala_brandt(), 1.0, 0.0),
-                ),
-            },
-            shade: Shade {
-                origin: whiten * (cam.center() - p.mean),
-                whiten,
-                opacity,
-                color: (spherical_harmonics(p.sh, p.mean - cam.center()) + 0.5).max(Vec3::ZERO),
-            },
-        }
-    }
-
-    /// Whether the contour reaches the side of the plane through the camera with normal `n`
-    /// that the tile is on.
-    fn reaches(n: Vec3, c: &Cull) -> bool {
-        n.dot(c.mean) + n.dot(c.contour * n).max(0.0).sqrt() >= 0.0
-    }
-
-    /// The PBF-CSF test: the tile's rays lie between the planes through the camera at its
-    /// edges' horizontal and vertical angles; keep the tile unless the contour is wholly
-    /// outside one of them.
-    pub fn tile_cull(tile: &Tile, c: &Cull) -> bool {
-        let lo = (tile.min - c.principal) / c.focal;
-        let hi = (tile.max - c.principal) / c.focal;
-        let linear = c.edges == 2.0;
-        let (l, r) = (
-            select(linear, lo.x, lo.x.atan()),
-            select(linear, hi.x, hi.x.atan()),
-        );
-        let (t, b) = (
-            select(linear, lo.y, lo.y.atan()),
-            select(linear, hi.y, hi.y.atan()),
-        );
-        c.edges == 1.0
-            || reaches(Vec3::new(l.cos(), 0.0, -l.sin()), c)
-                && reaches(Vec3::new(-r.cos(), 0.0, r.sin()), c)
-                && reaches(Vec3::new(0.0, t.cos(), -t.sin()), c)
-                && reaches(Vec3::new(0.0, -b.cos(), b.sin()), c)
-    }
-
-    pub fn pixel_info(pixel: Vec2, cam: &Camera) -> Ray {
-        Ray {
-            dir: cam.rotation.transpose() * cam.pixel_ray(pixel),
-        }
-    }
-
-    /// Φ(s), the standard normal CDF (Abramowitz-Stegun 7.1.26, error below 1.5e-7).
-    fn normal_cdf(s: f32) -> f32 {
-        let x = s.abs() * 0.70710678;
-        let t = 1.0 / (1.0 + 0.3275911 * x);
-        let poly = t
-            * (0.254829592
-                + t * (-0.284496736 + t * (1.421413741 + t * (-1.453152027 + t * 1.061405429))));
-        let tail = 0.5 * poly * (-x * x).exp();
-        select(s >= 0.0, 1.0 - tail, tail)
-    }
-
-    pub fn evaluate(ray: Ray, s: &Shade) -> Contribution<Vec3> {
-        let d = s.whiten * ray.dir;
-        let m = s.origin.cross(d);
-        let d2 = m.dot(m) / d.dot(d);
-        let ahead = -s.origin.dot(d) / d.length();
-        let alpha = (s.opacity * (-0.5 * d2).exp() * normal_cdf(ahead)).min(0.99);
-        Contribution {
-            alpha,
-            color: s.color,
-            valid: alpha >= ALPHA_MIN,
-        }
-    }
+    };
 }
+
+exact!(geer, sh_coefficients = 16);
+exact!(geer_sh0, sh_coefficients = 1);
+exact!(geer_sh1, sh_coefficients = 4);
+exact!(geer_sh2, sh_coefficients = 9);

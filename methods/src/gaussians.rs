@@ -217,32 +217,6 @@ macro_rules! gaussians_3d {
                 g.mean
             }
         }
-
-        impl crate::FromStored for $name::Params {
-            fn from_stored(g: &splat_runtime::io::ply::StoredGaussian) -> Self {
-                $name::Params {
-                    mean: g.mean,
-                    log_scale: g.log_scale,
-                    rotation: g.rotation,
-                    opacity_logit: g.opacity_logit,
-                    sh: std::array::from_fn(|i| g.sh[i]),
-                }
-            }
-        }
-
-        impl crate::ToStored for $name::Params {
-            fn to_stored(&self) -> splat_runtime::io::ply::StoredGaussian {
-                let mut sh = [splat_runtime::glam::Vec3::ZERO; 16];
-                sh[..$n].copy_from_slice(&self.sh);
-                splat_runtime::io::ply::StoredGaussian {
-                    mean: self.mean,
-                    log_scale: self.log_scale,
-                    rotation: self.rotation,
-                    opacity_logit: self.opacity_logit,
-                    sh,
-                }
-            }
-        }
     };
 }
 

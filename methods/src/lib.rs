@@ -5,15 +5,16 @@ mod gaussians;
 mod linear;
 mod unscented;
 
-pub use exact::geer;
+pub use exact::{geer, geer_sh0, geer_sh1, geer_sh2};
 pub use gaussians::{gs3d, gs3d_aa, gs3d_sh0, gs3d_sh1, gs3d_sh2};
 pub use linear::linprim;
-pub use unscented::{gut, gut_rs};
+pub use unscented::{gut, gut_rs, gut_sh0, gut_sh1, gut_sh2};
 
 pub use splat_runtime::io::ply::{FromStored, ToStored};
 
 /// `FromStored` and `ToStored` for methods whose parameters are the stored Gaussian's fields as
-/// they are (degree-3 SH).
+/// they are, with the SH coefficients of their degree (the stored ones beyond it dropped,
+/// written back as zeros).
 macro_rules! stored_as_is {
     ($($params:path),*) => {$(
         impl FromStored for $params {
@@ -23,26 +24,43 @@ macro_rules! stored_as_is {
                     log_scale: g.log_scale,
                     rotation: g.rotation,
                     opacity_logit: g.opacity_logit,
-                    sh: g.sh,
+                    sh: std::array::from_fn(|i| g.sh[i]),
                 }
             }
         }
 
         impl ToStored for $params {
             fn to_stored(&self) -> splat_runtime::io::ply::StoredGaussian {
+                let mut sh = [splat_runtime::glam::Vec3::ZERO; 16];
+                sh[..self.sh.len()].copy_from_slice(&self.sh);
                 splat_runtime::io::ply::StoredGaussian {
                     mean: self.mean,
                     log_scale: self.log_scale,
                     rotation: self.rotation,
                     opacity_logit: self.opacity_logit,
-                    sh: self.sh,
+                    sh,
                 }
             }
         }
     )*};
 }
 
-stored_as_is!(gut::Params, gut_rs::Params, geer::Params);
+stored_as_is!(
+    gs3d::Params,
+    gs3d_sh0::Params,
+    gs3d_sh1::Params,
+    gs3d_sh2::Params,
+    gs3d_aa::Params,
+    gut::Params,
+    gut_sh0::Params,
+    gut_sh1::Params,
+    gut_sh2::Params,
+    gut_rs::Params,
+    geer::Params,
+    geer_sh0::Params,
+    geer_sh1::Params,
+    geer_sh2::Params
+);
 
 /// 3DGUT, 3DGEER and LinPrim train like 3DGS (their parameters are the same Gaussian's, or
 /// for LinPrim's octahedra the Gaussian they are stored as): the same learning rates and

@@ -8,10 +8,13 @@
 //! away. Per Gaussian, the box holds the footprints at the first and the last row's pose, and
 //! the color and opacity are those seen from the first row's pose (they change little over a
 //! readout).
+//!
+//! The SH degree is one instance per degree, as for 3DGS: `gut_sh0` .. `gut_sh2`, and `gut` for
+//! degree 3 (and the rolling shutter).
 
-/// One 3DGUT method, with or without a rolling shutter.
+/// One 3DGUT method with `$n` SH coefficients per channel, with or without a rolling shutter.
 macro_rules! unscented {
-    ($name:ident, rolling_shutter = $rs:literal) => {
+    ($name:ident, sh_coefficients = $n:literal, rolling_shutter = $rs:literal) => {
         #[splat_macros::splat_method]
         pub mod $name {
             use splat_runtime::prelude::*;
@@ -28,7 +31,7 @@ macro_rules! unscented {
                 /// Rotation quaternion (w, x, y, z), normalized here.
                 pub rotation: Vec4,
                 pub opacity_logit: f32,
-                pub sh: [Vec3; 16],
+                pub sh: [Vec3; $n],
             }
 
             /// A pixel's ray in world space.
@@ -185,5 +188,8 @@ macro_rules! unscented {
     };
 }
 
-unscented!(gut, rolling_shutter = false);
-unscented!(gut_rs, rolling_shutter = true);
+unscented!(gut, sh_coefficients = 16, rolling_shutter = false);
+unscented!(gut_sh0, sh_coefficients = 1, rolling_shutter = false);
+unscented!(gut_sh1, sh_coefficients = 4, rolling_shutter = false);
+unscented!(gut_sh2, sh_coefficients = 9, rolling_shutter = false);
+unscented!(gut_rs, sh_coefficients = 16, rolling_shutter = true);

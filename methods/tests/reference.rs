@@ -63,50 +63,6 @@ fn gaussians_straddling_tile_boundaries() {
     compare("straddling", &params, &cam);
 }
 
-#[test]
-fn sh_degree_instances_agree_when_higher_terms_are_zero() {
-    use splat_methods::{FromStored, gs3d_sh0, gs3d_sh1};
-    use splat_runtime::glam::Vec3;
-    use splat_runtime::io::ply::StoredGaussian;
-    let mut rng = fastrand::Rng::with_seed(4);
-    let cam = camera(40, 32);
-    let stored: Vec<StoredGaussian> = (0..60)
-        .map(|_| {
-            let px = Vec2::new(rng.f32() * 40.0, rng.f32() * 32.0);
-            let z = 2.0 + 4.0 * rng.f32();
-            let g = gaussian_at(&mut rng, &cam, px, z, -2.0);
-            let mut sh = [Vec3::ZERO; 16];
-            sh[0] = g.sh[0];
-            StoredGaussian {
-                mean: g.mean,
-                log_scale: g.log_scale,
-                rotation: g.rotation,
-                opacity_logit: g.opacity_logit,
-                sh,
-            }
-        })
-        .collect();
-    let opts = RenderOptions::default();
-    let full: Vec<Params> = stored.iter().map(Params::from_stored).collect();
-    let reference = render::<Method>(&full, &cam, &opts).unwrap().color.data;
-    let d0: Vec<gs3d_sh0::Params> = stored.iter().map(FromStored::from_stored).collect();
-    let d1: Vec<gs3d_sh1::Params> = stored.iter().map(FromStored::from_stored).collect();
-    for other in [
-        render::<gs3d_sh0::Method>(&d0, &cam, &opts)
-            .unwrap()
-            .color
-            .data,
-        render::<gs3d_sh1::Method>(&d1, &cam, &opts)
-            .unwrap()
-            .color
-            .data,
-    ] {
-        for (a, b) in reference.iter().zip(&other) {
-            assert!((a - b).abs() <= 1e-6, "{a} vs {b}");
-        }
-    }
-}
-
 /// The blend's thresholds as renderer options: raised, they change the image as the reference
 /// with the same rule says, on the CPU and the GPU, forward and backward; at their defaults
 /// the image is bit for bit the one rendered without naming them.

@@ -1,13 +1,21 @@
 //! Camera models as compiled variants: each model-aware kernel is also compiled once per
 //! camera model, with the other models' branches folded away. The variants the runtime calls
 //! equal the generic kernels bit for bit, and the other models' code is not in them (neither
-//! in the Rust nor in the WGSL).
+//! in the Rust nor in the WGSL). Likewise the SH degree: a method's instance for a lower degree
+//! renders and differentiates a scene without higher terms as the full instance does.
 
 mod common;
 
 use common::{as_method, spread_gaussians, wide_camera};
-use splat_methods::{geer, gs3d, gut};
-use splat_runtime::checks::variants::specialized_kernels_match_generic;
+use splat_methods::FromStored;
+use splat_methods::{
+    geer, geer_sh0, geer_sh1, geer_sh2, gs3d, gs3d_sh0, gs3d_sh1, gs3d_sh2, gut, gut_sh0, gut_sh1,
+    gut_sh2,
+};
+use splat_runtime::checks::variants::{
+    lower_sh_degree_matches_full, specialized_kernels_match_generic,
+};
+use splat_runtime::io::ply::sh_coefficients;
 use splat_runtime::{CameraModel, SplatMethod};
 
 #[test]
@@ -25,6 +33,33 @@ fn specialized_kernels_equal_the_generic_ones_on_every_model() {
     // 3DGS reads no camera model (pinhole only): its "variant" is the kernel itself.
     let cam = wide_camera(64, 48, CameraModel::Pinhole);
     specialized_kernels_match_generic::<gs3d::Method>("3dgs", &spread_gaussians(&cam, 40, 5), &cam);
+}
+
+#[test]
+fn each_sh_degree_instance_renders_as_the_full_method() {
+    matches_full::<gs3d::Method, gs3d_sh0::Method>(0);
+    matches_full::<gs3d::Method, gs3d_sh1::Method>(1);
+    matches_full::<gs3d::Method, gs3d_sh2::Method>(2);
+    matches_full::<gut::Method, gut_sh0::Method>(0);
+    matches_full::<gut::Method, gut_sh1::Method>(1);
+    matches_full::<gut::Method, gut_sh2::Method>(2);
+    matches_full::<geer::Method, geer_sh0::Method>(0);
+    matches_full::<geer::Method, geer_sh1::Method>(1);
+    matches_full::<geer::Method, geer_sh2::Method>(2);
+}
+
+/// `Low`, the instance for SH degree `degree`, against `Full` on Gaussians of that degree.
+fn matches_full<Full: SplatMethod, Low: SplatMethod>(degree: u32)
+where
+    Full::Params: FromStored,
+{
+    let cam = wide_camera(40, 32, CameraModel::Pinhole);
+    let mut gaussians = spread_gaussians(&cam, 60, 6);
+    for g in &mut gaussians {
+        g.sh[sh_coefficients(degree)..].fill(Default::default());
+    }
+    let label = format!("degree {degree}");
+    lower_sh_degree_matches_full::<Full, Low>(&label, &as_method(gaussians), &cam);
 }
 
 /// The text of the item that starts with `start` in `source`, up to its closing brace at the

@@ -9,7 +9,8 @@
 //!   scenes, away from thresholds), against the reference's analytic adjoint (on realistic
 //!   scenes, with thresholds crossed and lists stopped at the T-stop), invalid pairs leaving no
 //!   trace, and the GPU backward against the CPU's;
-//! - [`variants`]: the kernels compiled for one camera model against the generic ones.
+//! - [`variants`]: the kernels compiled for one camera model against the generic ones, and a
+//!   lower SH degree's instance against the full one.
 //!
 //! Each check panics with a message naming the pixel, primitive or parameter group that is
 //! off, so it reads as a test:

@@ -4,9 +4,14 @@
 //! give the same results bit for bit; in the adjoints the generic kernel also adds the (zero)
 //! cotangents of the branches not taken, and sums a value's cotangent contributions in another
 //! order, so they agree to rounding: within `ADJOINT_TOLERANCE` of the cotangent's largest word.
+//!
+//! Likewise a method's instance for a lower SH degree against the full one, whole frames and
+//! gradients on both backends.
 
+use super::forward::outputs_close;
 use crate::flat::Flat;
 use crate::method::SplatMethod;
+use crate::pipeline::{Frame, Gradients, backward, render_for_backward};
 use crate::types::{Camera, Projected};
 use glam::Vec2;
 
@@ -50,6 +55,93 @@ pub fn specialized_kernels_match_generic<M: SplatMethod>(
             close(&words(&ca), &words(&cb), &format!("{what}: adjoint"));
         }
     });
+}
+
+/// `Low`, the instance of a method for a lower SH degree (its parameters the full instance's
+/// with the SH array cut short, the SH coefficients the last words), renders `params` as `Full`
+/// does when their higher-degree coefficients are zero: every output within 1e-6 + 1e-5
+/// relative, the gradients of the words it has (and of the camera) within `ADJOINT_TOLERANCE`
+/// of each one's largest, on the CPU and, where there is an adapter, on the GPU.
+pub fn lower_sh_degree_matches_full<Full: SplatMethod, Low: SplatMethod>(
+    label: &str,
+    params: &[Full::Params],
+    cam: &Camera,
+) {
+    let kept = Low::Params::LEN;
+    let low: Vec<Low::Params> = params
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let w = words(p);
+            assert!(
+                w[kept..].iter().all(|v| *v == 0.0),
+                "{label}: primitive {i} has SH coefficients beyond {}'s degree",
+                Low::NAME
+            );
+            Low::Params::read_words(&w[..kept])
+        })
+        .collect();
+    let n = (cam.size.x * cam.size.y) as usize;
+    let grad = super::frame_grad(&super::weights(n, <Full::Color as Flat>::LEN));
+    let opts = super::options(16);
+    let cpu = |label| {
+        let full = render_for_backward::<Full>(params, cam, &opts).unwrap();
+        let low_run = render_for_backward::<Low>(&low, cam, &opts).unwrap();
+        (
+            label,
+            outcome(
+                full.0,
+                &backward::<Full>(&full.1, params, cam, &grad).unwrap(),
+            ),
+            outcome(
+                low_run.0,
+                &backward::<Low>(&low_run.1, &low, cam, &grad).unwrap(),
+            ),
+        )
+    };
+    let mut runs = vec![cpu("CPU")];
+    #[cfg(feature = "gpu")]
+    if let Some(gpu) = crate::gpu::adapter_or_skip() {
+        use crate::gpu::{entries::Accumulation, render};
+        let acc = Accumulation::default_for(&gpu);
+        let (full, mut state) =
+            render::render_for_backward::<Full>(&gpu, params, cam, &opts).unwrap();
+        let full = outcome(
+            full,
+            &render::backward(&mut state, &grad, acc).unwrap().gradients,
+        );
+        let (low_run, mut state) =
+            render::render_for_backward::<Low>(&gpu, &low, cam, &opts).unwrap();
+        let low_run = outcome(
+            low_run,
+            &render::backward(&mut state, &grad, acc).unwrap().gradients,
+        );
+        runs.push(("GPU", full, low_run));
+    }
+    for (backend, (full_frame, full_grad, full_cam), (low_frame, low_grad, low_cam)) in runs {
+        let what = format!(
+            "{label}: {} against {} on the {backend}",
+            Low::NAME,
+            Full::NAME
+        );
+        outputs_close(&what, &full_frame, &low_frame, 1e-6, 1e-5);
+        let kept_grad: Vec<f32> = full_grad
+            .chunks(Full::Params::LEN)
+            .flat_map(|g| g[..kept].to_vec())
+            .collect();
+        close(
+            &kept_grad,
+            &low_grad,
+            &format!("{what}: parameter gradients"),
+        );
+        close(&full_cam, &low_cam, &format!("{what}: camera gradient"));
+    }
+}
+
+/// A frame with its gradients as words: the parameters', the camera's.
+fn outcome<M: SplatMethod>(frame: Frame, g: &Gradients<M>) -> (Frame, Vec<f32>, Vec<f32>) {
+    let params = g.params.iter().flat_map(words).collect();
+    (frame, params, g.camera.float_slots().to_vec())
 }
 
 /// A cotangent of `project`'s output that is one in every word that carries a gradient
