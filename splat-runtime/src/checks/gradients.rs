@@ -294,6 +294,7 @@ pub fn camera_gradient_off_changes_only_the_camera<M: SplatMethod>(
         backward::<M>(&state, params, cam, &grad).unwrap()
     };
     // The largest difference allowed, relative to the largest gradient.
+    #[cfg_attr(not(feature = "gpu"), allow(unused_mut))] // the GPU run is pushed
     let mut runs = vec![("CPU", 0.0, cpu(&full), cpu(&without))];
     #[cfg(feature = "gpu")]
     if let Some(gpu) = crate::gpu::adapter_or_skip() {

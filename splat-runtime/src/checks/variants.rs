@@ -99,6 +99,7 @@ pub fn lower_sh_degree_matches_full<Full: SplatMethod, Low: SplatMethod>(
             ),
         )
     };
+    #[cfg_attr(not(feature = "gpu"), allow(unused_mut))] // the GPU run is pushed
     let mut runs = vec![cpu("CPU")];
     #[cfg(feature = "gpu")]
     if let Some(gpu) = crate::gpu::adapter_or_skip() {
