@@ -1180,3 +1180,69 @@ fn a_rolling_shutter_camera_needs_a_method_that_renders_it() {
     }
     assert!(dir.path().join("rolling.png").exists());
 }
+
+/// A run killed (SIGKILL) while it writes its output leaves the previous file whole: every
+/// output goes to a temporary file in the same folder, renamed over the target once complete.
+/// The render is large enough that its encoding takes a while, and the kill comes as soon as
+/// the temporary file appears, so it lands in the middle of the write.
+#[cfg(unix)]
+#[test]
+fn a_run_killed_while_writing_leaves_the_previous_output_whole() {
+    let dir = temp();
+    let out = dir.path().join("render.exr");
+    let args = |size: [&'static str; 2]| {
+        let [w, h] = size;
+        [
+            "render",
+            "--backend",
+            "cpu",
+            "--out",
+            "render.exr",
+            "--width",
+            w,
+            "--height",
+            h,
+        ]
+    };
+    ok(&splat(&args(["64", "48"]), dir.path()));
+    let before = std::fs::read(&out).unwrap();
+    let others = || -> Vec<PathBuf> {
+        std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| *p != out)
+            .collect()
+    };
+    let mut child = Command::new(env!("CARGO_BIN_EXE_splat"))
+        .args(args(["4000", "3000"]))
+        .current_dir(dir.path())
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .expect("run splat");
+    let started = std::time::Instant::now();
+    let temporary = loop {
+        if let Some(t) = others().pop() {
+            child.kill().unwrap(); // SIGKILL
+            break t;
+        }
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the render finished before it could be killed while writing"
+        );
+        assert!(
+            started.elapsed().as_secs() < 300,
+            "no temporary file appeared"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    };
+    child.wait().unwrap();
+    assert_eq!(
+        std::fs::read(&out).unwrap(),
+        before,
+        "the previous output changed"
+    );
+    assert!(
+        temporary.exists(),
+        "the kill came after the write was complete"
+    );
+}
