@@ -84,11 +84,11 @@ pub fn lower_sh_degree_matches_full<Full: SplatMethod, Low: SplatMethod>(
     let n = (cam.size.x * cam.size.y) as usize;
     let grad = super::frame_grad(&super::weights(n, <Full::Color as Flat>::LEN));
     let opts = super::options(16);
-    let cpu = |label| {
+    let cpu = || {
         let full = render_for_backward::<Full>(params, cam, &opts).unwrap();
         let low_run = render_for_backward::<Low>(&low, cam, &opts).unwrap();
         (
-            label,
+            "CPU",
             outcome(
                 full.0,
                 &backward::<Full>(&full.1, params, cam, &grad).unwrap(),
@@ -100,7 +100,7 @@ pub fn lower_sh_degree_matches_full<Full: SplatMethod, Low: SplatMethod>(
         )
     };
     #[cfg_attr(not(feature = "gpu"), allow(unused_mut))] // the GPU run is pushed
-    let mut runs = vec![cpu("CPU")];
+    let mut runs = vec![cpu()];
     #[cfg(feature = "gpu")]
     if let Some(gpu) = crate::gpu::adapter_or_skip() {
         use crate::gpu::{entries::Accumulation, render};
