@@ -2,13 +2,15 @@
 //! kernel of 3DGUT and 3DGEER timed as the generic kernel (branching on the model inside) and
 //! as the variant compiled for that model alone (what the runtime calls), one primitive or
 //! pixel at a time, on every camera model. The camera gradient: the whole CPU backward pass
-//! with and without it (`RenderOptions::camera_gradient`, off in training). The SH degree:
-//! `project`, its adjoint and the whole CPU frame (forward and backward, all threads) of each
-//! method's full instance against the instance for the scene's degree, on Gaussians of that
-//! degree. Times are best of 5, the two alternating after a warm-up of each, kernels on a
-//! single thread; the ratio is generic (or full) / variant in the same run.
+//! with and without it (off in training). The SH degree: `project`, its adjoint and the whole
+//! CPU frame (forward and backward, all threads) of each method's full instance against the
+//! instance for the scene's degree, on Gaussians of that degree. Gradient groups: `project`'s
+//! adjoint and the whole backward pass computing every gradient against computing some
+//! (`RenderOptions::gradients`). Times are best of 5, the two alternating after a warm-up of
+//! each, kernels on a single thread; the ratio is generic (or full) / variant in the same run.
 //!
-//! `cargo bench -p splat-methods --bench variants [-- N WIDTH HEIGHT]`
+//! `cargo bench -p splat-methods --bench variants [-- N WIDTH HEIGHT] [models|sh|groups]`
+//! (the word runs that section alone)
 
 use splat_methods::{
     FromStored, geer, geer_sh0, geer_sh1, gs3d, gs3d_sh0, gs3d_sh1, gut, gut_sh0, gut_sh1,
@@ -16,8 +18,8 @@ use splat_methods::{
 use splat_runtime::checks::variants::unit_cotangent;
 use splat_runtime::glam::{Vec2, Vec4};
 use splat_runtime::{
-    Camera, CameraModel, Flat, FrameGrad, RenderOptions, SplatMethod, backward,
-    render_for_backward, with_camera_model,
+    Camera, CameraModel, Flat, FrameGrad, GradientSet, RenderOptions, SplatMethod, backward,
+    param_groups, render_for_backward, with_camera_model,
 };
 use std::hint::black_box;
 use std::time::{Duration, Instant};
@@ -90,12 +92,13 @@ fn time_as<M: SplatMethod, const MODEL: u32>(
             compare(
                 || {
                     per_primitive(&|p| {
-                        let _ = black_box(M::project_adjoint(p, cam, &ones));
+                        let _ = black_box(M::project_adjoint(p, cam, &ones, GradientSet::ALL));
                     })
                 },
                 || {
                     per_primitive(&|p| {
-                        let _ = black_box(M::project_adjoint_as::<MODEL>(p, cam, &ones));
+                        let all = GradientSet::ALL;
+                        let _ = black_box(M::project_adjoint_as::<MODEL>(p, cam, &ones, all));
                     })
                 },
             ),
@@ -125,11 +128,15 @@ fn time_as<M: SplatMethod, const MODEL: u32>(
     ]
 }
 
-/// The CPU backward pass (all threads) with and without the camera gradient.
-fn backward_times<M: SplatMethod>(params: &[M::Params], cam: &Camera) -> Times {
-    let pass = |camera_gradient: bool| {
+/// The CPU backward pass (all threads) computing every gradient and computing `wanted`.
+fn backward_times<M: SplatMethod>(
+    params: &[M::Params],
+    cam: &Camera,
+    wanted: GradientSet,
+) -> Times {
+    let pass = |gradients: GradientSet| {
         let opts = RenderOptions {
-            camera_gradient,
+            gradients,
             ..Default::default()
         };
         let (frame, state) = render_for_backward::<M>(params, cam, &opts).unwrap();
@@ -142,7 +149,48 @@ fn backward_times<M: SplatMethod>(params: &[M::Params], cam: &Camera) -> Times {
             let _ = black_box(backward::<M>(&state, params, cam, &grad).unwrap());
         }
     };
-    compare(pass(true), pass(false))
+    compare(pass(GradientSet::ALL), pass(wanted))
+}
+
+/// The gradient sets worth timing: each parameter group alone and everything but the camera.
+fn gradient_sets<M: SplatMethod>() -> Vec<(String, GradientSet)> {
+    let mut sets = vec![(
+        "all but the camera".to_string(),
+        GradientSet::ALL.with_camera(false),
+    )];
+    for (name, _) in param_groups::<M>() {
+        let set = GradientSet::params::<M>(&[&name]).unwrap();
+        sets.push((format!("`{name}` alone"), set));
+    }
+    sets
+}
+
+/// (set, (all, set)) times of `project`'s adjoint, as the backward pass calls it (one thread),
+/// computing every gradient and each set of [`gradient_sets`]; and of the whole backward pass
+/// for everything but the camera and for the last group alone.
+fn group_times<M: SplatMethod>(params: &[M::Params], cam: &Camera) -> Vec<(String, Times)> {
+    let ones = unit_cotangent::<M>();
+    let sets = gradient_sets::<M>();
+    let adjoint = |wanted: GradientSet| {
+        let ones = &ones;
+        move || {
+            with_camera_model!(cam.model, MODEL => for p in params {
+                let _ = black_box(M::project_adjoint_as::<MODEL>(black_box(p), cam, ones, wanted));
+            })
+        }
+    };
+    let mut rows: Vec<(String, Times)> = sets
+        .iter()
+        .map(|(what, set)| {
+            let times = compare(adjoint(GradientSet::ALL), adjoint(*set));
+            (format!("project adjoint, {what}"), times)
+        })
+        .collect();
+    for (what, set) in [&sets[0], sets.last().unwrap()] {
+        let times = backward_times::<M>(params, cam, *set);
+        rows.push((format!("backward pass, {what}"), times));
+    }
+    rows
 }
 
 /// (kernel, (full, instance)) times of `project`, its adjoint (one thread) and a whole CPU
@@ -187,12 +235,15 @@ where
             compare(
                 || {
                     for p in &full {
-                        let _ = black_box(Full::project_adjoint(black_box(p), cam, &full_ones));
+                        let all = GradientSet::ALL;
+                        let _ =
+                            black_box(Full::project_adjoint(black_box(p), cam, &full_ones, all));
                     }
                 },
                 || {
                     for p in &low {
-                        let _ = black_box(Low::project_adjoint(black_box(p), cam, &low_ones));
+                        let all = GradientSet::ALL;
+                        let _ = black_box(Low::project_adjoint(black_box(p), cam, &low_ones, all));
                     }
                 },
             ),
@@ -225,6 +276,24 @@ fn main() {
         as_method::<gut::Params>(&gaussians),
         as_method::<geer::Params>(&gaussians),
     );
+    let only: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| ["models", "sh", "groups"].contains(&a.as_str()))
+        .collect();
+    let run = |section: &str| only.is_empty() || only.iter().any(|o| o == section);
+    if run("models") {
+        models(&gut_params, &geer_params, w, h);
+    }
+    if run("sh") {
+        sh_degrees(&gaussians, w, h);
+    }
+    if run("groups") {
+        groups(&gaussians, &gut_params, &geer_params, w, h);
+    }
+}
+
+fn models(gut_params: &[gut::Params], geer_params: &[geer::Params], w: f32, h: f32) {
+    let n = gut_params.len();
     println!("{n} primitives, {w}x{h} pixels, one thread; ms, generic / variant");
     println!("| method | camera | kernel | generic ms | variant ms | ratio |");
     println!("|---|---|---|---:|---:|---:|");
@@ -235,8 +304,8 @@ fn main() {
             cam.distortion = Vec4::new(0.02, -0.002, 0.0002, -0.00001);
         }
         for (method, rows) in [
-            ("3dgut", time::<gut::Method>(&gut_params, &cam)),
-            ("3dgeer", time::<geer::Method>(&geer_params, &cam)),
+            ("3dgut", time::<gut::Method>(gut_params, &cam)),
+            ("3dgeer", time::<geer::Method>(geer_params, &cam)),
         ] {
             for (kernel, (generic, variant)) in rows {
                 let ms = |d: Duration| d.as_secs_f64() * 1e3;
@@ -259,9 +328,16 @@ fn main() {
         if model == CameraModel::KannalaBrandt {
             cam.distortion = Vec4::new(0.02, -0.002, 0.0002, -0.00001);
         }
+        let without = GradientSet::ALL.with_camera(false);
         for (method, (with, without)) in [
-            ("3dgut", backward_times::<gut::Method>(&gut_params, &cam)),
-            ("3dgeer", backward_times::<geer::Method>(&geer_params, &cam)),
+            (
+                "3dgut",
+                backward_times::<gut::Method>(gut_params, &cam, without),
+            ),
+            (
+                "3dgeer",
+                backward_times::<geer::Method>(geer_params, &cam, without),
+            ),
         ] {
             let ms = |d: Duration| d.as_secs_f64() * 1e3;
             println!(
@@ -272,6 +348,9 @@ fn main() {
             );
         }
     }
+}
+
+fn sh_degrees(gaussians: &[Gaussian], w: f32, h: f32) {
     println!();
     println!("the SH degree: the full instance (degree 3) against the degree's own; ms");
     println!("| method | scene's degree | kernel | full | instance | ratio |");
@@ -281,32 +360,32 @@ fn main() {
         (
             "3dgs",
             0,
-            sh_times::<gs3d::Method, gs3d_sh0::Method>(&gaussians, 0, &cam),
+            sh_times::<gs3d::Method, gs3d_sh0::Method>(gaussians, 0, &cam),
         ),
         (
             "3dgs",
             1,
-            sh_times::<gs3d::Method, gs3d_sh1::Method>(&gaussians, 1, &cam),
+            sh_times::<gs3d::Method, gs3d_sh1::Method>(gaussians, 1, &cam),
         ),
         (
             "3dgut",
             0,
-            sh_times::<gut::Method, gut_sh0::Method>(&gaussians, 0, &cam),
+            sh_times::<gut::Method, gut_sh0::Method>(gaussians, 0, &cam),
         ),
         (
             "3dgut",
             1,
-            sh_times::<gut::Method, gut_sh1::Method>(&gaussians, 1, &cam),
+            sh_times::<gut::Method, gut_sh1::Method>(gaussians, 1, &cam),
         ),
         (
             "3dgeer",
             0,
-            sh_times::<geer::Method, geer_sh0::Method>(&gaussians, 0, &cam),
+            sh_times::<geer::Method, geer_sh0::Method>(gaussians, 0, &cam),
         ),
         (
             "3dgeer",
             1,
-            sh_times::<geer::Method, geer_sh1::Method>(&gaussians, 1, &cam),
+            sh_times::<geer::Method, geer_sh1::Method>(gaussians, 1, &cam),
         ),
     ] {
         for (kernel, (full, instance)) in rows {
@@ -316,6 +395,38 @@ fn main() {
                 ms(full),
                 ms(instance),
                 full.as_secs_f64() / instance.as_secs_f64()
+            );
+        }
+    }
+}
+
+fn groups(
+    gaussians: &[Gaussian],
+    gut_params: &[gut::Params],
+    geer_params: &[geer::Params],
+    w: f32,
+    h: f32,
+) {
+    println!();
+    println!(
+        "gradient groups: every gradient against some, pinhole; ms (adjoint one thread, backward pass {} threads)",
+        threads()
+    );
+    println!("| method | what | all | some | ratio |");
+    println!("|---|---|---:|---:|---:|");
+    let cam = camera(w, h);
+    for (method, rows) in [
+        ("3dgs", group_times::<gs3d::Method>(gaussians, &cam)),
+        ("3dgut", group_times::<gut::Method>(gut_params, &cam)),
+        ("3dgeer", group_times::<geer::Method>(geer_params, &cam)),
+    ] {
+        for (what, (all, some)) in rows {
+            let ms = |d: Duration| d.as_secs_f64() * 1e3;
+            println!(
+                "| {method} | {what} | {:.2} | {:.2} | {:.2} |",
+                ms(all),
+                ms(some),
+                all.as_secs_f64() / some.as_secs_f64()
             );
         }
     }

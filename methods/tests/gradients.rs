@@ -185,3 +185,15 @@ fn gpu_gradients_match_cpu_on_a_realistic_scene() {
     let cam = camera(64, 48);
     gpu_gradients_match_cpu::<Method>("3dgs realistic", &realistic_scene(&cam, 1000), &cam);
 }
+
+/// Each gradient group of 3DGS alone (`mean`, `log_scale`, `rotation`, `opacity_logit`, `sh`),
+/// the camera alone and everything but the camera: what they name as in the full pass, the
+/// rest zero, on both backends.
+#[test]
+fn gradient_subsets_match_the_full_pass() {
+    let cam = camera(64, 48);
+    let params = realistic_scene(&cam, 200);
+    splat_runtime::checks::gradients::gradient_subsets_match_the_full_pass::<Method>(
+        "3dgs", &params, &cam,
+    );
+}

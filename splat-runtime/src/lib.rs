@@ -34,7 +34,9 @@ pub use effects::Effects;
 pub use flat::Flat;
 pub use glam;
 pub use lanes::{F32x8, I32x8, LANES, LaneArray, M32x8, U32x8};
-pub use method::{GeneratedSource, SplatMethod, WgslFunction, WgslScalar, param_groups};
+pub use method::{
+    GeneratedSource, GradientSet, SplatMethod, WgslFunction, WgslScalar, param_groups,
+};
 pub use pipeline::{
     Frame, FrameGrad, Gradients, Image, RenderError, RenderOptions, backward, render,
     render_for_backward,

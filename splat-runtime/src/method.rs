@@ -64,6 +64,8 @@ pub trait SplatMethod: Send + Sync + 'static {
     /// `cam.pixel_ray` (so it works with every [`CameraModel`](crate::CameraModel)); otherwise
     /// it is pinhole-only and rendering with another model is refused.
     const GENERIC_CAMERA: bool;
+    /// The fields of `Params`: name and words, in declaration order (see [`param_groups`]).
+    const PARAM_FIELDS: &'static [(&'static str, usize)];
     /// Whether it renders a camera's rolling shutter (a kernel reads the pose per row, with
     /// `cam.shutter_time` and `cam.rotation_at`); the runtime refuses a camera that moves
     /// during the readout to the others.
@@ -95,10 +97,12 @@ pub trait SplatMethod: Send + Sync + 'static {
 
     /// Reverse-mode derivative of `project`: the cotangents of the parameters and of the
     /// camera, given the cotangent of the output (only `depth`, `cull` and `shade` carry one).
+    /// Only the groups in `wanted` are computed; the others are zero.
     fn project_adjoint(
         params: &Self::Params,
         camera: &Camera,
         d_out: &Projected<Self::Cull, Self::Shade>,
+        wanted: GradientSet,
     ) -> (Self::Params, Camera);
 
     /// `project` compiled for the camera model with code `MODEL` (`CameraModel as u32`) only:
@@ -114,6 +118,7 @@ pub trait SplatMethod: Send + Sync + 'static {
         params: &Self::Params,
         camera: &Camera,
         d_out: &Projected<Self::Cull, Self::Shade>,
+        wanted: GradientSet,
     ) -> (Self::Params, Camera);
 
     /// `pixel_info` for the camera model `MODEL` only (see [`SplatMethod::project_as`]).
@@ -180,43 +185,73 @@ pub trait SplatMethod: Send + Sync + 'static {
 }
 
 /// The fields of `M::Params` as word ranges, named as the method declared them (`mean`,
-/// `log_scale`, `sh`, ...): read from the generated `project_adjoint`, whose first results are
-/// the parameters' cotangent words (`d_p_mean_x`, `d_p_sh_3_z`, ...). Where the names do not
-/// give one word per parameter word, the whole of `Params` is one group, `params`.
+/// `log_scale`, `sh`, ...): its gradient groups, in the order of their bits in a
+/// [`GradientSet`].
 pub fn param_groups<M: SplatMethod>() -> Vec<(String, std::ops::Range<usize>)> {
-    let len = <M::Params as crate::Flat>::LEN;
-    let whole = vec![("params".to_string(), 0..len)];
-    let Some(adjoint) = M::SOURCE.function("project_adjoint") else {
-        return whole;
-    };
-    // The cotangent of the first argument: `d_<name>_<field>[_<index or component>...]`.
-    let Some(arg) = adjoint
-        .results
-        .first()
-        .and_then(|(n, _)| n.split('_').nth(1))
-    else {
-        return whole;
-    };
-    let prefix = format!("d_{arg}_");
-    let fields: Vec<&str> = adjoint
-        .results
+    let mut at = 0;
+    M::PARAM_FIELDS
         .iter()
-        .map_while(|(n, _)| n.strip_prefix(&prefix))
-        .collect();
-    if fields.len() != len {
-        return whole;
+        .map(|(name, words)| {
+            at += words;
+            (name.to_string(), at - words..at)
+        })
+        .collect()
+}
+
+/// Which gradients a backward pass computes: a bit per field of the method's `Params` (the
+/// groups of [`param_groups`], in order; fields past the 31st share bit 30) and the camera's,
+/// [`GradientSet::CAMERA_BIT`]. The generated `project_adjoint` skips the work of every group
+/// not in the set, and its gradient is zero.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct GradientSet(u32);
+
+impl GradientSet {
+    /// Every parameter group and the camera.
+    pub const ALL: GradientSet = GradientSet(u32::MAX);
+    /// The camera's bit (the compiler's `gate::CAMERA_BIT`).
+    pub const CAMERA_BIT: u32 = 31;
+
+    /// The bits, as the generated adjoints take them.
+    pub fn bits(self) -> u32 {
+        self.0
     }
-    let component = |s: &str| matches!(s, "x" | "y" | "z" | "w") || s.parse::<u32>().is_ok();
-    let mut groups: Vec<(String, std::ops::Range<usize>)> = vec![];
-    for (i, word) in fields.iter().enumerate() {
-        let mut name = *word;
-        while let Some((head, _)) = name.rsplit_once('_').filter(|(_, l)| component(l)) {
-            name = head;
-        }
-        match groups.last_mut() {
-            Some((last, range)) if last == name => range.end = i + 1,
-            _ => groups.push((name.to_string(), i..i + 1)),
-        }
+
+    /// The same set with the camera's gradient on or off.
+    pub fn with_camera(self, on: bool) -> GradientSet {
+        let bit = 1 << Self::CAMERA_BIT;
+        GradientSet(if on { self.0 | bit } else { self.0 & !bit })
     }
-    groups
+
+    pub fn camera(self) -> bool {
+        self.0 & (1 << Self::CAMERA_BIT) != 0
+    }
+
+    /// Whether the parameter group `k` (of [`param_groups`]) is computed.
+    pub fn param(self, k: usize) -> bool {
+        self.0 & (1 << k.min(Self::CAMERA_BIT as usize - 1)) != 0
+    }
+
+    /// The parameter groups named in `names` (as [`param_groups`] names them) and no camera.
+    pub fn params<M: SplatMethod>(names: &[&str]) -> Result<GradientSet, String> {
+        let groups = param_groups::<M>();
+        let mut bits = 0;
+        for name in names {
+            let k = groups.iter().position(|(g, _)| g == name).ok_or_else(|| {
+                let known: Vec<&str> = groups.iter().map(|(g, _)| g.as_str()).collect();
+                format!(
+                    "{} has no parameter group `{name}`: its groups are {}",
+                    M::NAME,
+                    known.join(", ")
+                )
+            })?;
+            bits |= 1 << k.min(Self::CAMERA_BIT as usize - 1);
+        }
+        Ok(GradientSet(bits))
+    }
+}
+
+impl Default for GradientSet {
+    fn default() -> Self {
+        GradientSet::ALL
+    }
 }

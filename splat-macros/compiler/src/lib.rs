@@ -19,6 +19,7 @@ pub mod ad;
 pub mod builtins;
 pub mod diag;
 pub mod emit;
+pub mod gate;
 pub mod ir;
 pub mod lower;
 pub mod model;
@@ -155,7 +156,9 @@ fn build_kernels<'m>(
     };
     let mut kernels = vec![];
     for def in defs {
-        let Some((mut kernel, model_slot)) = build_kernel(m, def, custom, diag, None) else {
+        // Method's `project` adjoint computes only the gradient groups asked for.
+        let gated = kind == Kind::Method && def.name == "project";
+        let Some((mut kernel, model_slot)) = build_kernel(m, def, custom, diag, None, gated) else {
             continue;
         };
         let reads_model = model_slot.is_some_and(|v| {
@@ -166,11 +169,12 @@ fn build_kernels<'m>(
                 name: model, code, ..
             } in builtins::camera_models()
             {
-                let Some((mut variant, _)) = build_kernel(m, def, custom, diag, Some(code)) else {
+                let Some((mut variant, _)) = build_kernel(m, def, custom, diag, Some(code), gated)
+                else {
                     continue;
                 };
                 variant.primal.name = format!("{}_{model}", def.name);
-                if let Some(g) = &mut variant.adjoint {
+                for g in variant.adjoint.iter_mut().chain(&mut variant.gated) {
                     g.name = format!("{}_adjoint_{model}", def.name);
                 }
                 kernel.models.push((model, code, variant));
@@ -182,13 +186,15 @@ fn build_kernels<'m>(
 }
 
 /// Lowers, differentiates and cleans one kernel, for every camera model or for the one with
-/// code `model`; also returns the parameter slot of the camera's model code.
+/// code `model` (and with `gated`, gates its adjoint by gradient group: `Kernel::gated`); also
+/// returns the parameter slot of the camera's model code.
 fn build_kernel<'m>(
     m: &'m Module,
     def: &'m model::FnDef,
     custom: &Custom,
     diag: &Diag,
     model: Option<u32>,
+    gated: bool,
 ) -> Option<(Kernel<'m>, Option<ir::Var>)> {
     let l = lower::lower_for_model(m, diag, def, &custom.names, model)?;
     let mut primal = l.func;
@@ -210,10 +216,17 @@ fn build_kernel<'m>(
         g
     });
     opt::dce(&mut primal);
+    let gated = adjoint.as_ref().filter(|_| gated).map(|g| {
+        let mut g = g.clone();
+        let params: Vec<&types::Ty> = def.params.iter().map(|p| &p.ty).collect();
+        gate::gate(&mut g, &gate::result_groups(&params));
+        g
+    });
     let kernel = Kernel {
         def,
         primal,
         adjoint,
+        gated,
         ret: l.ret,
         camera_model: l.camera_model,
         rolling_shutter: l.rolling_shutter,
@@ -352,7 +365,7 @@ fn wgsl_kernels<'k>(kernels: &'k [Kernel]) -> Vec<(&'k ir::Function, Vec<String>
             .flat_map(|k| k.models.iter().map(|(_, _, v)| v)),
     ) {
         out.push((&k.primal, k.ret.slot_names("")));
-        if let Some(adj) = &k.adjoint {
+        if let Some(adj) = k.gated.as_ref().or(k.adjoint.as_ref()) {
             let names = k
                 .def
                 .params

@@ -161,3 +161,22 @@ fn suggested_methods_exist_and_near_misses_get_one() {
         "{m}"
     );
 }
+
+#[test]
+fn gating_puts_each_groups_own_work_behind_its_bit() {
+    let k = compile("mod m { fn f(x: f32, y: f32) -> f32 { x.exp() * y.sin() } }");
+    let mut adj = k[0].1.clone().unwrap();
+    // d_x needs sin(y), d_y needs cos(y); both need exp(x).
+    let mask = crate::gate::gate(&mut adj, &[1, 2]);
+    assert_eq!(adj.params.last(), Some(&mask));
+    let top = |u: Unary| adj.body.stmts.iter().filter(|s| is_unary(u)(s)).count();
+    assert_eq!(
+        top(Unary::Exp),
+        1,
+        "shared work stays unconditional:\n{adj}"
+    );
+    assert_eq!(top(Unary::Sin) + top(Unary::Cos), 0, "{adj}");
+    assert_eq!(count(&adj, &is_unary(Unary::Sin)), 1, "{adj}");
+    assert_eq!(count(&adj, &is_unary(Unary::Cos)), 1, "{adj}");
+    assert_eq!(count(&adj, &|s| matches!(s, Stmt::If { .. })), 2, "{adj}");
+}

@@ -6,7 +6,7 @@ use super::adjoint::{self, ReferenceGrad};
 use super::reference::render_words;
 use super::{camera_words, channels, frame_grad, group_error, options, weights, words};
 use crate::flat::Flat;
-use crate::method::SplatMethod;
+use crate::method::{GradientSet, SplatMethod};
 use crate::pipeline::{backward, render_for_backward};
 use crate::types::Camera;
 use std::ops::Range;
@@ -272,62 +272,125 @@ pub fn gpu_gradients_match_cpu_with<M: SplatMethod>(
     }
 }
 
-/// With [`RenderOptions::camera_gradient`](crate::RenderOptions::camera_gradient) off, the
-/// backward pass gives exactly the parameter gradients of the full pass and a zero camera
-/// gradient, on the CPU (bit for bit) and, where there is an adapter, on the GPU: there the
-/// blend sums with float atomics in whatever order the invocations run, so two identical
-/// passes agree to that order's rounding, 1e-6 of the largest gradient.
-pub fn camera_gradient_off_changes_only_the_camera<M: SplatMethod>(
+/// Each [`GradientSet`] computes what it names and nothing else: every parameter group alone,
+/// the camera alone, and everything but the camera. The groups a set holds come out as in the
+/// full pass and the others are zero, on the CPU (bit for bit: gating skips work, it does not
+/// reorder the arithmetic) and, where there is an adapter, on the GPU: there the blend sums with
+/// float atomics in whatever order the invocations run, so two identical passes agree to that
+/// order's rounding, 1e-6 of the largest gradient. The full pass must have a non-zero gradient
+/// in every group (otherwise the scene does not test it).
+pub fn gradient_subsets_match_the_full_pass<M: SplatMethod>(
     label: &str,
     params: &[M::Params],
     cam: &Camera,
 ) {
     let n = (cam.size.x * cam.size.y) as usize;
     let grad = frame_grad(&weights(n, <M::Color as Flat>::LEN));
-    let full = super::options(16);
-    let without = crate::RenderOptions {
-        camera_gradient: false,
-        ..full
+    let groups = crate::param_groups::<M>();
+    let names: Vec<&str> = groups.iter().map(|(g, _)| g.as_str()).collect();
+    let mut sets = vec![(
+        "everything but the camera".to_string(),
+        GradientSet::ALL.with_camera(false),
+    )];
+    sets.push((
+        "the camera alone".into(),
+        GradientSet::params::<M>(&[]).unwrap().with_camera(true),
+    ));
+    for name in &names {
+        sets.push((
+            format!("`{name}` alone"),
+            GradientSet::params::<M>(&[name]).unwrap(),
+        ));
+    }
+    let with = |wanted: GradientSet| crate::RenderOptions {
+        gradients: wanted,
+        ..options(16)
     };
-    let cpu = |opts: &crate::RenderOptions| {
-        let (_, state) = render_for_backward::<M>(params, cam, opts).unwrap();
+    let cpu = |wanted: GradientSet| {
+        let opts = with(wanted);
+        let (_, state) = render_for_backward::<M>(params, cam, &opts).unwrap();
         backward::<M>(&state, params, cam, &grad).unwrap()
+    };
+    let runs_of = |pass: &dyn Fn(GradientSet) -> crate::Gradients<M>| {
+        let full = pass(GradientSet::ALL);
+        let subsets: Vec<_> = sets.iter().map(|(what, s)| (what, *s, pass(*s))).collect();
+        (full, subsets)
     };
     // The largest difference allowed, relative to the largest gradient.
     #[cfg_attr(not(feature = "gpu"), allow(unused_mut))] // the GPU run is pushed
-    let mut runs = vec![("CPU", 0.0, cpu(&full), cpu(&without))];
+    let mut runs = vec![("CPU", 0.0, runs_of(&cpu))];
     #[cfg(feature = "gpu")]
     if let Some(gpu) = crate::gpu::adapter_or_skip() {
-        let gpu_run = |opts: &crate::RenderOptions| {
+        let gpu_run = |wanted: GradientSet| {
+            let opts = with(wanted);
             let (_, mut state) =
-                crate::gpu::render::render_for_backward::<M>(&gpu, params, cam, opts).unwrap();
+                crate::gpu::render::render_for_backward::<M>(&gpu, params, cam, &opts).unwrap();
             let acc = crate::gpu::entries::Accumulation::default_for(&gpu);
             crate::gpu::render::backward(&mut state, &grad, acc)
                 .unwrap()
                 .gradients
         };
-        runs.push(("GPU", 1e-6, gpu_run(&full), gpu_run(&without)));
+        runs.push(("GPU", 1e-6, runs_of(&gpu_run)));
     }
-    for (backend, rounding, all, params_only) in runs {
-        let flat =
-            |g: &crate::Gradients<M>| -> Vec<f64> { g.params.iter().flat_map(words).collect() };
-        let (all_words, without_words) = (flat(&all), flat(&params_only));
-        let largest = all_words.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        let off = all_words
+    let group_words = |g: &crate::Gradients<M>, k: usize| -> Vec<f64> {
+        let range = groups[k].1.clone();
+        g.params
             .iter()
-            .zip(&without_words)
-            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+            .flat_map(|p| words(p)[range.clone()].to_vec())
+            .collect()
+    };
+    let largest = |v: &[f64]| v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    for (backend, rounding, (full, subsets)) in runs {
+        let at = format!("{label} on the {backend}");
+        for (k, name) in names.iter().enumerate() {
+            assert!(
+                largest(&group_words(&full, k)) > 0.0,
+                "{at}: the full pass has no gradient for `{name}`: the scene does not test it"
+            );
+        }
+        let full_camera = camera_words(&full.camera);
         assert!(
-            off <= rounding * largest,
-            "{label} on the {backend}: the parameter gradients changed without the camera's ({off:.2e} of {largest:.2e})"
+            largest(&full_camera) > 0.0,
+            "{at}: the full pass should have a camera gradient"
         );
-        assert!(
-            camera_words(&params_only.camera).iter().all(|v| *v == 0.0),
-            "{label} on the {backend}: a camera gradient was computed though not asked for"
-        );
-        assert!(
-            camera_words(&all.camera).iter().any(|v| *v != 0.0),
-            "{label} on the {backend}: the full pass should have a camera gradient"
-        );
+        for (what, wanted, got) in &subsets {
+            for (k, name) in names.iter().enumerate() {
+                let (a, b) = (group_words(&full, k), group_words(got, k));
+                let keep = wanted.param(k);
+                let off = match keep {
+                    true => a
+                        .iter()
+                        .zip(&b)
+                        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs())),
+                    false => largest(&b),
+                };
+                let allowed = if keep { rounding * largest(&a) } else { 0.0 };
+                assert!(
+                    off <= allowed,
+                    "{at}, {what}: `{name}` is {} ({off:.2e})",
+                    if keep {
+                        "not that of the full pass"
+                    } else {
+                        "not zero"
+                    }
+                );
+            }
+            let c = camera_words(&got.camera);
+            let off = match wanted.camera() {
+                true => full_camera
+                    .iter()
+                    .zip(&c)
+                    .fold(0.0f64, |m, (x, y)| m.max((x - y).abs())),
+                false => largest(&c),
+            };
+            let allowed = match wanted.camera() {
+                true => rounding * largest(&full_camera),
+                false => 0.0,
+            };
+            assert!(
+                off <= allowed,
+                "{at}, {what}: the camera gradient is off by {off:.2e}"
+            );
+        }
     }
 }

@@ -37,8 +37,8 @@ pub fn specialized_kernels_match_generic<M: SplatMethod>(
                 &[b.depth, b.bbox_min.x, b.bbox_min.y, b.bbox_max.x, b.bbox_max.y], &what);
             same(&words(&a.cull), &words(&b.cull), &what);
             same(&words(&a.shade), &words(&b.shade), &what);
-            let (ga, ca) = M::project_adjoint(p, cam, &ones);
-            let (gb, cb) = M::project_adjoint_as::<MODEL>(p, cam, &ones);
+            let (ga, ca) = M::project_adjoint(p, cam, &ones, crate::GradientSet::ALL);
+            let (gb, cb) = M::project_adjoint_as::<MODEL>(p, cam, &ones, crate::GradientSet::ALL);
             close(&words(&ga), &words(&gb), &format!("{what}: adjoint"));
             close(&words(&ca), &words(&cb), &format!("{what}: camera adjoint"));
         }

@@ -10,7 +10,7 @@ use super::kernel::{self, load};
 use super::state::PixelState;
 use super::{Gpu, GpuError};
 use crate::flat::Flat;
-use crate::method::{SplatMethod, WgslFunction};
+use crate::method::{GradientSet, SplatMethod, WgslFunction};
 use crate::pipeline::shade::Blend;
 use crate::types::{Camera, CameraModel};
 
@@ -594,19 +594,23 @@ pub fn param_floats<M: SplatMethod>() -> Result<usize, GpuError> {
 }
 
 /// `project_backward`: `project`'s adjoint under the camera `model` per primitive, camera
-/// gradients per workgroup.
-pub fn project_backward<M: SplatMethod>(model: CameraModel) -> Result<String, GpuError> {
+/// gradients per workgroup. The gradient groups `wanted` are a constant of the pipeline: the
+/// adjoint's branches on them fold, and without the camera no workgroup sums it.
+pub fn project_backward<M: SplatMethod>(
+    model: CameraModel,
+    wanted: GradientSet,
+) -> Result<String, GpuError> {
     let wgsl = M::SOURCE.wgsl;
     let layout = Layout::of::<M>();
     let adj = sig_for::<M>("project_adjoint", model)?;
     let (np, ncam) = (M::Params::LEN, Camera::LEN);
     let npf = param_floats::<M>()?;
     // Arguments: parameters, camera, then the cotangent's float slots: depth, bbox (4), cull
-    // (zero: no gradient flows through culling), shade.
+    // (zero: no gradient flows through culling), shade; then the gradient groups' mask.
     let cull_floats = adj
         .args
         .len()
-        .checked_sub(np + ncam + 5 + layout.shade_floats)
+        .checked_sub(np + ncam + 5 + layout.shade_floats + 1)
         .ok_or_else(|| GpuError::Shader("project_adjoint has too few arguments".into()))?;
     let mut args: Vec<String> = adj.args[..np]
         .iter()
@@ -622,11 +626,12 @@ pub fn project_backward<M: SplatMethod>(model: CameraModel) -> Result<String, Gp
     args.push("bitcast<f32>(grads[i * NG + NG - 1u])".into());
     args.extend(std::iter::repeat_n("0.0".to_string(), 4 + cull_floats));
     args.extend((0..layout.shade_floats).map(|k| format!("bitcast<f32>(grads[i * NG + {k}u])")));
+    args.push(format!("{}u", wanted.bits()));
     let mut write = String::new();
     for (k, (m, _)) in adj.results.iter().enumerate() {
         if k < npf {
             write += &format!("            param_grads[i * NPF + {k}u] = bitcast<u32>(a.{m});\n");
-        } else {
+        } else if wanted.camera() {
             write += &format!("            cam[{}] = a.{m};\n", k - npf);
         }
     }
@@ -639,6 +644,7 @@ pub fn project_backward<M: SplatMethod>(model: CameraModel) -> Result<String, Gp
             ("NG", layout.grad_words.to_string()),
             ("STRIDE", layout.stride.to_string()),
             ("RED_WORDS", (64 * Camera::FLOAT_SLOTS).to_string()),
+            ("SUM_CAMERA", wanted.camera().to_string()),
             (
                 "PROJECT_ADJOINT",
                 format!("{}({})", adj.name, args.join(", ")),

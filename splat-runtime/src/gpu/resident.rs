@@ -466,7 +466,10 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         self.timer.start(&mut enc, ADJOINT);
         let model = self.front.model;
         let k = self.project_backward.get(model, || {
-            gpu.kernel(&entries::project_backward::<M>(model)?, "project_backward")
+            gpu.kernel(
+                &entries::project_backward::<M>(model, self.opts.gradients)?,
+                "project_backward",
+            )
         })?;
         let bind = gpu.bind_named(
             &k,
@@ -481,7 +484,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             ],
         )?;
         dispatch(&mut enc, &k.pipeline, &bind, groups);
-        if M::HAS_PIXEL_INFO && self.opts.camera_gradient {
+        if M::HAS_PIXEL_INFO && self.opts.gradients.camera() {
             let k = self.pixel_backward.get(model, || {
                 gpu.kernel(&entries::pixel_backward::<M>(model)?, "pixel_backward")
             })?;
@@ -555,11 +558,11 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             .map(M::params_from_float_slots)
             .collect();
         let groups = (n as u32).div_ceil(64).max(1) as usize;
-        let mut partials = match self.opts.camera_gradient {
+        let mut partials = match self.opts.gradients.camera() {
             true => gpu.read(&self.camera_partials, groups * Camera::FLOAT_SLOTS)?,
             false => vec![],
         };
-        if M::HAS_PIXEL_INFO && self.opts.camera_gradient {
+        if M::HAS_PIXEL_INFO && self.opts.gradients.camera() {
             let pixels = info.grid.width * info.grid.height;
             let ray_groups = pixels.div_ceil(64).max(1) as usize;
             partials.extend(gpu.read(&self.ray_partials, ray_groups * Camera::FLOAT_SLOTS)?);

@@ -195,7 +195,7 @@ fn backward_tile_body<M: SplatMethod, const MODEL: u32>(
                 );
                 t = st.take.select_f32(t * one_minus, t);
             }
-            if M::HAS_PIXEL_INFO && state.camera_gradient {
+            if M::HAS_PIXEL_INFO && state.gradients.camera() {
                 add_ray_gradient::<M, MODEL>(camera, &d_pixel, inside, x0, y, &mut acc.camera);
             }
         }

@@ -21,7 +21,7 @@ use preprocess::Preprocessed;
 use rasterize::TileLists;
 
 use crate::flat::Flat;
-use crate::method::SplatMethod;
+use crate::method::{GradientSet, SplatMethod};
 use crate::types::{Camera, Projected};
 use precision::{Range, Stored};
 use rayon::prelude::*;
@@ -51,10 +51,11 @@ pub struct RenderOptions {
     /// How the per-pixel state (color, transmittance, depth sums) is stored: what the outputs
     /// are read from and the backward pass replays against (CPU only for now).
     pub precision: precision::Precision,
-    /// Compute the camera's gradient in the backward pass. Off (training without pose
-    /// refinement), the rays' share (`pixel_info`'s adjoint per pixel) is not computed and
-    /// [`Gradients::camera`] is zero.
-    pub camera_gradient: bool,
+    /// The gradients the backward pass computes: the groups left out are never computed and
+    /// are zero. Without the camera (training without pose refinement) the rays' share
+    /// (`pixel_info`'s adjoint per pixel) is not computed either and [`Gradients::camera`] is
+    /// zero.
+    pub gradients: GradientSet,
 }
 
 impl Default for RenderOptions {
@@ -67,7 +68,7 @@ impl Default for RenderOptions {
             tile_cull: true,
             blend: shade::Blend::default(),
             precision: precision::Precision::F32,
-            camera_gradient: true,
+            gradients: GradientSet::ALL,
         }
     }
 }
@@ -148,8 +149,8 @@ pub struct ForwardState<M: SplatMethod> {
     pub lists: TileLists,
     pub p_max: Option<usize>,
     pub blend: shade::Blend,
-    /// The backward pass computes the camera's gradient ([`RenderOptions::camera_gradient`]).
-    pub camera_gradient: bool,
+    /// The gradients the backward pass computes ([`RenderOptions::gradients`]).
+    pub gradients: GradientSet,
     /// Final transmittance, color and sum of weight * depth per pixel, in the frame's precision.
     pub transmittance: precision::Stored,
     pub color: precision::Stored,
@@ -182,7 +183,7 @@ impl<M: SplatMethod> ForwardState<M> {
 /// Per-primitive gradients and the camera's.
 pub struct Gradients<M: SplatMethod> {
     pub params: Vec<M::Params>,
-    /// Zero when [`RenderOptions::camera_gradient`] is off.
+    /// Zero when [`RenderOptions::gradients`] leaves the camera out.
     pub camera: Camera,
     pub stats: BackwardStats,
 }
@@ -356,7 +357,7 @@ fn forward<M: SplatMethod>(
                 lists,
                 p_max: opts.p_max,
                 blend: opts.blend,
-                camera_gradient: opts.camera_gradient,
+                gradients: opts.gradients,
                 transmittance,
                 color,
                 depth_acc,
@@ -483,10 +484,10 @@ pub fn backward<M: SplatMethod>(
     let reduce = t1.elapsed();
     let t2 = Instant::now();
     let (zero_params, zero_cull) = (M::Params::zero(), M::Cull::zero());
+    let wanted = state.gradients;
     // Each gradient is written once (no zero-filled buffer first: that alone cost 0.1 s at 1M).
-    let (param_grads, camera_grads): (Vec<M::Params>, Vec<Camera>) = crate::with_camera_model!(camera.model, MODEL => (0..n)
-        .into_par_iter()
-        .map(|i| {
+    let (param_grads, camera_grads) = crate::with_camera_model!(camera.model, MODEL => {
+        let one = |i: usize| {
             let d_words = &shade[i * words..(i + 1) * words];
             let untouched = depth[i] == 0.0 && d_words.iter().all(|v| *v == 0.0);
             if !state.pre.projected[i].visible || untouched {
@@ -501,17 +502,26 @@ pub fn backward<M: SplatMethod>(
                 cull: zero_cull,
                 shade: M::Shade::read_words(d_words),
             };
-            let (d_params, d_camera) = M::project_adjoint_as::<MODEL>(&params[i], camera, &d_out);
-            (d_params, if state.camera_gradient { d_camera } else { Camera::ZERO })
-        })
-        .unzip());
+            M::project_adjoint_as::<MODEL>(&params[i], camera, &d_out, wanted)
+        };
+        match wanted.camera() {
+            true => {
+                let (p, c): (Vec<M::Params>, Vec<Camera>) = (0..n).into_par_iter().map(one).unzip();
+                (p, Some(c))
+            }
+            false => ((0..n).into_par_iter().map(|i| one(i).0).collect(), None),
+        }
+    });
     // Summed in fixed chunks, in order: the same gradient whatever the thread count.
     let camera_grad = camera_grads
-        .par_chunks(CHUNK)
-        .map(|c| c.iter().fold(Camera::ZERO, |a, b| a.add_cotangent(b)))
-        .collect::<Vec<_>>()
-        .iter()
-        .fold(Camera::ZERO, |a, b| a.add_cotangent(b))
+        .map_or(Camera::ZERO, |grads| {
+            grads
+                .par_chunks(CHUNK)
+                .map(|c| c.iter().fold(Camera::ZERO, |a, b| a.add_cotangent(b)))
+                .collect::<Vec<_>>()
+                .iter()
+                .fold(Camera::ZERO, |a, b| a.add_cotangent(b))
+        })
         .add_cotangent(&ray_camera);
     let stats = BackwardStats {
         blend,

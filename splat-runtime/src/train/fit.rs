@@ -192,7 +192,7 @@ pub fn render_view<M: SplatMethod>(
 pub(crate) fn for_training(r: &RenderOptions) -> RenderOptions {
     RenderOptions {
         alpha: true,
-        camera_gradient: false,
+        gradients: r.gradients.with_camera(false),
         ..*r
     }
 }

@@ -14,6 +14,10 @@ pub struct Kernel<'m> {
     pub primal: Function,
     /// `None` when the kernel has no float input or no float output.
     pub adjoint: Option<Function>,
+    /// The adjoint gated by gradient group (see `gate`): its last parameter is the mask of the
+    /// groups to compute. The typed and WGSL adjoints are emitted from it; the twin and the
+    /// lanes from `adjoint`.
+    pub gated: Option<Function>,
     pub ret: Ty,
     /// Whether the kernel reads the camera model (see `builtins::model_aware`).
     pub camera_model: bool,
@@ -236,11 +240,18 @@ impl Kernel<'_> {
         }
     }
 
-    /// The typed `f32` adjoint: `(params..., d_out) -> cotangents of the params`.
+    /// The typed `f32` adjoint: `(params..., d_out) -> cotangents of the params`, and for a
+    /// gated kernel `(params..., d_out, grads: u32)`: the groups to compute (see `gate`).
     pub fn adjoint_fn(&self) -> Option<TokenStream> {
-        let g = self.adjoint.as_ref()?;
-        let mut em = BodyEmitter::new(g, Flavor::F32, &self.reserved());
+        let g = self.gated.as_ref().or(self.adjoint.as_ref())?;
+        let mut reserved = self.reserved();
+        reserved.push("grads".into());
+        let mut em = BodyEmitter::new(g, Flavor::F32, &reserved);
         let mut prologue = self.typed_prologue(&mut em, g);
+        let grads = self.gated.as_ref().map(|g| {
+            em.name_as(*g.params.last().expect("the mask"), "grads");
+            quote!(grads: u32)
+        });
         let n_primal = self.primal.params.len();
         let ret_slots = self.ret.slots();
         let float_access = slot_access(&self.ret, quote!(d_out))
@@ -249,6 +260,7 @@ impl Kernel<'_> {
             .filter(|(_, s)| **s == Scalar::F32);
         let scalar_ret = matches!(self.ret, Ty::F32);
         for (v, (a, _)) in g.params[n_primal..].iter().zip(float_access) {
+            // (The gated adjoint's mask, its last parameter, is past the cotangent's slots.)
             if scalar_ret {
                 em.name_as(*v, "d_out");
                 continue;
@@ -289,16 +301,19 @@ impl Kernel<'_> {
         let name = format_ident!("{}_adjoint", self.name());
         let params = self.typed_params();
         let ret = self.ret.rust();
-        let doc = format!(
+        let mut doc = format!(
             " Reverse-mode derivative of [`{}`]: given the cotangent `d_out` of its result, the cotangents of its parameters (zero for `bool` and integer fields).",
             self.name()
         );
+        if grads.is_some() {
+            doc += " Only the gradient groups whose bits are set in `grads` are computed (bit k: field k of the first parameter, bit 31: the camera); the others are zero.";
+        }
         let allow: TokenStream = ALLOW.parse().unwrap();
         Some(quote! {
             #[doc = #doc]
             #[inline]
             #allow
-            pub fn #name(#(#params,)* d_out: #ret) -> #result_ty {
+            pub fn #name(#(#params,)* d_out: #ret, #grads) -> #result_ty {
                 #prologue
                 #body
                 #result

@@ -258,6 +258,20 @@ pub fn method_impl(m: &Module, kernels: &[Kernel], diag: &Diag) -> Option<TokenS
         return None;
     }
 
+    let param_fields: Vec<TokenStream> = match &params_ty {
+        Ty::Struct(s) => s
+            .fields
+            .iter()
+            .map(|(name, t)| {
+                let n = t.slot_count();
+                quote!((#name, #n))
+            })
+            .collect(),
+        t => {
+            let n = t.slot_count();
+            vec![quote!(("params", #n))]
+        }
+    };
     let (p_t, c_t, s_t, px_t, col_t) = (
         params_ty.rust(),
         cull_ty.rust(),
@@ -276,7 +290,7 @@ pub fn method_impl(m: &Module, kernels: &[Kernel], diag: &Diag) -> Option<TokenS
         &[false, false],
     );
     let project_adjoint = if project.adjoint.is_some() {
-        quote! { project_adjoint(#(#project_call,)* *d_out) }
+        quote! { project_adjoint(#(#project_call,)* *d_out, wanted.bits()) }
     } else {
         quote! { (<#p_t as #rt::Flat>::zero(), #rt::Camera::ZERO) }
     };
@@ -430,6 +444,7 @@ pub fn method_impl(m: &Module, kernels: &[Kernel], diag: &Diag) -> Option<TokenS
             const HAS_PIXEL_INFO: bool = #has_pi;
             const GENERIC_CAMERA: bool = #generic_camera;
             const ROLLING_SHUTTER: bool = #rolling_shutter;
+            const PARAM_FIELDS: &'static [(&'static str, usize)] = &[#(#param_fields),*];
             const SOURCE: #rt::GeneratedSource = #rt::GeneratedSource { rust: GENERATED_RUST, wgsl: GENERATED_WGSL, functions: GENERATED_FUNCTIONS };
             const TWIN: #rt::checks::Twin = #twin;
             type Params = #p_t;
@@ -446,7 +461,7 @@ pub fn method_impl(m: &Module, kernels: &[Kernel], diag: &Diag) -> Option<TokenS
                 project(#(#project_call),*)
             }
             #[inline]
-            fn project_adjoint(params: &#p_t, camera: &#rt::Camera, d_out: &#rt::Projected<#c_t, #s_t>) -> (#p_t, #rt::Camera) {
+            fn project_adjoint(params: &#p_t, camera: &#rt::Camera, d_out: &#rt::Projected<#c_t, #s_t>, wanted: #rt::GradientSet) -> (#p_t, #rt::Camera) {
                 #project_adjoint
             }
             #[inline]
@@ -454,7 +469,7 @@ pub fn method_impl(m: &Module, kernels: &[Kernel], diag: &Diag) -> Option<TokenS
                 #project_as
             }
             #[inline]
-            fn project_adjoint_as<const MODEL: u32>(params: &#p_t, camera: &#rt::Camera, d_out: &#rt::Projected<#c_t, #s_t>) -> (#p_t, #rt::Camera) {
+            fn project_adjoint_as<const MODEL: u32>(params: &#p_t, camera: &#rt::Camera, d_out: &#rt::Projected<#c_t, #s_t>, wanted: #rt::GradientSet) -> (#p_t, #rt::Camera) {
                 #project_adjoint_as
             }
             #[inline]

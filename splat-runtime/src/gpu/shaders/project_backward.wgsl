@@ -1,12 +1,13 @@
 // `project`'s adjoint per primitive, from the summed gradient of its shade words and depth.
-// The camera's gradient is summed over each workgroup in workgroup memory; the host adds
-// the workgroups' partial sums.
+// The camera's gradient (when asked for: SUM_CAMERA) is summed over each workgroup in
+// workgroup memory; the host adds the workgroups' partial sums.
 
 const NP: u32 = {{NP}}u; // parameter words per primitive
 const NPF: u32 = {{NPF}}u; // parameter float slots (gradient words)
 const NCAM: u32 = {{NCAM}}u; // camera float slots (its gradient words)
 const NG: u32 = {{NG}}u;
 const STRIDE: u32 = {{STRIDE}}u;
+const SUM_CAMERA: bool = {{SUM_CAMERA}};
 
 @group(0) @binding(0) var<storage, read> params: array<u32>;
 @group(0) @binding(1) var<storage, read> camera_words: array<u32>;
@@ -36,6 +37,9 @@ fn project_backward(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invoca
                 param_grads[i * NPF + k] = 0u;
             }
         }
+    }
+    if (!SUM_CAMERA) {
+        return;
     }
     for (var k = 0u; k < NCAM; k++) {
         red[k * 64u + lid] = cam[k];

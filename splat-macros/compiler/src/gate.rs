@@ -1,0 +1,302 @@
+//! Gradient groups: an adjoint that computes only the cotangents asked for.
+//!
+//! The results of an adjoint are split into groups (a bit each: the fields of a method's
+//! parameters, the camera). [`gate`] adds a `u32` parameter, the mask of wanted groups, and
+//! puts every statement that feeds only some groups behind a branch on that mask, so a frozen
+//! group's cotangents are never computed: dead-code elimination after AD, decided per call.
+//! Results of groups not asked for are zero.
+//!
+//! A statement's *groups* are the union of the groups of its users (its result's groups for
+//! the function's yields). If `a` feeds `b`, `a`'s groups contain `b`'s, so ordering a block's
+//! statements by decreasing group count (stable) keeps every definition before its uses; runs
+//! of statements with the same groups, fewer than the enclosing block's, become one `If`.
+//! Branches of the source are gated inside too, against their own groups.
+
+use crate::ir::{Binary, Block, Const, Function, Op, Scalar, Stmt, Var};
+use crate::types::{Ty, is_camera};
+use std::collections::{HashMap, HashSet};
+
+/// The group bit of the camera's cotangent (the runtime's `GradientSet::CAMERA_BIT`).
+pub const CAMERA_BIT: u32 = 31;
+
+/// The group bits of an adjoint's results (the float slots of `params`, in order): field `k`
+/// of a struct parameter is bit `min(k, 30)`, the camera is [`CAMERA_BIT`], any other
+/// parameter one bit of its own (in the same count as the fields).
+pub fn result_groups(params: &[&Ty]) -> Vec<u32> {
+    let floats = |t: &Ty| t.slots().iter().filter(|s| **s == Scalar::F32).count();
+    let mut out = vec![];
+    let mut next = 0u32;
+    let mut bit = || {
+        let b = 1 << next.min(CAMERA_BIT - 1);
+        next += 1;
+        b
+    };
+    for ty in params {
+        match ty {
+            t if is_camera(t) => out.extend(std::iter::repeat_n(1 << CAMERA_BIT, floats(t))),
+            Ty::Struct(s) => {
+                for (_, t) in &s.fields {
+                    let b = bit();
+                    out.extend(std::iter::repeat_n(b, floats(t)));
+                }
+            }
+            t => {
+                let b = bit();
+                out.extend(std::iter::repeat_n(b, floats(t)));
+            }
+        }
+    }
+    out
+}
+
+/// Gates `f`'s results: `groups[i]` is the group bits of result `i`. Returns the mask
+/// parameter (appended to `f.params`).
+pub fn gate(f: &mut Function, groups: &[u32]) -> Var {
+    assert_eq!(groups.len(), f.body.yields.len(), "one group per result");
+    let mask = f.new_var(Scalar::U32, "grads");
+    f.params.push(mask);
+    let mut of = HashMap::new();
+    for (y, g) in f.body.yields.iter().zip(groups) {
+        *of.entry(*y).or_insert(0) |= *g;
+    }
+    propagate(&f.body, &mut of);
+    let all = groups.iter().fold(0, |a, g| a | g);
+    let mut gates = Gates {
+        mask,
+        of,
+        conds: HashMap::new(),
+        prelude: vec![],
+    };
+    let mut body = std::mem::take(&mut f.body);
+    gates.rewrite(f, &mut body, all);
+    // A result shared with other groups is computed when they are: zero it unless its own
+    // group is asked for.
+    let mut tail = vec![];
+    for (y, &g) in body.yields.iter_mut().zip(groups) {
+        let shared = gates.of.get(y).is_some_and(|s| *s != g);
+        if shared && f.ty(*y) == Scalar::F32 {
+            let cond = gates.cond(f, g);
+            let zero = constant(f, Scalar::F32, &mut tail);
+            let kept = f.new_var(Scalar::F32, f.name(*y).to_string());
+            tail.push(Stmt::Let {
+                var: kept,
+                op: Op::Select(cond, *y, zero),
+            });
+            *y = kept;
+        }
+    }
+    body.stmts.extend(tail);
+    body.stmts.splice(0..0, std::mem::take(&mut gates.prelude));
+    f.body = body;
+    mask
+}
+
+/// Adds to `of` the groups of every variable that a statement of `b` (or nested in it) reads,
+/// from the groups of what the statement defines; `of` holds the groups of `b`'s yields.
+fn propagate(b: &Block, of: &mut HashMap<Var, u32>) {
+    for s in b.stmts.iter().rev() {
+        let groups = stmt_groups(s, of);
+        if groups == 0 {
+            continue;
+        }
+        match s {
+            Stmt::Let { op, .. } => {
+                for o in op.operands() {
+                    *of.entry(o).or_insert(0) |= groups;
+                }
+            }
+            Stmt::If {
+                cond,
+                then_block,
+                else_block,
+                outs,
+            } => {
+                for inner in [then_block, else_block] {
+                    for (y, o) in inner.yields.iter().zip(outs) {
+                        let g = of.get(o).copied().unwrap_or(0);
+                        *of.entry(*y).or_insert(0) |= g;
+                    }
+                    propagate(inner, of);
+                }
+                *of.entry(*cond).or_insert(0) |= groups;
+            }
+            Stmt::Call { args, body, .. } => {
+                // A helper with its own adjoint runs whole: everything it reads gets its groups.
+                for a in args {
+                    *of.entry(*a).or_insert(0) |= groups;
+                }
+                let mut read = HashSet::new();
+                reads(body, &mut read);
+                for v in read {
+                    *of.entry(v).or_insert(0) |= groups;
+                }
+            }
+        }
+    }
+}
+
+/// The groups of what `s` defines.
+fn stmt_groups(s: &Stmt, of: &HashMap<Var, u32>) -> u32 {
+    let g = |v: &Var| of.get(v).copied().unwrap_or(0);
+    match s {
+        Stmt::Let { var, .. } => g(var),
+        Stmt::If { outs, .. } | Stmt::Call { outs, .. } => outs.iter().fold(0, |a, o| a | g(o)),
+    }
+}
+
+/// Every variable read in `b` or nested in it (including those it defines itself).
+fn reads(b: &Block, out: &mut HashSet<Var>) {
+    out.extend(b.yields.iter().copied());
+    b.visit(&mut |s| match s {
+        Stmt::Let { op, .. } => out.extend(op.operands()),
+        Stmt::If {
+            cond,
+            then_block,
+            else_block,
+            ..
+        } => {
+            out.insert(*cond);
+            out.extend(then_block.yields.iter().chain(&else_block.yields).copied());
+        }
+        Stmt::Call { args, body, .. } => {
+            out.extend(args.iter().copied());
+            out.extend(body.yields.iter().copied());
+        }
+    });
+}
+
+fn constant(f: &mut Function, ty: Scalar, out: &mut Vec<Stmt>) -> Var {
+    let c = match ty {
+        Scalar::F32 => Const::F(0.0),
+        Scalar::Bool => Const::B(false),
+        Scalar::U32 => Const::U(0),
+        Scalar::I32 => Const::I(0),
+    };
+    let var = f.new_var(ty, "zero");
+    out.push(Stmt::Let {
+        var,
+        op: Op::Const(c),
+    });
+    var
+}
+
+struct Gates {
+    mask: Var,
+    /// The groups of every variable.
+    of: HashMap<Var, u32>,
+    /// `mask & groups != 0`, computed once per set of groups...
+    conds: HashMap<u32, Var>,
+    /// ...in statements that go at the top of the body, so they dominate every use.
+    prelude: Vec<Stmt>,
+}
+
+impl Gates {
+    /// The condition "one of `groups` is asked for".
+    fn cond(&mut self, f: &mut Function, groups: u32) -> Var {
+        if let Some(c) = self.conds.get(&groups) {
+            return *c;
+        }
+        let bits = f.new_var(Scalar::U32, "group_bits");
+        let picked = f.new_var(Scalar::U32, "groups_asked");
+        let zero = f.new_var(Scalar::U32, "none");
+        let cond = f.new_var(Scalar::Bool, "wanted");
+        self.prelude.extend([
+            Stmt::Let {
+                var: bits,
+                op: Op::Const(Const::U(groups)),
+            },
+            Stmt::Let {
+                var: picked,
+                op: Op::Binary(Binary::And, self.mask, bits),
+            },
+            Stmt::Let {
+                var: zero,
+                op: Op::Const(Const::U(0)),
+            },
+            Stmt::Let {
+                var: cond,
+                op: Op::Binary(Binary::Ne, picked, zero),
+            },
+        ]);
+        self.conds.insert(groups, cond);
+        cond
+    }
+
+    /// Orders `b`'s statements by their groups and puts each run whose groups are fewer than
+    /// `enclosing` behind a branch; recurses into the source's own branches.
+    fn rewrite(&mut self, f: &mut Function, b: &mut Block, enclosing: u32) {
+        let mut stmts: Vec<(u32, Stmt)> = std::mem::take(&mut b.stmts)
+            .into_iter()
+            .map(|s| (stmt_groups(&s, &self.of) & enclosing, s))
+            .collect();
+        // Decreasing group count keeps definitions before uses (see the module's docs).
+        stmts.sort_by_key(|(g, _)| (std::cmp::Reverse(g.count_ones()), *g));
+        for (g, s) in &mut stmts {
+            if let Stmt::If {
+                then_block,
+                else_block,
+                ..
+            } = s
+            {
+                self.rewrite(f, then_block, *g);
+                self.rewrite(f, else_block, *g);
+            }
+        }
+        let mut out: Vec<Stmt> = vec![];
+        let mut rest = stmts.into_iter().peekable();
+        while let Some((g, first)) = rest.next() {
+            let mut run = vec![first];
+            while let Some((_, s)) = rest.next_if(|(h, _)| *h == g) {
+                run.push(s);
+            }
+            if g == enclosing || g == 0 {
+                out.extend(run);
+                continue;
+            }
+            // What the run defines that later statements or the yields read.
+            let mut later = HashSet::new();
+            let tail = Block {
+                stmts: rest.clone().map(|(_, s)| s).collect(),
+                yields: b.yields.clone(),
+            };
+            reads(&tail, &mut later);
+            let run = Block {
+                stmts: run,
+                yields: vec![],
+            };
+            let mut outs: Vec<Var> = run.defined_here().into_iter().collect();
+            outs.retain(|v| later.contains(v));
+            outs.sort();
+            let cond = self.cond(f, g);
+            let mut remap = HashMap::new();
+            let mut then_block = f.clone_fresh(&run, &mut remap);
+            then_block.yields = outs.iter().map(|v| remap[v]).collect();
+            let mut else_block = Block::default();
+            for v in &outs {
+                let zero = constant(f, f.ty(*v), &mut else_block.stmts);
+                else_block.yields.push(zero);
+            }
+            out.push(Stmt::If {
+                cond,
+                then_block,
+                else_block,
+                outs,
+            });
+        }
+        b.stmts = out;
+    }
+}
+
+impl Block {
+    /// The variables the block's own statements define (not those nested in its branches).
+    fn defined_here(&self) -> Vec<Var> {
+        let mut out = vec![];
+        for s in &self.stmts {
+            match s {
+                Stmt::Let { var, .. } => out.push(*var),
+                Stmt::If { outs, .. } | Stmt::Call { outs, .. } => out.extend(outs),
+            }
+        }
+        out
+    }
+}
