@@ -66,6 +66,9 @@ pub trait SplatMethod: Send + Sync + 'static {
     const GENERIC_CAMERA: bool;
     /// The fields of `Params`: name and words, in declaration order (see [`param_groups`]).
     const PARAM_FIELDS: &'static [(&'static str, usize)];
+    /// For each field of `Shade`, the [`GradientSet`] bits whose gradient flows through it
+    /// (what `project` computes it from): see [`GradientSet::shade_groups`].
+    const SHADE_FIELD_GROUPS: &'static [u32];
     /// Whether it renders a camera's rolling shutter (a kernel reads the pose per row, with
     /// `cam.shutter_time` and `cam.rotation_at`); the runtime refuses a camera that moves
     /// during the readout to the others.
@@ -163,7 +166,9 @@ pub trait SplatMethod: Send + Sync + 'static {
     /// `active` add nothing). Summing the lanes once per (tile, primitive) instead of once per
     /// group of pixels keeps horizontal sums out of the backward blend loop. With
     /// `pixel_info`, the pixel data's cotangent is added lane by lane into `d_pixel` too
-    /// (without it the pixel centre is a constant and `d_pixel` is left alone).
+    /// (without it the pixel centre is a constant and `d_pixel` is left alone). Only the
+    /// cotangents `shade_groups` asks for are computed ([`GradientSet::shade_groups`]); the
+    /// others add zero.
     fn evaluate_adjoint_lanes_accumulate(
         pixel: &Self::PixelLanes,
         shade: &Self::Shade,
@@ -171,6 +176,7 @@ pub trait SplatMethod: Send + Sync + 'static {
         active: M32x8,
         acc: &mut Self::ShadeLanes,
         d_pixel: &mut Self::PixelLanes,
+        shade_groups: u32,
     );
 
     /// The camera's cotangent through `pixel_info` at `pixel`, given the pixel data's
@@ -224,6 +230,16 @@ impl GradientSet {
 
     pub fn camera(self) -> bool {
         self.0 & (1 << Self::CAMERA_BIT) != 0
+    }
+
+    /// The groups of `evaluate`'s adjoint this set needs: bit `k` for field `k` of `M::Shade`
+    /// when a group asked for flows through it, bit 31 (the pixel data's cotangent) when the
+    /// camera's gradient is asked for.
+    pub fn shade_groups<M: SplatMethod>(self) -> u32 {
+        let bit = |k: usize| 1 << k.min(Self::CAMERA_BIT as usize - 1);
+        let fields = M::SHADE_FIELD_GROUPS.iter().enumerate();
+        let shade = fields.fold(0, |a, (k, g)| if g & self.0 != 0 { a | bit(k) } else { a });
+        shade | (self.0 & (1 << Self::CAMERA_BIT))
     }
 
     /// Whether the parameter group `k` (of [`param_groups`]) is computed.

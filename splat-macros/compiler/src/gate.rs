@@ -19,34 +19,119 @@ use std::collections::{HashMap, HashSet};
 /// The group bit of the camera's cotangent (the runtime's `GradientSet::CAMERA_BIT`).
 pub const CAMERA_BIT: u32 = 31;
 
-/// The group bits of an adjoint's results (the float slots of `params`, in order): field `k`
-/// of a struct parameter is bit `min(k, 30)`, the camera is [`CAMERA_BIT`], any other
-/// parameter one bit of its own (in the same count as the fields).
-pub fn result_groups(params: &[&Ty]) -> Vec<u32> {
-    let floats = |t: &Ty| t.slots().iter().filter(|s| **s == Scalar::F32).count();
-    let mut out = vec![];
-    let mut next = 0u32;
-    let mut bit = || {
-        let b = 1 << next.min(CAMERA_BIT - 1);
-        next += 1;
-        b
-    };
-    for ty in params {
-        match ty {
-            t if is_camera(t) => out.extend(std::iter::repeat_n(1 << CAMERA_BIT, floats(t))),
-            Ty::Struct(s) => {
-                for (_, t) in &s.fields {
-                    let b = bit();
-                    out.extend(std::iter::repeat_n(b, floats(t)));
+/// The group bits of `project`'s adjoint results (the float slots of its parameters and of
+/// the camera): field `k` of the parameters is bit `min(k, 30)`, the camera [`CAMERA_BIT`].
+pub fn project_groups(params: &Ty, camera: &Ty) -> Vec<u32> {
+    let mut out = per_field(params);
+    out.extend(std::iter::repeat_n(1 << CAMERA_BIT, float_slots(camera)));
+    out
+}
+
+/// The group bits of `evaluate`'s adjoint results (the float slots of the pixel data and of the
+/// shade data): field `k` of the shade data is bit `min(k, 30)`; the pixel data, whose
+/// cotangent only the camera's gradient needs, is [`CAMERA_BIT`].
+pub fn evaluate_groups(pixel: &Ty, shade: &Ty) -> Vec<u32> {
+    let mut out = vec![1 << CAMERA_BIT; float_slots(pixel)];
+    out.extend(per_field(shade));
+    out
+}
+
+/// For each field of the shade data `project` returns, the groups of `project_groups` whose
+/// gradient flows through it: `evaluate`'s adjoint needs the cotangent of a shade field only
+/// when one of them is asked for.
+pub fn shade_field_groups(project: &Function, params: &Ty, camera: &Ty, shade: &Ty) -> Vec<u32> {
+    let mut inputs = per_field_slots(params, &|t| t.slot_count());
+    inputs.extend(std::iter::repeat_n(1 << CAMERA_BIT, camera.slot_count()));
+    let deps = dependencies(project, &inputs);
+    let mut shade_slots = deps[deps.len() - shade.slot_count()..].iter();
+    match shade {
+        Ty::Struct(s) => s
+            .fields
+            .iter()
+            .map(|(_, t)| {
+                let field = shade_slots.by_ref().take(t.slot_count());
+                field.fold(0, |a, d| a | d)
+            })
+            .collect(),
+        _ => vec![shade_slots.fold(0, |a, d| a | d)],
+    }
+}
+
+/// A bit per field of a struct (one for the whole of any other type), for each float slot.
+fn per_field(ty: &Ty) -> Vec<u32> {
+    per_field_slots(ty, &float_slots)
+}
+
+/// A bit per field of a struct (one for the whole of any other type), repeated `slots(field)`
+/// times.
+fn per_field_slots(ty: &Ty, slots: &dyn Fn(&Ty) -> usize) -> Vec<u32> {
+    let bit = |k: usize| 1 << k.min(CAMERA_BIT as usize - 1);
+    match ty {
+        Ty::Struct(s) if !is_camera(ty) => s
+            .fields
+            .iter()
+            .enumerate()
+            .flat_map(|(k, (_, t))| std::iter::repeat_n(bit(k), slots(t)))
+            .collect(),
+        t => vec![bit(0); slots(t)],
+    }
+}
+
+fn float_slots(t: &Ty) -> usize {
+    t.slots().iter().filter(|s| **s == Scalar::F32).count()
+}
+
+/// For each result of `f`, the union of `inputs[i]` over the parameters `i` it depends on
+/// (through its operands, and through the conditions of the branches it is chosen by).
+pub fn dependencies(f: &Function, inputs: &[u32]) -> Vec<u32> {
+    let mut on: HashMap<Var, u32> = f
+        .params
+        .iter()
+        .copied()
+        .zip(inputs.iter().copied())
+        .collect();
+    depend(&f.body, 0, &mut on);
+    let get = |v: &Var| on.get(v).copied().unwrap_or(0);
+    f.body.yields.iter().map(get).collect()
+}
+
+/// Adds to `on` what each variable `b` defines depends on; `under` is what the enclosing
+/// branches' conditions depend on.
+fn depend(b: &Block, under: u32, on: &mut HashMap<Var, u32>) {
+    let get = |on: &HashMap<Var, u32>, v: &Var| on.get(v).copied().unwrap_or(0);
+    for s in &b.stmts {
+        match s {
+            Stmt::Let { var, op } => {
+                let d = op.operands().iter().fold(under, |a, o| a | get(on, o));
+                on.insert(*var, d);
+            }
+            Stmt::If {
+                cond,
+                then_block,
+                else_block,
+                outs,
+            } => {
+                let inner = under | get(on, cond);
+                depend(then_block, inner, on);
+                depend(else_block, inner, on);
+                for (k, o) in outs.iter().enumerate() {
+                    let d = inner | get(on, &then_block.yields[k]) | get(on, &else_block.yields[k]);
+                    on.insert(*o, d);
                 }
             }
-            t => {
-                let b = bit();
-                out.extend(std::iter::repeat_n(b, floats(t)));
+            Stmt::Call {
+                args, body, outs, ..
+            } => {
+                let mut read = HashSet::new();
+                reads(body, &mut read);
+                depend(body, under, on);
+                let d = args.iter().chain(&read).fold(under, |a, v| a | get(on, v));
+                for o in outs {
+                    on.insert(*o, d);
+                }
             }
         }
     }
-    out
 }
 
 /// Gates `f`'s results: `groups[i]` is the group bits of result `i`. Returns the mask

@@ -156,8 +156,10 @@ fn build_kernels<'m>(
     };
     let mut kernels = vec![];
     for def in defs {
-        // Method's `project` adjoint computes only the gradient groups asked for.
-        let gated = kind == Kind::Method && def.name == "project";
+        // A method's `project` and `evaluate` adjoints compute only the groups asked for.
+        let gated = kind == Kind::Method
+            && ["project", "evaluate"].contains(&def.name.as_str())
+            && def.params.len() == 2;
         let Some((mut kernel, model_slot)) = build_kernel(m, def, custom, diag, None, gated) else {
             continue;
         };
@@ -218,8 +220,12 @@ fn build_kernel<'m>(
     opt::dce(&mut primal);
     let gated = adjoint.as_ref().filter(|_| gated).map(|g| {
         let mut g = g.clone();
-        let params: Vec<&types::Ty> = def.params.iter().map(|p| &p.ty).collect();
-        gate::gate(&mut g, &gate::result_groups(&params));
+        let (a, b) = (&def.params[0].ty, &def.params[1].ty);
+        let groups = match def.name.as_str() {
+            "project" => gate::project_groups(a, b),
+            _ => gate::evaluate_groups(a, b),
+        };
+        gate::gate(&mut g, &groups);
         g
     });
     let kernel = Kernel {

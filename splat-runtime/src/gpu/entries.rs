@@ -11,6 +11,7 @@ use super::state::PixelState;
 use super::{Gpu, GpuError};
 use crate::flat::Flat;
 use crate::method::{GradientSet, SplatMethod, WgslFunction};
+use crate::pipeline::RenderOptions;
 use crate::pipeline::shade::Blend;
 use crate::types::{Camera, CameraModel};
 
@@ -318,16 +319,18 @@ pub fn shade<M: SplatMethod>(
 }
 
 /// `backward_tiles`: the backward blend under the camera `model` with the gradient
-/// accumulation `acc`, replaying against the pixels stored as `state` says.
+/// accumulation `acc`, replaying against the pixels stored as `state` says, for the tile size,
+/// blend and gradient groups of `opts` (the groups a constant of the pipeline: `evaluate`'s
+/// adjoint branches on them fold).
 pub fn backward<M: SplatMethod>(
     gpu: &Gpu,
     model: CameraModel,
-    tile: u32,
+    opts: &RenderOptions,
     want_depth: bool,
     acc: Accumulation,
-    rule: Blend,
     state: PixelState,
 ) -> Result<String, GpuError> {
+    let (tile, rule) = (opts.tile_size, opts.blend);
     let wgsl = M::SOURCE.wgsl;
     let layout = Layout::of::<M>();
     let b = blend_sizes(gpu, tile, &layout, acc.reduce == Reduction::Workgroup)?;
@@ -335,11 +338,12 @@ pub fn backward<M: SplatMethod>(
     let (call, eval) = evaluate_call::<M>(&pixel_args, "batch_words")?;
     let adj = sig::<M>("evaluate_adjoint")?;
     let (np, ns, nc) = (pixel_args.len(), layout.shade_words, layout.channels);
-    if adj.args.len() != np + ns + 1 + nc {
+    // The pixel data, the shade data, the cotangents of alpha and color, the groups' mask.
+    if adj.args.len() != np + ns + 1 + nc + 1 {
         return Err(GpuError::Shader(format!(
             "evaluate_adjoint takes {} arguments, expected {}",
             adj.args.len(),
-            np + ns + 1 + nc
+            np + ns + 1 + nc + 1
         )));
     }
     let color_terms: String = (0..nc)
@@ -359,6 +363,7 @@ pub fn backward<M: SplatMethod>(
     }
     adj_args.push("d_alpha".into());
     adj_args.extend((0..nc).map(|c| format!("w * d_color[{c}]")));
+    adj_args.push(format!("{}u", opts.gradients.shade_groups::<M>()));
     let nsf = layout.shade_floats;
     let first = adj.results.len() - nsf;
     let shade_grads: String = (0..nsf)

@@ -528,8 +528,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         if let Some(p) = self.blends.get(&key) {
             return Ok(p.clone());
         }
-        let (tile, rule) = (self.opts.tile_size, self.opts.blend);
-        let source = entries::backward::<M>(gpu, key.0, tile, want_depth, acc, rule, self.state)?;
+        let source = entries::backward::<M>(gpu, key.0, &self.opts, want_depth, acc, self.state)?;
         let k = gpu.kernel(&source, "backward_tiles")?;
         self.blends.insert(key, k.clone());
         Ok(k)

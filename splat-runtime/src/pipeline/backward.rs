@@ -105,6 +105,7 @@ fn backward_tile_body<M: SplatMethod, const MODEL: u32>(
     let (s, channels, words) = (grid.size, M::Color::LEN, M::Shade::LEN);
     let (tx, ty) = grid.tile_xy(tile);
     let want_depth = grad.depth.is_some();
+    let shade_groups = state.gradients.shade_groups::<M>();
     // Per-lane gradient sums for every entry of the tile's list, over all its pixel groups;
     // the lanes are summed once per entry at the end of the tile.
     let mut shade_lanes = vec![M::ShadeLanes::default(); list.len()];
@@ -192,6 +193,7 @@ fn backward_tile_body<M: SplatMethod, const MODEL: u32>(
                     st.take,
                     &mut shade_lanes[k],
                     &mut d_pixel,
+                    shade_groups,
                 );
                 t = st.take.select_f32(t * one_minus, t);
             }

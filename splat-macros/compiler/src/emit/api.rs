@@ -301,19 +301,39 @@ impl Kernel<'_> {
         let name = format_ident!("{}_adjoint", self.name());
         let params = self.typed_params();
         let ret = self.ret.rust();
-        let mut doc = format!(
+        let doc = format!(
             " Reverse-mode derivative of [`{}`]: given the cotangent `d_out` of its result, the cotangents of its parameters (zero for `bool` and integer fields).",
             self.name()
         );
-        if grads.is_some() {
-            doc += " Only the gradient groups whose bits are set in `grads` are computed (bit k: field k of the first parameter, bit 31: the camera); the others are zero.";
-        }
         let allow: TokenStream = ALLOW.parse().unwrap();
+        let Some(grads) = grads else {
+            return Some(quote! {
+                #[doc = #doc]
+                #[inline]
+                #allow
+                pub fn #name(#(#params,)* d_out: #ret) -> #result_ty {
+                    #prologue
+                    #body
+                    #result
+                }
+            });
+        };
+        let gated = format_ident!("{}_adjoint_gated", self.name());
+        let args: Vec<&Ident> = self.def.params.iter().map(|p| &p.ident).collect();
+        let gated_doc = format!(
+            " [`{name}`] computing only the gradient groups whose bits are set in `grads` (bit k: field k of the parameters, or of the shade data; bit 31: the camera, or the pixel data; see `splat_runtime::GradientSet`); the others are zero."
+        );
         Some(quote! {
             #[doc = #doc]
             #[inline]
             #allow
-            pub fn #name(#(#params,)* d_out: #ret, #grads) -> #result_ty {
+            pub fn #name(#(#params,)* d_out: #ret) -> #result_ty {
+                #gated(#(#args,)* d_out, u32::MAX)
+            }
+            #[doc = #gated_doc]
+            #[inline]
+            #allow
+            pub fn #gated(#(#params,)* d_out: #ret, #grads) -> #result_ty {
                 #prologue
                 #body
                 #result
@@ -403,27 +423,71 @@ impl Kernel<'_> {
                 ([#(#fl),*], [#(#it),*])
             }
         };
-        if let Some(g) = &self.adjoint {
+        // Lane code of a gated kernel takes the groups' mask (one for all lanes); the twin is
+        // the whole adjoint.
+        let gated = self.gated.as_ref().filter(|_| flavor == Flavor::Lanes);
+        if let Some(g) = gated.or(self.adjoint.as_ref()) {
+            let mut reserved = reserved.clone();
+            reserved.push("grads".into());
             let mut em = BodyEmitter::new(g, flavor, &reserved);
             let n = f.params.len();
+            let cotangents = g.params.len() - gated.is_some() as usize;
             let (mut prologue, _, _) =
                 read(&mut em, &g.params[..n], g, quote!(__in), quote!(__int));
-            let (bars, _, _) = read(&mut em, &g.params[n..], g, quote!(__d), quote!(__int));
+            let (bars, _, _) = read(
+                &mut em,
+                &g.params[n..cotangents],
+                g,
+                quote!(__d),
+                quote!(__int),
+            );
             prologue.extend(bars);
+            let grads = gated.map(|_| {
+                let mask = g.params[cotangents];
+                em.name_as(mask, "grads");
+                em.set_uniform(mask);
+                quote!(grads: u32)
+            });
             let body = em.block(&g.body);
             let (fl, _) = write(&mut em, g.results(), g);
             let adj = format_ident!("{}_adjoint", name);
             let doc = format!(
                 " Flat form of [`super::{name}_adjoint`]: the cotangents of the float inputs."
             );
-            out.extend(quote! {
-                #[doc = #doc]
-                #inline
-                #allow
-                pub fn #adj(__in: &[#float_t; #nf_l], __int: &[#int_t; #ni_l], __d: &[#float_t; #mf]) -> [#float_t; #nf_l] {
-                    #prologue
-                    #body
-                    [#(#fl),*]
+            let signature =
+                quote!((__in: &[#float_t; #nf_l], __int: &[#int_t; #ni_l], __d: &[#float_t; #mf]));
+            out.extend(match grads {
+                None => quote! {
+                    #[doc = #doc]
+                    #inline
+                    #allow
+                    pub fn #adj #signature -> [#float_t; #nf_l] {
+                        #prologue
+                        #body
+                        [#(#fl),*]
+                    }
+                },
+                Some(grads) => {
+                    let gated = format_ident!("{}_adjoint_gated", name);
+                    let gated_doc = format!(
+                        " Flat form of [`super::{name}_adjoint_gated`]: the cotangents of the groups in `grads`."
+                    );
+                    quote! {
+                        #[doc = #doc]
+                        #inline
+                        #allow
+                        pub fn #adj #signature -> [#float_t; #nf_l] {
+                            #gated(__in, __int, __d, u32::MAX)
+                        }
+                        #[doc = #gated_doc]
+                        #inline
+                        #allow
+                        pub fn #gated(__in: &[#float_t; #nf_l], __int: &[#int_t; #ni_l], __d: &[#float_t; #mf], #grads) -> [#float_t; #nf_l] {
+                            #prologue
+                            #body
+                            [#(#fl),*]
+                        }
+                    }
                 }
             });
         }

@@ -20,6 +20,9 @@ pub struct BodyEmitter<'f> {
     names: HashMap<Var, Ident>,
     used: HashSet<String>,
     consts: HashMap<Var, Const>,
+    /// In lane code, the values that are the same on every lane (a gated adjoint's mask and
+    /// what is computed from it alone): scalars, and branches on them are real branches.
+    uniform: HashSet<Var>,
 }
 
 const RT: &str = "::splat_runtime";
@@ -34,7 +37,22 @@ impl<'f> BodyEmitter<'f> {
             names: HashMap::new(),
             used: reserved.iter().cloned().collect(),
             consts,
+            uniform: HashSet::new(),
         }
+    }
+
+    /// Declares the parameter `v` the same on every lane (a scalar in lane code).
+    pub fn set_uniform(&mut self, v: Var) {
+        self.uniform.insert(v);
+    }
+
+    /// A lane-code `Let` whose operands are uniform (or constant, with at least one uniform).
+    fn computes_uniform(&self, op: &Op) -> bool {
+        let ops = op.operands();
+        ops.iter().any(|o| self.uniform.contains(o))
+            && ops
+                .iter()
+                .all(|o| self.uniform.contains(o) || self.is_const(*o))
     }
 
     /// Claims `name` for `v` (the scalar parameter named like its slot keeps that name).
@@ -138,6 +156,14 @@ impl<'f> BodyEmitter<'f> {
             Stmt::Let {
                 op: Op::Const(_), ..
             } => TokenStream::new(),
+            Stmt::Let { var, op } if self.flavor == Flavor::Lanes && self.computes_uniform(op) => {
+                self.uniform.insert(*var);
+                self.flavor = Flavor::F32;
+                let rhs = self.op(*var, op);
+                self.flavor = Flavor::Lanes;
+                let id = self.ident(*var);
+                quote!(let #id = #rhs;)
+            }
             Stmt::Let { var, op } => {
                 let rhs = self.op(*var, op);
                 let id = self.ident(*var);
@@ -149,7 +175,7 @@ impl<'f> BodyEmitter<'f> {
                 else_block,
                 outs,
             } => {
-                if self.flavor == Flavor::Lanes {
+                if self.flavor == Flavor::Lanes && !self.uniform.contains(cond) {
                     // Both sides run on all lanes; the condition's mask picks per lane.
                     let t = self.block(then_block);
                     let e = self.block(else_block);
@@ -196,7 +222,7 @@ impl<'f> BodyEmitter<'f> {
             Op::Const(_) => unreachable!("constants are inlined"),
             Op::Select(c, a, b) => {
                 let (cv, av, bv) = (self.val(c), self.val(a), self.val(b));
-                if lanes {
+                if lanes && !self.uniform.contains(&c) {
                     let m = select_method(self.f.ty(r));
                     quote!(#cv.#m(#av, #bv))
                 } else {

@@ -272,6 +272,8 @@ pub fn method_impl(m: &Module, kernels: &[Kernel], diag: &Diag) -> Option<TokenS
             vec![quote!(("params", #n))]
         }
     };
+    let shade_field_groups =
+        crate::gate::shade_field_groups(&project.primal, &params_ty, &camera, &shade_ty);
     let (p_t, c_t, s_t, px_t, col_t) = (
         params_ty.rust(),
         cull_ty.rust(),
@@ -290,7 +292,7 @@ pub fn method_impl(m: &Module, kernels: &[Kernel], diag: &Diag) -> Option<TokenS
         &[false, false],
     );
     let project_adjoint = if project.adjoint.is_some() {
-        quote! { project_adjoint(#(#project_call,)* *d_out, wanted.bits()) }
+        quote! { project_adjoint_gated(#(#project_call,)* *d_out, wanted.bits()) }
     } else {
         quote! { (<#p_t as #rt::Flat>::zero(), #rt::Camera::ZERO) }
     };
@@ -412,7 +414,7 @@ pub fn method_impl(m: &Module, kernels: &[Kernel], diag: &Diag) -> Option<TokenS
             let __in = [#(#lane_in),*];
             let __int = [#(#lane_int),*];
             let __d = [d_out.alpha, #(#d_color),*];
-            let __bars = lanes::evaluate_adjoint(&__in, &__int, &__d);
+            let __bars = lanes::evaluate_adjoint_gated(&__in, &__int, &__d, shade_groups);
             #(#accumulate)*
         }
     } else {
@@ -445,6 +447,7 @@ pub fn method_impl(m: &Module, kernels: &[Kernel], diag: &Diag) -> Option<TokenS
             const GENERIC_CAMERA: bool = #generic_camera;
             const ROLLING_SHUTTER: bool = #rolling_shutter;
             const PARAM_FIELDS: &'static [(&'static str, usize)] = &[#(#param_fields),*];
+            const SHADE_FIELD_GROUPS: &'static [u32] = &[#(#shade_field_groups),*];
             const SOURCE: #rt::GeneratedSource = #rt::GeneratedSource { rust: GENERATED_RUST, wgsl: GENERATED_WGSL, functions: GENERATED_FUNCTIONS };
             const TWIN: #rt::checks::Twin = #twin;
             type Params = #p_t;
@@ -522,6 +525,7 @@ pub fn method_impl(m: &Module, kernels: &[Kernel], diag: &Diag) -> Option<TokenS
                 active: #rt::M32x8,
                 acc: &mut [#f32x8; #nsf],
                 d_pixel: &mut [#f32x8; #np],
+                shade_groups: u32,
             ) {
                 #lanes_accumulate
             }
