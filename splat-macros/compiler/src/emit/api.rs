@@ -240,15 +240,22 @@ impl Kernel<'_> {
         }
     }
 
-    /// The typed `f32` adjoint: `(params..., d_out) -> cotangents of the params`, and for a
-    /// gated kernel `(params..., d_out, grads: u32)`: the groups to compute (see `gate`).
+    /// The typed `f32` adjoint: `(params..., d_out) -> cotangents of the params`; for a gated
+    /// kernel also `{name}_adjoint_gated(params..., d_out, grads: u32)`, which computes only the
+    /// groups in `grads` (see `gate`). Both are emitted: the plain one keeps the statement
+    /// order the AD wrote, so computing everything costs what it did before gating.
     pub fn adjoint_fn(&self) -> Option<TokenStream> {
-        let g = self.gated.as_ref().or(self.adjoint.as_ref())?;
+        let plain = self.typed_adjoint(self.adjoint.as_ref()?, false);
+        let gated = self.gated.as_ref().map(|g| self.typed_adjoint(g, true));
+        Some(quote!(#plain #gated))
+    }
+
+    fn typed_adjoint(&self, g: &Function, gated: bool) -> TokenStream {
         let mut reserved = self.reserved();
         reserved.push("grads".into());
         let mut em = BodyEmitter::new(g, Flavor::F32, &reserved);
         let mut prologue = self.typed_prologue(&mut em, g);
-        let grads = self.gated.as_ref().map(|g| {
+        let grads = gated.then(|| {
             em.name_as(*g.params.last().expect("the mask"), "grads");
             quote!(grads: u32)
         });
@@ -298,47 +305,33 @@ impl Kernel<'_> {
         } else {
             (quote!((#(#cots),*)), quote!((#(#cot_tys),*)))
         };
-        let name = format_ident!("{}_adjoint", self.name());
+        let plain = format_ident!("{}_adjoint", self.name());
+        let name = match gated {
+            true => format_ident!("{}_adjoint_gated", self.name()),
+            false => plain.clone(),
+        };
         let params = self.typed_params();
         let ret = self.ret.rust();
-        let doc = format!(
-            " Reverse-mode derivative of [`{}`]: given the cotangent `d_out` of its result, the cotangents of its parameters (zero for `bool` and integer fields).",
-            self.name()
-        );
-        let allow: TokenStream = ALLOW.parse().unwrap();
-        let Some(grads) = grads else {
-            return Some(quote! {
-                #[doc = #doc]
-                #[inline]
-                #allow
-                pub fn #name(#(#params,)* d_out: #ret) -> #result_ty {
-                    #prologue
-                    #body
-                    #result
-                }
-            });
+        let doc = match gated {
+            true => format!(
+                " [`{plain}`] computing only the gradient groups whose bits are set in `grads` (bit k: field k of the parameters, or of the shade data; bit 31: the camera, or the pixel data; see `splat_runtime::GradientSet`); the others are zero."
+            ),
+            false => format!(
+                " Reverse-mode derivative of [`{}`]: given the cotangent `d_out` of its result, the cotangents of its parameters (zero for `bool` and integer fields).",
+                self.name()
+            ),
         };
-        let gated = format_ident!("{}_adjoint_gated", self.name());
-        let args: Vec<&Ident> = self.def.params.iter().map(|p| &p.ident).collect();
-        let gated_doc = format!(
-            " [`{name}`] computing only the gradient groups whose bits are set in `grads` (bit k: field k of the parameters, or of the shade data; bit 31: the camera, or the pixel data; see `splat_runtime::GradientSet`); the others are zero."
-        );
-        Some(quote! {
+        let allow: TokenStream = ALLOW.parse().unwrap();
+        quote! {
             #[doc = #doc]
             #[inline]
             #allow
-            pub fn #name(#(#params,)* d_out: #ret) -> #result_ty {
-                #gated(#(#args,)* d_out, u32::MAX)
-            }
-            #[doc = #gated_doc]
-            #[inline]
-            #allow
-            pub fn #gated(#(#params,)* d_out: #ret, #grads) -> #result_ty {
+            pub fn #name(#(#params,)* d_out: #ret, #grads) -> #result_ty {
                 #prologue
                 #body
                 #result
             }
-        })
+        }
     }
 
     /// The flat forward and adjoint in `flavor` (`F64` for the twin, `Lanes` for SIMD):
@@ -423,15 +416,16 @@ impl Kernel<'_> {
                 ([#(#fl),*], [#(#it),*])
             }
         };
-        // Lane code of a gated kernel takes the groups' mask (one for all lanes); the twin is
-        // the whole adjoint.
+        // Lane code of a gated kernel also comes gated (its mask one for all lanes); the twin
+        // is the whole adjoint only.
         let gated = self.gated.as_ref().filter(|_| flavor == Flavor::Lanes);
-        if let Some(g) = gated.or(self.adjoint.as_ref()) {
+        let adjoints = self.adjoint.iter().map(|g| (g, false));
+        for (g, gated) in adjoints.chain(gated.map(|g| (g, true))) {
             let mut reserved = reserved.clone();
             reserved.push("grads".into());
             let mut em = BodyEmitter::new(g, flavor, &reserved);
             let n = f.params.len();
-            let cotangents = g.params.len() - gated.is_some() as usize;
+            let cotangents = g.params.len() - gated as usize;
             let (mut prologue, _, _) =
                 read(&mut em, &g.params[..n], g, quote!(__in), quote!(__int));
             let (bars, _, _) = read(
@@ -442,7 +436,7 @@ impl Kernel<'_> {
                 quote!(__int),
             );
             prologue.extend(bars);
-            let grads = gated.map(|_| {
+            let grads = gated.then(|| {
                 let mask = g.params[cotangents];
                 em.name_as(mask, "grads");
                 em.set_uniform(mask);
@@ -450,44 +444,28 @@ impl Kernel<'_> {
             });
             let body = em.block(&g.body);
             let (fl, _) = write(&mut em, g.results(), g);
-            let adj = format_ident!("{}_adjoint", name);
-            let doc = format!(
-                " Flat form of [`super::{name}_adjoint`]: the cotangents of the float inputs."
-            );
-            let signature =
-                quote!((__in: &[#float_t; #nf_l], __int: &[#int_t; #ni_l], __d: &[#float_t; #mf]));
-            out.extend(match grads {
-                None => quote! {
-                    #[doc = #doc]
-                    #inline
-                    #allow
-                    pub fn #adj #signature -> [#float_t; #nf_l] {
-                        #prologue
-                        #body
-                        [#(#fl),*]
-                    }
-                },
-                Some(grads) => {
-                    let gated = format_ident!("{}_adjoint_gated", name);
-                    let gated_doc = format!(
+            let (adj, doc) = match gated {
+                false => (
+                    format_ident!("{}_adjoint", name),
+                    format!(
+                        " Flat form of [`super::{name}_adjoint`]: the cotangents of the float inputs."
+                    ),
+                ),
+                true => (
+                    format_ident!("{}_adjoint_gated", name),
+                    format!(
                         " Flat form of [`super::{name}_adjoint_gated`]: the cotangents of the groups in `grads`."
-                    );
-                    quote! {
-                        #[doc = #doc]
-                        #inline
-                        #allow
-                        pub fn #adj #signature -> [#float_t; #nf_l] {
-                            #gated(__in, __int, __d, u32::MAX)
-                        }
-                        #[doc = #gated_doc]
-                        #inline
-                        #allow
-                        pub fn #gated(__in: &[#float_t; #nf_l], __int: &[#int_t; #ni_l], __d: &[#float_t; #mf], #grads) -> [#float_t; #nf_l] {
-                            #prologue
-                            #body
-                            [#(#fl),*]
-                        }
-                    }
+                    ),
+                ),
+            };
+            out.extend(quote! {
+                #[doc = #doc]
+                #inline
+                #allow
+                pub fn #adj(__in: &[#float_t; #nf_l], __int: &[#int_t; #ni_l], __d: &[#float_t; #mf], #grads) -> [#float_t; #nf_l] {
+                    #prologue
+                    #body
+                    [#(#fl),*]
                 }
             });
         }

@@ -46,10 +46,12 @@ impl<'f> BodyEmitter<'f> {
         self.uniform.insert(v);
     }
 
-    /// A lane-code `Let` whose operands are uniform (or constant, with at least one uniform).
-    fn computes_uniform(&self, op: &Op) -> bool {
+    /// A lane-code `Let` of a mask or a condition whose operands are uniform (or constant,
+    /// with at least one uniform).
+    fn computes_uniform(&self, var: Var, op: &Op) -> bool {
         let ops = op.operands();
-        ops.iter().any(|o| self.uniform.contains(o))
+        self.f.ty(var) != Scalar::F32
+            && ops.iter().any(|o| self.uniform.contains(o))
             && ops
                 .iter()
                 .all(|o| self.uniform.contains(o) || self.is_const(*o))
@@ -156,7 +158,9 @@ impl<'f> BodyEmitter<'f> {
             Stmt::Let {
                 op: Op::Const(_), ..
             } => TokenStream::new(),
-            Stmt::Let { var, op } if self.flavor == Flavor::Lanes && self.computes_uniform(op) => {
+            Stmt::Let { var, op }
+                if self.flavor == Flavor::Lanes && self.computes_uniform(*var, op) =>
+            {
                 self.uniform.insert(*var);
                 self.flavor = Flavor::F32;
                 let rhs = self.op(*var, op);

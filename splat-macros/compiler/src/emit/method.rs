@@ -291,10 +291,25 @@ pub fn method_impl(m: &Module, kernels: &[Kernel], diag: &Diag) -> Option<TokenS
         &[quote!(params), quote!(camera)],
         &[false, false],
     );
-    let project_adjoint = if project.adjoint.is_some() {
-        quote! { project_adjoint_gated(#(#project_call,)* *d_out, wanted.bits()) }
-    } else {
-        quote! { (<#p_t as #rt::Flat>::zero(), #rt::Camera::ZERO) }
+    // Every parameter group asked for: the plain adjoint (the AD's own statement order, so
+    // that costs what it did before gating), the camera dropped unless asked for; otherwise
+    // the gated one. `by_model` turns each call into its model's.
+    let all_params = crate::gate::all_fields(&params_ty);
+    let choose_project_adjoint = |model: &dyn Fn(TokenStream) -> TokenStream| {
+        let plain = model(quote!(project_adjoint(#(#project_call,)* *d_out)));
+        let gated = model(quote!(project_adjoint_gated(#(#project_call,)* *d_out, wanted.bits())));
+        quote! {
+            if wanted.bits() & #all_params == #all_params {
+                let (p, c) = #plain;
+                (p, if wanted.camera() { c } else { #rt::Camera::ZERO })
+            } else {
+                #gated
+            }
+        }
+    };
+    let project_adjoint = match project.adjoint {
+        Some(_) => choose_project_adjoint(&|call| call),
+        None => quote! { (<#p_t as #rt::Flat>::zero(), #rt::Camera::ZERO) },
     };
     let tile_cull_body = match tile_cull {
         Some(tc) => {
@@ -321,7 +336,7 @@ pub fn method_impl(m: &Module, kernels: &[Kernel], diag: &Diag) -> Option<TokenS
     // The same calls through the kernels specialized to the camera model `MODEL`.
     let project_as = by_model(project, quote!(project(#(#project_call),*)));
     let project_adjoint_as = match project.adjoint {
-        Some(_) => by_model(project, project_adjoint.clone()),
+        Some(_) => choose_project_adjoint(&|call| by_model(project, call)),
         None => project_adjoint.clone(),
     };
     let (pixel_info_as, pixel_info_adjoint_as) = match pixel_info {
@@ -409,12 +424,17 @@ pub fn method_impl(m: &Module, kernels: &[Kernel], diag: &Diag) -> Option<TokenS
     } else {
         quote! { <#s_t as #rt::Flat>::zero() }
     };
+    let all_shade = crate::gate::all_fields(&shade_ty);
     let lanes_accumulate = if evaluate.adjoint.is_some() {
         quote! {
             let __in = [#(#lane_in),*];
             let __int = [#(#lane_int),*];
             let __d = [d_out.alpha, #(#d_color),*];
-            let __bars = lanes::evaluate_adjoint_gated(&__in, &__int, &__d, shade_groups);
+            let __bars = if shade_groups & #all_shade == #all_shade {
+                lanes::evaluate_adjoint(&__in, &__int, &__d)
+            } else {
+                lanes::evaluate_adjoint_gated(&__in, &__int, &__d, shade_groups)
+            };
             #(#accumulate)*
         }
     } else {
