@@ -60,6 +60,9 @@ pub trait SplatMethod: Send + Sync + 'static {
     const HAS_TILE_CULL: bool;
     /// Whether the method declared `pixel_info` (otherwise the pixel data is the pixel centre).
     const HAS_PIXEL_INFO: bool;
+    /// Whether `pixel_info` (and so the blend) has a variant per camera model; without one
+    /// the blend is compiled once for every model ([`with_pixel_model!`](crate::with_pixel_model)).
+    const PIXELS_BY_MODEL: bool;
     /// Whether the method reaches the camera model only through `cam.project_point` /
     /// `cam.pixel_ray` (so it works with every [`CameraModel`](crate::CameraModel)); otherwise
     /// it is pinhole-only and rendering with another model is refused.
@@ -232,19 +235,30 @@ impl GradientSet {
         self.0 & (1 << Self::CAMERA_BIT) != 0
     }
 
+    /// The bit of field `k` (of the parameters, or of the shade data): fields past the 31st
+    /// share bit 30 (the compiler's `gate::field_bit`).
+    pub fn field_bit(k: usize) -> u32 {
+        1 << k.min(Self::CAMERA_BIT as usize - 1)
+    }
+
     /// The groups of `evaluate`'s adjoint this set needs: bit `k` for field `k` of `M::Shade`
     /// when a group asked for flows through it, bit 31 (the pixel data's cotangent) when the
     /// camera's gradient is asked for.
     pub fn shade_groups<M: SplatMethod>(self) -> u32 {
-        let bit = |k: usize| 1 << k.min(Self::CAMERA_BIT as usize - 1);
         let fields = M::SHADE_FIELD_GROUPS.iter().enumerate();
-        let shade = fields.fold(0, |a, (k, g)| if g & self.0 != 0 { a | bit(k) } else { a });
+        let shade = fields.fold(0, |a, (k, g)| {
+            if g & self.0 != 0 {
+                a | Self::field_bit(k)
+            } else {
+                a
+            }
+        });
         shade | (self.0 & (1 << Self::CAMERA_BIT))
     }
 
     /// Whether the parameter group `k` (of [`param_groups`]) is computed.
     pub fn param(self, k: usize) -> bool {
-        self.0 & (1 << k.min(Self::CAMERA_BIT as usize - 1)) != 0
+        self.0 & Self::field_bit(k) != 0
     }
 
     /// The parameter groups named in `names` (as [`param_groups`] names them) and no camera.
@@ -260,7 +274,7 @@ impl GradientSet {
                     known.join(", ")
                 )
             })?;
-            bits |= 1 << k.min(Self::CAMERA_BIT as usize - 1);
+            bits |= Self::field_bit(k);
         }
         Ok(GradientSet(bits))
     }

@@ -80,6 +80,22 @@ macro_rules! with_camera_model {
     };
 }
 
+/// [`with_camera_model!`] for the blend of `$method`: `$code` is the camera's model where the
+/// method's pixel data depends on it ([`SplatMethod::PIXELS_BY_MODEL`](crate::SplatMethod)),
+/// otherwise pinhole's for every model (the code is the same; compiling it once per model
+/// only costs build time).
+#[macro_export]
+macro_rules! with_pixel_model {
+    ($method:ty, $model:expr, $code:ident => $body:expr) => {
+        if <$method as $crate::SplatMethod>::PIXELS_BY_MODEL {
+            $crate::with_camera_model!($model, $code => $body)
+        } else {
+            const $code: u32 = $crate::CameraModel::Pinhole as u32;
+            $body
+        }
+    };
+}
+
 impl std::fmt::Display for CameraModel {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(self.name())

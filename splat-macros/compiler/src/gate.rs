@@ -21,6 +21,12 @@ use std::collections::{HashMap, HashSet};
 /// The group bit of the camera's cotangent (the runtime's `GradientSet::CAMERA_BIT`).
 pub const CAMERA_BIT: u32 = 31;
 
+/// The bit of field `k` (of the parameters, or of the shade data): fields past the 31st share
+/// bit 30 (the runtime's `GradientSet::field_bit`).
+pub fn field_bit(k: usize) -> u32 {
+    1 << k.min(CAMERA_BIT as usize - 1)
+}
+
 /// The group bits of `project`'s adjoint results (the float slots of its parameters and of
 /// the camera): field `k` of the parameters is bit `min(k, 30)`, the camera [`CAMERA_BIT`].
 pub fn project_groups(params: &Ty, camera: &Ty) -> Vec<u32> {
@@ -65,7 +71,7 @@ pub fn all_fields(ty: &Ty) -> u32 {
         Ty::Struct(s) if !is_camera(ty) => s.fields.len(),
         _ => 1,
     };
-    (0..fields).fold(0, |a, k| a | 1 << k.min(CAMERA_BIT as usize - 1))
+    (0..fields).fold(0, |a, k| a | field_bit(k))
 }
 
 /// A bit per field of a struct (one for the whole of any other type), for each float slot.
@@ -76,15 +82,14 @@ fn per_field(ty: &Ty) -> Vec<u32> {
 /// A bit per field of a struct (one for the whole of any other type), repeated `slots(field)`
 /// times.
 fn per_field_slots(ty: &Ty, slots: &dyn Fn(&Ty) -> usize) -> Vec<u32> {
-    let bit = |k: usize| 1 << k.min(CAMERA_BIT as usize - 1);
     match ty {
         Ty::Struct(s) if !is_camera(ty) => s
             .fields
             .iter()
             .enumerate()
-            .flat_map(|(k, (_, t))| std::iter::repeat_n(bit(k), slots(t)))
+            .flat_map(|(k, (_, t))| std::iter::repeat_n(field_bit(k), slots(t)))
             .collect(),
-        t => vec![bit(0); slots(t)],
+        t => vec![field_bit(0); slots(t)],
     }
 }
 
@@ -134,7 +139,7 @@ fn depend(b: &Block, under: u32, on: &mut HashMap<Var, u32>) {
                 args, body, outs, ..
             } => {
                 let mut read = HashSet::new();
-                reads(body, &mut read);
+                body.reads(&mut read);
                 depend(body, under, on);
                 let d = args.iter().chain(&read).fold(under, |a, v| a | get(on, v));
                 for o in outs {
@@ -221,7 +226,7 @@ fn propagate(b: &Block, of: &mut HashMap<Var, u32>) {
                     *of.entry(*a).or_insert(0) |= groups;
                 }
                 let mut read = HashSet::new();
-                reads(body, &mut read);
+                body.reads(&mut read);
                 for v in read {
                     *of.entry(v).or_insert(0) |= groups;
                 }
@@ -237,27 +242,6 @@ fn stmt_groups(s: &Stmt, of: &HashMap<Var, u32>) -> u32 {
         Stmt::Let { var, .. } => g(var),
         Stmt::If { outs, .. } | Stmt::Call { outs, .. } => outs.iter().fold(0, |a, o| a | g(o)),
     }
-}
-
-/// Every variable read in `b` or nested in it (including those it defines itself).
-fn reads(b: &Block, out: &mut HashSet<Var>) {
-    out.extend(b.yields.iter().copied());
-    b.visit(&mut |s| match s {
-        Stmt::Let { op, .. } => out.extend(op.operands()),
-        Stmt::If {
-            cond,
-            then_block,
-            else_block,
-            ..
-        } => {
-            out.insert(*cond);
-            out.extend(then_block.yields.iter().chain(&else_block.yields).copied());
-        }
-        Stmt::Call { args, body, .. } => {
-            out.extend(args.iter().copied());
-            out.extend(body.yields.iter().copied());
-        }
-    });
 }
 
 fn constant(f: &mut Function, ty: Scalar, out: &mut Vec<Stmt>) -> Var {
@@ -347,13 +331,13 @@ impl Gates {
         for (g, run) in runs.into_iter().rev() {
             let mut read = HashSet::new();
             for s in &run {
-                stmt_reads(s, &mut read);
+                s.reads_nested(&mut read);
             }
             let run = Block {
                 stmts: run,
                 yields: vec![],
             };
-            if g == enclosing || g == 0 || operations(&run) < MIN_GATED {
+            if g == enclosing || g == 0 || run.operations() < MIN_GATED {
                 later.extend(read);
                 out.push(run.stmts);
                 continue;
@@ -383,41 +367,3 @@ impl Gates {
 
 /// The fewest operations worth a branch.
 const MIN_GATED: usize = 8;
-
-/// The operations (not constants) in `b` and nested in it.
-fn operations(b: &Block) -> usize {
-    let mut n = 0;
-    b.visit(&mut |s| {
-        n += !matches!(
-            s,
-            Stmt::Let {
-                op: Op::Const(_),
-                ..
-            }
-        ) as usize
-    });
-    n
-}
-
-/// Every variable `s` reads, nested blocks included.
-fn stmt_reads(s: &Stmt, out: &mut HashSet<Var>) {
-    let b = Block {
-        stmts: vec![s.clone()],
-        yields: vec![],
-    };
-    reads(&b, out);
-}
-
-impl Block {
-    /// The variables the block's own statements define (not those nested in its branches).
-    fn defined_here(&self) -> Vec<Var> {
-        let mut out = vec![];
-        for s in &self.stmts {
-            match s {
-                Stmt::Let { var, .. } => out.push(*var),
-                Stmt::If { outs, .. } | Stmt::Call { outs, .. } => out.extend(outs),
-            }
-        }
-        out
-    }
-}

@@ -13,7 +13,7 @@
 //!   is straight-line code plus branches and needs no tape.
 //! - Operations are pure; the only side effect of a function is its results.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 
 /// An SSA value, an index into [`Function::vars`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -159,22 +159,61 @@ pub struct Block {
     pub yields: Vec<Var>,
 }
 
+impl Stmt {
+    /// What the statement defines at its own level (not what its nested blocks define).
+    pub fn defines(&self) -> &[Var] {
+        match self {
+            Stmt::Let { var, .. } => std::slice::from_ref(var),
+            Stmt::If { outs, .. } | Stmt::Call { outs, .. } => outs,
+        }
+    }
+
+    /// What the statement reads at its own level: an operation's operands, a branch's
+    /// condition and its blocks' yields, a call's arguments and its body's yields.
+    pub fn reads(&self) -> Vec<Var> {
+        match self {
+            Stmt::Let { op, .. } => op.operands(),
+            Stmt::If {
+                cond,
+                then_block,
+                else_block,
+                ..
+            } => std::iter::once(*cond)
+                .chain(then_block.yields.iter().chain(&else_block.yields).copied())
+                .collect(),
+            Stmt::Call { args, body, .. } => args.iter().chain(&body.yields).copied().collect(),
+        }
+    }
+
+    /// The blocks nested in the statement.
+    pub fn blocks(&self) -> Vec<&Block> {
+        match self {
+            Stmt::Let { .. } => vec![],
+            Stmt::If {
+                then_block,
+                else_block,
+                ..
+            } => vec![then_block, else_block],
+            Stmt::Call { body, .. } => vec![body],
+        }
+    }
+
+    /// Every variable the statement or a statement nested in it reads.
+    pub fn reads_nested(&self, out: &mut HashSet<Var>) {
+        out.extend(self.reads());
+        for b in self.blocks() {
+            b.visit(&mut |s| out.extend(s.reads()));
+        }
+    }
+}
+
 impl Block {
     /// Visits every statement of the block and of the blocks nested in it, outer first.
     pub fn visit(&self, f: &mut impl FnMut(&Stmt)) {
         for s in &self.stmts {
             f(s);
-            match s {
-                Stmt::Let { .. } => {}
-                Stmt::If {
-                    then_block,
-                    else_block,
-                    ..
-                } => {
-                    then_block.visit(f);
-                    else_block.visit(f);
-                }
-                Stmt::Call { body, .. } => body.visit(f),
+            for b in s.blocks() {
+                b.visit(f);
             }
         }
     }
@@ -182,19 +221,29 @@ impl Block {
     /// Whether `v` is read anywhere in the block or nested in it.
     pub fn uses(&self, v: Var) -> bool {
         let mut used = self.yields.contains(&v);
-        self.visit(&mut |s| {
-            used |= match s {
-                Stmt::Let { op, .. } => op.operands().contains(&v),
-                Stmt::If {
-                    cond,
-                    then_block,
-                    else_block,
-                    ..
-                } => *cond == v || then_block.yields.contains(&v) || else_block.yields.contains(&v),
-                Stmt::Call { args, body, .. } => args.contains(&v) || body.yields.contains(&v),
-            }
-        });
+        self.visit(&mut |s| used |= s.reads().contains(&v));
         used
+    }
+
+    /// Every variable read in the block or nested in it (its yields too).
+    pub fn reads(&self, out: &mut HashSet<Var>) {
+        out.extend(self.yields.iter().copied());
+        self.visit(&mut |s| out.extend(s.reads()));
+    }
+
+    /// The operations (not constants) in the block and nested in it.
+    pub fn operations(&self) -> usize {
+        let mut n = 0;
+        self.visit(&mut |s| {
+            n += !matches!(
+                s,
+                Stmt::Let {
+                    op: Op::Const(_),
+                    ..
+                }
+            ) as usize
+        });
+        n
     }
 
     /// Every constant defined in the block or nested in it.
@@ -213,15 +262,19 @@ impl Block {
     }
 
     /// Every variable defined in the block or nested in it.
-    pub fn defined(&self) -> std::collections::HashSet<Var> {
-        let mut out = std::collections::HashSet::new();
-        self.visit(&mut |s| match s {
-            Stmt::Let { var, .. } => {
-                out.insert(*var);
-            }
-            Stmt::If { outs, .. } | Stmt::Call { outs, .. } => out.extend(outs.iter().copied()),
-        });
+    pub fn defined(&self) -> HashSet<Var> {
+        let mut out = HashSet::new();
+        self.visit(&mut |s| out.extend(s.defines()));
         out
+    }
+
+    /// The variables the block's own statements define (not those nested in its branches).
+    pub fn defined_here(&self) -> Vec<Var> {
+        self.stmts
+            .iter()
+            .flat_map(|s| s.defines())
+            .copied()
+            .collect()
     }
 }
 

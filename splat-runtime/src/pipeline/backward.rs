@@ -70,7 +70,7 @@ pub fn backward_tile<M: SplatMethod>(
     tile: u32,
     acc: &mut Accum,
 ) {
-    crate::with_camera_model!(camera.model, MODEL => {
+    crate::with_pixel_model!(M, camera.model, MODEL => {
         #[cfg(target_arch = "x86_64")]
         if crate::lanes::has_avx2() {
             // SAFETY: the CPU supports the features the function is compiled for.

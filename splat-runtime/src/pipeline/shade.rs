@@ -121,7 +121,7 @@ pub fn shade_tile<M: SplatMethod>(
     want_depth: bool,
     blend: Blend,
 ) -> TileOutput {
-    crate::with_camera_model!(camera.model, MODEL => {
+    crate::with_pixel_model!(M, camera.model, MODEL => {
         #[cfg(target_arch = "x86_64")]
         if crate::lanes::has_avx2() {
             // SAFETY: the CPU supports the features the function is compiled for.
