@@ -9,6 +9,8 @@
 //!   scenes, away from thresholds), against the reference's analytic adjoint (on realistic
 //!   scenes, with thresholds crossed and lists stopped at the T-stop), invalid pairs leaving no
 //!   trace, and the GPU backward against the CPU's;
+//! - [`extremes`]: renders and gradients finite and correct where training drives parameters
+//!   (collapsed and screen-covering scales, zero quaternions, saturated opacities, deep stacks);
 //! - [`variants`]: the kernels compiled for one camera model against the generic ones, and a
 //!   lower SH degree's instance against the full one.
 //!
@@ -33,6 +35,7 @@
 //! `SPLAT_REQUIRE_GPU=1`.
 
 pub mod adjoint;
+pub mod extremes;
 pub mod forward;
 pub mod gradients;
 pub mod reference;

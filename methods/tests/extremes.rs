@@ -1,0 +1,104 @@
+//! Numerics under optimization (`checks::extremes`): scales collapsed to 1e-8 and grown over
+//! the screen, zero quaternions, opacity logits of ±30 and 10 000 Gaussians stacked on one
+//! pixel, each against the f64 reference and its adjoint, on the CPU and the GPU; for 3DGS on
+//! a pinhole camera, for 3DGUT and 3DGEER also on a fisheye seeing past 90 degrees off axis
+//! (Gaussians straddling the image plane's sides), with a Gaussian on the near plane.
+
+mod common;
+
+use common::{as_method, gaussian_toward, spread_gaussians, wide_camera};
+use splat_methods::gs3d::Params;
+use splat_methods::{FromStored, geer, gs3d, gut};
+use splat_runtime::checks::extremes::{
+    EXTREMES, cases, extremes_stay_finite_and_correct, scene_stays_finite_and_correct,
+};
+use splat_runtime::glam::{Vec2, Vec3};
+use splat_runtime::{Camera, CameraModel, SplatMethod};
+
+/// Gaussians over a 24 x 16 image, one on the near plane and, on the wide cameras, two at 90
+/// degrees off axis, half in front of the camera's plane and half behind it.
+fn scene(cam: &Camera) -> Vec<Params> {
+    let mut ps = spread_gaussians(cam, 10, 3);
+    let mut rng = fastrand::Rng::with_seed(4);
+    let mut near = gaussian_toward(&mut rng, cam, Vec2::new(6.0, 5.0), 1.0, -3.0);
+    near.mean.z = 0.0100001;
+    ps.push(near);
+    if cam.model != CameraModel::Pinhole {
+        for side in [-1.0, 1.0] {
+            let mut g = gaussian_toward(&mut rng, cam, Vec2::new(12.0, 8.0), 2.0, -0.5);
+            g.mean = Vec3::new(2.0 * side, 0.0, 0.0);
+            ps.push(g);
+        }
+    }
+    ps
+}
+
+/// Gradients within 1e-3 of each group's largest: f32 sums with cancellation put unmodified
+/// Gaussians 1e-4 to 3e-4 off the f64 adjoint in these scenes.
+const TOL: f64 = 1e-3;
+
+/// The base scene for `model`, as `M`'s parameters, and its camera.
+fn base<M: SplatMethod>(model: CameraModel) -> (Vec<M::Params>, Camera)
+where
+    M::Params: FromStored,
+{
+    let cam = wide_camera(24, 16, model);
+    (as_method(scene(&cam)), cam)
+}
+
+/// Every case but the `known` failures (run by [`known_failures`]).
+fn check<M: SplatMethod>(label: &str, model: CameraModel, known: &[&str])
+where
+    M::Params: FromStored,
+{
+    let (base, cam) = base::<M>(model);
+    let ran = extremes_stay_finite_and_correct::<M>(label, &base, &cam, 10_000, TOL, known);
+    assert_eq!(
+        ran.len(),
+        EXTREMES.len() + 1 - known.len(),
+        "{label}: {ran:?}"
+    );
+}
+
+const STACK: &str = "10000 primitives stacked on one pixel";
+const COLLAPSED: &str = "scales collapsed to 1e-8";
+
+#[test]
+fn gaussians_at_their_limits_stay_finite_and_correct() {
+    check::<gs3d::Method>("3dgs, pinhole", CameraModel::Pinhole, &[]);
+}
+
+#[test]
+fn unscented_gaussians_at_their_limits_stay_finite_and_correct() {
+    check::<gut::Method>("3dgut, pinhole", CameraModel::Pinhole, &[]);
+    check::<gut::Method>("3dgut, fisheye", CameraModel::KannalaBrandt, &[STACK]);
+}
+
+#[test]
+fn exact_gaussians_at_their_limits_stay_finite_and_correct() {
+    check::<geer::Method>("3dgeer, pinhole", CameraModel::Pinhole, &[COLLAPSED]);
+    check::<geer::Method>("3dgeer, fisheye", CameraModel::KannalaBrandt, &[STACK]);
+}
+
+/// Open failures (issue 16): on the fisheye, deep in a 10 000 stack, 3DGUT's and 3DGEER's
+/// opacity gradients are 2.9e-3 and 1.8e-3 of the largest off the f64 adjoint (the blend's
+/// "color behind = final - prefix" cancels, suspected); with scales of 1e-8, 3DGEER's GPU
+/// boxes hold 14 tile intersections where the CPU's hold 9 (tile 8).
+#[test]
+#[ignore = "open failures of issue 16, run with --ignored"]
+fn known_failures() {
+    fn run<M: SplatMethod>(label: &str, model: CameraModel, which: &str)
+    where
+        M::Params: FromStored,
+    {
+        let (base, cam) = base::<M>(model);
+        let (name, params) = cases::<M>(&base, &cam, 10_000)
+            .into_iter()
+            .find(|(name, _)| name == which)
+            .expect("the case exists");
+        scene_stays_finite_and_correct::<M>(&format!("{label}, {name}"), &params, &cam, TOL);
+    }
+    run::<gut::Method>("3dgut, fisheye", CameraModel::KannalaBrandt, STACK);
+    run::<geer::Method>("3dgeer, fisheye", CameraModel::KannalaBrandt, STACK);
+    run::<geer::Method>("3dgeer, pinhole", CameraModel::Pinhole, COLLAPSED);
+}
