@@ -226,3 +226,15 @@ fn gpu_gradients_match_cpu_on_realistic_scenes() {
         );
     }
 }
+
+/// Each gradient group alone, the camera alone and everything but the camera give the full
+/// pass's gradients for what they name and zero for the rest, on both backends.
+#[test]
+fn gradient_subsets_match_the_full_pass() {
+    let cam = wide_camera(24, 16, CameraModel::KannalaBrandt);
+    splat_runtime::checks::gradients::gradient_subsets_match_the_full_pass::<Method>(
+        "3dgeer fisheye",
+        &covering_scene(&cam),
+        &cam,
+    );
+}

@@ -1,14 +1,14 @@
 //! Numerics under optimization (`checks::extremes`): scales collapsed to 1e-8 and grown over
 //! the screen, zero quaternions, opacity logits of ±30 and 10 000 Gaussians stacked on one
-//! pixel, each against the f64 reference and its adjoint, on the CPU and the GPU; for 3DGS on
-//! a pinhole camera, for 3DGUT and 3DGEER also on a fisheye seeing past 90 degrees off axis
-//! (Gaussians straddling the image plane's sides), with a Gaussian on the near plane.
+//! pixel, each against the f64 reference and its adjoint, on the CPU and the GPU; for 3DGS and
+//! LinPrim on a pinhole camera, for 3DGUT and 3DGEER also on a fisheye seeing past 90 degrees
+//! off axis (Gaussians straddling the image plane's sides), with a Gaussian on the near plane.
 
 mod common;
 
 use common::{as_method, gaussian_toward, spread_gaussians, wide_camera};
 use splat_methods::gs3d::Params;
-use splat_methods::{FromStored, geer, gs3d, gut};
+use splat_methods::{FromStored, geer, gs3d, gut, linprim};
 use splat_runtime::checks::extremes::{
     EXTREMES, cases, extremes_stay_finite_and_correct, scene_stays_finite_and_correct,
 };
@@ -66,6 +66,11 @@ const COLLAPSED: &str = "scales collapsed to 1e-8";
 #[test]
 fn gaussians_at_their_limits_stay_finite_and_correct() {
     check::<gs3d::Method>("3dgs, pinhole", CameraModel::Pinhole, &[]);
+}
+
+#[test]
+fn octahedra_at_their_limits_stay_finite_and_correct() {
+    check::<linprim::Method>("linprim, pinhole", CameraModel::Pinhole, &[]);
 }
 
 #[test]

@@ -169,3 +169,15 @@ fn gpu_gradients_match_cpu_on_a_realistic_scene() {
     let cam = camera(64, 48);
     gpu_gradients_match_cpu::<Method>("linprim realistic", &scene(&cam, 400), &cam);
 }
+
+/// Each gradient group alone, the camera alone and everything but the camera give the full
+/// pass's gradients for what they name and zero for the rest, on both backends.
+#[test]
+fn gradient_subsets_match_the_full_pass() {
+    let cam = narrow_camera();
+    checks::gradients::gradient_subsets_match_the_full_pass::<Method>(
+        "linprim",
+        &covering_scene(&cam),
+        &cam,
+    );
+}
