@@ -277,7 +277,9 @@ pub fn gpu_gradients_match_cpu_with<M: SplatMethod>(
 /// full pass and the others are zero, on the CPU (bit for bit: gating skips work, it does not
 /// reorder the arithmetic) and, where there is an adapter, on the GPU: there the blend sums with
 /// float atomics in whatever order the invocations run, so two identical passes agree to that
-/// order's rounding, 1e-6 of the largest gradient. The full pass must have a non-zero gradient
+/// order's rounding: 1e-6 of the largest gradient of any parameter group, 1e-4 of the
+/// camera's largest (the camera's gradient sums terms of every pixel that mostly cancel:
+/// identical full passes of 3DGUT on the fisheye differ by up to 1.1e-5 of it). The full pass must have a non-zero gradient
 /// in every group (otherwise the scene does not test it).
 pub fn gradient_subsets_match_the_full_pass<M: SplatMethod>(
     label: &str,
@@ -316,9 +318,10 @@ pub fn gradient_subsets_match_the_full_pass<M: SplatMethod>(
         let subsets: Vec<_> = sets.iter().map(|(what, s)| (what, *s, pass(*s))).collect();
         (full, subsets)
     };
-    // The largest difference allowed, relative to the largest gradient.
+    // The largest difference allowed, relative to the largest gradient of a parameter group
+    // and of the camera.
     #[cfg_attr(not(feature = "gpu"), allow(unused_mut))] // the GPU run is pushed
-    let mut runs = vec![("CPU", 0.0, runs_of(&cpu))];
+    let mut runs = vec![("CPU", (0.0, 0.0), runs_of(&cpu))];
     #[cfg(feature = "gpu")]
     if let Some(gpu) = crate::gpu::adapter_or_skip() {
         let gpu_run = |wanted: GradientSet| {
@@ -330,7 +333,7 @@ pub fn gradient_subsets_match_the_full_pass<M: SplatMethod>(
                 .unwrap()
                 .gradients
         };
-        runs.push(("GPU", 1e-6, runs_of(&gpu_run)));
+        runs.push(("GPU", (1e-6, 1e-4), runs_of(&gpu_run)));
     }
     let group_words = |g: &crate::Gradients<M>, k: usize| -> Vec<f64> {
         let range = groups[k].1.clone();
@@ -340,7 +343,7 @@ pub fn gradient_subsets_match_the_full_pass<M: SplatMethod>(
             .collect()
     };
     let largest = |v: &[f64]| v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-    for (backend, rounding, (full, subsets)) in runs {
+    for (backend, (rounding, camera_rounding), (full, subsets)) in runs {
         let at = format!("{label} on the {backend}");
         for (k, name) in names.iter().enumerate() {
             assert!(
@@ -387,12 +390,13 @@ pub fn gradient_subsets_match_the_full_pass<M: SplatMethod>(
                 false => largest(&c),
             };
             let allowed = match wanted.camera() {
-                true => rounding * largest(&full_camera),
+                true => camera_rounding * largest(&full_camera),
                 false => 0.0,
             };
             assert!(
                 off <= allowed,
-                "{at}, {what}: the camera gradient is off by {off:.2e}"
+                "{at}, {what}: the camera gradient is off by {off:.2e} (allowed {allowed:.2e}; largest {:.2e})",
+                largest(&full_camera)
             );
         }
     }
