@@ -207,6 +207,14 @@ pub fn param_groups<M: SplatMethod>() -> Vec<(String, std::ops::Range<usize>)> {
         .collect()
 }
 
+/// The words of the field `name` of `M::Params` (one of [`param_groups`]), if it has one.
+pub fn param_group<M: SplatMethod>(name: &str) -> Option<std::ops::Range<usize>> {
+    param_groups::<M>()
+        .into_iter()
+        .find(|(n, _)| n == name)
+        .map(|(_, range)| range)
+}
+
 /// Which gradients a backward pass computes: a bit per field of the method's `Params` (the
 /// groups of [`param_groups`], in order; fields past the 31st share bit 30) and the camera's,
 /// [`GradientSet::CAMERA_BIT`]. The generated `project_adjoint` skips the work of every group

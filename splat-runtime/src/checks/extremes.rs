@@ -7,9 +7,9 @@
 //! reference, its gradients are finite and match the reference's analytic adjoint, and the GPU
 //! (where there is one) matches the CPU.
 
-use super::{adjoint, channels, frame_grad, group_error, options, weights, words};
+use super::{adjoint, channels, frame_grad, options, weights, words};
 use crate::flat::Flat;
-use crate::method::{SplatMethod, param_groups};
+use crate::method::{SplatMethod, param_group, param_groups};
 use crate::pipeline::{backward, render_for_backward};
 use crate::types::Camera;
 
@@ -57,10 +57,7 @@ pub fn with_field<M: SplatMethod>(
     field: &str,
     value: f32,
 ) -> Option<Vec<M::Params>> {
-    let range = param_groups::<M>()
-        .into_iter()
-        .find(|(name, _)| name == field)?
-        .1;
+    let range = param_group::<M>(field)?;
     let mut w = vec![0.0f32; <M::Params as Flat>::LEN];
     let out = params
         .iter()
@@ -86,10 +83,7 @@ pub fn stacked<M: SplatMethod>(
     count: usize,
     step: f32,
 ) -> Option<Vec<M::Params>> {
-    let range = param_groups::<M>()
-        .into_iter()
-        .find(|(name, r)| name == "mean" && r.len() == 3)?
-        .1;
+    let range = param_group::<M>("mean").filter(|r| r.len() == 3)?;
     // The camera's axis in the world: the third row of the world-to-camera rotation.
     let axis = cam.rotation.row(2);
     let mut w = vec![0.0f32; <M::Params as Flat>::LEN];
@@ -171,28 +165,8 @@ pub fn scene_stays_finite_and_correct<M: SplatMethod>(
                 "{label}, tile {tile_size}: primitive {i}'s gradient is not finite: {p:?}"
             );
         }
-        for (name, range) in &groups {
-            let pick = |ps: &[Vec<f64>]| -> Vec<f64> {
-                ps.iter().flat_map(|p| p[range.clone()].to_vec()).collect()
-            };
-            let (gw, rw) = (pick(&got), pick(&reference.params));
-            let err = group_error(&gw, &rw);
-            let worst = (0..gw.len())
-                .max_by(|&a, &b| (gw[a] - rw[a]).abs().total_cmp(&(gw[b] - rw[b]).abs()))
-                .unwrap_or(0);
-            let (i, k) = (worst / range.len(), worst % range.len());
-            let worst = format!(
-                "worst: primitive {i} word {k}, {:e} vs reference {:e}",
-                gw[worst], rw[worst]
-            );
-            println!(
-                "{label}, tile {tile_size}, {name}: max error {err:.2e} of the largest; {worst}"
-            );
-            assert!(
-                err <= tol,
-                "{label}, tile {tile_size}, {name}: error {err:.2e} of the largest gradient; {worst}"
-            );
-        }
+        let label = format!("{label}, tile {tile_size}");
+        super::gradients::groups_match(&label, &got, &reference.params, &groups, tol);
     }
     #[cfg(feature = "gpu")]
     {

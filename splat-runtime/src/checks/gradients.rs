@@ -104,24 +104,8 @@ pub fn gradients_match_reference_adjoint<M: SplatMethod>(
         let (_, state) = render_for_backward::<M>(params, cam, &options(tile_size)).unwrap();
         let g = backward::<M>(&state, params, cam, &frame_grad(&w)).unwrap();
         let got: Vec<Vec<f64>> = g.params.iter().map(words).collect();
-        for (name, range) in groups {
-            let pick = |ps: &[Vec<f64>]| -> Vec<f64> {
-                ps.iter().flat_map(|p| p[range.clone()].to_vec()).collect()
-            };
-            let (g, r) = (pick(&got), pick(&reference.params));
-            let err = group_error(&g, &r);
-            println!("{label}, tile {tile_size}, {name}: max error {err:.2e} of the largest");
-            if err > tol {
-                let worst = (0..g.len())
-                    .max_by(|&a, &b| (g[a] - r[a]).abs().total_cmp(&(g[b] - r[b]).abs()))
-                    .unwrap();
-                let (i, k) = (worst / range.len(), worst % range.len());
-                panic!(
-                    "{label}, tile {tile_size}, {name}: error {err:.2e}; worst: primitive {i} word {k}: {} vs reference {}",
-                    g[worst], r[worst]
-                );
-            }
-        }
+        let label = format!("{label}, tile {tile_size}");
+        groups_match(&label, &got, &reference.params, groups, tol);
         let cam_grad = camera_words(&g.camera);
         for (name, range) in camera_groups {
             let err = group_error(&cam_grad[range.clone()], &reference.camera[range.clone()]);
@@ -139,6 +123,40 @@ pub fn gradients_match_reference_adjoint<M: SplatMethod>(
         reference.skipped_before_a_take, reference.stopped_pixels
     );
     reference
+}
+
+/// Each parameter group of `got` (per primitive, its words) within `tol` of the group's
+/// largest gradient in `reference`; prints every group's error and panics naming the worst
+/// element of the first group past `tol`.
+pub fn groups_match<N: AsRef<str>>(
+    label: &str,
+    got: &[Vec<f64>],
+    reference: &[Vec<f64>],
+    groups: &[(N, Range<usize>)],
+    tol: f64,
+) {
+    for (name, range) in groups {
+        let name = name.as_ref();
+        let pick = |ps: &[Vec<f64>]| -> Vec<f64> {
+            ps.iter().flat_map(|p| p[range.clone()].to_vec()).collect()
+        };
+        let (g, r) = (pick(got), pick(reference));
+        let err = group_error(&g, &r);
+        let worst = (0..g.len())
+            .max_by(|&a, &b| (g[a] - r[a]).abs().total_cmp(&(g[b] - r[b]).abs()))
+            .map_or(String::new(), |w| {
+                let (i, k) = (w / range.len(), w % range.len());
+                format!(
+                    "; worst: primitive {i} word {k}, {:e} vs reference {:e}",
+                    g[w], r[w]
+                )
+            });
+        println!("{label}, {name}: max error {err:.2e} of the largest{worst}");
+        assert!(
+            err <= tol,
+            "{label}, {name}: error {err:.2e} of the largest gradient{worst}"
+        );
+    }
 }
 
 /// A primitive leaves no trace through the pixels where its pairs are invalid: with the loss
