@@ -36,6 +36,7 @@ pub use glam;
 pub use lanes::{F32x8, I32x8, LANES, LaneArray, M32x8, U32x8};
 pub use method::{
     GeneratedSource, GradientSet, SplatMethod, WgslFunction, WgslScalar, param_group, param_groups,
+    word_name,
 };
 pub use pipeline::{
     Frame, FrameGrad, Gradients, Image, RenderError, RenderOptions, backward, render,

@@ -215,6 +215,18 @@ pub fn param_group<M: SplatMethod>(name: &str) -> Option<std::ops::Range<usize>>
         .map(|(_, range)| range)
 }
 
+/// The primitive and field of word `word` of a scene's parameters (every primitive's words,
+/// one after another), as "primitive 17's `log_scale`".
+pub fn word_name<M: SplatMethod>(word: usize) -> String {
+    let words = <M::Params as crate::flat::Flat>::LEN.max(1);
+    let (primitive, k) = (word / words, word % words);
+    let field = param_groups::<M>()
+        .into_iter()
+        .find(|(_, range)| range.contains(&k))
+        .map_or_else(|| format!("word {k}"), |(name, _)| format!("`{name}`"));
+    format!("primitive {primitive}'s {field}")
+}
+
 /// Which gradients a backward pass computes: a bit per field of the method's `Params` (the
 /// groups of [`param_groups`], in order; fields past the 31st share bit 30) and the camera's,
 /// [`GradientSet::CAMERA_BIT`]. The generated `project_adjoint` skips the work of every group

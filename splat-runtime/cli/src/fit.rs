@@ -125,6 +125,10 @@ const BUILT_IN_DEFAULTS: Defaults = Defaults {
 };
 
 /// The checkpoint's and the metrics' names in the output folder.
+/// Steps whose [`Faults`](splat_runtime::train::adam::Faults) are printed; later ones are
+/// counted.
+const FAULTS_SHOWN: usize = 10;
+const FAULTS_AFTER_SHOWN: usize = FAULTS_SHOWN + 1;
 const CHECKPOINT: &str = "checkpoint.bin";
 const METRICS: &str = "metrics.csv";
 
@@ -318,9 +322,24 @@ impl Fit<'_> {
         );
         bar.set_position(state.step as u64);
         let first = state.step;
+        let mut faulty_steps = 0usize;
         let report = |r: &StepReport| {
             bar.inc(1);
             log.record(r);
+            if r.faults.any() {
+                faulty_steps += 1;
+                match faulty_steps {
+                    ..=FAULTS_SHOWN => bar.println(format!(
+                        "warning: step {}: {}",
+                        r.step + 1,
+                        r.faults.describe::<M>()
+                    )),
+                    FAULTS_AFTER_SHOWN => bar.println(
+                        "warning: later steps with words left alone are counted, not shown",
+                    ),
+                    _ => {}
+                }
+            }
             // With the checkpoint, the metrics up to it (a resumed run keeps them). One that
             // cannot be written stops nothing now; the run reports it at its end.
             if let Some(c) = r.checkpoint
@@ -353,6 +372,11 @@ impl Fit<'_> {
         };
         bar.finish();
         saved?;
+        if faulty_steps > 0 {
+            println!(
+                "warning: {faulty_steps} steps left parameter words alone (non-finite gradients or steps); the scene stayed finite"
+            );
+        }
         let params = state.params::<M>();
         let per_step = t.elapsed().as_secs_f64() / (opts.steps - first).max(1) as f64;
         let images = test_images(&params)?;

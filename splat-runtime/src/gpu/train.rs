@@ -8,7 +8,7 @@
 use super::device::{Grown, Kernel, dispatch};
 use super::{Gpu, GpuError};
 use crate::io::dataset::View;
-use crate::train::adam::{bias_corrections, remap_rows};
+use crate::train::adam::{Faults, bias_corrections, remap_rows};
 use crate::train::checkpoint::AdamState;
 use crate::train::loss::{LossValue, WINDOW, window};
 use crate::train::mcmc::Mcmc;
@@ -191,6 +191,8 @@ pub struct GpuAdam {
     v: Grown,
     rates: wgpu::Buffer,
     info: wgpu::Buffer,
+    /// The last step's [`Faults`]: two counts and the first word.
+    faults: wgpu::Buffer,
     words: usize,
     step: u64,
     pub beta1: f32,
@@ -207,6 +209,7 @@ impl GpuAdam {
             v: Grown::new(gpu, "Adam second moments", 1)?,
             rates: gpu.buffer("learning rates", words)?,
             info: gpu.uniform_buffer(12),
+            faults: gpu.buffer("Adam's faults", 3)?,
             words,
             step: 0,
             beta1: 0.9,
@@ -244,6 +247,7 @@ impl GpuAdam {
         );
         let rate_words: Vec<u32> = rates.iter().map(|r| r.to_bits()).collect();
         gpu.write(&self.rates, &rate_words);
+        gpu.write(&self.faults, &[0, 0, u32::MAX]);
         let bind = gpu.bind_named(
             &self.kernel,
             &[
@@ -253,6 +257,7 @@ impl GpuAdam {
                 ("v", &self.v),
                 ("rates", &self.rates),
                 ("info", &self.info),
+                ("faults", &self.faults),
             ],
         )?;
         dispatch(
@@ -262,6 +267,16 @@ impl GpuAdam {
             (total as u32).div_ceil(256),
         );
         Ok(())
+    }
+
+    /// The words the last recorded step could not move (a few words read back).
+    pub fn faults(&self, gpu: &Gpu) -> Result<Faults, GpuError> {
+        let f = gpu.read(&self.faults, 3)?;
+        Ok(Faults {
+            gradients: f[0],
+            steps: f[1],
+            first: (f[2] != u32::MAX).then_some(f[2] as usize),
+        })
     }
 
     /// The step count and the moments of `primitives` primitives, for a checkpoint.
@@ -577,7 +592,8 @@ mod tests {
     }
 
     /// Three device Adam steps equal the CPU's, a word not trained yet (negative rate) and its
-    /// moments stay put; after a remap the moments follow the rows.
+    /// moments stay put, words it cannot step are left and counted alike; after a remap the
+    /// moments follow the rows.
     #[test]
     fn device_adam_matches_the_cpu() {
         let Some(gpu) = crate::gpu::adapter_or_skip() else {
@@ -591,8 +607,12 @@ mod tests {
         let mut adam = GpuAdam::new(&gpu, words).unwrap();
         let mut host = Adam::new(prims, words);
         let rates = [0.01, 0.05, -1.0];
-        for _ in 0..3 {
-            let g: Vec<f32> = (0..prims * words).map(|_| rng.f32() - 0.5).collect();
+        for step in 0..3 {
+            let mut g: Vec<f32> = (0..prims * words).map(|_| rng.f32() - 0.5).collect();
+            // The last step meets a non-finite gradient and one that overflows Adam.
+            if step == 2 {
+                (g[40], g[7], g[9]) = (f32::INFINITY, 1e30, f32::NAN);
+            }
             let grads = gpu.buffer_from("grads", &to_words(&g)).unwrap();
             let mut enc = gpu.device.create_command_encoder(&Default::default());
             adam.record(&gpu, &mut enc, &params, &grads, prims, &rates)
@@ -603,7 +623,8 @@ mod tests {
                 .enumerate()
                 .map(|(k, g)| if k % words == 2 { 0.0 } else { *g })
                 .collect();
-            host.step(&mut cpu, &locked, &rates.map(|r: f32| r.max(0.0)));
+            let want = host.step(&mut cpu, &locked, &rates.map(|r: f32| r.max(0.0)));
+            assert_eq!(adam.faults(&gpu).unwrap(), want, "step {step}");
         }
         let got: Vec<f32> = gpu
             .read(&params, prims * words)

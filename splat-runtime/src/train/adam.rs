@@ -3,6 +3,7 @@
 //! opacities and colors at different rates) and bias correction.
 
 use super::checkpoint::AdamState;
+use crate::method::{SplatMethod, word_name};
 
 /// Adam's state for `primitives` x `words` parameter words.
 pub struct Adam {
@@ -31,7 +32,8 @@ impl Adam {
 
     /// One step: `params -= lr * m_hat / (sqrt(v_hat) + eps)`, where `lr[k]` is the rate of
     /// word `k` of every primitive. `params` and `grads` hold `words` words per primitive.
-    pub fn step(&mut self, params: &mut [f32], grads: &[f32], lr: &[f32]) {
+    /// Words the step cannot move are left as [`Faults`] says, and counted there.
+    pub fn step(&mut self, params: &mut [f32], grads: &[f32], lr: &[f32]) -> Faults {
         assert_eq!(lr.len(), self.words, "one learning rate per parameter word");
         assert_eq!(params.len(), self.m.len(), "parameters and optimizer state");
         assert_eq!(grads.len(), self.m.len(), "gradients and optimizer state");
@@ -39,16 +41,93 @@ impl Adam {
         let (b1, b2) = (self.beta1, self.beta2);
         let (c1, c2) = bias_corrections(b1, b2, self.step);
         let words = self.words.max(1);
+        let mut faults = Faults::default();
         for (i, ((p, g), (m, v))) in params
             .iter_mut()
             .zip(grads)
             .zip(self.m.iter_mut().zip(self.v.iter_mut()))
             .enumerate()
         {
-            *m = b1 * *m + (1.0 - b1) * g;
-            *v = b2 * *v + (1.0 - b2) * g * g;
-            *p -= lr[i % words] * (*m / c1) / ((*v / c2).sqrt() + self.eps);
+            if !g.is_finite() {
+                faults.add(i, Fault::Gradient);
+                continue;
+            }
+            let mi = b1 * *m + (1.0 - b1) * g;
+            let vi = b2 * *v + (1.0 - b2) * g * g;
+            let pi = *p - lr[i % words] * (mi / c1) / ((vi / c2).sqrt() + self.eps);
+            if !(pi.is_finite() && vi.is_finite()) {
+                faults.add(i, Fault::Step);
+                (*m, *v) = (0.0, 0.0);
+                continue;
+            }
+            (*m, *v, *p) = (mi, vi, pi);
         }
+        faults
+    }
+}
+
+/// What went wrong with one word in an Adam step.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Fault {
+    /// Its gradient was not finite: the word and its moments keep their values (the step is
+    /// skipped for it).
+    Gradient,
+    /// The step would have made the word or its second moment non-finite (a gradient past
+    /// ~6e20 overflows the second moment): the word keeps its value and its moments restart from
+    /// zero.
+    Step,
+}
+
+/// The words an Adam step could not move, by [`Fault`]: training goes on around them, and
+/// the caller says which they were.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Faults {
+    /// Words with a non-finite gradient ([`Fault::Gradient`]).
+    pub gradients: u32,
+    /// Words whose step was undone ([`Fault::Step`]).
+    pub steps: u32,
+    /// The lowest such word (of all primitives' words, one primitive after another).
+    pub first: Option<usize>,
+}
+
+impl Faults {
+    fn add(&mut self, word: usize, fault: Fault) {
+        match fault {
+            Fault::Gradient => self.gradients += 1,
+            Fault::Step => self.steps += 1,
+        }
+        self.first = Some(self.first.map_or(word, |f| f.min(word)));
+    }
+
+    /// Whether any word was left alone.
+    pub fn any(&self) -> bool {
+        self.first.is_some()
+    }
+
+    /// What happened, naming the first word's primitive and parameter field of `M`: "3
+    /// parameter words with a non-finite gradient kept their values (the first: primitive
+    /// 17's `log_scale`)".
+    pub fn describe<M: SplatMethod>(&self) -> String {
+        let words = |n: u32| match n {
+            1 => "1 parameter word".to_string(),
+            n => format!("{n} parameter words"),
+        };
+        let mut what = Vec::new();
+        if self.gradients > 0 {
+            let n = words(self.gradients);
+            what.push(format!("{n} with a non-finite gradient kept their values"));
+        }
+        if self.steps > 0 {
+            let n = words(self.steps);
+            what.push(format!(
+                "{n} that the step would have made non-finite kept their values and restart their moments"
+            ));
+        }
+        format!(
+            "{} (the first: {})",
+            what.join("; "),
+            word_name::<M>(self.first.unwrap_or(0))
+        )
     }
 }
 
@@ -152,5 +231,37 @@ mod tests {
         // With a zero gradient only remembered moments move a word.
         assert!(p[0] < 0.0, "{p:?}");
         assert_eq!(&p[1..], [0.0; 3], "forgotten and new words stay");
+    }
+
+    #[test]
+    fn words_it_cannot_step_keep_their_values_and_are_counted() {
+        let mut adam = Adam::new(2, 3);
+        let mut p = vec![1.0; 6];
+        adam.step(&mut p, &[1.0; 6], &[0.1; 3]);
+        let (before, moments) = (p.clone(), adam.state());
+        // Word 4's gradient is not finite; word 2's squares to infinity.
+        let faults = adam.step(&mut p, &[1.0, 1.0, 1e30, 1.0, f32::NAN, 1.0], &[0.1; 3]);
+        assert_eq!(
+            faults,
+            Faults {
+                gradients: 1,
+                steps: 1,
+                first: Some(2)
+            }
+        );
+        assert!(p.iter().all(|x| x.is_finite()), "{p:?}");
+        assert_eq!(
+            (p[2], p[4]),
+            (before[2], before[4]),
+            "both words stand still"
+        );
+        let after = adam.state();
+        assert_eq!((after.m[4], after.v[4]), (moments.m[4], moments.v[4]));
+        assert_eq!(
+            (after.m[2], after.v[2]),
+            (0.0, 0.0),
+            "an undone step restarts"
+        );
+        assert!(p[0] < before[0] && p[5] < before[5], "the others step");
     }
 }

@@ -156,8 +156,12 @@ impl Densifier {
             let z = x.z.max(1e-6);
             let du = g.x * z / camera.focal.x * half.x;
             let dv = g.y * z / camera.focal.y * half.y;
-            self.grad2d[i] += (du * du + dv * dv).sqrt();
-            self.count[i] += 1;
+            let norm = (du * du + dv * dv).sqrt();
+            // A gradient Adam skips (not finite) does not count either.
+            if norm.is_finite() {
+                self.grad2d[i] += norm;
+                self.count[i] += 1;
+            }
         }
     }
 

@@ -4,14 +4,14 @@
 //! shape is) in its own file. This is the CPU loop; [`super::gpu_fit`] runs the same steps on
 //! the device.
 
-use super::adam::Adam;
+use super::adam::{Adam, Faults};
 use super::checkpoint::Checkpoint;
 use super::densify::{Densifier, DensifyOptions, Refinement, Shape};
 use super::loss::{self, LossError, LossValue};
 use super::mcmc::{Mcmc, McmcOptions};
 use crate::flat::Flat;
 use crate::io::dataset::{Dataset, View};
-use crate::method::SplatMethod;
+use crate::method::{SplatMethod, word_name};
 use crate::pipeline::{FrameGrad, Image, RenderError, RenderOptions};
 use glam::Vec3;
 
@@ -266,6 +266,10 @@ pub struct StepReport<'a> {
     pub primitives: usize,
     /// Set on the steps that refined the primitive set.
     pub refinement: Option<&'a Refinement>,
+    /// The parameter words this step's Adam step could not move (non-finite gradients, or
+    /// steps that would have left a non-finite word): they kept their values and the rest of
+    /// the scene trained.
+    pub faults: Faults,
     /// The test views' PSNR and SSIM after this step, on the steps `FitOptions::eval_every`
     /// asks for.
     pub evaluation: Option<Evaluation>,
@@ -345,7 +349,7 @@ pub fn fit_from<M: Trainable>(
                 *g = 0.0;
             }
         }
-        adam.step(&mut flat, &grads, &lr);
+        let faults = adam.step(&mut flat, &grads, &lr);
         let mut refinement = None;
         if let Some(m) = &mcmc {
             if m.opts.refines_at(step) {
@@ -397,6 +401,7 @@ pub fn fit_from<M: Trainable>(
             loss: &value,
             primitives: params.len(),
             refinement: refinement.as_ref(),
+            faults,
             evaluation,
             checkpoint: save.then_some(&*state),
         });
@@ -405,7 +410,7 @@ pub fn fit_from<M: Trainable>(
 }
 
 /// Makes `state` this run's: refuses a state of another method, run length or (once
-/// started) strategy, and records the strategy.
+/// started) strategy, or with a non-finite parameter, and records the strategy.
 pub(crate) fn adopt<M: Trainable>(
     state: &mut Checkpoint,
     opts: &FitOptions,
@@ -430,6 +435,13 @@ pub(crate) fn adopt<M: Trainable>(
         return Err(FitError::Unsupported(format!(
             "the checkpoint is of a run with strategy {}, not {strategy} (the primitives change otherwise)",
             state.strategy
+        )));
+    }
+    if let Some(k) = state.params.iter().position(|x| !x.is_finite()) {
+        return Err(FitError::Unsupported(format!(
+            "the scene to train is not finite: {} is {}",
+            word_name::<M>(k),
+            state.params[k]
         )));
     }
     state.strategy = strategy.to_string();

@@ -2,7 +2,7 @@
 //! target images, the loss, the gradients and Adam's moments live on the device. A step is
 //! the renderer's forward (which reads back the intersection count), the loss and backward,
 //! Adam, density control's statistics or MCMC's penalties and noise, and a read-back of the
-//! loss value (a few words). Every hundred steps density control or MCMC refines on the host:
+//! loss value and of the words Adam could not step (a few words). Every hundred steps density control or MCMC refines on the host:
 //! the scene and the moments go down and back up.
 
 use super::checkpoint::Checkpoint;
@@ -142,6 +142,7 @@ pub fn fit_gpu_from<M: Trainable>(
         }
         gpu.queue.submit([enc.finish()]);
         let value = loss.value(gpu)?;
+        let faults = adam.faults(gpu)?;
 
         let mut refinement = None;
         if let Some(m) = &mcmc {
@@ -206,6 +207,7 @@ pub fn fit_gpu_from<M: Trainable>(
             loss: &value,
             primitives: scene.len(),
             refinement: refinement.as_ref(),
+            faults,
             evaluation,
             checkpoint: save.then_some(&*state),
         });

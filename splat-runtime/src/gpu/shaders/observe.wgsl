@@ -39,6 +39,10 @@ fn observe(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_inde
     let focal = vec2<f32>(camera_words[12], camera_words[13]);
     let half = vec2<f32>(camera_words[16], camera_words[17]) * 0.5;
     let d = gc.xy * z / focal * half;
-    grad2d[i] += length(d);
-    seen[i] += 1u;
+    let norm = length(d);
+    // A gradient Adam skips (not finite) does not count either.
+    if ((bitcast<u32>(norm) & 0x7f800000u) != 0x7f800000u) {
+        grad2d[i] += norm;
+        seen[i] += 1u;
+    }
 }
