@@ -17,12 +17,18 @@
 //!   (the PBF-CSF test); exact for pinhole and BEAP, every tile kept for the fisheye, whose
 //!   tile edges are not planes.
 //!
+//! - A rolling shutter, as for 3DGUT, is an instance of its own: `geer_rs` integrates each
+//!   pixel along the ray of the pose the camera had when its row was read (`cam.shutter_time`);
+//!   the box holds the boxes seen from the first and the last row's pose, and every tile in it
+//!   is kept (the PBF-CSF planes pass through one camera centre); color and opacity are those
+//!   seen from the first row's pose.
+//!
 //! The SH degree is one instance per degree, as for 3DGS: `geer_sh0` .. `geer_sh2`, and `geer`
-//! for degree 3.
+//! for degree 3 (and the rolling shutter).
 
-/// One 3DGEER method with `$n` SH coefficients per channel.
+/// One 3DGEER method with `$n` SH coefficients per channel, with or without a rolling shutter.
 macro_rules! exact {
-    ($name:ident, sh_coefficients = $n:literal) => {
+    ($name:ident, sh_coefficients = $n:literal, rolling_shutter = $rs:literal) => {
         #[splat_macros::splat_method]
         pub mod $name {
             use splat_runtime::prelude::*;
@@ -32,6 +38,8 @@ macro_rules! exact {
             pub const PI: f32 = std::f32::consts::PI;
             /// Stands for an unbounded box side (the runtime clamps boxes to the image).
             pub const FAR: f32 = 1e6;
+            /// See each row from the camera's pose at the row's readout.
+            pub const ROLLING_SHUTTER: bool = $rs;
 
             pub struct Params {
                 pub mean: Vec3,
@@ -43,8 +51,11 @@ macro_rules! exact {
             }
 
             pub struct Ray {
-                /// World-space direction; the origin is the camera centre.
+                /// World-space direction.
                 pub dir: Vec3,
+                /// Where it starts, from the camera centre: the rolling shutter's motion by the
+                /// row's time (zero without one).
+                pub shift: Vec3,
             }
 
             pub struct Cull {
@@ -133,16 +144,31 @@ macro_rules! exact {
                 (lo, hi)
             }
 
-            pub fn project(p: &Params, cam: &Camera) -> Projected<Cull, Shade> {
-                let q = Quat::from_xyzw(p.rotation.y, p.rotation.z, p.rotation.w, p.rotation.x)
-                    .normalize();
-                let rot = Mat3::from_quat(q);
-                let scale = p.log_scale.exp();
-                let mean = cam.rotation * p.mean + cam.translation;
-                let axes = cam.rotation * rot * Mat3::from_diagonal(scale);
-                let opacity = sigmoid(p.opacity_logit);
-                // λ-contour: where exp(-λ²/2) opacity = ALPHA_MIN.
-                let lambda2 = 2.0 * (opacity / ALPHA_MIN).ln().max(0.0);
+            /// The particle bounding frustum seen from one pose of the camera.
+            pub struct Frustum {
+                /// The image box of the contour.
+                pub lo: Vec2,
+                pub hi: Vec2,
+                /// Camera-space mean and λ² Σ.
+                pub mean: Vec3,
+                pub contour: Mat3,
+                /// The mean in front of the near plane and where the camera can project it.
+                pub seen: bool,
+            }
+
+            /// The PBF of the contour `lambda2` (λ²) of the Gaussian at `p.mean` with axes
+            /// `rot` scaled by `scale`, from the pose (`rotation`, `translation`) of `cam`.
+            fn frustum(
+                p: &Params,
+                rot: Mat3,
+                scale: Vec3,
+                lambda2: f32,
+                rotation: Mat3,
+                translation: Vec3,
+                cam: &Camera,
+            ) -> Frustum {
+                let mean = rotation * p.mean + translation;
+                let axes = rotation * rot * Mat3::from_diagonal(scale);
                 let contour = axes * axes.transpose() * lambda2;
                 let t = contour - Mat3::from_cols(mean * mean.x, mean * mean.y, mean * mean.z);
                 // No tangent plane through the camera's y (x) axis when that axis crosses the
@@ -178,21 +204,49 @@ macro_rules! exact {
                 };
                 // The fisheye's cone bound covers everything once it reaches a half space.
                 let whole = inside || (cam.is_kannala_brandt() && reach >= PI / 2.0);
+                Frustum {
+                    lo: select(whole, c - FAR, box_lo),
+                    hi: select(whole, c + FAR, box_hi),
+                    mean,
+                    contour,
+                    seen: mean.length() > NEAR && cam.can_project(mean),
+                }
+            }
+
+            pub fn project(p: &Params, cam: &Camera) -> Projected<Cull, Shade> {
+                let q = Quat::from_xyzw(p.rotation.y, p.rotation.z, p.rotation.w, p.rotation.x)
+                    .normalize();
+                let rot = Mat3::from_quat(q);
+                let scale = p.log_scale.exp();
+                let opacity = sigmoid(p.opacity_logit);
+                // λ-contour: where exp(-λ²/2) opacity = ALPHA_MIN.
+                let lambda2 = 2.0 * (opacity / ALPHA_MIN).ln().max(0.0);
+                let first = frustum(p, rot, scale, lambda2, cam.rotation, cam.translation, cam);
+                let (mut lo, mut hi, mut seen) = (first.lo, first.hi, first.seen);
+                if ROLLING_SHUTTER {
+                    // The box holds the boxes seen from the first and the last row's pose.
+                    let (rotation, translation) = (cam.rotation_at(1.0), cam.translation_at(1.0));
+                    let last = frustum(p, rot, scale, lambda2, rotation, translation, cam);
+                    lo = lo.min(last.lo);
+                    hi = hi.max(last.hi);
+                    seen = seen && last.seen;
+                }
                 let whiten = Mat3::from_diagonal(Vec3::ONE / scale) * rot.transpose();
                 Projected {
-                    visible: mean.length() > NEAR && cam.can_project(mean) && opacity >= ALPHA_MIN,
-                    depth: mean.length(),
-                    bbox_min: select(whole, c - FAR, box_lo),
-                    bbox_max: select(whole, c + FAR, box_hi),
+                    visible: seen && opacity >= ALPHA_MIN,
+                    depth: first.mean.length(),
+                    bbox_min: lo,
+                    bbox_max: hi,
                     cull: Cull {
-                        mean,
-                        contour,
-                        focal: f,
-                        principal: c,
+                        mean: first.mean,
+                        contour: first.contour,
+                        focal: cam.focal,
+                        principal: cam.principal,
+                        // A moving camera's tile planes do not pass through one centre.
                         edges: select(
-                            cam.is_equiangular(),
-                            2.0,
-                            select(cam.is_kannala_brandt(), 1.0, 0.0),
+                            cam.is_kannala_brandt() || ROLLING_SHUTTER,
+                            1.0,
+                            select(cam.is_equiangular(), 2.0, 0.0),
                         ),
                     },
                     shade: Shade {
@@ -234,8 +288,16 @@ macro_rules! exact {
             }
 
             pub fn pixel_info(pixel: Vec2, cam: &Camera) -> Ray {
+                let mut rotation = cam.rotation;
+                let mut shift = Vec3::ZERO;
+                if ROLLING_SHUTTER {
+                    let t = cam.shutter_time(pixel);
+                    rotation = cam.rotation_at(t);
+                    shift = cam.shutter_shift * t;
+                }
                 Ray {
-                    dir: cam.rotation.transpose() * cam.pixel_ray(pixel),
+                    dir: rotation.transpose() * cam.pixel_ray(pixel),
+                    shift,
                 }
             }
 
@@ -252,10 +314,14 @@ macro_rules! exact {
             }
 
             pub fn evaluate(ray: Ray, s: &Shade) -> Contribution<Vec3> {
+                let mut origin = s.origin;
+                if ROLLING_SHUTTER {
+                    origin += s.whiten * ray.shift;
+                }
                 let d = s.whiten * ray.dir;
-                let m = s.origin.cross(d);
+                let m = origin.cross(d);
                 let d2 = m.dot(m) / d.dot(d);
-                let ahead = -s.origin.dot(d) / d.length();
+                let ahead = -origin.dot(d) / d.length();
                 let alpha = (s.opacity * (-0.5 * d2).exp() * normal_cdf(ahead)).min(0.99);
                 Contribution {
                     alpha,
@@ -267,7 +333,8 @@ macro_rules! exact {
     };
 }
 
-exact!(geer, sh_coefficients = 16);
-exact!(geer_sh0, sh_coefficients = 1);
-exact!(geer_sh1, sh_coefficients = 4);
-exact!(geer_sh2, sh_coefficients = 9);
+exact!(geer, sh_coefficients = 16, rolling_shutter = false);
+exact!(geer_sh0, sh_coefficients = 1, rolling_shutter = false);
+exact!(geer_sh1, sh_coefficients = 4, rolling_shutter = false);
+exact!(geer_sh2, sh_coefficients = 9, rolling_shutter = false);
+exact!(geer_rs, sh_coefficients = 16, rolling_shutter = true);

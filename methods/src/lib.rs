@@ -5,7 +5,7 @@ mod gaussians;
 mod linear;
 mod unscented;
 
-pub use exact::{geer, geer_sh0, geer_sh1, geer_sh2};
+pub use exact::{geer, geer_rs, geer_sh0, geer_sh1, geer_sh2};
 pub use gaussians::{gs3d, gs3d_aa, gs3d_sh0, gs3d_sh1, gs3d_sh2};
 pub use linear::linprim;
 pub use unscented::{gut, gut_rs, gut_sh0, gut_sh1, gut_sh2};
@@ -59,7 +59,8 @@ stored_as_is!(
     geer::Params,
     geer_sh0::Params,
     geer_sh1::Params,
-    geer_sh2::Params
+    geer_sh2::Params,
+    geer_rs::Params
 );
 
 /// 3DGUT, 3DGEER and LinPrim train like 3DGS (their parameters are the same Gaussian's, or

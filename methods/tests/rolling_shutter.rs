@@ -1,7 +1,7 @@
-//! 3DGUT with a rolling shutter (`gut_rs`): rows read out top to bottom while the camera
-//! moves. The pose per row against its definition written here independently (f64 axis-angle);
+//! 3DGUT and 3DGEER with a rolling shutter (`gut_rs`, `geer_rs`): rows read out top to bottom
+//! while the camera moves. The pose per row against its definition written here independently (f64 axis-angle);
 //! a thin vertical Gaussian seen by a camera sliding sideways leans by the slide, row by row;
-//! a still camera renders exactly as `gut`; then the shared checks with a moving camera on every
+//! a still camera renders exactly as `gut` (`geer`); then the shared checks with a moving camera on every
 //! model (f64 reference, boxes, finite differences with the shutter's own gradient, GPU
 //! parity). Methods without a rolling shutter refuse a moving camera.
 
@@ -11,7 +11,7 @@ use common::{
     GAUSSIAN_GROUPS, SHUTTER_GROUPS, as_method, camera, camera_groups, covering_gaussians,
     spread_gaussians, wide_camera,
 };
-use splat_methods::{gut, gut_rs};
+use splat_methods::{FromStored, geer, geer_rs, gut, gut_rs};
 use splat_runtime::checks::forward::{
     boxes_hold_every_contributing_pixel, forward_matches_reference, gpu_forward_matches_cpu,
 };
@@ -119,8 +119,12 @@ fn a_vertical_line_leans_by_the_slide() {
     }
 }
 
-#[test]
-fn a_still_camera_renders_exactly_as_3dgut() {
+/// `Rolling` renders a still camera exactly as `Still`, its global-shutter twin.
+fn a_still_camera_renders_exactly_as<Still: SplatMethod, Rolling: SplatMethod>()
+where
+    Still::Params: FromStored,
+    Rolling::Params: FromStored,
+{
     let opts = RenderOptions {
         alpha: true,
         depth: true,
@@ -129,39 +133,49 @@ fn a_still_camera_renders_exactly_as_3dgut() {
     for model in CameraModel::ALL {
         let cam = wide_camera(48, 32, model);
         let gaussians = spread_gaussians(&cam, 200, 5);
-        let still = render::<gut::Method>(&as_method(gaussians.clone()), &cam, &opts).unwrap();
-        let rs = render::<gut_rs::Method>(&as_method(gaussians), &cam, &opts).unwrap();
-        assert_eq!(rs.color.data, still.color.data, "{model}");
-        assert_eq!(rs.alpha, still.alpha, "{model}");
-        assert_eq!(rs.depth, still.depth, "{model}");
+        let still = render::<Still>(&as_method(gaussians.clone()), &cam, &opts).unwrap();
+        let rs = render::<Rolling>(&as_method(gaussians), &cam, &opts).unwrap();
+        let label = format!("{} {model}", Rolling::NAME);
+        assert_eq!(rs.color.data, still.color.data, "{label}");
+        assert_eq!(rs.alpha, still.alpha, "{label}");
+        assert_eq!(rs.depth, still.depth, "{label}");
     }
 }
 
 #[test]
-fn rolling_shutter_passes_the_shared_checks_on_every_camera_model() {
+fn a_still_camera_renders_exactly_as_3dgut() {
+    a_still_camera_renders_exactly_as::<gut::Method, gut_rs::Method>();
+}
+
+#[test]
+fn a_still_camera_renders_exactly_as_3dgeer() {
+    a_still_camera_renders_exactly_as::<geer::Method, geer_rs::Method>();
+}
+
+/// The shared checks with a moving camera on every model: the f64 reference, boxes, finite
+/// differences (the shutter's own gradient too), GPU parity.
+fn shared_checks_on_every_camera_model<M: SplatMethod>()
+where
+    M::Params: FromStored,
+{
     for model in CameraModel::ALL {
-        let label = format!("3dgut-rs {model}");
+        let label = format!("{} {model}", M::NAME);
         let cam = rolling(wide_camera(64, 48, model));
-        let scene: Vec<gut_rs::Params> = as_method(spread_gaussians(&cam, 120, 31));
-        let coverage = forward_matches_reference::<gut_rs::Method>(&label, &scene, &cam);
+        let scene: Vec<M::Params> = as_method(spread_gaussians(&cam, 120, 31));
+        let coverage = forward_matches_reference::<M>(&label, &scene, &cam);
         assert!(coverage > 0.2, "{label}: the scene should cover the image");
-        let outside = boxes_hold_every_contributing_pixel::<gut_rs::Method>(
-            &label,
-            &scene,
-            &cam,
-            1.0 / 255.0,
-        );
+        let outside = boxes_hold_every_contributing_pixel::<M>(&label, &scene, &cam, 1.0 / 255.0);
         println!("{label}: {outside} (primitive, pixel) pairs outside the boxes, all below 1/255");
-        gpu_forward_matches_cpu::<gut_rs::Method>(&label, &scene, &cam);
+        gpu_forward_matches_cpu::<M>(&label, &scene, &cam);
 
         let small = rolling(wide_camera(24, 16, model));
-        let covering: Vec<gut_rs::Params> = as_method(covering_gaussians(&small));
+        let covering: Vec<M::Params> = as_method(covering_gaussians(&small));
         let cameras: Vec<_> = camera_groups(model)
             .iter()
             .chain(&SHUTTER_GROUPS)
             .cloned()
             .collect();
-        gradients_match_finite_differences::<gut_rs::Method>(
+        gradients_match_finite_differences::<M>(
             &label,
             &covering,
             &small,
@@ -169,8 +183,18 @@ fn rolling_shutter_passes_the_shared_checks_on_every_camera_model() {
             &cameras,
             1e-4,
         );
-        gpu_gradients_match_cpu::<gut_rs::Method>(&label, &covering, &small);
+        gpu_gradients_match_cpu::<M>(&label, &covering, &small);
     }
+}
+
+#[test]
+fn rolling_shutter_3dgut_passes_the_shared_checks_on_every_camera_model() {
+    shared_checks_on_every_camera_model::<gut_rs::Method>();
+}
+
+#[test]
+fn rolling_shutter_3dgeer_passes_the_shared_checks_on_every_camera_model() {
+    shared_checks_on_every_camera_model::<geer_rs::Method>();
 }
 
 #[test]
@@ -181,4 +205,5 @@ fn global_shutter_methods_refuse_a_moving_camera() {
     };
     assert!(err.to_string().contains("global shutters only"), "{err}");
     const { assert!(gut_rs::Method::ROLLING_SHUTTER && !gut::Method::ROLLING_SHUTTER) };
+    const { assert!(geer_rs::Method::ROLLING_SHUTTER && !geer::Method::ROLLING_SHUTTER) };
 }

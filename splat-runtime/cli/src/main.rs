@@ -2,8 +2,8 @@
 
 use splat_cli::{Instance, Method};
 use splat_methods::{
-    geer, geer_sh0, geer_sh1, geer_sh2, gs3d, gs3d_aa, gs3d_sh0, gs3d_sh1, gs3d_sh2, gut, gut_rs,
-    gut_sh0, gut_sh1, gut_sh2, linprim,
+    geer, geer_rs, geer_sh0, geer_sh1, geer_sh2, gs3d, gs3d_aa, gs3d_sh0, gs3d_sh1, gs3d_sh2, gut,
+    gut_rs, gut_sh0, gut_sh1, gut_sh2, linprim,
 };
 use std::process::ExitCode;
 
@@ -50,6 +50,7 @@ fn main() -> ExitCode {
                 Instance::trainable::<geer::Method>(),
             ],
         )
+        .with_rolling_shutter(Instance::of::<geer_rs::Method>())
         .exact(),
     ])
 }

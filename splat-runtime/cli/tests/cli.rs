@@ -1168,17 +1168,20 @@ fn a_rolling_shutter_camera_needs_a_method_that_renders_it() {
     };
     fails(
         &render("3dgs", "global.png"),
-        "3dgs renders global shutters only, and the camera moves during its readout (shutter_turn, shutter_shift): use --method 3dgut",
+        "3dgs renders global shutters only, and the camera moves during its readout (shutter_turn, shutter_shift): use --method 3dgut or --method 3dgeer",
         &dir.path().join("global.png"),
     );
-    let stdout = ok(&render("3dgut", "rolling.png"));
-    for line in [
-        "method            gut_rs",
-        "rolling shutter   on (each row seen from the camera's pose at its readout)",
-    ] {
-        assert!(stdout.contains(line), "`{line}` is not in:\n{stdout}");
+    for (method, instance) in [("3dgut", "gut_rs"), ("3dgeer", "geer_rs")] {
+        let out = format!("{method}.png");
+        let stdout = ok(&render(method, &out));
+        for line in [
+            format!("method            {instance}"),
+            "rolling shutter   on (each row seen from the camera's pose at its readout)".into(),
+        ] {
+            assert!(stdout.contains(&line), "`{line}` is not in:\n{stdout}");
+        }
+        assert!(dir.path().join(out).exists());
     }
-    assert!(dir.path().join("rolling.png").exists());
 }
 
 /// A run killed (SIGKILL) while it writes its output leaves the previous file whole: every
