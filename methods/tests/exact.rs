@@ -170,8 +170,20 @@ fn rays_do_not_pick_up_particles_behind_the_camera() {
         opacity: 0.9,
         color: Vec3::ONE,
     };
-    let forward = evaluate(Ray { dir: Vec3::Z, shift: Vec3::ZERO }, &shade);
-    let backward = evaluate(Ray { dir: -Vec3::Z, shift: Vec3::ZERO }, &shade);
+    let forward = evaluate(
+        Ray {
+            dir: Vec3::Z,
+            shift: Vec3::ZERO,
+        },
+        &shade,
+    );
+    let backward = evaluate(
+        Ray {
+            dir: -Vec3::Z,
+            shift: Vec3::ZERO,
+        },
+        &shade,
+    );
     assert!(
         !forward.valid && forward.alpha < 1e-4,
         "forward ray: alpha {}",

@@ -795,6 +795,60 @@ fn non_finite_gradients_are_named_and_skipped() {
     );
 }
 
+/// Groups left out of `render.gradients` stay as they start, bit for bit, on the CPU and the
+/// GPU, while the others train; density control refuses frozen shape groups.
+#[test]
+fn frozen_groups_stay_as_they_start() {
+    use splat_runtime::GradientSet;
+    use splat_runtime::train::gpu_fit::fit_gpu;
+    let dir = tempfile::tempdir().unwrap();
+    write_known_scene(dir.path());
+    let data = read_blender(dir.path(), Vec3::ZERO).unwrap();
+    let colors = GradientSet::params::<Method>(&["opacity_logit", "sh"]).unwrap();
+    let opts = FitOptions {
+        densify: None,
+        render: RenderOptions {
+            gradients: colors,
+            ..options(100).render
+        },
+        ..options(100)
+    };
+    let start = moved_start::<Method>(&truth());
+    let before = evaluate::<Method>(&start, &data.test, &opts).unwrap();
+    let check = |label: &str, params: &[Params]| {
+        let after = evaluate::<Method>(params, &data.test, &opts).unwrap();
+        println!(
+            "{label}, colors and opacities alone: held-out PSNR {:.2} -> {:.2} dB",
+            before.psnr, after.psnr
+        );
+        for (p, s) in params.iter().zip(&start) {
+            assert_eq!(
+                (p.mean, p.log_scale, p.rotation),
+                (s.mean, s.log_scale, s.rotation)
+            );
+        }
+        assert!(params.iter().zip(&start).all(|(p, s)| p.sh[0] != s.sh[0]));
+        assert!(after.psnr > before.psnr + 1.0, "{label}: the colors train");
+    };
+    let mut params = start.clone();
+    fit::<Method>(&data, &mut params, 1.0, &opts, |_| {}).unwrap();
+    check("CPU", &params);
+    if let Some(gpu) = splat_runtime::gpu::adapter_or_skip() {
+        let mut params = start.clone();
+        fit_gpu::<Method>(&gpu, &data, &mut params, 1.0, &opts, |_| {}).unwrap();
+        check("GPU", &params);
+    }
+    let adc = FitOptions {
+        densify: FitOptions::default().densify,
+        ..opts.clone()
+    };
+    let err = fit::<Method>(&data, &mut params, 1.0, &adc, |_| {}).unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "mean, log_scale, rotation cannot stay frozen under density control (adc), which moves, resizes and fades primitives: train with a fixed primitive count"
+    );
+}
+
 /// A dataset read on black, re-composited on white, is the dataset read on white; training on
 /// random backgrounds (targets re-composited per step) fits the held-out views.
 #[test]

@@ -17,6 +17,7 @@ use splat_runtime::train::fit::{Evaluation, FitOptions, StepReport, fit_from, re
 use splat_runtime::train::gpu_fit::{fit_gpu_from, render_views_gpu};
 use splat_runtime::train::loss::LossValue;
 use splat_runtime::train::{Checkpoint, DensifyOptions, McmcOptions, Strategy, Trainable, init};
+use splat_runtime::{GradientSet, RenderOptions, param_groups};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -74,6 +75,12 @@ pub struct FitArgs {
     /// follow as in the run that saved it.
     #[arg(long)]
     resume: bool,
+    /// Parameter groups to keep as they start (comma-separated field names of the method's
+    /// parameters, e.g. `sh` to fit the geometry alone, or `mean,log_scale,rotation` to fit
+    /// colors and opacities on fixed shapes): their gradients are never computed. Freezing a
+    /// shape group needs `--strategy fixed`.
+    #[arg(long, value_delimiter = ',')]
+    freeze: Vec<String>,
     /// Where to train: the GPU (the device-resident loop), the CPU, or `auto` (a hardware
     /// GPU when there is one).
     #[arg(long, value_enum, default_value_t = crate::Backend::Auto)]
@@ -279,6 +286,7 @@ impl Fit<'_> {
             init_extent,
             opts,
         } = *self;
+        let opts = &trained_groups::<M>(opts, &args.freeze, &args.method)?;
         let gpu = crate::pick_gpu(args.backend)?;
         let test_images = |params: &[M::Params]| match &gpu {
             Some(gpu) => render_views_gpu::<M>(gpu, params, &data.test, opts),
@@ -411,6 +419,40 @@ impl Fit<'_> {
         crate::wrote(out);
         Ok(())
     }
+}
+
+/// `opts` training every parameter group of `M` (`--method method`) but those named in
+/// `freeze`; says which are trained and which frozen.
+fn trained_groups<M: Trainable>(
+    opts: &FitOptions,
+    freeze: &[String],
+    method: &str,
+) -> Result<FitOptions> {
+    let groups = param_groups::<M>();
+    let names: Vec<&str> = groups.iter().map(|(name, _)| name.as_str()).collect();
+    if let Some(unknown) = freeze.iter().find(|f| !names.contains(&f.as_str())) {
+        bail!(
+            "--freeze {unknown}: {method} has no parameter group `{unknown}`; its groups are {}",
+            names.join(", ")
+        );
+    }
+    let (frozen, trained): (Vec<&str>, Vec<&str>) =
+        names.iter().partition(|n| freeze.iter().any(|f| f == *n));
+    let gradients = GradientSet::params::<M>(&trained).map_err(|e| anyhow!(e))?;
+    if !frozen.is_empty() {
+        println!(
+            "training {}; frozen: {}",
+            trained.join(", "),
+            frozen.join(", ")
+        );
+    }
+    Ok(FitOptions {
+        render: RenderOptions {
+            gradients,
+            ..opts.render
+        },
+        ..opts.clone()
+    })
 }
 
 /// The primitives a run starts from: the dataset's points, or random ones in the cube of

@@ -703,6 +703,54 @@ fn fit_takes_a_strategy() {
     );
 }
 
+/// `--freeze` keeps the named groups as they start and says which are trained; an unknown
+/// group, or a frozen shape under density control, is refused by name.
+#[test]
+fn fit_freezes_the_groups_it_is_told_to() {
+    let dir = tempfile::tempdir().unwrap();
+    tiny_dataset(&dir.path().join("data"), 3);
+    let args = ["fit", "data", "--points", "100", "--backend", "cpu"];
+    let shapes = ["--freeze", "mean,log_scale,rotation", "--strategy", "fixed"];
+    let mut scenes = vec![];
+    for steps in ["1", "5"] {
+        let out = format!("frozen{steps}");
+        let run = [&args[..], &shapes, &["--steps", steps, "--out", &out]].concat();
+        let stdout = ok(&splat(&run, dir.path()));
+        assert!(
+            stdout.contains("training opacity_logit, sh; frozen: mean, log_scale, rotation"),
+            "{stdout}"
+        );
+        scenes.push(
+            fit_output(&dir.path().join(&out), 3, (16, 16))
+                .scene
+                .gaussians,
+        );
+    }
+    for (a, b) in scenes[0].iter().zip(&scenes[1]) {
+        assert_eq!(
+            (a.mean, a.log_scale, a.rotation),
+            (b.mean, b.log_scale, b.rotation)
+        );
+    }
+    assert!(scenes[0].iter().zip(&scenes[1]).any(|(a, b)| a.sh != b.sh));
+    let refused = |extra: &[&str], message: &str| {
+        let run = [&args[..], &["--steps", "1", "--out", "refused"], extra].concat();
+        fails(
+            &splat(&run, dir.path()),
+            message,
+            &dir.path().join("refused/scene.ply"),
+        );
+    };
+    refused(
+        &["--freeze", "sh,colour"],
+        "--freeze colour: 3dgs has no parameter group `colour`; its groups are mean, log_scale, rotation, opacity_logit, sh",
+    );
+    refused(
+        &["--freeze", "log_scale"],
+        "log_scale cannot stay frozen under density control (adc)",
+    );
+}
+
 /// With no dataset, `splat fit` trains on views of the built-in planet; the test views are
 /// measured every `--eval-every` steps, and training brings them closer.
 #[test]

@@ -11,7 +11,7 @@ use super::loss::{self, LossError, LossValue};
 use super::mcmc::{Mcmc, McmcOptions};
 use crate::flat::Flat;
 use crate::io::dataset::{Dataset, View};
-use crate::method::{SplatMethod, word_name};
+use crate::method::{SplatMethod, param_groups, word_name};
 use crate::pipeline::{FrameGrad, Image, RenderError, RenderOptions};
 use glam::Vec3;
 
@@ -26,6 +26,13 @@ pub struct Rate {
 }
 
 impl Rate {
+    /// A word that is never trained.
+    pub const FROZEN: Rate = Rate {
+        first: 0.0,
+        last: 0.0,
+        from_step: usize::MAX,
+    };
+
     /// A rate that neither decays nor waits.
     pub const fn fixed(lr: f32) -> Rate {
         Rate {
@@ -75,6 +82,8 @@ pub struct FitOptions {
     pub ssim_weight: f64,
     /// What the images were composited on; the render is composited the same way.
     pub background: Vec3,
+    /// How each step renders; its `gradients` are the parameter groups trained, the others
+    /// stay frozen ([`frozen_groups`]; the camera is never trained).
     pub render: RenderOptions,
     pub seed: u64,
     /// A random background color per step instead of `background` (the targets' transparent
@@ -304,7 +313,7 @@ pub fn fit_from<M: Trainable>(
     opts: &FitOptions,
     mut progress: impl FnMut(&StepReport),
 ) -> Result<(), FitError> {
-    let rates = rates_for::<M>(data, extent)?;
+    let rates = rates_for::<M>(data, extent, opts)?;
     adopt::<M>(state, opts)?;
     let words = M::Params::LEN;
     let mut params = state.params::<M>();
@@ -448,13 +457,20 @@ pub(crate) fn adopt<M: Trainable>(
     Ok(())
 }
 
-/// The method's learning rates, once a run can start: the dataset has training views and the
-/// method declares one rate per parameter word.
-pub(crate) fn rates_for<M: Trainable>(data: &Dataset, extent: f32) -> Result<Vec<Rate>, FitError> {
+/// The method's learning rates for a run of `opts`, once it can start: the dataset has
+/// training views and the method declares one rate per parameter word. The words of the
+/// groups `opts.render.gradients` leaves out are frozen (never trained, their gradients never
+/// computed); density control, which moves, resizes and fades primitives, refuses frozen
+/// shape words.
+pub(crate) fn rates_for<M: Trainable>(
+    data: &Dataset,
+    extent: f32,
+    opts: &FitOptions,
+) -> Result<Vec<Rate>, FitError> {
     if data.train.is_empty() {
         return Err(FitError::NoViews);
     }
-    let rates = M::learning_rates(extent);
+    let mut rates = M::learning_rates(extent);
     if rates.len() != M::Params::LEN {
         return Err(FitError::Unsupported(format!(
             "{} declares {} learning rates for {} parameter words",
@@ -463,7 +479,51 @@ pub(crate) fn rates_for<M: Trainable>(data: &Dataset, extent: f32) -> Result<Vec
             M::Params::LEN
         )));
     }
+    let frozen = frozen_groups::<M>(opts);
+    for (_, range) in &frozen {
+        rates[range.clone()].fill(Rate::FROZEN);
+    }
+    let shape = shape_words::<M>();
+    let frozen_shape: Vec<&str> = (frozen.iter())
+        .filter(|(_, r)| r.clone().any(|k| shape.contains(&k)))
+        .map(|(name, _)| name.as_str())
+        .collect();
+    if opts.densify.is_some() && !frozen_shape.is_empty() {
+        return Err(FitError::Unsupported(format!(
+            "{} cannot stay frozen under density control ({}), which moves, resizes and fades primitives: train with a fixed primitive count",
+            frozen_shape.join(", "),
+            Strategy::name(opts.densify.as_ref())
+        )));
+    }
     Ok(rates)
+}
+
+/// The parameter groups of `M` that a run of `opts` does not train (`opts.render.gradients`
+/// leaves them out).
+pub fn frozen_groups<M: SplatMethod>(opts: &FitOptions) -> Vec<(String, std::ops::Range<usize>)> {
+    param_groups::<M>()
+        .into_iter()
+        .enumerate()
+        .filter(|(k, _)| !opts.render.gradients.param(*k))
+        .map(|(_, group)| group)
+        .collect()
+}
+
+/// The parameter words that hold `M`'s shape (what [`Trainable::with_shape`] writes): those
+/// that differ between a primitive given two different shapes.
+fn shape_words<M: Trainable>() -> Vec<usize> {
+    let base = M::Params::read_words(&vec![0.25; M::Params::LEN]);
+    let shape = |k: f32| Shape {
+        position: Vec3::new(1.0, 2.0, 3.0) * k,
+        scale: Vec3::new(0.1, 0.2, 0.3) * k,
+        rotation: glam::Quat::from_rotation_y(0.3 * k),
+        opacity: 0.2 * k,
+    };
+    let (a, b) = (
+        flatten::<M>(&[M::with_shape(&base, &shape(1.0))]),
+        flatten::<M>(&[M::with_shape(&base, &shape(2.0))]),
+    );
+    (0..a.len()).filter(|&k| a[k] != b[k]).collect()
 }
 
 /// This step's background: `opts.background`, or a random color.

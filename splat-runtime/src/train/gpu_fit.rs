@@ -62,7 +62,7 @@ pub fn fit_gpu_from<M: Trainable>(
     opts: &FitOptions,
     mut progress: impl FnMut(&StepReport),
 ) -> Result<(), FitError> {
-    let rates = rates_for::<M>(data, extent)?;
+    let rates = rates_for::<M>(data, extent, opts)?;
     adopt::<M>(state, opts)?;
     let words = M::Params::LEN;
     let position = position_word::<M>().ok_or_else(|| {
