@@ -77,20 +77,34 @@ macro_rules! exact {
             }
 
             /// Angular bounds (lo, hi) of the wedge holding the contour, from the tangent condition
-            /// a c² - 2 b c + e = 0 in c = tan(angle). Each root is a plane, known mod pi; on the
-            /// branches nearest `centre` both can land on one side of it (a wedge reaching past 90°
-            /// from the centre's angle, as for particles beside a wide camera): then the wedge
-            /// holding the centre is the narrower one, and the farther bound moves by pi.
-            fn bounds(a: f32, b: f32, e: f32, centre: f32) -> Vec2 {
-                let root = (b * b - a * e).max(0.0).sqrt();
+            /// a c² - 2 b c + e = 0 in c = tan(angle), whose discriminant b² - a e is `disc`. Each
+            /// root is a plane, known mod pi; on the branches nearest `centre` both can land on one
+            /// side of it (a wedge reaching past 90° from the centre's angle, as for particles
+            /// beside a wide camera): then the wedge holding the centre is the narrower one, and the
+            /// farther bound moves by pi. Unless `narrow` (the contour's bounding sphere is clear of
+            /// the camera axis the planes turn about: its wedge is within 90° of the centre), where
+            /// both on one side is rounding (a contour collapsed to a point) and the wedge is
+            /// widened to hold the centre.
+            fn bounds(a: f32, b: f32, disc: f32, centre: f32, narrow: bool) -> Vec2 {
+                let root = disc.max(0.0).sqrt();
                 let one = nearest_branch(a, b + root, centre);
                 let other = nearest_branch(a, b - root, centre);
                 let (lo, hi) = (one.min(other), one.max(other));
-                let (below, above) = (hi < centre, lo > centre);
+                let (below, above) = (hi < centre && !narrow, lo > centre && !narrow);
                 Vec2::new(
-                    select(below, hi, select(above, hi - PI, lo)),
-                    select(below, lo + PI, select(above, lo, hi)),
+                    select(below, hi, select(above, hi - PI, lo.min(centre))),
+                    select(below, lo + PI, select(above, lo, hi.max(centre))),
                 )
+            }
+
+            /// The tangent condition's discriminant b² - a e for the contour's entries `cuu`,
+            /// `cuz`, `czz` and the mean's `mu`, `mz` in the plane of one image axis u (a = czz - mz²,
+            /// b = cuz - mu mz, e = cuu - mu²), written without the mu² mz² terms that cancel: the
+            /// contour's quadratic form at (mz, -mu) less its minor. Negative when the camera's
+            /// other axis crosses the contour; for a collapsed contour the form (about |C| |m|²)
+            /// outweighs the minor (|C|²) and keeps it positive, where b² - a e is rounding noise.
+            fn tangent_discriminant(cuu: f32, cuz: f32, czz: f32, mu: f32, mz: f32) -> f32 {
+                cuu * mz * mz + czz * mu * mu - 2.0 * cuz * mu * mz - (cuu * czz - cuz * cuz)
             }
 
             /// The angle with tangent num / a closest to `centre` (tan repeats every pi).
@@ -173,13 +187,34 @@ macro_rules! exact {
                 let t = contour - Mat3::from_cols(mean * mean.x, mean * mean.y, mean * mean.z);
                 // No tangent plane through the camera's y (x) axis when that axis crosses the
                 // contour: every horizontal (vertical) angle is reached. Both: the camera is inside.
+                let (cx, cy, cz) = (contour.x_axis, contour.y_axis, contour.z_axis);
+                let disc = Vec2::new(
+                    tangent_discriminant(cx.x, cz.x, cz.z, mean.x, mean.z),
+                    tangent_discriminant(cy.y, cz.y, cz.z, mean.y, mean.z),
+                );
                 let open = Vec2::new(
-                    select(t.z_axis.x * t.z_axis.x < t.z_axis.z * t.x_axis.x, FAR, 0.0),
-                    select(t.z_axis.y * t.z_axis.y < t.z_axis.z * t.y_axis.y, FAR, 0.0),
+                    select(disc.x < 0.0, FAR, 0.0),
+                    select(disc.y < 0.0, FAR, 0.0),
                 );
                 let inside = open.min_element() > 0.0;
-                let theta = bounds(t.z_axis.z, t.z_axis.x, t.x_axis.x, mean.x.atan2(mean.z));
-                let phi = bounds(t.z_axis.z, t.z_axis.y, t.y_axis.y, mean.y.atan2(mean.z));
+                // The contour's bounding sphere (radius² lambda2 s_max²) clear of the y (x) axis.
+                let r2 = lambda2 * scale.max_element() * scale.max_element();
+                let (mx, my, mz) = (mean.x * mean.x, mean.y * mean.y, mean.z * mean.z);
+                let (narrow_x, narrow_y) = (mx + mz > r2, my + mz > r2);
+                let theta = bounds(
+                    t.z_axis.z,
+                    t.z_axis.x,
+                    disc.x,
+                    mean.x.atan2(mean.z),
+                    narrow_x,
+                );
+                let phi = bounds(
+                    t.z_axis.z,
+                    t.z_axis.y,
+                    disc.y,
+                    mean.y.atan2(mean.z),
+                    narrow_y,
+                );
                 let (f, c) = (cam.focal, cam.principal);
                 let lo = Vec2::new(theta.x, phi.x);
                 let hi = Vec2::new(theta.y, phi.y);

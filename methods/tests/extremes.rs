@@ -61,7 +61,6 @@ where
 }
 
 const STACK: &str = "10000 primitives stacked on one pixel";
-const COLLAPSED: &str = "scales collapsed to 1e-8";
 
 #[test]
 fn gaussians_at_their_limits_stay_finite_and_correct() {
@@ -81,16 +80,14 @@ fn unscented_gaussians_at_their_limits_stay_finite_and_correct() {
 
 #[test]
 fn exact_gaussians_at_their_limits_stay_finite_and_correct() {
-    check::<geer::Method>("3dgeer, pinhole", CameraModel::Pinhole, &[COLLAPSED]);
+    check::<geer::Method>("3dgeer, pinhole", CameraModel::Pinhole, &[]);
     check::<geer::Method>("3dgeer, fisheye", CameraModel::KannalaBrandt, &[STACK]);
 }
 
 /// Open failures (issue 16). On the fisheye, deep in a 10 000 stack, 3DGUT's and 3DGEER's
 /// opacity gradients are 2.9e-3 and 1.8e-3 of the largest off the f64 adjoint: the blend takes
 /// the color behind an entry as final minus prefix, both f32 and near equal late in a list, so
-/// the error is about eps / T_final, times 1 / (1 - alpha). With scales of 1e-8, 3DGEER's boxes
-/// are single points between pixel centres: the CPU gives them no tile, the GPU one (tile 8:
-/// 9 against 14 intersections); neither changes a pixel, but the counts differ.
+/// the error is about eps / T_final, times 1 / (1 - alpha).
 #[test]
 #[ignore = "open failures of issue 16, run with --ignored"]
 fn known_failures() {
@@ -107,5 +104,4 @@ fn known_failures() {
     }
     run::<gut::Method>("3dgut, fisheye", CameraModel::KannalaBrandt, STACK);
     run::<geer::Method>("3dgeer, fisheye", CameraModel::KannalaBrandt, STACK);
-    run::<geer::Method>("3dgeer, pinhole", CameraModel::Pinhole, COLLAPSED);
 }
