@@ -309,7 +309,7 @@ pub fn shade<M: SplatMethod>(
             ("ALPHA", eval.results[0].0.to_string()),
             ("ACCUMULATE", accumulate),
             ("DEPTH", depth.into()),
-            ("STORE", state.wgsl_store("pixel_out")),
+            ("STORE", state.wgsl_store("pixel_out", "walked")),
         ],
     );
     Ok(format!(
@@ -349,9 +349,13 @@ pub fn backward<M: SplatMethod>(
     let color_terms: String = (0..nc)
         .map(|c| {
             format!(
-                "                        let cc{c} = r.{m};
-                        c_acc[{c}] += w * cc{c};
-                        d_alpha += t * cc{c} * d_color[{c}] - (c_final[{c}] - c_acc[{c}]) * d_color[{c}] / one_minus;
+                "                    let cc{c} = r.{m};
+                    if (first) {{
+                        reference[{c}] = cc{c};
+                    }}
+                    let b{c} = blend_term(cc{c}, reference[{c}], behind[{c}], t, w, one_minus, t_final);
+                    d_alpha += b{c}.x * d_color[{c}];
+                    behind[{c}] = b{c}.y;
 ",
                 m = eval.results[1 + c].0
             )
@@ -369,7 +373,7 @@ pub fn backward<M: SplatMethod>(
     let shade_grads: String = (0..nsf)
         .map(|k| {
             format!(
-                "                        g[{k}] = a.{};\n",
+                "                    g[{k}] = a.{};\n",
                 adj.results[first + k].0
             )
         })
@@ -459,7 +463,7 @@ pub fn backward<M: SplatMethod>(
             (0..np)
                 .map(|k| {
                     format!(
-                        "                        d_pixel[{k}] += a.{};
+                        "                    d_pixel[{k}] += a.{};
 ",
                         adj.results[k].0
                     )

@@ -1,7 +1,10 @@
-//! The backward blend (Yuan and He, "Efficient Differentiable Hardware Rasterization for 3D
-//! Gaussian Splatting", eq. 5-7): re-walk each pixel's list front to back, carrying
-//! the transmittance and the color accumulated so far; the color still to come behind
-//! primitive i is the final color minus that prefix, so no per-pixel list is stored. Each
+//! The backward blend: walk each pixel's list back to front from the last entry its forward
+//! walk took, recovering the transmittance before each entry from the final one (T before =
+//! T after / (1 - alpha)) and summing the color behind it as the walk goes, as gsplat does.
+//! Walking front to back instead, the color behind an entry is the final color minus a
+//! prefix, two near-equal f32 values deep in a list, whose difference loses the gradient of
+//! entries behind thousands of others; back to front every quantity keeps its relative
+//! precision, so an entry's gradient is as precise as its size. Each
 //! step calls `evaluate`'s lane adjoint, which sums the gradient over the group's eight lanes
 //! (the reduction inside a group); the sum is added to the worker's own dense per-primitive
 //! buffer, so no two threads write the same memory and no atomics are needed. The workers'
@@ -9,7 +12,7 @@
 
 use super::ForwardState;
 use super::RenderError;
-use super::shade::{group_pixels, misses_group, step};
+use super::shade::{counts, group_pixels, misses_group};
 use crate::flat::Flat;
 use crate::lanes::{F32x8, LANES, M32x8};
 use crate::method::SplatMethod;
@@ -55,6 +58,36 @@ impl Accum {
             depth: vec![0.0; primitives],
             camera: Camera::ZERO,
         }
+    }
+}
+
+/// One entry of the back-to-front walk, on the lanes that take it.
+struct Entry {
+    /// The lanes taking their first entry (their last in the list).
+    first: M32x8,
+    /// T before the entry.
+    t: F32x8,
+    /// Its weight, alpha T (zero on lanes that skip it).
+    w: F32x8,
+    one_minus: F32x8,
+    t_final: F32x8,
+}
+
+impl Entry {
+    /// The derivative by the entry's alpha of a blended channel (a color channel or depth sum)
+    /// where the entry's value is `v`, and the entry added to what lies `behind`: with B the
+    /// sum behind it, T_k v - B / (1 - alpha). In a stack of similar values the two terms
+    /// nearly cancel, so the sum is kept relative to a `reference` value (the lane's last
+    /// entry's), B = B' + r (T_k (1 - alpha) - T_final), giving
+    /// T_k (v - r) + (r T_final - B') / (1 - alpha), whose terms are each as small as the result
+    /// when the values are alike: no precision is lost to cancellation.
+    #[inline(always)]
+    fn blend(&self, behind: &mut F32x8, reference: &mut F32x8, v: F32x8) -> F32x8 {
+        *reference = self.first.select_f32(v, *reference);
+        let d = v - *reference;
+        let g = self.t * d + (*reference * self.t_final - *behind) / self.one_minus;
+        *behind = *behind + self.w * d;
+        g
     }
 }
 
@@ -120,69 +153,79 @@ fn backward_tile_body<M: SplatMethod, const MODEL: u32>(
                 (y.min(grid.height - 1) * grid.width + x) as usize
             };
             let t_final = lanes_of(|l| state.transmittance.get(px(l)));
+            let ends: [u32; LANES] = std::array::from_fn(|l| match inside.lane(l) {
+                true => state.ends[px(l)],
+                false => 0,
+            });
             let mut d_color = M::ColorLanes::default();
-            let mut c_final = M::ColorLanes::default();
             for ch in 0..channels {
                 d_color.as_mut()[ch] = lanes_of(|l| grad.color[px(l) * channels + ch]);
-                c_final.as_mut()[ch] = lanes_of(|l| state.color.get(px(l) * channels + ch));
             }
             let mut d_alpha_out = match &grad.alpha {
                 Some(a) => lanes_of(|l| a[px(l)]),
                 None => F32x8::splat(0.0),
             };
             // depth = D / A with D = sum of w z and A = 1 - T: split its gradient into D and A.
-            let (mut d_d, mut d_final) = (F32x8::splat(0.0), F32x8::splat(0.0));
+            let mut d_d = F32x8::splat(0.0);
             if let Some(g) = &grad.depth {
                 let a = 1.0 - t_final;
                 let has = a.gt(F32x8::splat(0.0));
                 let a_safe = has.select_f32(a, F32x8::splat(1.0));
-                d_final = lanes_of(|l| state.depth_acc.get(px(l)));
+                let d_final = lanes_of(|l| state.depth_acc.get(px(l)));
                 let gd = lanes_of(|l| g[px(l)]);
                 d_d = has.select_f32(gd / a_safe, F32x8::splat(0.0));
                 d_alpha_out = d_alpha_out
                     - has.select_f32(gd * d_final / (a_safe * a_safe), F32x8::splat(0.0));
             }
-            let mut done = !inside;
             let mut d_pixel = M::PixelLanes::default();
-            let mut t = F32x8::splat(1.0);
-            let mut c_acc = M::ColorLanes::default();
-            let mut d_acc = F32x8::splat(0.0);
-            for (k, &prim) in list.iter().enumerate() {
-                if done.all() {
-                    break;
-                }
-                let p = &state.pre.projected[prim as usize];
+            // Back to front from each lane's last entry: T before an entry is T after it over
+            // 1 - alpha, and what lies behind it is summed as the walk goes.
+            let mut t = t_final;
+            let mut seen = M32x8::splat(false);
+            let (mut behind, mut reference) = (M::ColorLanes::default(), M::ColorLanes::default());
+            let (mut depth_behind, mut depth_reference) = (F32x8::splat(0.0), F32x8::splat(0.0));
+            let walked = ends.iter().max().copied().unwrap_or(0) as usize;
+            for k in (0..walked).rev() {
+                let p = &state.pre.projected[list[k] as usize];
                 if misses_group(p, x0, y) {
                     continue;
                 }
                 let c = M::evaluate_lanes(&pixels, &p.shade);
-                let st = step(c.alpha, c.valid, done, t, state.blend);
-                done = done | st.stop;
-                if !st.take.any() {
+                let before_end = M32x8::from(std::array::from_fn(|l| (k as u32) < ends[l]));
+                let take = before_end & counts(c.alpha, c.valid, state.blend);
+                if !take.any() {
                     continue;
                 }
+                let first = take & !seen;
+                seen = seen | take;
                 let zero = F32x8::splat(0.0);
-                // Lanes that skip the pair (invalid there, or done) add nothing to the prefixes.
-                let w = st.weight;
-                let one_minus = 1.0 - st.alpha;
+                let one_minus = 1.0 - c.alpha;
+                t = take.select_f32(t / one_minus, t);
+                let w = take.select_f32(c.alpha * t, zero);
+                let entry = Entry {
+                    first,
+                    t,
+                    w,
+                    one_minus,
+                    t_final,
+                };
                 let mut d_alpha = zero;
                 let mut d_col = M::ColorLanes::default();
                 for ch in 0..channels {
-                    let (cc, dc) = (c.color.as_ref()[ch], d_color.as_ref()[ch]);
-                    let acc = c_acc.as_ref()[ch] + w * cc;
-                    c_acc.as_mut()[ch] = acc;
-                    let behind = c_final.as_ref()[ch] - acc;
-                    d_alpha = d_alpha + t * cc * dc - behind * dc / one_minus;
-                    d_col.as_mut()[ch] = st.take.select_f32(w * dc, zero);
+                    let (b, r) = (&mut behind.as_mut()[ch], &mut reference.as_mut()[ch]);
+                    let dc = d_color.as_ref()[ch];
+                    d_alpha = d_alpha + entry.blend(b, r, c.color.as_ref()[ch]) * dc;
+                    d_col.as_mut()[ch] = w * dc;
                 }
                 if want_depth {
-                    d_acc = d_acc + w * p.depth;
-                    d_alpha = d_alpha + t * p.depth * d_d - (d_final - d_acc) * d_d / one_minus;
-                    depth_lanes[k] = depth_lanes[k] + st.take.select_f32(w * d_d, zero);
+                    let z = F32x8::splat(p.depth);
+                    d_alpha =
+                        d_alpha + entry.blend(&mut depth_behind, &mut depth_reference, z) * d_d;
+                    depth_lanes[k] = depth_lanes[k] + w * d_d;
                 }
                 d_alpha = d_alpha + d_alpha_out * t_final / one_minus;
                 let d_out = ContributionLanes {
-                    alpha: st.take.select_f32(d_alpha, zero),
+                    alpha: take.select_f32(d_alpha, zero),
                     color: d_col,
                     valid: M32x8::splat(true),
                 };
@@ -190,12 +233,11 @@ fn backward_tile_body<M: SplatMethod, const MODEL: u32>(
                     &pixels,
                     &p.shade,
                     &d_out,
-                    st.take,
+                    take,
                     &mut shade_lanes[k],
                     &mut d_pixel,
                     shade_groups,
                 );
-                t = st.take.select_f32(t * one_minus, t);
             }
             if M::HAS_PIXEL_INFO && state.gradients.camera() {
                 add_ray_gradient::<M, MODEL>(camera, &d_pixel, inside, x0, y, &mut acc.camera);

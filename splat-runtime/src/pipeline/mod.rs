@@ -48,8 +48,8 @@ pub struct RenderOptions {
     pub tile_cull: bool,
     /// The blend's thresholds (transmittance stop, alpha skip).
     pub blend: shade::Blend,
-    /// How the per-pixel state (color, transmittance, depth sums) is stored: what the outputs
-    /// are read from and the backward pass replays against (CPU only for now).
+    /// How the per-pixel values (color, transmittance, depth sums) are stored: what the
+    /// outputs are read from and the backward pass walks back from.
     pub precision: precision::Precision,
     /// The gradients the backward pass computes: the groups left out are never computed and
     /// are zero. Without the camera (training without pose refinement) the rays' share
@@ -151,10 +151,11 @@ pub struct ForwardState<M: SplatMethod> {
     pub blend: shade::Blend,
     /// The gradients the backward pass computes ([`RenderOptions::gradients`]).
     pub gradients: GradientSet,
-    /// Final transmittance, color and sum of weight * depth per pixel, in the frame's precision.
+    /// Final transmittance and sum of weight * depth per pixel, in the frame's precision, and
+    /// where each pixel's walk of its tile's list ended ([`shade::TileOutput::ends`]).
     pub transmittance: precision::Stored,
-    pub color: precision::Stored,
     pub depth_acc: precision::Stored,
+    pub ends: Vec<u32>,
 }
 
 impl<M: SplatMethod> ForwardState<M> {
@@ -175,8 +176,8 @@ impl<M: SplatMethod> ForwardState<M> {
             + held(&self.lists.prims)
             + held(&self.lists.ranges)
             + self.transmittance.bytes()
-            + self.color.bytes()
             + self.depth_acc.bytes()
+            + held(&self.ends)
     }
 }
 
@@ -317,6 +318,7 @@ fn forward<M: SplatMethod>(
     let channels = M::Color::LEN;
     let mut color = vec![0.0; w * h * channels];
     let mut transmittance = vec![1.0; w * h];
+    let mut ends = if keep { vec![0; w * h] } else { vec![] };
     let mut depth_acc = if want_depth { vec![0.0; w * h] } else { vec![] };
     let s = grid.size as usize;
     for (t, out) in &tiles {
@@ -333,6 +335,9 @@ fn forward<M: SplatMethod>(
             color[dst * channels..(dst + n) * channels]
                 .copy_from_slice(&out.color[src * channels..(src + n) * channels]);
             transmittance[dst..dst + n].copy_from_slice(&out.transmittance[src..src + n]);
+            if keep {
+                ends[dst..dst + n].copy_from_slice(&out.ends[src..src + n]);
+            }
             if want_depth {
                 depth_acc[dst..dst + n].copy_from_slice(&out.depth[src..src + n]);
             }
@@ -340,43 +345,34 @@ fn forward<M: SplatMethod>(
     }
     stats.shade = t2.elapsed();
 
-    // The per-pixel state in the frame's precision: the outputs are read from it, and the
-    // backward pass replays against it.
+    // The per-pixel values in the frame's precision: the outputs are read from them, and the
+    // backward pass walks back from the transmittance and depth sums.
     let p = opts.precision;
-    let color = Stored::new(p, Range::Unit, color);
-    let transmittance = Stored::new(p, Range::Unit, transmittance);
-    let depth_acc = Stored::new(p, Range::Unbounded, depth_acc);
+    let transmittance = Stored::new(p, Range::Relative, transmittance);
+    let depth_acc = Stored::new(p, Range::Relative, depth_acc);
     let (alpha, depth) = alpha_and_depth(&grid, opts, &transmittance.as_f32(), &depth_acc.as_f32());
-    // Only a render kept for the backward pass pays for a second copy of the color.
-    let (state, color) = match keep {
-        true => {
-            let data = color.to_f32();
-            let state = ForwardState {
-                grid,
-                pre,
-                lists,
-                p_max: opts.p_max,
-                blend: opts.blend,
-                gradients: opts.gradients,
-                transmittance,
-                color,
-                depth_acc,
-            };
-            (Some(state), data)
-        }
-        false => (None, color.into_f32()),
-    };
     let frame = Frame {
         color: Image {
             width: grid.width,
             height: grid.height,
             channels,
-            data: color,
+            data: Stored::new(p, Range::Unit, color).into_f32(),
         },
         alpha,
         depth,
         stats,
     };
+    let state = keep.then(|| ForwardState {
+        grid,
+        pre,
+        lists,
+        p_max: opts.p_max,
+        blend: opts.blend,
+        gradients: opts.gradients,
+        transmittance,
+        depth_acc,
+        ends,
+    });
     Ok((frame, state))
 }
 

@@ -1,8 +1,8 @@
-//! Storage formats for the per-pixel state a frame keeps between its stages: the color,
-//! transmittance and depth sums the forward pass writes (its render targets, in the sense of
-//! Yuan and He's mixed-precision rendering), which the image is read from and the backward
-//! pass replays against. Arithmetic stays f32; only what is stored is rounded, and it really
-//! is stored in the format (2 or 1 bytes per value).
+//! Storage formats for the per-pixel values a frame's forward pass writes (its render targets,
+//! in the sense of Yuan and He's mixed-precision rendering): the color, which the image is
+//! read from, and the final transmittance and depth sums, which the outputs are read from and
+//! the backward pass walks back from. Arithmetic stays f32; only what is stored is rounded,
+//! and it really is stored in the format (2 or 1 bytes per value).
 
 use half::f16;
 
@@ -13,10 +13,10 @@ pub enum Precision {
     F32,
     /// IEEE half: 11 significant bits (relative error at most 2^-11), range to 65504.
     F16,
-    /// [0, 1] in steps of 1/65535 (values outside saturate); depth sums, which are not
-    /// bounded, are stored as f16.
+    /// Colors in [0, 1] in steps of 1/65535 (values outside saturate); transmittance and depth
+    /// sums as f16 ([`Range::Relative`]).
     Unorm16,
-    /// [0, 1] in steps of 1/255 (values outside saturate); depth sums as f16.
+    /// Colors in [0, 1] in steps of 1/255; transmittance and depth sums as f16.
     Unorm8,
 }
 
@@ -51,10 +51,13 @@ impl Precision {
 /// What a value means, which decides how a unorm format holds it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Range {
-    /// Colors and transmittance: in [0, 1] (colors may exceed 1, and saturate in unorm).
+    /// Colors: in [0, 1] (they may exceed 1, and saturate in unorm).
     Unit,
-    /// Sums of weight x depth: any non-negative size; f16 where the format is unorm.
-    Unbounded,
+    /// Values whose relative precision matters, stored as f16 where the format is unorm: the
+    /// final transmittance (the backward pass recovers every entry's T by dividing it back up,
+    /// so all of a pixel's gradients scale with it, and a unorm step near 0 would lose them)
+    /// and sums of weight x depth (of any size).
+    Relative,
 }
 
 /// Values stored in one format.
@@ -74,7 +77,7 @@ impl Stored {
         let unit = |x: f32, steps: f32| (x.clamp(0.0, 1.0) * steps).round();
         match (precision, range) {
             (Precision::F32, _) => Stored::F32(values),
-            (Precision::F16, _) | (_, Range::Unbounded) => half(values),
+            (Precision::F16, _) | (_, Range::Relative) => half(values),
             (Precision::Unorm16, Range::Unit) => {
                 Stored::Unorm16(values.iter().map(|x| unit(*x, 65535.0) as u16).collect())
             }
@@ -156,8 +159,8 @@ mod tests {
         for p in [Precision::Unorm16, Precision::Unorm8] {
             let stored = Stored::new(p, Range::Unit, outside.clone());
             assert_eq!(stored.to_f32(), [0.0, 1.0, 1.0], "{p:?}");
-            // Unbounded sums keep their size (as f16).
-            let sums = Stored::new(p, Range::Unbounded, outside.clone());
+            // Relative values keep their size (as f16).
+            let sums = Stored::new(p, Range::Relative, outside.clone());
             assert_eq!(
                 sums.to_f32(),
                 [-0.2f32, 1.5, 300.0].map(|x| f16::from_f32(x).to_f32())

@@ -15,8 +15,8 @@ use glam::Vec2;
 /// Blending stops once transmittance would fall to this value (gsplat's and 3DGS's).
 pub const T_MIN: f32 = 1e-4;
 
-/// The blend's two thresholds, shared by the forward pass, the backward pass (which replays
-/// it) and both backends. Raising either trades accuracy for time.
+/// The blend's two thresholds, shared by the forward pass, the backward pass (which takes
+/// the pairs it took) and both backends. Raising either trades accuracy for time.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Blend {
     /// A pixel stops before the primitive that would bring its transmittance to this or below.
@@ -42,6 +42,9 @@ pub struct TileOutput {
     pub color: Vec<f32>,
     /// Final transmittance per pixel.
     pub transmittance: Vec<f32>,
+    /// Per pixel, how far into the list its walk went: the index of the last entry it took,
+    /// plus one (zero when it took none). The backward pass walks back from there.
+    pub ends: Vec<u32>,
     /// Sum of weight * depth per pixel (only when depth is requested).
     pub depth: Vec<f32>,
     /// Number of (pixel, primitive) evaluations on pixels still blending.
@@ -74,6 +77,14 @@ pub fn group_pixels<M: SplatMethod, const MODEL: u32>(
     (lanes, M32x8::from(inside))
 }
 
+/// The lanes on which a pair counts at all: the method keeps it and its alpha reaches
+/// [`Blend::alpha_min`]. Of the entries a pixel walks before it stops, it takes exactly
+/// these, which is how the backward pass replays the forward's choice.
+#[inline(always)]
+pub fn counts(alpha: F32x8, valid: M32x8, blend: Blend) -> M32x8 {
+    valid & alpha.ge(F32x8::splat(blend.alpha_min))
+}
+
 /// One step of the blend for a group: which lanes take this primitive, and which stop here.
 pub struct Step {
     pub alpha: F32x8,
@@ -86,10 +97,10 @@ pub struct Step {
     pub stop: M32x8,
 }
 
-/// The blend rule shared by the forward and the backward pass (which must replay it exactly).
+/// The forward blend's rule.
 #[inline(always)]
 pub fn step(alpha: F32x8, valid: M32x8, done: M32x8, t: F32x8, blend: Blend) -> Step {
-    let live = valid & alpha.ge(F32x8::splat(blend.alpha_min)) & !done;
+    let live = counts(alpha, valid, blend) & !done;
     let next = t * (1.0 - alpha);
     let stop = live & next.le(F32x8::splat(blend.t_min));
     let take = live & !stop;
@@ -162,6 +173,7 @@ fn shade_tile_body<M: SplatMethod, const MODEL: u32>(
     let mut out = TileOutput {
         color: vec![0.0; s * s * channels],
         transmittance: vec![1.0; s * s],
+        ends: vec![0; s * s],
         depth: if want_depth { vec![0.0; s * s] } else { vec![] },
         pairs: 0,
     };
@@ -174,7 +186,8 @@ fn shade_tile_body<M: SplatMethod, const MODEL: u32>(
             let mut t = F32x8::splat(1.0);
             let mut color = M::ColorLanes::default();
             let mut depth = F32x8::splat(0.0);
-            for &prim in list {
+            let mut ends = [0u32; LANES];
+            for (k, &prim) in list.iter().enumerate() {
                 if done.all() {
                     break;
                 }
@@ -194,10 +207,16 @@ fn shade_tile_body<M: SplatMethod, const MODEL: u32>(
                 }
                 t = st.take.select_f32(t * (1.0 - st.alpha), t);
                 done = done | st.stop;
+                for (l, end) in ends.iter_mut().enumerate() {
+                    if st.take.lane(l) {
+                        *end = k as u32 + 1;
+                    }
+                }
             }
             for l in 0..LANES {
                 let px = row * s + gx + l;
                 out.transmittance[px] = t.lane(l);
+                out.ends[px] = ends[l];
                 for (ch, v) in color.as_ref().iter().enumerate() {
                     out.color[px * channels + ch] = v.lane(l);
                 }

@@ -1,13 +1,14 @@
-// The backward blend (seed 001 eq. 5-7): re-walk each pixel's list front to back carrying T
-// and the color prefix (the color behind an entry is the final color minus the prefix), call
-// `evaluate`'s adjoint, and add each entry's gradient to the primitive's sums with global
-// atomics: {{REDUCTION_NOTE}}
+// The backward blend: walk each pixel's list back to front from the last entry its forward
+// walk took, recovering T before each entry from the final one (T after / (1 - alpha)) and
+// summing the color behind it as the walk goes (as the CPU's `pipeline::backward` does, which
+// says why), call `evaluate`'s adjoint, and add each entry's gradient to the primitive's sums
+// with global atomics: {{REDUCTION_NOTE}}
 
 const NG: u32 = {{NG}}u; // gradient words per primitive: shade float slots, then depth
 const RC: u32 = {{RC}}u; // gradient words reduced per round
 
-// Per pixel: the forward output (color, final T, sum of weight * depth, as `gpu::state` packs
-// them) and its gradient (color, alpha, depth, f32).
+// Per pixel: the forward output (color, final T, sum of weight * depth, the walk's end, as
+// `gpu::state` packs them) and its gradient (color, alpha, depth, f32).
 @group(0) @binding(5) var<storage, read> pixel_state: array<u32>;
 @group(0) @binding(6) var<storage, read> pixel_grad: array<u32>;
 @group(0) @binding(7) var<storage, read_write> grads: array<{{GRAD_ATOMIC}}>;
@@ -20,6 +21,33 @@ const RC: u32 = {{RC}}u; // gradient words reduced per round
 
 var<workgroup> red: array<f32, {{RED_WORDS}}>;
 var<workgroup> group_issued: atomic<u32>;
+var<workgroup> walk_max: atomic<u32>;
+var<workgroup> walk_len: u32;
+
+// The derivative by an entry's alpha of a blended channel (a color channel or the depth sum)
+// where the entry's value is `v`, kept relative to the pixel's reference value `r` to avoid
+// cancellation (the CPU's `pipeline::backward::Entry::blend` says how), and what lies
+// `behind` the entry before it, the entry added.
+fn blend_term(v: f32, r: f32, behind: f32, t: f32, w: f32, one_minus: f32, t_final: f32) -> vec2<f32> {
+    let d = v - r;
+    return vec2<f32>(t * d + (r * t_final - behind) / one_minus, behind + w * d);
+}
+
+// The longest walk of any pixel of the tile (`end` is this invocation's): how many entries of
+// the list the backward pass visits. Also zeroes `group_issued`.
+fn longest_walk(lid: u32, end: u32) -> u32 {
+    if (lid == 0u) {
+        atomicStore(&walk_max, 0u);
+        atomicStore(&group_issued, 0u);
+    }
+    workgroupBarrier();
+    atomicMax(&walk_max, end);
+    workgroupBarrier();
+    if (lid == 0u) {
+        walk_len = atomicLoad(&walk_max);
+    }
+    return workgroupUniformLoad(&walk_len);
+}
 
 fn add_grad(i: u32, v: f32) {
 {{ATOMIC_ADD}}
@@ -34,11 +62,8 @@ fn backward_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
     // Pixels past the image edge read pixel 0 and stay done.
     let pix = select(0u, at.y * frame[0].y + at.x, at.inside);
     let grad_at = pix * (CHANNELS + 2u);
-    var c_final: array<f32, CHANNELS>;
     var d_color: array<f32, CHANNELS>;
-    var c_acc: array<f32, CHANNELS>;
     for (var c = 0u; c < CHANNELS; c++) {
-        c_final[c] = state_value(pix, c);
         d_color[c] = bitcast<f32>(pixel_grad[grad_at + c]);
     }
     let t_final = state_value(pix, CHANNELS);
@@ -52,53 +77,54 @@ fn backward_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
         d_d = gd / a_final;
         d_alpha_out -= gd * d_final / (a_final * a_final);
     }
-    var t = 1.0;
-    var d_acc = 0.0;
-    var done = !at.inside;
+    let end = select(0u, state_end(pix), at.inside);
+    var t = t_final;
+    var seen = false;
+    var behind: array<f32, CHANNELS>;
+    var reference: array<f32, CHANNELS>;
+    var depth_behind = 0.0;
+    var depth_reference = 0.0;
     var my_issued = 0u;
 {{PIXEL_GRAD_DECL}}
-    if (lid == 0u) {
-        atomicStore(&group_issued, 0u);
-    }
-    start_walk(lid, done);
-    for (var b = at.start; b < at.end; b += BATCH) {
-        if (all_pixels_done(lid)) {
-            break;
-        }
+    let walk = longest_walk(lid, end);
+    for (var nb = (walk + BATCH - 1u) / BATCH; nb > 0u; nb--) {
+        let b = at.start + (nb - 1u) * BATCH;
+        // Every invocation is done with the previous batch before it is overwritten.
+        workgroupBarrier();
         stage_batch(lid, b, at.end);
         workgroupBarrier();
-        let m = min(BATCH, at.end - b);
-        for (var j = 0u; j < m; j++) {
+        for (var j = min(BATCH, at.end - b); j > 0u; j--) {
+            let i = j - 1u;
             var g: array<f32, NG>;
-            if (!done) {
-                let s = j * NS;
+            if (b - at.start + i < end) {
+                let s = i * NS;
                 let r = {{EVALUATE}};
                 if (r.{{VALID}} != 0u && r.{{ALPHA}} >= ALPHA_MIN) {
                     let alpha = r.{{ALPHA}};
-                    let next = t * (1.0 - alpha);
-                    if (next <= T_MIN) {
-                        done = true;
-                        atomicAdd(&done_count, 1u);
-                    } else {
-                        let w = alpha * t;
-                        let one_minus = 1.0 - alpha;
-                        var d_alpha = 0.0;
+                    let one_minus = 1.0 - alpha;
+                    t = t / one_minus;
+                    let w = alpha * t;
+                    let first = !seen;
+                    seen = true;
+                    var d_alpha = 0.0;
 {{COLOR_TERMS}}
-                        if ({{WANT_DEPTH}}) {
-                            let z = batch_depth[j];
-                            d_acc += w * z;
-                            d_alpha += t * z * d_d - (d_final - d_acc) * d_d / one_minus;
-                            g[NG - 1u] = w * d_d;
+                    if ({{WANT_DEPTH}}) {
+                        let z = batch_depth[i];
+                        if (first) {
+                            depth_reference = z;
                         }
-                        d_alpha += d_alpha_out * t_final / one_minus;
-                        let a = {{EVALUATE_ADJOINT}};
+                        let bz = blend_term(z, depth_reference, depth_behind, t, w, one_minus, t_final);
+                        d_alpha += bz.x * d_d;
+                        depth_behind = bz.y;
+                        g[NG - 1u] = w * d_d;
+                    }
+                    d_alpha += d_alpha_out * t_final / one_minus;
+                    let a = {{EVALUATE_ADJOINT}};
 {{SHADE_GRADS}}
 {{PIXEL_GRADS}}
-                        t = next;
-                    }
                 }
             }
-            let prim = batch_prim[j];
+            let prim = batch_prim[i];
 {{SCATTER}}
         }
     }

@@ -1,7 +1,7 @@
 // The forward blend: front to back, stop once T would fall to T_MIN or below (as on the CPU).
 
-// Per pixel: color (CHANNELS), final T, sum of weight * depth, stored as `gpu::state` packs
-// them.
+// Per pixel: color (CHANNELS), final T, sum of weight * depth and how many entries of the
+// list the walk took in (its last taken one, plus one), stored as `gpu::state` packs them.
 @group(0) @binding(5) var<storage, read_write> pixel_out: array<u32>;
 {{CAMERA_BINDING}}
 
@@ -13,6 +13,7 @@ fn shade_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_
     {{PIXEL}}
     var t = 1.0;
     var depth_acc = 0.0;
+    var walked = 0u;
     var color: array<f32, CHANNELS>;
     var done = !at.inside;
     start_walk(lid, done);
@@ -39,6 +40,7 @@ fn shade_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_
 {{ACCUMULATE}}
             {{DEPTH}}
             t = next;
+            walked = b - at.start + j + 1u;
         }
     }
     if (at.inside) {
