@@ -47,6 +47,11 @@ pub fn grid_of(groups: u32) -> (u32, u32) {
     (groups.min(MAX_GROUPS), groups.div_ceil(MAX_GROUPS))
 }
 
+/// How every storage buffer is used: bound to shaders, copied in and out.
+const STORAGE: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE
+    .union(wgpu::BufferUsages::COPY_SRC)
+    .union(wgpu::BufferUsages::COPY_DST);
+
 impl Gpu {
     /// The first adapter wgpu finds (a software one such as lavapipe is fine), with float
     /// atomics enabled where the adapter has them.
@@ -122,33 +127,47 @@ impl Gpu {
         Ok(())
     }
 
+    /// `create` (which allocates `bytes` for `what`), with the device running out of memory
+    /// turned into an error naming the buffer.
+    fn allocate(
+        &self,
+        what: &'static str,
+        bytes: u64,
+        create: impl FnOnce() -> wgpu::Buffer,
+    ) -> Result<wgpu::Buffer, GpuError> {
+        self.check_size(what, bytes)?;
+        let scope = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let buffer = create();
+        match pollster::block_on(scope.pop()) {
+            Some(_) => Err(GpuError::OutOfMemory { what, bytes }),
+            None => Ok(buffer),
+        }
+    }
+
     /// A storage buffer of `words` 32-bit words (at least one), contents undefined until written.
     pub fn buffer(&self, what: &'static str, words: usize) -> Result<wgpu::Buffer, GpuError> {
         let bytes = 4 * words.max(1) as u64;
-        self.check_size(what, bytes)?;
-        Ok(self.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some(what),
-            size: bytes,
-            usage: wgpu::BufferUsages::STORAGE
-                | wgpu::BufferUsages::COPY_SRC
-                | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        }))
+        self.allocate(what, bytes, || {
+            self.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(what),
+                size: bytes,
+                usage: STORAGE,
+                mapped_at_creation: false,
+            })
+        })
     }
 
     /// A storage buffer holding `words` (one zero word if empty: bindings cannot be empty).
     pub fn buffer_from(&self, what: &'static str, words: &[u32]) -> Result<wgpu::Buffer, GpuError> {
-        self.check_size(what, 4 * words.len() as u64)?;
         let contents: &[u32] = if words.is_empty() { &[0] } else { words };
-        Ok(self
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(what),
-                contents: as_bytes(contents),
-                usage: wgpu::BufferUsages::STORAGE
-                    | wgpu::BufferUsages::COPY_SRC
-                    | wgpu::BufferUsages::COPY_DST,
-            }))
+        self.allocate(what, 4 * contents.len() as u64, || {
+            self.device
+                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some(what),
+                    contents: as_bytes(contents),
+                    usage: STORAGE,
+                })
+        })
     }
 
     /// A uniform block of `words` 32-bit words (a multiple of four), written per frame with

@@ -70,6 +70,10 @@ pub enum GpuError {
         limit: u64,
     },
     #[error(
+        "the GPU ran out of memory for {what} ({bytes} bytes): lower the resolution or the number of primitives (`--max-primitives` when training), or use `--backend cpu`"
+    )]
+    OutOfMemory { what: &'static str, bytes: u64 },
+    #[error(
         "the GPU backend supports tile sizes {TILE_SIZES:?} (one invocation per pixel), not {0}"
     )]
     TileSize(u32),

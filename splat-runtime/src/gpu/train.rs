@@ -6,6 +6,7 @@
 //! and the state density control refines from every hundred steps).
 
 use super::device::{Grown, Kernel, dispatch};
+use super::entries::FINITE;
 use super::{Gpu, GpuError};
 use crate::io::dataset::View;
 use crate::train::adam::{Faults, bias_corrections, remap_rows};
@@ -204,7 +205,7 @@ impl GpuAdam {
     /// 3DGS's constants, as `train::adam::Adam`.
     pub fn new(gpu: &Gpu, words: usize) -> Result<GpuAdam, GpuError> {
         Ok(GpuAdam {
-            kernel: gpu.kernel(ADAM, "adam_step")?,
+            kernel: gpu.kernel(&format!("{FINITE}\n{ADAM}"), "adam_step")?,
             m: Grown::new(gpu, "Adam first moments", 1)?,
             v: Grown::new(gpu, "Adam second moments", 1)?,
             rates: gpu.buffer("learning rates", words)?,
@@ -349,7 +350,7 @@ pub struct GpuObserver {
 impl GpuObserver {
     pub fn new(gpu: &Gpu) -> Result<GpuObserver, GpuError> {
         Ok(GpuObserver {
-            kernel: gpu.kernel(OBSERVE, "observe")?,
+            kernel: gpu.kernel(&format!("{FINITE}\n{OBSERVE}"), "observe")?,
             grad2d: Grown::new(gpu, "screen-space gradient sums", 1)?,
             seen: Grown::new(gpu, "view counts", 1)?,
             info: gpu.uniform_buffer(8),

@@ -22,10 +22,6 @@ struct AdamInfo {
 // words with a non-finite gradient, steps undone, the lowest such word (cleared to 0, 0, ~0)
 @group(0) @binding(6) var<storage, read_write> faults: array<atomic<u32>, 3>;
 
-fn finite(x: f32) -> bool {
-    return (bitcast<u32>(x) & 0x7f800000u) != 0x7f800000u;
-}
-
 fn fault(kind: u32, word: u32) {
     atomicAdd(&faults[kind], 1u);
     atomicMin(&faults[2], word);

@@ -41,7 +41,7 @@ fn observe(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_inde
     let d = gc.xy * z / focal * half;
     let norm = length(d);
     // A gradient Adam skips (not finite) does not count either.
-    if ((bitcast<u32>(norm) & 0x7f800000u) != 0x7f800000u) {
+    if (finite(norm)) {
         grad2d[i] += norm;
         seen[i] += 1u;
     }

@@ -14,10 +14,6 @@ fn word(i: u32, k: u32) -> f32 {
     return bitcast<f32>(projected[i * STRIDE + k]);
 }
 
-fn finite(v: f32) -> bool {
-    return (bitcast<u32>(v) & 0x7f800000u) != 0x7f800000u;
-}
-
 // The tiles holding a pixel centre inside primitive i's box, as (x0, y0, x1, y1) half-open;
 // x1 == x0 if none (the CPU's TileGrid::rect, operation for operation).
 fn tile_rect(i: u32) -> vec4<u32> {
