@@ -19,9 +19,11 @@
 //!
 //! - A rolling shutter, as for 3DGUT, is an instance of its own: `geer_rs` integrates each
 //!   pixel along the ray of the pose the camera had when its row was read (`cam.shutter_time`);
-//!   the box holds the boxes seen from the first and the last row's pose, and every tile in it
-//!   is kept (the PBF-CSF planes pass through one camera centre); color and opacity are those
-//!   seen from the first row's pose.
+//!   the box holds the boxes seen from the first and the last row's pose; the tile cull tests
+//!   the contour seen from the first row's pose, grown by how far any of its points can move
+//!   by the tile's last row (the slide, plus the turn's angle times the distance: the planes
+//!   of a tile's rays pass through the camera centre of the moment); color and opacity are
+//!   those seen from the first row's pose.
 //!
 //! The SH degree is one instance per degree, as for 3DGS: `geer_sh0` .. `geer_sh2`, and `geer`
 //! for degree 3 (and the rolling shutter).
@@ -66,6 +68,11 @@ macro_rules! exact {
                 pub principal: Vec2,
                 /// How tile edges map to angles: 0 atan (pinhole), 1 none (fisheye), 2 linear (BEAP).
                 pub edges: f32,
+                /// With a rolling shutter: how far any point of the contour moves, in the
+                /// camera's frame, from the first row's pose to the last's, and the rows
+                /// (time runs from 0 at the top edge to 1 at the bottom).
+                pub motion: f32,
+                pub rows: f32,
             }
 
             pub struct Shade {
@@ -267,6 +274,13 @@ macro_rules! exact {
                     seen = seen && last.seen;
                 }
                 let whiten = Mat3::from_diagonal(Vec3::ONE / scale) * rot.transpose();
+                // A point x of the contour is at Q(t) x - t R shift at time t, Q(t) a turn by at
+                // most t |shutter_turn| radians: it moves by at most t (|turn| |x| + |shift|).
+                let mut motion = 0.0;
+                if ROLLING_SHUTTER {
+                    let reach = first.mean.length() + lambda2.sqrt() * scale.max_element();
+                    motion = cam.shutter_turn.length() * reach + cam.shutter_shift.length();
+                }
                 Projected {
                     visible: seen && opacity >= ALPHA_MIN,
                     depth: first.mean.length(),
@@ -277,12 +291,13 @@ macro_rules! exact {
                         contour: first.contour,
                         focal: cam.focal,
                         principal: cam.principal,
-                        // A moving camera's tile planes do not pass through one centre.
                         edges: select(
-                            cam.is_kannala_brandt() || ROLLING_SHUTTER,
+                            cam.is_kannala_brandt(),
                             1.0,
                             select(cam.is_equiangular(), 2.0, 0.0),
                         ),
+                        motion,
+                        rows: cam.size.y,
                     },
                     shade: Shade {
                         origin: whiten * (cam.center() - p.mean),
@@ -294,16 +309,21 @@ macro_rules! exact {
                 }
             }
 
-            /// Whether the contour reaches the side of the plane through the camera with normal `n`
-            /// that the tile is on.
-            fn reaches(n: Vec3, c: &Cull) -> bool {
-                n.dot(c.mean) + n.dot(c.contour * n).max(0.0).sqrt() >= 0.0
+            /// Whether the contour, grown by `grow`, reaches the side of the plane through the
+            /// camera with unit normal `n` that the tile is on.
+            fn reaches(n: Vec3, c: &Cull, grow: f32) -> bool {
+                n.dot(c.mean) + n.dot(c.contour * n).max(0.0).sqrt() + grow >= 0.0
             }
 
             /// The PBF-CSF test: the tile's rays lie between the planes through the camera at its
             /// edges' horizontal and vertical angles; keep the tile unless the contour is wholly
-            /// outside one of them.
+            /// outside one of them (with a rolling shutter, grown by its motion until the tile's
+            /// last row).
             pub fn tile_cull(tile: &Tile, c: &Cull) -> bool {
+                let mut grow = 0.0;
+                if ROLLING_SHUTTER {
+                    grow = c.motion * (tile.max.y / c.rows).min(1.0);
+                }
                 let lo = (tile.min - c.principal) / c.focal;
                 let hi = (tile.max - c.principal) / c.focal;
                 let linear = c.edges == 2.0;
@@ -316,10 +336,10 @@ macro_rules! exact {
                     select(linear, hi.y, hi.y.atan()),
                 );
                 c.edges == 1.0
-                    || reaches(Vec3::new(l.cos(), 0.0, -l.sin()), c)
-                        && reaches(Vec3::new(-r.cos(), 0.0, r.sin()), c)
-                        && reaches(Vec3::new(0.0, t.cos(), -t.sin()), c)
-                        && reaches(Vec3::new(0.0, -b.cos(), b.sin()), c)
+                    || reaches(Vec3::new(l.cos(), 0.0, -l.sin()), c, grow)
+                        && reaches(Vec3::new(-r.cos(), 0.0, r.sin()), c, grow)
+                        && reaches(Vec3::new(0.0, t.cos(), -t.sin()), c, grow)
+                        && reaches(Vec3::new(0.0, -b.cos(), b.sin()), c, grow)
             }
 
             pub fn pixel_info(pixel: Vec2, cam: &Camera) -> Ray {

@@ -2,8 +2,8 @@
 //! while the camera moves. The pose per row against its definition written here independently (f64 axis-angle);
 //! a thin vertical Gaussian seen by a camera sliding sideways leans by the slide, row by row;
 //! a still camera renders exactly as `gut` (`geer`); then the shared checks with a moving camera on every
-//! model (f64 reference, boxes, finite differences with the shutter's own gradient, GPU
-//! parity). Methods without a rolling shutter refuse a moving camera.
+//! model (f64 reference, boxes, the tile cull against none, finite differences with the
+//! shutter's own gradient, GPU parity). Methods without a rolling shutter refuse a moving camera.
 
 mod common;
 
@@ -14,6 +14,7 @@ use common::{
 use splat_methods::{FromStored, geer, geer_rs, gut, gut_rs};
 use splat_runtime::checks::forward::{
     boxes_hold_every_contributing_pixel, forward_matches_reference, gpu_forward_matches_cpu,
+    tile_cull_is_conservative,
 };
 use splat_runtime::checks::gradients::{
     gpu_gradients_match_cpu, gradients_match_finite_differences,
@@ -167,6 +168,7 @@ where
         let outside = boxes_hold_every_contributing_pixel::<M>(&label, &scene, &cam, 1.0 / 255.0);
         println!("{label}: {outside} (primitive, pixel) pairs outside the boxes, all below 1/255");
         gpu_forward_matches_cpu::<M>(&label, &scene, &cam);
+        tile_cull_is_conservative::<M>(&label, &scene, &cam);
 
         let small = rolling(wide_camera(24, 16, model));
         let covering: Vec<M::Params> = as_method(covering_gaussians(&small));
