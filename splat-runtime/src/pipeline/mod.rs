@@ -362,7 +362,7 @@ fn forward<M: SplatMethod>(
         depth,
         stats,
     };
-    let state = keep.then(|| ForwardState {
+    let state = keep.then_some(ForwardState {
         grid,
         pre,
         lists,

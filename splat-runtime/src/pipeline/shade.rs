@@ -213,10 +213,10 @@ fn shade_tile_body<M: SplatMethod, const MODEL: u32>(
                     }
                 }
             }
-            for l in 0..LANES {
+            for (l, end) in ends.into_iter().enumerate() {
                 let px = row * s + gx + l;
                 out.transmittance[px] = t.lane(l);
-                out.ends[px] = ends[l];
+                out.ends[px] = end;
                 for (ch, v) in color.as_ref().iter().enumerate() {
                     out.color[px * channels + ch] = v.lane(l);
                 }
