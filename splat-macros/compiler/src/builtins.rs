@@ -220,14 +220,14 @@ pub fn builtin_fns(mut parse: impl FnMut(syn::ItemFn) -> Option<FnDef>, diag: &D
         syn::Item::Fn(f) => Some(f),
         _ => None,
     });
-    let errors_before = diag.messages().len();
+    let errors_before = diag.count();
     let fns: Vec<FnDef> = camera_items()
         .into_iter()
         .chain(sh)
         .filter_map(&mut parse)
         .collect();
     debug_assert_eq!(
-        diag.messages().len(),
+        diag.count(),
         errors_before,
         "the builtin source type-checks"
     );

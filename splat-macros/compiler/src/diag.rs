@@ -1,41 +1,83 @@
 //! Error collection: every error found while compiling a module is gathered with its span, and
-//! all of them are reported together (like serde_derive's `Ctxt`).
+//! all of them are reported together. As serde_derive's `Ctxt`, a collector must be consumed
+//! ([`Diag::check`] or one of its forms) or explicitly [`Diag::discard`]ed: dropping one
+//! unchecked panics, so no path can lose the errors it gathered.
 
 use proc_macro2::{Span, TokenStream};
 use std::cell::RefCell;
 
-#[derive(Default)]
 pub struct Diag {
-    errors: RefCell<Vec<syn::Error>>,
+    /// `None` once consumed.
+    errors: RefCell<Option<Vec<syn::Error>>>,
+}
+
+impl Default for Diag {
+    fn default() -> Self {
+        Diag {
+            errors: RefCell::new(Some(vec![])),
+        }
+    }
 }
 
 impl Diag {
+    /// Adds an error made elsewhere (a parse error).
+    pub fn push_error(&self, e: syn::Error) {
+        self.errors
+            .borrow_mut()
+            .as_mut()
+            .expect("the collector is not consumed while in use")
+            .push(e);
+    }
+
     pub fn error(&self, span: Span, msg: impl std::fmt::Display) {
-        self.errors.borrow_mut().push(syn::Error::new(span, msg));
+        self.push_error(syn::Error::new(span, msg));
     }
 
     pub fn error_at(&self, node: &impl quote::ToTokens, msg: impl std::fmt::Display) {
-        self.errors
-            .borrow_mut()
-            .push(syn::Error::new_spanned(node, msg));
+        self.push_error(syn::Error::new_spanned(node, msg));
+    }
+
+    /// Errors gathered so far.
+    pub fn count(&self) -> usize {
+        self.errors.borrow().as_ref().map_or(0, Vec::len)
     }
 
     pub fn has_errors(&self) -> bool {
-        !self.errors.borrow().is_empty()
+        self.count() > 0
+    }
+
+    /// Consumes the collector: its errors, if any.
+    pub fn check(self) -> Result<(), Vec<syn::Error>> {
+        let errors = self.errors.borrow_mut().take().unwrap_or_default();
+        match errors.is_empty() {
+            true => Ok(()),
+            false => Err(errors),
+        }
     }
 
     /// All errors as `compile_error!` invocations, or `None` if there were none.
     pub fn into_compile_errors(self) -> Option<TokenStream> {
-        let errors = self.errors.into_inner();
-        if errors.is_empty() {
-            return None;
-        }
+        let errors = self.check().err()?;
         Some(errors.into_iter().map(|e| e.to_compile_error()).collect())
     }
 
-    /// The messages, for unit tests.
-    pub fn messages(&self) -> Vec<String> {
-        self.errors.borrow().iter().map(|e| e.to_string()).collect()
+    /// The messages, for tests and tools.
+    pub fn into_messages(self) -> Vec<String> {
+        let errors = self.check().err().unwrap_or_default();
+        errors.iter().map(|e| e.to_string()).collect()
+    }
+
+    /// Drops the errors on purpose (a scratch collector whose errors were reported elsewhere).
+    pub fn discard(self) {
+        self.errors.borrow_mut().take();
+    }
+}
+
+impl Drop for Diag {
+    fn drop(&mut self) {
+        if self.errors.get_mut().is_some() && !std::thread::panicking() {
+            panic!("an error collector was dropped without being checked");
+        }
     }
 }
 
@@ -59,7 +101,39 @@ pub fn edit_distance(a: &str, b: &str) -> usize {
 
 #[cfg(test)]
 mod tests {
-    use super::edit_distance;
+    use super::{Diag, edit_distance};
+    use proc_macro2::Span;
+
+    #[test]
+    #[should_panic(expected = "dropped without being checked")]
+    fn a_collector_dropped_unchecked_panics() {
+        let diag = Diag::default();
+        diag.error(Span::call_site(), "lost");
+    }
+
+    #[test]
+    fn a_checked_collector_hands_over_every_error() {
+        let diag = Diag::default();
+        diag.error(Span::call_site(), "first");
+        diag.error(Span::call_site(), "second");
+        assert_eq!(diag.count(), 2);
+        assert_eq!(diag.into_messages(), ["first", "second"]);
+        Diag::default().check().unwrap();
+    }
+
+    #[test]
+    fn an_attribute_error_survives_an_unparsable_module() {
+        let out = crate::expand(
+            crate::Kind::Method,
+            quote::quote!(oops),
+            quote::quote!(
+                fn not_a_module() {}
+            ),
+        )
+        .to_string();
+        assert!(out.contains("this attribute takes no arguments"), "{out}");
+        assert!(out.contains("expected `mod`"), "{out}");
+    }
 
     #[test]
     fn edit_distance_counts_insertions_deletions_and_substitutions() {

@@ -58,7 +58,10 @@ pub fn expand(kind: Kind, attr: TokenStream, item: TokenStream) -> TokenStream {
     }
     let out = match syn::parse2::<syn::ItemMod>(item) {
         Ok(m) => expand_module(kind, m, &diag),
-        Err(e) => return e.to_compile_error(),
+        Err(e) => {
+            diag.push_error(e);
+            None
+        }
     };
     match diag.into_compile_errors() {
         Some(errors) => errors,
@@ -76,9 +79,9 @@ pub fn compile_ir(kind: Kind, item: syn::ItemMod) -> Result<Compiled, Vec<String
             kernels: kernels.into_iter().map(|k| (k.primal, k.adjoint)).collect(),
         })
     });
-    match r {
-        Some(c) if !diag.has_errors() => Ok(c),
-        _ => Err(diag.messages()),
+    match (r, diag.into_messages()) {
+        (Some(c), errors) if errors.is_empty() => Ok(c),
+        (_, errors) => Err(errors),
     }
 }
 

@@ -331,7 +331,10 @@ impl Resolver<'_> {
 
     fn resolve(&mut self, t: &syn::Type) -> Result<Ty, String> {
         // Struct errors were already reported when the struct itself was parsed.
-        self.resolve_with_structs(t, &Diag::default(), &mut vec![])
+        let scratch = Diag::default();
+        let ty = self.resolve_with_structs(t, &scratch, &mut vec![]);
+        scratch.discard();
+        ty
     }
 
     fn resolve_with_structs(
