@@ -1,6 +1,6 @@
 //! The effects a frame simulates, as the scene and the request switch them on, and how each
 //! is carried: by a kernel variant compiled for it, by a method instance, or by a buffer that
-//! exists only when asked for. What `splat render --explain` prints.
+//! exists only when asked for. What `splat render --explain` and `splat fit --explain` print.
 
 use crate::method::SplatMethod;
 use crate::pipeline::RenderOptions;
@@ -25,6 +25,20 @@ pub struct Effects {
     /// The outputs asked for (alpha, depth: without it no depth is summed and no buffer holds
     /// it) and the renderer's settings.
     pub options: RenderOptions,
+    /// For frames with a backward pass ([`Effects::with_gradients`]): which gradients it
+    /// computes.
+    pub gradients: Option<GradientEffects>,
+}
+
+/// The gradients a backward pass computes: `options.gradients` by name.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GradientEffects {
+    /// Parameter groups whose gradients are computed.
+    pub computed: Vec<&'static str>,
+    /// Groups left out: the gated adjoints never compute their cotangents.
+    pub skipped: Vec<&'static str>,
+    /// The camera's gradient (with it, its share through each pixel's ray).
+    pub camera: bool,
 }
 
 impl Effects {
@@ -44,6 +58,26 @@ impl Effects {
             rolling_shutter: camera.has_rolling_shutter(),
             channels: <M::Color as crate::Flat>::LEN,
             options: *options,
+            gradients: None,
+        }
+    }
+
+    /// The effects of a frame with a backward pass, which computes `options.gradients`.
+    pub fn with_gradients<M: SplatMethod>(self) -> Effects {
+        let set = self.options.gradients;
+        let (computed, skipped) = M::PARAM_FIELDS
+            .iter()
+            .enumerate()
+            .map(|(k, (name, _))| (k, *name))
+            .partition::<Vec<_>, _>(|(k, _)| set.param(*k));
+        let names = |v: Vec<(usize, &'static str)>| v.into_iter().map(|(_, n)| n).collect();
+        Effects {
+            gradients: Some(GradientEffects {
+                computed: names(computed),
+                skipped: names(skipped),
+                camera: set.camera(),
+            }),
+            ..self
         }
     }
 }
@@ -88,6 +122,22 @@ impl fmt::Display for Effects {
             "tile              {} px, tile cull {}",
             o.tile_size,
             on(o.tile_cull)
-        )
+        )?;
+        if let Some(g) = &self.gradients {
+            let skipped = match g.skipped.is_empty() {
+                true => String::new(),
+                false => format!(" (never computed: {})", g.skipped.join(", ")),
+            };
+            let camera = match g.camera {
+                true => "on",
+                false => "off (no ray adjoint per pixel)",
+            };
+            write!(
+                f,
+                "\ngradients         {}{skipped}\ncamera gradient   {camera}",
+                g.computed.join(", ")
+            )?;
+        }
+        Ok(())
     }
 }

@@ -17,7 +17,7 @@ use splat_runtime::train::fit::{Evaluation, FitOptions, StepReport, fit_from, re
 use splat_runtime::train::gpu_fit::{fit_gpu_from, render_views_gpu};
 use splat_runtime::train::loss::LossValue;
 use splat_runtime::train::{Checkpoint, DensifyOptions, McmcOptions, Strategy, Trainable, init};
-use splat_runtime::{GradientSet, RenderOptions, param_groups};
+use splat_runtime::{Effects, GradientSet, RenderOptions, param_groups};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -81,6 +81,10 @@ pub struct FitArgs {
     /// shape group needs `--strategy fixed`.
     #[arg(long, value_delimiter = ',')]
     freeze: Vec<String>,
+    /// Also print the effects each training step simulates (the first training view's camera)
+    /// and the gradients its backward pass computes.
+    #[arg(long)]
+    explain: bool,
     /// Where to train: the GPU (the device-resident loop), the CPU, or `auto` (a hardware
     /// GPU when there is one).
     #[arg(long, value_enum, default_value_t = crate::Backend::Auto)]
@@ -287,6 +291,9 @@ impl Fit<'_> {
             opts,
         } = *self;
         let opts = &trained_groups::<M>(opts, &args.freeze, &args.method)?;
+        if args.explain {
+            explain::<M>(data, opts);
+        }
         let gpu = crate::pick_gpu(args.backend)?;
         let test_images = |params: &[M::Params]| match &gpu {
             Some(gpu) => render_views_gpu::<M>(gpu, params, &data.test, opts),
@@ -453,6 +460,26 @@ fn trained_groups<M: Trainable>(
         },
         ..opts.clone()
     })
+}
+
+/// What `--explain` prints: the effects of a training step's frame, its gradients, and what
+/// the loop adds around it.
+fn explain<M: Trainable>(data: &Dataset, opts: &FitOptions) {
+    if let Some(view) = data.train.first() {
+        println!(
+            "{}",
+            Effects::of::<M>(&view.camera, &opts.render).with_gradients::<M>()
+        );
+    }
+    let background = match opts.random_background {
+        true => "random per step (the targets re-composited on it)".to_string(),
+        false => format!("{:?}", opts.background.to_array()),
+    };
+    println!("background        {background}");
+    println!(
+        "density control   {}",
+        Strategy::name(opts.densify.as_ref())
+    );
 }
 
 /// The primitives a run starts from: the dataset's points, or random ones in the cube of

@@ -715,11 +715,15 @@ fn fit_freezes_the_groups_it_is_told_to() {
     for steps in ["1", "5"] {
         let out = format!("frozen{steps}");
         let run = [&args[..], &shapes, &["--steps", steps, "--out", &out]].concat();
-        let stdout = ok(&splat(&run, dir.path()));
+        let stdout = ok(&splat(&[&run[..], &["--explain"]].concat(), dir.path()));
         assert!(
             stdout.contains("training opacity_logit, sh; frozen: mean, log_scale, rotation"),
             "{stdout}"
         );
+        // --explain names the gradients the backward pass computes and those it never does.
+        let gradients = "gradients         opacity_logit, sh (never computed: mean, log_scale, rotation)\ncamera gradient   off";
+        assert!(stdout.contains(gradients), "{stdout}");
+        assert!(stdout.contains("density control   fixed"), "{stdout}");
         scenes.push(
             fit_output(&dir.path().join(&out), 3, (16, 16))
                 .scene
