@@ -186,6 +186,20 @@ fn gpu_gradients_match_cpu_on_a_realistic_scene() {
     gpu_gradients_match_cpu::<Method>("3dgs realistic", &realistic_scene(&cam, 1000), &cam);
 }
 
+/// Alpha's cotangent is computed only for the groups it reaches: not for the colors (SH)
+/// alone; for every geometry group and for the camera (through the projected mean).
+#[test]
+fn only_groups_alpha_reaches_need_its_cotangent() {
+    use splat_runtime::GradientSet;
+    let alone = |name| GradientSet::params::<Method>(&[name]).unwrap();
+    assert!(!alone("sh").alpha_cotangent::<Method>());
+    for name in ["mean", "log_scale", "rotation", "opacity_logit"] {
+        assert!(alone(name).alpha_cotangent::<Method>(), "{name}");
+    }
+    let camera = GradientSet::params::<Method>(&[]).unwrap().with_camera(true);
+    assert!(camera.alpha_cotangent::<Method>());
+}
+
 /// Each gradient group of 3DGS alone (`mean`, `log_scale`, `rotation`, `opacity_logit`, `sh`),
 /// the camera alone and everything but the camera: what they name as in the full pass, the
 /// rest zero, on both backends.

@@ -163,3 +163,56 @@ fn absurd_sizes_and_options_are_refused() {
         Some(RenderError::TileSize(12))
     );
 }
+
+/// Depth sums are kept only for a frame that renders depth: a depth gradient against any other
+/// frame is refused on both backends, and the other outputs' gradients do not depend on it.
+#[test]
+fn a_depth_gradient_needs_the_depth_output() {
+    let (cam, ps) = (camera(40, 32), hard_scene());
+    let n = 40 * 32;
+    let color_only = FrameGrad {
+        color: vec![0.5; n * 3],
+        alpha: Some(vec![0.25; n]),
+        depth: None,
+    };
+    let with_depth = FrameGrad {
+        depth: Some(vec![0.1; n]),
+        ..color_only.clone()
+    };
+    let [plain, deep] = [false, true].map(|depth| RenderOptions {
+        alpha: true,
+        depth,
+        ..Default::default()
+    });
+    let (_, state) = render_for_backward::<Method>(&ps, &cam, &plain).unwrap();
+    let (_, deep_state) = render_for_backward::<Method>(&ps, &cam, &deep).unwrap();
+    assert_eq!(deep_state.bytes() - state.bytes(), n * 4, "one f32 per pixel");
+    assert_eq!(
+        backward::<Method>(&state, &ps, &cam, &with_depth).err(),
+        Some(RenderError::DepthNotRendered)
+    );
+    let got = backward::<Method>(&state, &ps, &cam, &color_only).unwrap();
+    let want = backward::<Method>(&deep_state, &ps, &cam, &color_only).unwrap();
+    assert_eq!(got.params, want.params);
+
+    let Some(gpu) = splat_runtime::gpu::adapter_or_skip() else {
+        return;
+    };
+    use splat_runtime::gpu::{GpuRenderError, entries::Accumulation, render};
+    let acc = Accumulation::default_for(&gpu);
+    let (_, mut state) = render::render_for_backward::<Method>(&gpu, &ps, &cam, &plain).unwrap();
+    assert!(matches!(
+        render::backward(&mut state, &with_depth, acc),
+        Err(GpuRenderError::Render(RenderError::DepthNotRendered))
+    ));
+    let (_, mut deep_state) =
+        render::render_for_backward::<Method>(&gpu, &ps, &cam, &deep).unwrap();
+    let words = |s: &render::GpuForwardState<Method>| s.renderer.state_layout().words();
+    assert_eq!(words(&deep_state) - words(&state), 1);
+    let got = render::backward(&mut state, &color_only, acc).unwrap();
+    let want = render::backward(&mut deep_state, &color_only, acc).unwrap();
+    // Atomics sum in any order: equal up to the rounding of the order.
+    let flat = |g: &[Params]| g.iter().flat_map(checks::words).collect::<Vec<f64>>();
+    let err = checks::group_error(&flat(&got.gradients.params), &flat(&want.gradients.params));
+    assert!(err < 1e-5, "{err} of the largest gradient");
+}

@@ -134,7 +134,7 @@ fn the_gpu_stores_each_format_within_its_step_in_fewer_bytes() {
     use splat_runtime::gpu::entries::Accumulation;
     use splat_runtime::gpu::render::{backward, render_for_backward};
     let acc = Accumulation::default_for(&gpu);
-    // A frame that keeps no depth sum (no depth output, no backward) has no word for it.
+    // A frame without the depth output keeps no depth sum, backward pass or not.
     let shallow = splat_runtime::gpu::GpuRenderer::<Method>::new(&gpu, &RenderOptions::default());
     assert_eq!(shallow.unwrap().state_layout().words(), 5);
     for bright in [false, true] {

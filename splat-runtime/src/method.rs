@@ -72,6 +72,9 @@ pub trait SplatMethod: Send + Sync + 'static {
     /// For each field of `Shade`, the [`GradientSet`] bits whose gradient flows through it
     /// (what `project` computes it from): see [`GradientSet::shade_groups`].
     const SHADE_FIELD_GROUPS: &'static [u32];
+    /// The groups of `evaluate`'s adjoint (numbered as [`GradientSet::shade_groups`]) that the
+    /// cotangent of its alpha flows to: see [`GradientSet::alpha_cotangent`].
+    const ALPHA_GROUPS: u32;
     /// Whether it renders a camera's rolling shutter (a kernel reads the pose per row, with
     /// `cam.shutter_time` and `cam.rotation_at`); the runtime refuses a camera that moves
     /// during the readout to the others.
@@ -274,6 +277,13 @@ impl GradientSet {
             }
         });
         shade | (self.0 & (1 << Self::CAMERA_BIT))
+    }
+
+    /// Whether the backward blend needs the cotangent of `evaluate`'s alpha: only when a group
+    /// asked for flows through a shade field alpha is computed from (or through the pixel
+    /// data). Training colors alone skips it, and with it the sums of what lies behind.
+    pub fn alpha_cotangent<M: SplatMethod>(self) -> bool {
+        self.shade_groups::<M>() & M::ALPHA_GROUPS != 0
     }
 
     /// Whether the parameter group `k` (of [`param_groups`]) is computed.

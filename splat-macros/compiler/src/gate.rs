@@ -65,6 +65,16 @@ pub fn shade_field_groups(project: &Function, params: &Ty, camera: &Ty, shade: &
     }
 }
 
+/// The groups of [`evaluate_groups`] that the cotangent of `evaluate`'s alpha reaches: the
+/// shade fields alpha is computed from, and the pixel data's bit when it depends on the pixel.
+/// When none is asked for, the blend need not compute alpha's cotangent at all.
+pub fn alpha_groups(evaluate: &Function, pixel: &Ty, shade: &Ty) -> u32 {
+    let mut inputs = vec![1 << CAMERA_BIT; pixel.slot_count()];
+    inputs.extend(per_field_slots(shade, &|t| t.slot_count()));
+    // Alpha is the first slot of the `Contribution` evaluate returns.
+    dependencies(evaluate, &inputs)[0]
+}
+
 /// The bits of every field of `ty` (of the one group of any other type).
 pub fn all_fields(ty: &Ty) -> u32 {
     let fields = match ty {

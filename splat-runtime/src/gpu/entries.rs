@@ -351,13 +351,13 @@ pub fn backward<M: SplatMethod>(
     let color_terms: String = (0..nc)
         .map(|c| {
             format!(
-                "                    let cc{c} = r.{m};
-                    if (first) {{
-                        reference[{c}] = cc{c};
-                    }}
-                    let b{c} = blend_term(cc{c}, reference[{c}], behind[{c}], t, w, one_minus, t_final);
-                    d_alpha += b{c}.x * d_color[{c}];
-                    behind[{c}] = b{c}.y;
+                "                        let cc{c} = r.{m};
+                        if (first) {{
+                            reference[{c}] = cc{c};
+                        }}
+                        let b{c} = blend_term(cc{c}, reference[{c}], behind[{c}], t, w, one_minus, t_final);
+                        d_alpha += b{c}.x * d_color[{c}];
+                        behind[{c}] = b{c}.y;
 ",
                 m = eval.results[1 + c].0
             )
@@ -511,6 +511,10 @@ pub fn backward<M: SplatMethod>(
             ("VALID", eval.results[nc + 1].0.to_string()),
             ("ALPHA", eval.results[0].0.to_string()),
             ("WANT_DEPTH", want_depth.to_string()),
+            (
+                "ALPHA_COTANGENT",
+                opts.gradients.alpha_cotangent::<M>().to_string(),
+            ),
             ("COLOR_TERMS", color_terms),
             (
                 "EVALUATE_ADJOINT",

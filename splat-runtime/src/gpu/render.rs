@@ -27,15 +27,15 @@ pub struct GpuForwardState<'g, M: SplatMethod> {
     pub scene: GpuScene<M>,
 }
 
-/// Renders and keeps what [`backward`] needs (the depth sums always, so any output's
-/// gradient is accepted).
+/// Renders and keeps what [`backward`] needs (the depth sums only when `opts` asks for
+/// depth: a depth gradient needs them).
 pub fn render_for_backward<'g, M: SplatMethod>(
     gpu: &'g Gpu,
     params: &[M::Params],
     camera: &Camera,
     opts: &RenderOptions,
 ) -> Result<(Frame, GpuForwardState<'g, M>), GpuRenderError> {
-    let mut renderer = GpuRenderer::<M>::with_depth_gradients(gpu, opts)?;
+    let mut renderer = GpuRenderer::<M>::new(gpu, opts)?;
     let scene = GpuScene::new(gpu, params)?;
     renderer.forward(&scene, camera)?;
     let frame = renderer.download_frame()?;

@@ -38,8 +38,6 @@ pub enum GpuRenderError {
     Gpu(#[from] GpuError),
     #[error("the backward pass needs a frame: render one first")]
     NoFrame,
-    #[error("a depth gradient needs a frame rendered with depth sums (RenderOptions::depth)")]
-    DepthNotRendered,
     #[error("the scene has {got} primitives, the frame was rendered with {want}")]
     SceneChanged { got: usize, want: usize },
 }
@@ -138,7 +136,6 @@ pub struct GpuRenderer<'g, M: SplatMethod> {
     gpu: &'g Gpu,
     opts: RenderOptions,
     /// Accumulate weight * depth per pixel (for the depth output or its gradient).
-    depth_sums: bool,
     layout: Layout,
     /// How the per-pixel state is stored.
     state: PixelState,
@@ -171,18 +168,6 @@ pub struct GpuRenderer<'g, M: SplatMethod> {
 impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
     /// A renderer producing the outputs `opts` asks for.
     pub fn new(gpu: &'g Gpu, opts: &RenderOptions) -> Result<Self, GpuRenderError> {
-        Self::build(gpu, opts, opts.depth)
-    }
-
-    /// A renderer whose frames accept a depth gradient even without the depth output.
-    pub fn with_depth_gradients(
-        gpu: &'g Gpu,
-        opts: &RenderOptions,
-    ) -> Result<Self, GpuRenderError> {
-        Self::build(gpu, opts, true)
-    }
-
-    fn build(gpu: &'g Gpu, opts: &RenderOptions, depth_sums: bool) -> Result<Self, GpuRenderError> {
         if !super::TILE_SIZES.contains(&opts.tile_size) {
             return Err(GpuError::TileSize(opts.tile_size).into());
         }
@@ -190,13 +175,12 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         let state = PixelState {
             precision: opts.precision,
             channels: layout.channels,
-            depth: depth_sums,
+            depth: opts.depth,
         };
         let grown = |what, words| Grown::new(gpu, what, words);
         Ok(GpuRenderer {
             gpu,
             opts: *opts,
-            depth_sums,
             layout,
             state,
             front: Front::new::<M>(gpu, opts.tile_cull)?,
@@ -258,7 +242,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         self.tiles.record(gpu, &mut enc, &self.front.keys)?;
         self.timer.end(&mut enc, SORT);
         self.timer.start(&mut enc, SHADE);
-        let (model, opts, state, depth) = (camera.model, self.opts, self.state, self.depth_sums);
+        let (model, opts, state, depth) = (camera.model, self.opts, self.state, self.opts.depth);
         let shade = self.shade.get(model, || {
             let source = entries::shade::<M>(gpu, model, opts.tile_size, depth, opts.blend, state)?;
             gpu.kernel(&source, "shade_tiles")
@@ -341,11 +325,8 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         let info = self.frame.ok_or(GpuRenderError::NoFrame)?;
         let channels = self.layout.channels;
         let pixels = (info.grid.width * info.grid.height) as usize;
-        grad.check(pixels, channels)?;
+        grad.check(pixels, channels, self.opts.depth)?;
         let want_depth = grad.depth.is_some();
-        if want_depth && !self.depth_sums {
-            return Err(GpuRenderError::DepthNotRendered);
-        }
         let mut words = vec![0u32; pixels * (channels + 2)];
         for (p, out) in words.chunks_exact_mut(channels + 2).enumerate() {
             let color = &grad.color[p * channels..(p + 1) * channels];

@@ -19,6 +19,7 @@ use crate::method::SplatMethod;
 use crate::types::{Camera, ContributionLanes};
 
 /// Gradient of the loss with respect to each requested output, in the layout of the frame.
+#[derive(Clone, Debug)]
 pub struct FrameGrad {
     /// H x W x channels.
     pub color: Vec<f32>,
@@ -27,8 +28,17 @@ pub struct FrameGrad {
 }
 
 impl FrameGrad {
-    /// Checks that every given gradient has one value per pixel (`channels` for the color).
-    pub fn check(&self, pixels: usize, channels: usize) -> Result<(), RenderError> {
+    /// Checks that every given gradient has one value per pixel (`channels` for the color),
+    /// and that a depth gradient comes with a frame that rendered depth (`depth_rendered`).
+    pub fn check(
+        &self,
+        pixels: usize,
+        channels: usize,
+        depth_rendered: bool,
+    ) -> Result<(), RenderError> {
+        if self.depth.is_some() && !depth_rendered {
+            return Err(RenderError::DepthNotRendered);
+        }
         let sizes = [
             ("color", Some(self.color.len()), pixels * channels),
             ("alpha", self.alpha.as_ref().map(Vec::len), pixels),
@@ -139,6 +149,7 @@ fn backward_tile_body<M: SplatMethod, const MODEL: u32>(
     let (tx, ty) = grid.tile_xy(tile);
     let want_depth = grad.depth.is_some();
     let shade_groups = state.gradients.shade_groups::<M>();
+    let alpha_cotangent = state.gradients.alpha_cotangent::<M>();
     // Per-lane gradient sums for every entry of the tile's list, over all its pixel groups;
     // the lanes are summed once per entry at the end of the tile.
     let mut shade_lanes = vec![M::ShadeLanes::default(); list.len()];
@@ -209,21 +220,27 @@ fn backward_tile_body<M: SplatMethod, const MODEL: u32>(
                     one_minus,
                     t_final,
                 };
-                let mut d_alpha = zero;
                 let mut d_col = M::ColorLanes::default();
                 for ch in 0..channels {
-                    let (b, r) = (&mut behind.as_mut()[ch], &mut reference.as_mut()[ch]);
-                    let dc = d_color.as_ref()[ch];
-                    d_alpha = d_alpha + entry.blend(b, r, c.color.as_ref()[ch]) * dc;
-                    d_col.as_mut()[ch] = w * dc;
+                    d_col.as_mut()[ch] = w * d_color.as_ref()[ch];
                 }
                 if want_depth {
-                    let z = F32x8::splat(p.depth);
-                    d_alpha =
-                        d_alpha + entry.blend(&mut depth_behind, &mut depth_reference, z) * d_d;
                     depth_lanes[k] = depth_lanes[k] + w * d_d;
                 }
-                d_alpha = d_alpha + d_alpha_out * t_final / one_minus;
+                let mut d_alpha = zero;
+                if alpha_cotangent {
+                    for ch in 0..channels {
+                        let (b, r) = (&mut behind.as_mut()[ch], &mut reference.as_mut()[ch]);
+                        let v = c.color.as_ref()[ch];
+                        d_alpha = d_alpha + entry.blend(b, r, v) * d_color.as_ref()[ch];
+                    }
+                    if want_depth {
+                        let z = F32x8::splat(p.depth);
+                        d_alpha = d_alpha
+                            + entry.blend(&mut depth_behind, &mut depth_reference, z) * d_d;
+                    }
+                    d_alpha = d_alpha + d_alpha_out * t_final / one_minus;
+                }
                 let d_out = ContributionLanes {
                     alpha: take.select_f32(d_alpha, zero),
                     color: d_col,

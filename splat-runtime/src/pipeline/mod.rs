@@ -110,6 +110,10 @@ pub enum RenderError {
         got: usize,
         want: usize,
     },
+    #[error(
+        "a depth gradient needs a frame rendered with the depth output (RenderOptions::depth, `--depth`)"
+    )]
+    DepthNotRendered,
 }
 
 /// An image of `channels` interleaved f32 values per pixel, rows top to bottom.
@@ -151,8 +155,9 @@ pub struct ForwardState<M: SplatMethod> {
     pub blend: shade::Blend,
     /// The gradients the backward pass computes ([`RenderOptions::gradients`]).
     pub gradients: GradientSet,
-    /// Final transmittance and sum of weight * depth per pixel, in the frame's precision, and
-    /// where each pixel's walk of its tile's list ended ([`shade::TileOutput::ends`]).
+    /// Final transmittance and sum of weight * depth per pixel (empty unless the frame
+    /// rendered depth), in the frame's precision, and where each pixel's walk of its tile's
+    /// list ended ([`shade::TileOutput::ends`]).
     pub transmittance: precision::Stored,
     pub depth_acc: precision::Stored,
     pub ends: Vec<u32>,
@@ -296,7 +301,6 @@ fn forward<M: SplatMethod>(
     // Trip-count binning: the longest lists start first so they do not finish last.
     let mut order: Vec<u32> = (0..grid.tile_count() as u32).collect();
     order.sort_by_key(|&t| std::cmp::Reverse(capped(t as usize).len()));
-    let want_depth = opts.depth || keep;
     let tiles: Vec<(u32, shade::TileOutput)> = order
         .par_iter()
         .map(|&t| {
@@ -308,7 +312,7 @@ fn forward<M: SplatMethod>(
                     t,
                     capped(t as usize),
                     &pre.projected,
-                    want_depth,
+                    opts.depth,
                     opts.blend,
                 ),
             )
@@ -319,7 +323,7 @@ fn forward<M: SplatMethod>(
     let mut color = vec![0.0; w * h * channels];
     let mut transmittance = vec![1.0; w * h];
     let mut ends = if keep { vec![0; w * h] } else { vec![] };
-    let mut depth_acc = if want_depth { vec![0.0; w * h] } else { vec![] };
+    let mut depth_acc = if opts.depth { vec![0.0; w * h] } else { vec![] };
     let s = grid.size as usize;
     for (t, out) in &tiles {
         stats.pairs += out.pairs;
@@ -338,7 +342,7 @@ fn forward<M: SplatMethod>(
             if keep {
                 ends[dst..dst + n].copy_from_slice(&out.ends[src..src + n]);
             }
-            if want_depth {
+            if opts.depth {
                 depth_acc[dst..dst + n].copy_from_slice(&out.depth[src..src + n]);
             }
         }
@@ -428,10 +432,8 @@ pub fn backward<M: SplatMethod>(
     camera: &Camera,
     grad: &FrameGrad,
 ) -> Result<Gradients<M>, RenderError> {
-    grad.check(
-        (state.grid.width * state.grid.height) as usize,
-        M::Color::LEN,
-    )?;
+    let pixels = (state.grid.width * state.grid.height) as usize;
+    grad.check(pixels, M::Color::LEN, state.depth_acc.len() == pixels)?;
     let n = state.pre.projected.len();
     let words = M::Shade::LEN;
     let t0 = Instant::now();

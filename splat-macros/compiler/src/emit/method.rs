@@ -274,6 +274,7 @@ pub fn method_impl(m: &Module, kernels: &[Kernel], diag: &Diag) -> Option<TokenS
     };
     let shade_field_groups =
         crate::gate::shade_field_groups(&project.primal, &params_ty, &camera, &shade_ty);
+    let alpha_groups = crate::gate::alpha_groups(&evaluate.primal, &pixel_ty, &shade_ty);
     let (p_t, c_t, s_t, px_t, col_t) = (
         params_ty.rust(),
         cull_ty.rust(),
@@ -469,6 +470,7 @@ pub fn method_impl(m: &Module, kernels: &[Kernel], diag: &Diag) -> Option<TokenS
             const ROLLING_SHUTTER: bool = #rolling_shutter;
             const PARAM_FIELDS: &'static [(&'static str, usize)] = &[#(#param_fields),*];
             const SHADE_FIELD_GROUPS: &'static [u32] = &[#(#shade_field_groups),*];
+            const ALPHA_GROUPS: u32 = #alpha_groups;
             const SOURCE: #rt::GeneratedSource = #rt::GeneratedSource { rust: GENERATED_RUST, wgsl: GENERATED_WGSL, functions: GENERATED_FUNCTIONS };
             const TWIN: #rt::checks::Twin = #twin;
             type Params = #p_t;

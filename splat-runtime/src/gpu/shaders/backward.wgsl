@@ -6,6 +6,8 @@
 
 const NG: u32 = {{NG}}u; // gradient words per primitive: shade float slots, then depth
 const RC: u32 = {{RC}}u; // gradient words reduced per round
+// Whether a gradient asked for flows through alpha (`GradientSet::alpha_cotangent`).
+const ALPHA_COTANGENT: bool = {{ALPHA_COTANGENT}};
 
 // Per pixel: the forward output (color, final T, sum of weight * depth, the walk's end, as
 // `gpu::state` packs them) and its gradient (color, alpha, depth, f32).
@@ -106,19 +108,23 @@ fn backward_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
                     let w = alpha * t;
                     let first = !seen;
                     seen = true;
-                    var d_alpha = 0.0;
-{{COLOR_TERMS}}
                     if ({{WANT_DEPTH}}) {
-                        let z = batch_depth[i];
-                        if (first) {
-                            depth_reference = z;
-                        }
-                        let bz = blend_term(z, depth_reference, depth_behind, t, w, one_minus, t_final);
-                        d_alpha += bz.x * d_d;
-                        depth_behind = bz.y;
                         g[NG - 1u] = w * d_d;
                     }
-                    d_alpha += d_alpha_out * t_final / one_minus;
+                    var d_alpha = 0.0;
+                    if (ALPHA_COTANGENT) {
+{{COLOR_TERMS}}
+                        if ({{WANT_DEPTH}}) {
+                            let z = batch_depth[i];
+                            if (first) {
+                                depth_reference = z;
+                            }
+                            let bz = blend_term(z, depth_reference, depth_behind, t, w, one_minus, t_final);
+                            d_alpha += bz.x * d_d;
+                            depth_behind = bz.y;
+                        }
+                        d_alpha += d_alpha_out * t_final / one_minus;
+                    }
                     let a = {{EVALUATE_ADJOINT}};
 {{SHADE_GRADS}}
 {{PIXEL_GRADS}}
