@@ -39,6 +39,10 @@ pub struct GradientEffects {
     pub skipped: Vec<&'static str>,
     /// The camera's gradient (with it, its share through each pixel's ray).
     pub camera: bool,
+    /// Whether a gradient asked for flows through `evaluate`'s alpha
+    /// ([`GradientSet::alpha_cotangent`](crate::GradientSet::alpha_cotangent)): without it the
+    /// blend sums nothing of what lies behind each entry.
+    pub alpha_cotangent: bool,
 }
 
 impl Effects {
@@ -65,17 +69,17 @@ impl Effects {
     /// The effects of a frame with a backward pass, which computes `options.gradients`.
     pub fn with_gradients<M: SplatMethod>(self) -> Effects {
         let set = self.options.gradients;
-        let (computed, skipped) = M::PARAM_FIELDS
-            .iter()
-            .enumerate()
-            .map(|(k, (name, _))| (k, *name))
-            .partition::<Vec<_>, _>(|(k, _)| set.param(*k));
-        let names = |v: Vec<(usize, &'static str)>| v.into_iter().map(|(_, n)| n).collect();
+        let groups = |computed: bool| {
+            let fields = M::PARAM_FIELDS.iter().enumerate();
+            let picked = fields.filter(|(k, _)| set.param(*k) == computed);
+            picked.map(|(_, (name, _))| *name).collect()
+        };
         Effects {
             gradients: Some(GradientEffects {
-                computed: names(computed),
-                skipped: names(skipped),
+                computed: groups(true),
+                skipped: groups(false),
                 camera: set.camera(),
+                alpha_cotangent: set.alpha_cotangent::<M>(),
             }),
             ..self
         }
@@ -132,9 +136,13 @@ impl fmt::Display for Effects {
                 true => "on",
                 false => "off (no ray adjoint per pixel)",
             };
+            let alpha = match g.alpha_cotangent {
+                true => "on",
+                false => "off (no gradient asked for flows through alpha)",
+            };
             write!(
                 f,
-                "\ngradients         {}{skipped}\ncamera gradient   {camera}",
+                "\ngradients         {}{skipped}\ncamera gradient   {camera}\nalpha cotangent   {alpha}",
                 g.computed.join(", ")
             )?;
         }

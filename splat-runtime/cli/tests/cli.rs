@@ -721,7 +721,7 @@ fn fit_freezes_the_groups_it_is_told_to() {
             "{stdout}"
         );
         // --explain names the gradients the backward pass computes and those it never does.
-        let gradients = "gradients         opacity_logit, sh (never computed: mean, log_scale, rotation)\ncamera gradient   off";
+        let gradients = "gradients         opacity_logit, sh (never computed: mean, log_scale, rotation)\ncamera gradient   off (no ray adjoint per pixel)\nalpha cotangent   on";
         assert!(stdout.contains(gradients), "{stdout}");
         assert!(stdout.contains("density control   fixed"), "{stdout}");
         scenes.push(
@@ -737,6 +737,24 @@ fn fit_freezes_the_groups_it_is_told_to() {
         );
     }
     assert!(scenes[0].iter().zip(&scenes[1]).any(|(a, b)| a.sh != b.sh));
+    // Colors alone: no gradient flows through alpha, so the blend skips its cotangent.
+    let colors = [
+        &args[..],
+        &["--freeze", "mean,log_scale,rotation,opacity_logit"],
+        &[
+            "--strategy",
+            "fixed",
+            "--steps",
+            "1",
+            "--out",
+            "colors",
+            "--explain",
+        ],
+    ]
+    .concat();
+    let stdout = ok(&splat(&colors, dir.path()));
+    let alpha = "alpha cotangent   off (no gradient asked for flows through alpha)";
+    assert!(stdout.contains(alpha), "{stdout}");
     let refused = |extra: &[&str], message: &str| {
         let run = [&args[..], &["--steps", "1", "--out", "refused"], extra].concat();
         fails(

@@ -236,8 +236,8 @@ fn backward_tile_body<M: SplatMethod, const MODEL: u32>(
                     }
                     if want_depth {
                         let z = F32x8::splat(p.depth);
-                        d_alpha = d_alpha
-                            + entry.blend(&mut depth_behind, &mut depth_reference, z) * d_d;
+                        d_alpha =
+                            d_alpha + entry.blend(&mut depth_behind, &mut depth_reference, z) * d_d;
                     }
                     d_alpha = d_alpha + d_alpha_out * t_final / one_minus;
                 }
