@@ -196,7 +196,9 @@ fn only_groups_alpha_reaches_need_its_cotangent() {
     for name in ["mean", "log_scale", "rotation", "opacity_logit"] {
         assert!(alone(name).alpha_cotangent::<Method>(), "{name}");
     }
-    let camera = GradientSet::params::<Method>(&[]).unwrap().with_camera(true);
+    let camera = GradientSet::params::<Method>(&[])
+        .unwrap()
+        .with_camera(true);
     assert!(camera.alpha_cotangent::<Method>());
 }
 

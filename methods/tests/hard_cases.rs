@@ -186,7 +186,11 @@ fn a_depth_gradient_needs_the_depth_output() {
     });
     let (_, state) = render_for_backward::<Method>(&ps, &cam, &plain).unwrap();
     let (_, deep_state) = render_for_backward::<Method>(&ps, &cam, &deep).unwrap();
-    assert_eq!(deep_state.bytes() - state.bytes(), n * 4, "one f32 per pixel");
+    assert_eq!(
+        deep_state.bytes() - state.bytes(),
+        n * 4,
+        "one f32 per pixel"
+    );
     assert_eq!(
         backward::<Method>(&state, &ps, &cam, &with_depth).err(),
         Some(RenderError::DepthNotRendered)
