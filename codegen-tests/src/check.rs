@@ -101,6 +101,42 @@ pub fn gradient<const NF: usize, const NI: usize, const MF: usize, const MI: usi
     report
 }
 
+/// Compares a Jacobian computed inside a kernel (`jac`: the gradient of `f`'s output `i` by
+/// its inputs `wrt` at `i * wrt.len()`) with central differences of `f`'s f64 twin, on `trials`
+/// inputs from `sample`; returns the largest relative error of an entry.
+pub fn jacobian_vs_differences<
+    const NF: usize,
+    const NI: usize,
+    const MF: usize,
+    const MI: usize,
+    const MJ: usize,
+    const MJI: usize,
+>(
+    f: TwinFn<NF, NI, MF, MI>,
+    jac: TwinFn<NF, NI, MJ, MJI>,
+    wrt: std::ops::Range<usize>,
+    sample: impl Fn(&mut fastrand::Rng) -> ([f64; NF], [u32; NI]),
+    seed: u64,
+    trials: usize,
+) -> f64 {
+    assert_eq!(MJ, MF * wrt.len(), "one gradient per output");
+    let mut rng = fastrand::Rng::with_seed(seed);
+    let mut worst = 0.0f64;
+    for _ in 0..trials {
+        let (x, ints) = sample(&mut rng);
+        let (j, _) = jac(&x, &ints);
+        for (k, input) in wrt.clone().enumerate() {
+            let mut e = [0.0; NF];
+            e[input] = 1.0;
+            let col = directional(f, &x, &ints, &e);
+            for (i, d) in col.iter().enumerate() {
+                worst = worst.max(rel(*d, j[i * wrt.len() + k]));
+            }
+        }
+    }
+    worst
+}
+
 /// Uniform samples in `[lo, hi)`.
 pub fn uniform<const N: usize>(rng: &mut fastrand::Rng, lo: f64, hi: f64) -> [f64; N] {
     std::array::from_fn(|_| lo + (hi - lo) * rng.f64())

@@ -335,6 +335,37 @@ pub mod structured {
     }
 }
 
+/// Forward mode inside a kernel: `jacobian` of a map that uses every differentiable operation
+/// (branches, selects and kinks included). `tests/jacobians.rs` checks the Jacobian against
+/// central differences of the map's f64 twin; the corpus' gradient test checks its adjoint
+/// (reverse over forward) against differences of the Jacobian: second differences.
+#[splat_functions]
+pub mod jacobians {
+    use splat_runtime::prelude::*;
+
+    pub fn every_op(p: Vec2) -> Vec4 {
+        let (x, y) = (p.x, p.y);
+        let a = x * y + x / (1.0 + y * y) - y % 0.7 + x.exp() + y.ln() + x.ln_1p();
+        let b = x.sqrt() + rsqrt(y) + y.recip() + (x - 0.5).abs() + x.min(y) + x.max(0.2 * y);
+        let c = x.sin() * y.cos() + x.tan() + y.tanh() + x.asin() + y.acos() + x.atan();
+        let d = x.powf(y) + y.powi(3) + x.fract() * x.floor() + sigmoid(x - y) + y.atan2(x);
+        let e = if x > y { x * x } else { y.sqrt() * x };
+        Vec4::new(a, b + e, c, select(x > 0.3, d, -d))
+    }
+
+    pub fn every_op_jacobian(x: f32, y: f32) -> (Vec2, Vec2, Vec2, Vec2) {
+        let (_, j) = jacobian(|p| every_op(p), Vec2::new(x, y));
+        (j[0], j[1], j[2], j[3])
+    }
+
+    /// The value and the Jacobian together, of a map from a scalar, at a point the map reads
+    /// twice (the copies keep one direction per input).
+    pub fn scalar_jacobian(t: f32) -> Vec4 {
+        let (v, j) = jacobian(|s: f32| Vec3::new(s * s, s.sin(), t * s.exp()), t);
+        Vec4::new(v.x, v.y + v.z, j[0], j[1] + j[2])
+    }
+}
+
 /// Functions evaluated exactly at their non-differentiable or singular points by
 /// `tests/kinks.rs`; each gradient there follows a documented rule and is finite.
 #[splat_functions]

@@ -146,6 +146,8 @@ corpus! {
     structured::sh_color / sh_color_adjoint => signed::<51>(0.05, 1.0);
     structured::splat_of / splat_of_adjoint => splat_inputs;
     structured::uses_custom / uses_custom_adjoint => plain::<2>(-1.0, 1.0);
+    jacobians::every_op_jacobian / every_op_jacobian_adjoint => plain::<2>(0.15, 0.85);
+    jacobians::scalar_jacobian / scalar_jacobian_adjoint => plain::<1>(-1.5, 1.5);
 }
 
 #[test]

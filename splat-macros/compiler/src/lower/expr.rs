@@ -188,7 +188,7 @@ impl Lowerer<'_> {
                 self.err(e.span(), "`break` and `continue` are not supported: loops always run all N iterations")
             }
             E::Closure(_) => {
-                self.err(e.span(), "closures are not supported: write a helper `fn` in the same module")
+                self.err(e.span(), "closures are not supported (but as the map of `jacobian(|p| body, x)`): write a helper `fn` in the same module")
             }
             E::Macro(m) => self.err(
                 e.span(),

@@ -187,7 +187,7 @@ const FREE_AS_METHOD: &[(&str, &str)] = &[
 
 pub const INTRINSIC_LIST: &str = "exp, log/ln, log1p, sqrt, rsqrt, abs, min, max, clamp, select, sin, \
     cos, tan, atan2, dot, cross, length, normalize, transpose, inverse, determinant, sigmoid, no_diff, \
-    spherical_harmonics, and the camera methods project_point, pixel_ray, can_project, center";
+    spherical_harmonics, jacobian, and the camera methods project_point, pixel_ray, can_project, center";
 
 impl Lowerer<'_> {
     fn f(&self, v: &Val) -> Var {
@@ -628,6 +628,7 @@ impl Lowerer<'_> {
                     _ => Ok(Self::scalar(self.sigmoid(v.comps[0]))),
                 }
             }
+            "jacobian" => self.jacobian(c, span),
             "spherical_harmonics" => {
                 let args = self.args_of(&c.args)?;
                 let n = match args.first().map(|a| &a.ty) {

@@ -6,9 +6,11 @@
 //!   tracking), statements, places and control flow.
 //! - `expr.rs`: expressions (operators, literals, paths, casts, struct literals).
 //! - `intrinsics.rs`: method calls on glam types and the free intrinsic functions.
+//! - `jacobian.rs`: the `jacobian` intrinsic, forward-mode differentiation inside a kernel.
 
 mod expr;
 pub(crate) mod intrinsics;
+mod jacobian;
 
 use crate::diag::Diag;
 use crate::ir::{Binary, Block, Const, Function, Op, Scalar, Stmt, Unary, Var};
@@ -553,9 +555,14 @@ impl<'m> Lowerer<'m> {
         }
     }
 
+    /// Binds every name of `pat` to an error value, so its uses report nothing more.
     fn bind_pattern_poisoned(&mut self, pat: &syn::Pat) {
-        if let syn::Pat::Ident(pi) = pat {
-            self.bind(&pi.ident.to_string(), Val::error(), true);
+        match pat {
+            syn::Pat::Ident(pi) => self.bind(&pi.ident.to_string(), Val::error(), true),
+            syn::Pat::Tuple(t) => t.elems.iter().for_each(|p| self.bind_pattern_poisoned(p)),
+            syn::Pat::Paren(p) => self.bind_pattern_poisoned(&p.pat),
+            syn::Pat::Type(t) => self.bind_pattern_poisoned(&t.pat),
+            _ => {}
         }
     }
 

@@ -1,0 +1,426 @@
+//! The `jacobian` intrinsic: forward-mode differentiation inside a kernel.
+//!
+//! `let (value, j) = jacobian(|p| body, x);` evaluates `body` at `p = x` and returns its value
+//! with its Jacobian there: `j[i]` is the gradient of the value's component `i` (of the type
+//! of `x`), so `j: [Vec3; 2]` for a map from `Vec3` to `Vec2`. The closure reads the kernel's
+//! other values (`|p| cam.project_point(p)`), which are constants of the differentiation.
+//!
+//! Why forward mode, and why this form: a Jacobian of a map from n <= 4 inputs is n tangent
+//! sweeps riding along the primal, which fuse into one pass over the statements with no tape;
+//! and the closure names exactly what is differentiated and at which point, without a second
+//! function to declare. The lowering evaluates the body with `p` bound to fresh copies of
+//! `x`'s components, then walks the statements it produced, emitting after each one the
+//! linearization of its operation for every direction (tangents known to be zero are not
+//! materialized). A branch gets its tangents inside each side, as extra outputs. The result is
+//! ordinary IR: `project`'s reverse-mode adjoint differentiates through it (second derivatives
+//! of the camera model), and each tangent rule uses the kink rules of `ad.rs` (a derivative
+//! that would be infinite at a singular point is 0; `min` / `max` ties go to the first
+//! operand), so both modes agree where the function is smooth.
+
+use super::{Lowerer, R, Val};
+use crate::ir::{Binary, Block, Op, Scalar, Stmt, Unary, Var};
+use crate::types::Ty;
+use proc_macro2::Span;
+use std::collections::HashMap;
+use syn::spanned::Spanned;
+
+/// The tangent of a value in each direction; `None` is a tangent known to be zero.
+type Tangent = Vec<Option<Var>>;
+
+impl Lowerer<'_> {
+    /// `jacobian(|p| body, x)`.
+    pub(super) fn jacobian(&mut self, c: &syn::ExprCall, span: Span) -> R<Val> {
+        let usage = "`jacobian(|p| body, x)` takes a closure of one argument and the point to differentiate it at";
+        let (Some(syn::Expr::Closure(closure)), Some(point), 2) =
+            (c.args.first(), c.args.get(1), c.args.len())
+        else {
+            return self.err(span, usage);
+        };
+        if closure.inputs.len() != 1 {
+            return self.err(closure.span(), usage);
+        }
+        let x = self.expr(point)?;
+        let differentiable = |t: &Ty| matches!(t, Ty::F32 | Ty::Vec(2..=4));
+        if !differentiable(&x.ty) {
+            return self.err(
+                point.span(),
+                format!(
+                    "`jacobian` differentiates at an `f32`, `Vec2`, `Vec3` or `Vec4`, found `{}`",
+                    x.ty
+                ),
+            );
+        }
+        // Fresh copies (x * 1, exact), so each direction seeds one value even where `x`'s
+        // components share one (`Vec3::splat(a)`).
+        let one = self.fconst(1.0);
+        let inputs: Vec<Var> = x
+            .comps
+            .iter()
+            .map(|&v| self.bin(Binary::Mul, v, one))
+            .collect();
+        let p = Val {
+            ty: x.ty.clone(),
+            comps: inputs.clone(),
+        };
+        let pattern = match &closure.inputs[0] {
+            syn::Pat::Type(typed) => {
+                let written = self.resolve_type(&typed.ty)?;
+                self.check_ty(&p, &written, typed.ty.span(), "the closure's argument")?;
+                &*typed.pat
+            }
+            pattern => pattern,
+        };
+        let outer = std::mem::take(&mut self.stmts);
+        self.scopes.push(HashMap::new());
+        let bound = self.bind_pattern(pattern, p);
+        let value = bound.and_then(|_| self.expr(&closure.body));
+        self.scopes.pop();
+        let body = std::mem::replace(&mut self.stmts, outer);
+        let value = value?;
+        if !differentiable(&value.ty) {
+            return self.err(
+                closure.body.span(),
+                format!(
+                    "`jacobian` differentiates a map to an `f32`, `Vec2`, `Vec3` or `Vec4`, found `{}`",
+                    value.ty
+                ),
+            );
+        }
+        let n = inputs.len();
+        let mut tangents: HashMap<Var, Tangent> = HashMap::new();
+        for (k, v) in inputs.iter().enumerate() {
+            tangents.insert(*v, (0..n).map(|j| (j == k).then_some(one)).collect());
+        }
+        if let Err(helper) = self.push_forward(body, &mut tangents) {
+            return self.err(
+                closure.body.span(),
+                format!(
+                    "`jacobian` cannot differentiate through `{helper}`: it has a hand-written adjoint, and forward mode would need its tangent rule"
+                ),
+            );
+        }
+        let mut comps = value.comps.clone();
+        for out in &value.comps {
+            let t = tangents.get(out).cloned().unwrap_or_else(|| vec![None; n]);
+            for d in t {
+                comps.push(self.materialize(d));
+            }
+        }
+        Ok(Val {
+            ty: Ty::Tuple(vec![
+                value.ty.clone(),
+                Ty::Array(Box::new(x.ty), value.comps.len()),
+            ]),
+            comps,
+        })
+    }
+
+    fn materialize(&mut self, t: Option<Var>) -> Var {
+        t.unwrap_or_else(|| self.fconst(0.0))
+    }
+
+    /// Re-emits `stmts` into the current block, each followed by its tangents (added to
+    /// `tangents`). Fails with the helper's name at a call of a helper with a custom adjoint.
+    fn push_forward(
+        &mut self,
+        stmts: Vec<Stmt>,
+        tangents: &mut HashMap<Var, Tangent>,
+    ) -> Result<(), String> {
+        for s in stmts {
+            match s {
+                Stmt::Let { var, op } => {
+                    self.stmts.push(Stmt::Let {
+                        var,
+                        op: op.clone(),
+                    });
+                    if self.f.ty(var) != Scalar::F32 {
+                        continue;
+                    }
+                    let operands = op.operands();
+                    let ts: Vec<Tangent> = operands
+                        .iter()
+                        .map(|o| tangents.get(o).cloned().unwrap_or_default())
+                        .collect();
+                    if ts.iter().all(|t| t.iter().all(Option::is_none)) {
+                        continue;
+                    }
+                    let n = ts.iter().map(Vec::len).max().unwrap_or(0);
+                    let at = |t: &Tangent, j: usize| t.get(j).copied().flatten();
+                    let t: Tangent = (0..n)
+                        .map(|j| {
+                            let dirs: Vec<Option<Var>> = ts.iter().map(|t| at(t, j)).collect();
+                            self.tangent_rule(var, &op, &dirs)
+                        })
+                        .collect();
+                    tangents.insert(var, t);
+                }
+                Stmt::If {
+                    cond,
+                    then_block,
+                    else_block,
+                    mut outs,
+                } => {
+                    let outer = std::mem::take(&mut self.stmts);
+                    let mut then_t = tangents.clone();
+                    let then_r = self.push_forward(then_block.stmts, &mut then_t);
+                    let then_stmts = std::mem::take(&mut self.stmts);
+                    let mut else_t = tangents.clone();
+                    let else_r = self.push_forward(else_block.stmts, &mut else_t);
+                    let else_stmts = std::mem::replace(&mut self.stmts, outer);
+                    then_r?;
+                    else_r?;
+                    let mut then_b = Block {
+                        stmts: then_stmts,
+                        yields: then_block.yields.clone(),
+                    };
+                    let mut else_b = Block {
+                        stmts: else_stmts,
+                        yields: else_block.yields.clone(),
+                    };
+                    let mut new_tangents = vec![];
+                    for (k, out) in outs.clone().into_iter().enumerate() {
+                        let (a, b) = (then_block.yields[k], else_block.yields[k]);
+                        let (ta, tb) = (
+                            then_t.get(&a).cloned().unwrap_or_default(),
+                            else_t.get(&b).cloned().unwrap_or_default(),
+                        );
+                        let n = ta.len().max(tb.len());
+                        let mut t = vec![];
+                        for j in 0..n {
+                            let (da, db) =
+                                (ta.get(j).copied().flatten(), tb.get(j).copied().flatten());
+                            if da.is_none() && db.is_none() {
+                                t.push(None);
+                                continue;
+                            }
+                            let da = self.in_block(&mut then_b, da);
+                            let db = self.in_block(&mut else_b, db);
+                            then_b.yields.push(da);
+                            else_b.yields.push(db);
+                            let o = self
+                                .f
+                                .new_var(Scalar::F32, format!("{}_tangent", self.f.name(out)));
+                            if self.is_active(da) || self.is_active(db) {
+                                self.active.insert(o);
+                            }
+                            outs.push(o);
+                            t.push(Some(o));
+                        }
+                        new_tangents.push((out, t));
+                    }
+                    self.stmts.push(Stmt::If {
+                        cond,
+                        then_block: then_b,
+                        else_block: else_b,
+                        outs,
+                    });
+                    tangents.extend(new_tangents);
+                }
+                Stmt::Call { callee, .. } => return Err(self.custom[callee].clone()),
+            }
+        }
+        Ok(())
+    }
+
+    /// `t`, or a zero constant appended to `block`.
+    fn in_block(&mut self, block: &mut Block, t: Option<Var>) -> Var {
+        if let Some(t) = t {
+            return t;
+        }
+        let outer = std::mem::replace(&mut self.stmts, std::mem::take(&mut block.stmts));
+        let z = self.fconst(0.0);
+        block.stmts = std::mem::replace(&mut self.stmts, outer);
+        z
+    }
+
+    /// The tangent of `r = op(..)` in one direction, given its operands' (`None`: zero).
+    fn tangent_rule(&mut self, r: Var, op: &Op, d: &[Option<Var>]) -> Option<Var> {
+        use Binary as B;
+        use Unary as U;
+        match *op {
+            Op::Const(_) => None,
+            Op::Unary(u, a) => {
+                let da = d[0]?;
+                let scaled = |s: &mut Self, k: Var| Some(s.bin(B::Mul, da, k));
+                match u {
+                    U::Neg => Some(self.un(U::Neg, da)),
+                    U::Fract => Some(da),
+                    U::NoDiff
+                    | U::Floor
+                    | U::Ceil
+                    | U::Round
+                    | U::Trunc
+                    | U::Signum
+                    | U::Cast(_)
+                    | U::Not => None,
+                    U::Exp => scaled(self, r),
+                    U::Ln => {
+                        let q = self.bin(B::Div, da, a);
+                        self.guarded(a, B::Gt, 0.0, q)
+                    }
+                    U::Ln1p => {
+                        let one = self.fconst(1.0);
+                        let den = self.bin(B::Add, one, a);
+                        let q = self.bin(B::Div, da, den);
+                        self.guarded(a, B::Gt, -1.0, q)
+                    }
+                    U::Sqrt => {
+                        let half = self.fconst(0.5);
+                        let h = self.bin(B::Mul, half, da);
+                        let q = self.bin(B::Div, h, r);
+                        self.guarded(a, B::Gt, 0.0, q)
+                    }
+                    U::Rsqrt => {
+                        let k = self.fconst(-0.5);
+                        let r2 = self.bin(B::Mul, r, r);
+                        let r3 = self.bin(B::Mul, r2, r);
+                        let kd = self.bin(B::Mul, k, da);
+                        let q = self.bin(B::Mul, kd, r3);
+                        self.guarded(a, B::Gt, 0.0, q)
+                    }
+                    U::Recip => {
+                        let r2 = self.bin(B::Mul, r, r);
+                        let q = self.bin(B::Mul, da, r2);
+                        let q = self.un(U::Neg, q);
+                        self.guarded(a, B::Ne, 0.0, q)
+                    }
+                    U::Abs => {
+                        let z = self.fconst(0.0);
+                        let nonneg = self.bin(B::Ge, a, z);
+                        let neg = self.un(U::Neg, da);
+                        Some(self.select(nonneg, da, neg))
+                    }
+                    U::Sin => {
+                        let c = self.un(U::Cos, a);
+                        scaled(self, c)
+                    }
+                    U::Cos => {
+                        let s = self.un(U::Sin, a);
+                        let q = self.bin(B::Mul, da, s);
+                        Some(self.un(U::Neg, q))
+                    }
+                    U::Tan | U::Tanh => {
+                        let one = self.fconst(1.0);
+                        let r2 = self.bin(B::Mul, r, r);
+                        let k = match u {
+                            U::Tan => self.bin(B::Add, one, r2),
+                            _ => self.bin(B::Sub, one, r2),
+                        };
+                        scaled(self, k)
+                    }
+                    U::Atan => {
+                        let one = self.fconst(1.0);
+                        let a2 = self.bin(B::Mul, a, a);
+                        let den = self.bin(B::Add, one, a2);
+                        Some(self.bin(B::Div, da, den))
+                    }
+                    U::Asin | U::Acos => {
+                        let one = self.fconst(1.0);
+                        let a2 = self.bin(B::Mul, a, a);
+                        let t = self.bin(B::Sub, one, a2);
+                        let s = self.un(U::Sqrt, t);
+                        let q = self.bin(B::Div, da, s);
+                        let q = if u == U::Acos { self.un(U::Neg, q) } else { q };
+                        self.guarded(t, B::Gt, 0.0, q)
+                    }
+                }
+            }
+            Op::Binary(b, x, y) => {
+                let (dx, dy) = (d[0], d[1]);
+                match b {
+                    B::Add => self.sum(dx, dy),
+                    B::Sub => {
+                        let ndy = dy.map(|v| self.un(U::Neg, v));
+                        self.sum(dx, ndy)
+                    }
+                    B::Mul => {
+                        let a = dx.map(|v| self.bin(B::Mul, v, y));
+                        let c = dy.map(|v| self.bin(B::Mul, x, v));
+                        self.sum(a, c)
+                    }
+                    B::Div => {
+                        // (dx - r dy) / y, zero where y is 0.
+                        let rdy = dy.map(|v| self.bin(B::Mul, r, v));
+                        let nrdy = rdy.map(|v| self.un(U::Neg, v));
+                        let num = self.sum(dx, nrdy)?;
+                        let q = self.bin(B::Div, num, y);
+                        self.guarded(y, B::Ne, 0.0, q)
+                    }
+                    B::Rem => {
+                        let k = dy.and_then(|v| {
+                            let q = self.bin(B::Div, x, y);
+                            let t = self.un(U::Trunc, q);
+                            let kv = self.bin(B::Mul, t, v);
+                            let nk = self.un(U::Neg, kv);
+                            self.guarded(y, B::Ne, 0.0, nk)
+                        });
+                        self.sum(dx, k)
+                    }
+                    B::Min | B::Max => {
+                        // Ties go to the first operand.
+                        let cmp = if b == B::Min { B::Le } else { B::Ge };
+                        let first = self.bin(cmp, x, y);
+                        let (a, c) = (self.materialize(dx), self.materialize(dy));
+                        Some(self.select(first, a, c))
+                    }
+                    B::Atan2 => {
+                        // atan2(x, y): (dx y - x dy) / (x^2 + y^2), zero at the origin.
+                        let x2 = self.bin(B::Mul, x, x);
+                        let y2 = self.bin(B::Mul, y, y);
+                        let den = self.bin(B::Add, x2, y2);
+                        let a = dx.map(|v| self.bin(B::Mul, v, y));
+                        let c = dy.map(|v| {
+                            let xv = self.bin(B::Mul, x, v);
+                            self.un(U::Neg, xv)
+                        });
+                        let num = self.sum(a, c)?;
+                        let q = self.bin(B::Div, num, den);
+                        self.guarded(den, B::Gt, 0.0, q)
+                    }
+                    B::Powf => {
+                        // x^y: y r / x dx (zero at x = 0) + r ln x dy (zero for x <= 0).
+                        let a = dx.and_then(|v| {
+                            let vy = self.bin(B::Mul, v, y);
+                            let vyr = self.bin(B::Mul, vy, r);
+                            let q = self.bin(B::Div, vyr, x);
+                            self.guarded(x, B::Ne, 0.0, q)
+                        });
+                        let c = dy.and_then(|v| {
+                            let l = self.un(U::Ln, x);
+                            let vr = self.bin(B::Mul, v, r);
+                            let q = self.bin(B::Mul, vr, l);
+                            self.guarded(x, B::Gt, 0.0, q)
+                        });
+                        self.sum(a, c)
+                    }
+                    // Comparisons and bit operations have no float result.
+                    _ => None,
+                }
+            }
+            Op::Select(c, _, _) => {
+                let (dx, dy) = (d[1], d[2]);
+                if dx.is_none() && dy.is_none() {
+                    return None;
+                }
+                let (a, b) = (self.materialize(dx), self.materialize(dy));
+                Some(self.select(c, a, b))
+            }
+        }
+    }
+
+    /// `value` where `v cmp k` holds, else 0 (the kink rule of `ad.rs`).
+    fn guarded(&mut self, v: Var, cmp: Binary, k: f64, value: Var) -> Option<Var> {
+        let k = self.fconst(k);
+        let ok = self.bin(cmp, v, k);
+        let z = self.fconst(0.0);
+        Some(self.select(ok, value, z))
+    }
+
+    fn sum(&mut self, a: Option<Var>, b: Option<Var>) -> Option<Var> {
+        match (a, b) {
+            (Some(a), Some(b)) => Some(self.bin(Binary::Add, a, b)),
+            (a, None) => a,
+            (None, b) => b,
+        }
+    }
+}
