@@ -59,15 +59,19 @@ pub mod generalized {
         let t = cam.rotation * p.mean + cam.translation;
         let z = t.z.max(NEAR);
         let (f, c, size) = (cam.focal, cam.principal, cam.size);
-        // EWA Jacobian with the tangent clamp of 3DGS.
+        let mean = Vec3::new(t.x, t.y, z);
+        // EWA: the projection's Jacobian at the mean (any camera model), on the pinhole at the
+        // tangent clamp of 3DGS.
         let lim_pos = (size - c) / f + size * 0.15 / f;
         let lim_neg = c / f + size * 0.15 / f;
         let tx = (t.x / z).clamp(-lim_neg.x, lim_pos.x) * z;
         let ty = (t.y / z).clamp(-lim_neg.y, lim_pos.y) * z;
+        let at = select(cam.is_pinhole(), Vec3::new(tx, ty, z), mean);
+        let (_, d) = jacobian(|q| cam.project_point(q), at);
         let j = Mat3::from_cols(
-            Vec3::new(f.x / z, 0.0, 0.0),
-            Vec3::new(0.0, f.y / z, 0.0),
-            Vec3::new(-f.x * tx / (z * z), -f.y * ty / (z * z), 0.0),
+            Vec3::new(d[0].x, d[1].x, 0.0),
+            Vec3::new(d[0].y, d[1].y, 0.0),
+            Vec3::new(d[0].z, d[1].z, 0.0),
         );
         let rot =
             Quat::from_xyzw(p.rotation.y, p.rotation.z, p.rotation.w, p.rotation.x).normalize();
@@ -85,7 +89,7 @@ pub mod generalized {
         let mid = 0.5 * (a + d);
         let lambda = mid + (mid * mid - det).max(0.1).sqrt();
         let radius = (q_max * lambda).sqrt().min(MAX_RADIUS).ceil();
-        let center = Vec2::new(f.x * t.x / z, f.y * t.y / z) + c;
+        let center = cam.project_point(mean);
         let conic = Vec3::new(d, -b, a) / det;
         Projected {
             visible: t.z > NEAR && det > 0.0 && opacity >= ALPHA_MIN,

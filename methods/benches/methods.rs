@@ -1,7 +1,7 @@
 //! The methods side by side on one scene (CPU backend): forward and backward time per camera
 //! model, what each tile cull saves, and what the approximations cost in accuracy: 3DGS (EWA)
 //! and 3DGUT (unscented transform, max response) against 3DGEER's exact ray integral, as PSNR
-//! on the pinhole camera. Times are best of 3 after a warm-up, ratios against 3DGS on the
+//! on each camera model (the wide ones about 150 degrees across). Times are best of 3 after a warm-up, ratios against 3DGS on the
 //! pinhole camera in the same run.
 //!
 //! `cargo bench -p splat-methods --bench methods [-- N WIDTH HEIGHT]`
@@ -90,8 +90,9 @@ fn main() {
     );
     println!("|---|---|---:|---:|---:|---:|---:|");
     let mut baseline = None;
-    let mut exact = None;
+    // Per camera model: the approximations' frames, then 3DGEER's.
     let mut approx = vec![];
+    let mut exact = vec![];
     let mut report = |name: &str, model: CameraModel, r: Row| {
         let base = *baseline.get_or_insert(r.forward.as_secs_f64());
         println!(
@@ -111,25 +112,21 @@ fn main() {
             // About 150 degrees across for the wide models.
             cam.focal = Vec2::splat(w / 2.6);
         }
-        if model == CameraModel::Pinhole {
-            let f = report("3DGS", model, run::<gs3d::Method>(&gaussians, &cam));
-            approx.push(("3DGS (EWA)", f));
-        }
+        let f = report("3DGS", model, run::<gs3d::Method>(&gaussians, &cam));
+        approx.push(("3DGS (EWA)", model, f));
         let f = report("3DGUT", model, run::<gut::Method>(&gut_params, &cam));
+        approx.push(("3DGUT (UT, max response)", model, f));
         if model == CameraModel::Pinhole {
-            approx.push(("3DGUT (UT, max response)", f));
             report("LinPrim", model, run::<linprim::Method>(&lin_params, &cam));
         }
         let f = report("3DGEER", model, run::<geer::Method>(&geer_params, &cam));
-        if model == CameraModel::Pinhole {
-            exact = Some(f);
-        }
+        exact.push((model, f));
     }
-    let exact = exact.unwrap();
-    println!("\nAgainst 3DGEER's exact ray integral (pinhole, same Gaussians):");
-    for (name, f) in approx {
+    println!("\nAgainst 3DGEER's exact ray integral (same Gaussians, same camera):");
+    for (name, model, f) in approx {
+        let (_, exact) = exact.iter().find(|(m, _)| *m == model).unwrap();
         println!(
-            "  {name}: PSNR {:.2} dB",
+            "  {name}, {model}: PSNR {:.2} dB",
             psnr(&f.color.data, &exact.color.data)
         );
     }

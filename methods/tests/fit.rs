@@ -278,28 +278,26 @@ fn bad_datasets_are_refused_by_file_and_field() {
     assert!(err.contains("missing.png"), "{err}");
 }
 
-/// A nerfstudio dataset of fisheye views (OPENCV_FISHEYE, global intrinsics, one frame with
-/// its own focal length): read back with the Kannala-Brandt cameras it was written with, every
-/// 8th frame held out; 3DGUT trains on the fisheye images as they are.
-#[test]
-fn three_dgut_fits_a_nerfstudio_fisheye_dataset() {
-    let dir = tempfile::tempdir().unwrap();
-    let scene: Vec<splat_methods::gut::Params> = common::as_method(truth());
-    let k = Vec4::new(0.05, -0.01, 0.002, -0.0005);
+/// The fisheye's distortion coefficients in [`fisheye_dataset`].
+const FISHEYE_K: Vec4 = Vec4::new(0.05, -0.01, 0.002, -0.0005);
+
+/// A nerfstudio dataset in `dir` of `scene` seen by `M` through nine fisheye views
+/// (OPENCV_FISHEYE, global intrinsics, frame 4 with its own focal length); returns the cameras.
+fn fisheye_dataset<M: SplatMethod>(dir: &Path, scene: &[M::Params]) -> Vec<Camera> {
     let fisheye = |eye: Vec3, fl: f32| Camera {
         focal: Vec2::splat(fl),
         model: CameraModel::KannalaBrandt,
-        distortion: k,
+        distortion: FISHEYE_K,
         ..look_at(eye)
     };
-    std::fs::create_dir_all(dir.path().join("images")).unwrap();
+    std::fs::create_dir_all(dir.join("images")).unwrap();
     let mut frames = vec![];
     let mut cams = vec![];
     for i in 0..9 {
         let fl = if i == 4 { 16.0 } else { 14.0 };
         let cam = fisheye(eye(i, 9, 0.6 * (i % 3) as f32 - 0.6), fl);
         let file = format!("images/frame_{i:03}.png");
-        save_view::<splat_methods::gut::Method>(&dir.path().join(&file), &scene, &cam);
+        save_view::<M>(&dir.join(&file), scene, &cam);
         let mut frame = serde_json::json!({
             "file_path": file,
             "transform_matrix": blender_matrix(&cam),
@@ -311,14 +309,49 @@ fn three_dgut_fits_a_nerfstudio_fisheye_dataset() {
         frames.push(frame);
         cams.push(cam);
     }
+    let k = FISHEYE_K;
     let json = serde_json::json!({
         "camera_model": "OPENCV_FISHEYE",
         "fl_x": 14.0, "fl_y": 14.0, "cx": 20.0, "cy": 20.0, "w": SIZE, "h": SIZE,
         "k1": k.x, "k2": k.y, "k3": k.z, "k4": k.w,
         "frames": frames,
     });
-    std::fs::write(dir.path().join("transforms.json"), json.to_string()).unwrap();
+    std::fs::write(dir.join("transforms.json"), json.to_string()).unwrap();
+    cams
+}
 
+/// Fits `M` to a fisheye dataset of its own renders of the truth (a method fits the images its
+/// own model makes): the held-out views get at least 5 dB closer.
+fn fits_fisheye_views<M: Trainable>(label: &str)
+where
+    M::Params: splat_methods::FromStored,
+{
+    let dir = tempfile::tempdir().unwrap();
+    let scene: Vec<M::Params> = common::as_method(truth());
+    fisheye_dataset::<M>(dir.path(), &scene);
+    let data = splat_runtime::io::dataset::read(dir.path(), Vec3::ZERO).unwrap();
+    let mut params = moved_start::<M>(&truth());
+    let opts = options(150);
+    let before = evaluate::<M>(&params, &data.test, &opts).unwrap();
+    fit::<M>(&data, &mut params, 1.0, &opts, |_| {}).unwrap();
+    let after = evaluate::<M>(&params, &data.test, &opts).unwrap();
+    println!(
+        "{label} fisheye: test PSNR {:.2} -> {:.2} dB",
+        before.psnr, after.psnr
+    );
+    assert!(
+        after.psnr > before.psnr + 5.0,
+        "{label}: held-out fisheye views get closer"
+    );
+}
+
+/// The fisheye dataset reads back with the Kannala-Brandt cameras it was written with, every
+/// 8th frame held out; 3DGUT trains on the fisheye images as they are.
+#[test]
+fn three_dgut_fits_a_nerfstudio_fisheye_dataset() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene: Vec<splat_methods::gut::Params> = common::as_method(truth());
+    let cams = fisheye_dataset::<splat_methods::gut::Method>(dir.path(), &scene);
     let data = splat_runtime::io::dataset::read(dir.path(), Vec3::ZERO).unwrap();
     assert_eq!(
         (data.train.len(), data.test.len()),
@@ -339,26 +372,18 @@ fn three_dgut_fits_a_nerfstudio_fisheye_dataset() {
         .chain(data.train.iter().zip(trained))
     {
         assert_eq!(view.camera.model, CameraModel::KannalaBrandt);
-        assert_eq!(view.camera.distortion, k);
+        assert_eq!(view.camera.distortion, FISHEYE_K);
         assert_eq!(view.camera.focal, cam.focal);
         assert_eq!(view.camera.principal, cam.principal);
         assert_same_pose(&view.camera, cam);
     }
+    fits_fisheye_views::<splat_methods::gut::Method>("3DGUT");
+}
 
-    type Gut = splat_methods::gut::Method;
-    let mut params = moved_start::<Gut>(&truth());
-    let opts = options(150);
-    let before = evaluate::<Gut>(&params, &data.test, &opts).unwrap();
-    fit::<Gut>(&data, &mut params, 1.0, &opts, |_| {}).unwrap();
-    let after = evaluate::<Gut>(&params, &data.test, &opts).unwrap();
-    println!(
-        "3DGUT fisheye: test PSNR {:.2} -> {:.2} dB",
-        before.psnr, after.psnr
-    );
-    assert!(
-        after.psnr > before.psnr + 5.0,
-        "held-out fisheye views get closer"
-    );
+/// 3DGS trains on fisheye images too: EWA with the compiler's Jacobian of the fisheye.
+#[test]
+fn three_dgs_fits_a_nerfstudio_fisheye_dataset() {
+    fits_fisheye_views::<splat_methods::gs3d::Method>("3DGS");
 }
 
 /// Density control on hand-made statistics: a small primitive under a strong screen-space pull

@@ -88,17 +88,6 @@ fn the_box_holds_every_contributing_pixel_on_every_camera_model() {
     }
 }
 
-#[test]
-fn the_pinhole_only_method_refuses_a_fisheye_by_name() {
-    let cam = wide_camera(16, 16, CameraModel::KannalaBrandt);
-    let Err(err) =
-        splat_runtime::render::<splat_methods::gs3d::Method>(&[], &cam, &Default::default())
-    else {
-        panic!("3DGS rendered with a fisheye");
-    };
-    assert!(err.to_string().contains("pinhole camera only"), "{err}");
-}
-
 /// Realistic scenes: pairs below 1/255 at the footprints' edges, lists that end at the T-stop.
 #[test]
 fn gradients_match_the_reference_adjoint_on_realistic_scenes() {

@@ -11,7 +11,7 @@ fn main() -> ExitCode {
     splat_cli::run(&[
         Method::per_sh_degree(
             "3dgs",
-            "3D Gaussian Splatting (EWA, SH up to degree 3); pinhole only",
+            "3D Gaussian Splatting (EWA, SH up to degree 3); every camera",
             vec![
                 Instance::of::<gs3d_sh0::Method>(),
                 Instance::of::<gs3d_sh1::Method>(),
@@ -21,7 +21,7 @@ fn main() -> ExitCode {
         ),
         Method::new(
             "3dgs-aa",
-            "3DGS anti-aliased (Mip-Splatting's 2D filter, gsplat's `antialiased`); pinhole only",
+            "3DGS anti-aliased (Mip-Splatting's 2D filter, gsplat's `antialiased`); every camera",
             Instance::trainable::<gs3d_aa::Method>(),
         ),
         Method::per_sh_degree(
