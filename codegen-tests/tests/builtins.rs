@@ -1,10 +1,11 @@
 //! The compiler's builtins as kernels see them (compiled from `splat-compiler/src/builtins.rs`):
 //! the camera models (`cam.project_point`, `cam.pixel_ray`) equal to the runtime's plain-Rust
 //! `Camera` methods, inverse to each other (also past 90° off axis for the fisheye), and
-//! differentiated correctly (f64 finite differences) for every model; the rolling shutter's
-//! pose per row likewise; `spherical_harmonics` equal to the runtime prelude's.
+//! differentiated correctly (f64 finite differences) for every model, their Jacobians by
+//! `jacobian` too (and those Jacobians' own gradients: second derivatives); the rolling
+//! shutter's pose per row likewise; `spherical_harmonics` equal to the runtime prelude's.
 
-use codegen_tests::check::{gradient, uniform};
+use codegen_tests::check::{gradient, jacobian_vs_differences, uniform};
 use splat_macros::splat_functions;
 use splat_runtime::glam::{Mat3, Vec2, Vec3, Vec4};
 use splat_runtime::{Camera, CameraModel};
@@ -21,6 +22,12 @@ mod cameras {
 
     pub fn pixel_ray(cam: &Camera, pixel: Vec2) -> Vec3 {
         cam.pixel_ray(pixel)
+    }
+
+    /// The gradients of the pixel's two coordinates by the camera-space point (`jacobian`).
+    pub fn projection_jacobian(cam: &Camera, p: Vec3) -> (Vec3, Vec3) {
+        let (_, j) = jacobian(|q| cam.project_point(q), p);
+        (j[0], j[1])
     }
 
     /// The rolling shutter's pose at the pixel's row, applied to its ray (one output that
@@ -183,19 +190,7 @@ fn sample<const N: usize>(
 #[test]
 fn camera_model_gradients_match_finite_differences() {
     for model in CameraModel::ALL {
-        let angle = max_angle(model) as f64 * 0.9;
-        let point = move |r: &mut fastrand::Rng| {
-            let (theta, phi) = (
-                0.05 + (angle - 0.05) * r.f64(),
-                std::f64::consts::TAU * r.f64(),
-            );
-            let d = 1.0 + 3.0 * r.f64();
-            vec![
-                d * theta.sin() * phi.cos(),
-                d * theta.sin() * phi.sin(),
-                d * theta.cos(),
-            ]
-        };
+        let point = point_toward(model);
         let report = gradient(
             cameras::twin::project_point,
             cameras::twin::project_point_adjoint,
@@ -218,6 +213,56 @@ fn camera_model_gradients_match_finite_differences() {
             30,
         );
         println!("{model} pixel_ray: {report:?}");
+        assert!(
+            report.jacobian <= 1e-6 && report.dot_product <= 1e-6,
+            "{model}: {report:?}"
+        );
+    }
+}
+
+/// Camera-space points up to 0.9 of what `model` sees off axis, 1 to 4 units away.
+fn point_toward(model: CameraModel) -> impl Fn(&mut fastrand::Rng) -> Vec<f64> + Copy {
+    let angle = max_angle(model) as f64 * 0.9;
+    move |r: &mut fastrand::Rng| {
+        let (theta, phi) = (
+            0.05 + (angle - 0.05) * r.f64(),
+            std::f64::consts::TAU * r.f64(),
+        );
+        let d = 1.0 + 3.0 * r.f64();
+        vec![
+            d * theta.sin() * phi.cos(),
+            d * theta.sin() * phi.sin(),
+            d * theta.cos(),
+        ]
+    }
+}
+
+/// `jacobian(|q| cam.project_point(q), p)` (forward mode inside the kernel) against central
+/// differences of `project_point`'s f64 twin; and its adjoint by the camera and the point
+/// (reverse over forward: second derivatives of each model) against differences of the
+/// Jacobian.
+#[test]
+fn projection_jacobians_match_differences_on_every_model() {
+    for model in CameraModel::ALL {
+        let sample = sample::<{ FLOAT_SLOTS + 3 }>(camera(model), point_toward(model));
+        let err = jacobian_vs_differences(
+            cameras::twin::project_point,
+            cameras::twin::projection_jacobian,
+            FLOAT_SLOTS..FLOAT_SLOTS + 3,
+            &sample,
+            12,
+            40,
+        );
+        println!("{model}: projection Jacobian {err:.2e} off differences");
+        assert!(err <= 1e-6, "{model}: {err}");
+        let report = gradient(
+            cameras::twin::projection_jacobian,
+            cameras::twin::projection_jacobian_adjoint,
+            sample,
+            13,
+            30,
+        );
+        println!("{model} projection Jacobian's adjoint: {report:?}");
         assert!(
             report.jacobian <= 1e-6 && report.dot_product <= 1e-6,
             "{model}: {report:?}"
