@@ -358,6 +358,20 @@ pub mod jacobians {
         (j[0], j[1], j[2], j[3])
     }
 
+    /// A branch whose sides do not depend on the point (its tangent is zero in every
+    /// direction) beside one whose do.
+    pub fn branch_jacobian(x: f32, y: f32) -> Vec4 {
+        let (v, j) = jacobian(
+            |p: Vec2| {
+                let step = if p.x > 0.5 { 1.0 } else { -1.0 };
+                let bend = if p.y > 0.5 { p.x * p.y } else { p.y - p.x };
+                Vec2::new(step, bend * step)
+            },
+            Vec2::new(x, y),
+        );
+        Vec4::new(v.x + v.y, j[0].x + j[0].y, j[1].x, j[1].y)
+    }
+
     /// The value and the Jacobian together, of a map from a scalar, at a point the map reads
     /// twice (the copies keep one direction per input).
     pub fn scalar_jacobian(t: f32) -> Vec4 {

@@ -148,6 +148,11 @@ corpus! {
     structured::uses_custom / uses_custom_adjoint => plain::<2>(-1.0, 1.0);
     jacobians::every_op_jacobian / every_op_jacobian_adjoint => plain::<2>(0.15, 0.85);
     jacobians::scalar_jacobian / scalar_jacobian_adjoint => plain::<1>(-1.5, 1.5);
+    jacobians::branch_jacobian / branch_jacobian_adjoint => |r: &mut Rng| {
+        // Away from the branches' edges at 0.5.
+        let side = |r: &mut Rng| if r.bool() { 0.1 + 0.3 * r.f64() } else { 0.6 + 0.3 * r.f64() };
+        ([side(r), side(r)], [])
+    };
 }
 
 #[test]

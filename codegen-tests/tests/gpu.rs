@@ -191,6 +191,7 @@ fn corpus_kernels_match_the_rust_forms_on_the_gpu() {
         kinks::lazy_div / lazy_div_adjoint in -1.0 .. 1.0, ints <= 0;
         jacobians::every_op_jacobian / every_op_jacobian_adjoint in 0.15 .. 0.85, ints <= 0, TOL_INVERSE_TRIG;
         jacobians::scalar_jacobian / scalar_jacobian_adjoint in -1.5 .. 1.5, ints <= 0;
+        jacobians::branch_jacobian / branch_jacobian_adjoint in 0.1 .. 0.4, ints <= 0;
     );
     assert!(
         failures.is_empty(),

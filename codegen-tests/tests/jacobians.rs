@@ -30,6 +30,21 @@ fn the_jacobian_of_every_operation_matches_differences() {
     assert!(err <= TOL, "{err}");
 }
 
+/// A branch with constant sides has a zero Jacobian; the other side's is the bend's.
+#[test]
+fn branches_without_tangents_keep_their_place() {
+    for (x, y) in [(0.2f32, 0.3f32), (0.7, 0.3), (0.2, 0.8), (0.7, 0.8)] {
+        let step = if x > 0.5 { 1.0 } else { -1.0 };
+        let (bend, d_bend) = match y > 0.5 {
+            true => (x * y, (y, x)),
+            false => (y - x, (-1.0, 1.0)),
+        };
+        let want = Vec4::new(step + bend * step, 0.0, d_bend.0 * step, d_bend.1 * step);
+        let got = jacobians::branch_jacobian(x, y);
+        assert!((got - want).length() <= 1e-6, "({x}, {y}): {got} vs {want}");
+    }
+}
+
 #[test]
 fn the_value_comes_with_its_jacobian() {
     for t in [-1.2f32, 0.0, 0.4, 1.3] {

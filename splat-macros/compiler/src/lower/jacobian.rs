@@ -101,8 +101,9 @@ impl Lowerer<'_> {
         }
         let mut comps = value.comps.clone();
         for out in &value.comps {
-            let t = tangents.get(out).cloned().unwrap_or_else(|| vec![None; n]);
-            for d in t {
+            let t = tangents.get(out).cloned().unwrap_or_default();
+            for j in 0..n {
+                let d = t.get(j).copied().flatten();
                 comps.push(self.materialize(d));
             }
         }
@@ -206,7 +207,10 @@ impl Lowerer<'_> {
                             outs.push(o);
                             t.push(Some(o));
                         }
-                        new_tangents.push((out, t));
+                        // An output with no tangent in any direction stays out of the map.
+                        if t.iter().any(Option::is_some) {
+                            new_tangents.push((out, t));
+                        }
                     }
                     self.stmts.push(Stmt::If {
                         cond,
@@ -328,6 +332,8 @@ impl Lowerer<'_> {
             Op::Binary(b, x, y) => {
                 let (dx, dy) = (d[0], d[1]);
                 match b {
+                    // No tangent in this direction (others may have one).
+                    _ if dx.is_none() && dy.is_none() => None,
                     B::Add => self.sum(dx, dy),
                     B::Sub => {
                         let ndy = dy.map(|v| self.un(U::Neg, v));
