@@ -135,7 +135,6 @@ pub struct GpuGradients<M: SplatMethod> {
 pub struct GpuRenderer<'g, M: SplatMethod> {
     gpu: &'g Gpu,
     opts: RenderOptions,
-    /// Accumulate weight * depth per pixel (for the depth output or its gradient).
     layout: Layout,
     /// How the per-pixel state is stored.
     state: PixelState,
@@ -242,9 +241,10 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         self.tiles.record(gpu, &mut enc, &self.front.keys)?;
         self.timer.end(&mut enc, SORT);
         self.timer.start(&mut enc, SHADE);
-        let (model, opts, state, depth) = (camera.model, self.opts, self.state, self.opts.depth);
+        let (model, opts, state) = (camera.model, self.opts, self.state);
         let shade = self.shade.get(model, || {
-            let source = entries::shade::<M>(gpu, model, opts.tile_size, depth, opts.blend, state)?;
+            let source =
+                entries::shade::<M>(gpu, model, opts.tile_size, opts.depth, opts.blend, state)?;
             gpu.kernel(&source, "shade_tiles")
         })?;
         let mut inputs = self.tile_pass_inputs();
