@@ -3,7 +3,9 @@
 //! at 1 instead of wrapping); the transmittance and depth sums, which the backward pass walks
 //! back from, f16 in every reduced format (a unorm step near 0 would lose a pixel's
 //! gradients); the bytes held shrinking accordingly; and the backward pass within f16's
-//! rounding of f32's, however the colors are stored.
+//! rounding of f32's, however the colors are stored. Then the shade data between the
+//! preprocess and the blend (each value within its format's step, 2 or 1 bytes each, and
+//! both passes reading exactly what is stored), and the gradient sums held in f16.
 
 mod common;
 
@@ -160,5 +162,176 @@ fn the_gpu_stores_each_format_within_its_step_in_fewer_bytes() {
             assert!(got.params.iter().all(splat_runtime::Flat::is_finite));
             assert!(err <= F16_STEPS * 2f64.powi(-11), "{precision:?}: {err}");
         }
+    }
+}
+
+/// The shade data each format stores: every value within its step of `project`'s (f16: 2^-11
+/// of the value, 2^-25 below its normal range; unorm: half a step of the range the word spans over the frame), in 2 or 1
+/// bytes per float; and the blend and the backward pass read exactly what is stored: both
+/// equal, bit for bit, those of a frame whose `project` had returned the decoded values.
+#[test]
+fn shade_data_in_each_format_is_what_both_passes_read_in_fewer_bytes() {
+    use splat_runtime::pipeline::shade::shade_tile;
+    let (cam, params) = scene(false);
+    let full = all_outputs(Precision::F32);
+    let (reference, _) = render_for_backward::<Method>(&params, &cam, &full).unwrap();
+    let grad = loss_gradient(reference.color.data.len() / 3);
+    for precision in [Precision::F16, Precision::Unorm16, Precision::Unorm8] {
+        let opts = RenderOptions {
+            shade_precision: precision,
+            ..full
+        };
+        let (frame, mut state) = render_for_backward::<Method>(&params, &cam, &opts).unwrap();
+        let packed = state
+            .pre
+            .packed
+            .take()
+            .expect("reduced shade data is packed");
+        // 3DGS's shade data: 9 floats (center, conic, opacity, color), plus a range per word.
+        let width = if precision == Precision::Unorm8 { 1 } else { 2 };
+        assert_eq!(
+            packed.bytes(),
+            params.len() * 9 * width + 9 * 8,
+            "{precision:?}"
+        );
+        let mut worst = 0.0f32;
+        for (i, p) in state
+            .pre
+            .projected
+            .iter()
+            .enumerate()
+            .filter(|(_, p)| p.visible)
+        {
+            let (mut was, mut is) = ([0.0; 9], [0.0; 9]);
+            splat_runtime::Flat::write_words(&p.shade, &mut was);
+            splat_runtime::Flat::write_words(&packed.get::<splat_methods::gs3d::Shade>(i), &mut is);
+            for w in 0..9 {
+                let step = match precision {
+                    // Relative, down to f16's subnormals (absolute steps of 2^-24).
+                    Precision::F16 => (2f32.powi(-11) * was[w].abs()).max(2f32.powi(-25)),
+                    // Half a step, plus f32's rounding of the value's place in its range
+                    // (2^-24 of 65535 steps: 0.004 of one).
+                    _ => packed.step(w) * 0.51,
+                };
+                let err = (is[w] - was[w]).abs();
+                worst = worst.max(err / step);
+                assert!(err <= step, "{precision:?} word {w}: {is:?} for {was:?}");
+            }
+        }
+        println!("{precision:?} shade data: worst error {worst:.2} of its step");
+        let packed_grads = {
+            state.pre.packed = Some(packed);
+            let tiles: Vec<_> = (0..state.grid.tile_count() as u32)
+                .map(|t| {
+                    let list = state.visited(t as usize);
+                    shade_tile(&state.grid, &cam, t, list, &state.pre, true, state.blend)
+                })
+                .collect();
+            let grads = backward::<Method>(&state, &params, &cam, &grad).unwrap();
+            (tiles, grads.params)
+        };
+        // The same frame with the decoded values as `project`'s output and nothing packed.
+        let packed = state.pre.packed.take().unwrap();
+        for (i, p) in state.pre.projected.iter_mut().enumerate() {
+            p.shade = packed.get(i);
+        }
+        for (t, packed_tile) in packed_grads.0.iter().enumerate() {
+            let list = state.visited(t);
+            let plain = shade_tile(
+                &state.grid,
+                &cam,
+                t as u32,
+                list,
+                &state.pre,
+                true,
+                state.blend,
+            );
+            assert_eq!(plain.color, packed_tile.color, "{precision:?} tile {t}");
+            assert_eq!(plain.transmittance, packed_tile.transmittance);
+        }
+        let plain = backward::<Method>(&state, &params, &cam, &grad).unwrap();
+        assert_eq!(flat(&plain.params), flat(&packed_grads.1), "{precision:?}");
+        let err = group_error(&flat(&packed_grads.1), &backward_f32(&params, &cam, &grad));
+        println!(
+            "{precision:?} shade data: image PSNR {:.1} dB, gradients {err:.2e} of the largest off f32's",
+            psnr(&frame.color.data, &reference.color.data)
+        );
+    }
+}
+
+fn backward_f32(params: &[Params], cam: &splat_runtime::Camera, grad: &FrameGrad) -> Vec<f64> {
+    let opts = all_outputs(Precision::F32);
+    let (_, state) = render_for_backward::<Method>(params, cam, &opts).unwrap();
+    flat(
+        &backward::<Method>(&state, params, cam, grad)
+            .unwrap()
+            .params,
+    )
+}
+
+fn psnr(got: &[f32], want: &[f32]) -> f64 {
+    let mse = got
+        .iter()
+        .zip(want)
+        .map(|(a, b)| ((a - b) as f64).powi(2))
+        .sum::<f64>();
+    10.0 * (got.len() as f64 / mse).log10()
+}
+
+/// Gradient sums held in f16: every add rounds the sum (2^-11 of it), once per tile a
+/// primitive covers and once per worker's sum, so the gradients stay within that many f16
+/// steps of f32's; the accumulators really are half the size (f16 bits in `Stored::F16`); a
+/// unorm format, which needs a range sums do not have, is refused.
+#[test]
+fn gradient_sums_in_f16_stay_within_their_rounding_and_unorm_is_refused() {
+    let (cam, params) = scene(false);
+    let grad = loss_gradient(48 * 40);
+    let want = backward_f32(&params, &cam, &grad);
+    let opts = RenderOptions {
+        gradient_precision: Precision::F16,
+        ..all_outputs(Precision::F32)
+    };
+    let (_, state) = render_for_backward::<Method>(&params, &cam, &opts).unwrap();
+    let got = backward::<Method>(&state, &params, &cam, &grad).unwrap();
+    // A 48 x 40 frame has 3 x 3 tiles of 16: at most 9 adds per worker, then the workers'.
+    let adds = 9 + rayon::current_num_threads() + 1;
+    let err = group_error(&flat(&got.params), &want);
+    println!("f16 gradient sums: {err:.2e} of the largest off f32's ({adds} roundings at most)");
+    assert!(err > 0.0, "the sums were not rounded");
+    assert!(err <= adds as f64 * 2f64.powi(-11), "{err}");
+    let acc = splat_runtime::pipeline::backward::Accum::new(1000, 9, Precision::F16);
+    assert_eq!(acc.shade.bytes(), 1000 * 9 * 2);
+    for unorm in [Precision::Unorm16, Precision::Unorm8] {
+        let opts = RenderOptions {
+            gradient_precision: unorm,
+            ..RenderOptions::default()
+        };
+        let Err(e) = render_for_backward::<Method>(&params, &cam, &opts) else {
+            panic!("{unorm:?} gradient sums accepted");
+        };
+        assert!(e.to_string().contains("no fixed range"), "{e}");
+    }
+}
+
+/// The GPU refuses what only the CPU stores in a reduced format, naming it.
+#[test]
+fn the_gpu_refuses_reduced_shade_data_and_gradient_sums() {
+    let Some(gpu) = splat_runtime::gpu::adapter_or_skip() else {
+        return;
+    };
+    let shade = RenderOptions {
+        shade_precision: Precision::F16,
+        ..RenderOptions::default()
+    };
+    let sums = RenderOptions {
+        gradient_precision: Precision::F16,
+        ..RenderOptions::default()
+    };
+    for (opts, what) in [(shade, "shade data"), (sums, "gradient sums")] {
+        let Err(e) = splat_runtime::gpu::GpuRenderer::<Method>::new(&gpu, &opts) else {
+            panic!("{what} accepted");
+        };
+        let e = e.to_string();
+        assert!(e.contains(what) && e.contains("CPU backend only"), "{e}");
     }
 }

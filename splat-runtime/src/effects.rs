@@ -119,6 +119,10 @@ impl fmt::Display for Effects {
         };
         writeln!(f, "depth output      {depth}")?;
         writeln!(f, "state precision   {}", o.precision.name())?;
+        writeln!(f, "shade precision   {}", o.shade_precision.name())?;
+        if self.gradients.is_some() {
+            writeln!(f, "gradient sums     {}", o.gradient_precision.name())?;
+        }
         let p_max = o.p_max.map_or("off".to_string(), |p| p.to_string());
         writeln!(f, "P_max             {p_max}")?;
         write!(

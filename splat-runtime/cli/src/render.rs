@@ -44,6 +44,10 @@ pub struct RenderArgs {
     /// render targets' format).
     #[arg(long, default_value = "f32", value_parser = parse_precision)]
     precision: Precision,
+    /// How the shade data the blend reads per primitive is stored: f32, f16, unorm16 or unorm8
+    /// (unorm: each value coded in the range it spans over the frame; CPU backend only).
+    #[arg(long, default_value = "f32", value_parser = parse_precision)]
+    shade_precision: Precision,
     /// On the GPU, rasterize with the graphics pipeline: quads in depth order, blended by
     /// fixed-function blending (no tile lists; no transmittance stop).
     #[arg(long)]
@@ -72,7 +76,7 @@ pub struct Render<'a> {
 }
 
 /// A precision by its name.
-fn parse_precision(name: &str) -> Result<Precision, String> {
+pub(crate) fn parse_precision(name: &str) -> Result<Precision, String> {
     let all = Precision::ALL;
     all.into_iter().find(|p| p.name() == name).ok_or_else(|| {
         let names: Vec<&str> = all.iter().map(|p| p.name()).collect();
@@ -280,6 +284,7 @@ pub(crate) fn render_cmd(args: &RenderArgs, methods: &[Method]) -> Result<()> {
         alpha: args.alpha,
         depth: args.depth,
         precision: args.precision,
+        shade_precision: args.shade_precision,
         ..Default::default()
     };
     let (frame, backend) =

@@ -1,7 +1,8 @@
 //! `splat tradeoff`: what each accuracy knob of the renderer costs in time and memory and what
 //! it buys in image and gradient accuracy, on one scene, camera and backend.
 //!
-//! Each knob is swept alone from the defaults. On the GPU one more knob is the forward path:
+//! Each knob is swept alone from the defaults. On the CPU two more knobs are how the shade data
+//! and the gradient sums are stored between stages. On the GPU one more knob is the forward path:
 //! the hardware-rasterized pass (quads blended into render targets, one sort key per visible
 //! primitive) at each target precision the adapter can blend into; it has no backward pass.
 //! The reference is the f32 render with every knob at its most accurate
@@ -70,13 +71,10 @@ pub(crate) enum Forward {
     Hardware,
 }
 
-/// The defaults, then each knob alone at its other settings (the tile sizes and precisions
-/// the backend has, and the hardware path at the precisions in `hardware`).
-pub(crate) fn sweep(
-    tile_sizes: &[u32],
-    precisions: &[Precision],
-    hardware: &[Precision],
-) -> Vec<Setting> {
+/// The defaults, then each knob alone at its other settings (the tile sizes the backend has,
+/// the shade data's and gradient sums' precisions where it has them (the CPU), and the
+/// hardware path at the precisions in `hardware`).
+pub(crate) fn sweep(tile_sizes: &[u32], cpu: bool, hardware: &[Precision]) -> Vec<Setting> {
     let base = RenderOptions::default();
     let mut out = vec![Setting {
         knob: "default",
@@ -124,9 +122,25 @@ pub(crate) fn sweep(
             blend(base.blend.t_min, a as f32 / 255.0),
         );
     }
-    for &precision in precisions.iter().filter(|&&p| p != base.precision) {
+    let reduced = Precision::ALL.into_iter().filter(|&p| p != Precision::F32);
+    for precision in reduced.clone() {
         let opts = RenderOptions { precision, ..base };
         add("precision", precision.name().into(), opts);
+    }
+    if cpu {
+        for shade_precision in reduced {
+            let opts = RenderOptions {
+                shade_precision,
+                ..base
+            };
+            add("shade_precision", shade_precision.name().into(), opts);
+        }
+        // Sums have no fixed range: f16 is the one reduced format they are held in.
+        let opts = RenderOptions {
+            gradient_precision: Precision::F16,
+            ..base
+        };
+        add("gradient_precision", "f16".into(), opts);
     }
     for &precision in hardware {
         out.push(Setting {
@@ -198,9 +212,9 @@ pub fn tradeoff_cmd(args: &TradeoffArgs, methods: &[Method]) -> Result<()> {
             let hardware: Vec<Precision> = blendable
                 .filter(|p| splat_runtime::gpu::raster::supports(gpu, *p))
                 .collect();
-            sweep(&splat_runtime::gpu::TILE_SIZES, &Precision::ALL, &hardware)
+            sweep(&splat_runtime::gpu::TILE_SIZES, false, &hardware)
         }
-        None => sweep(&splat_runtime::pipeline::TILE_SIZES, &Precision::ALL, &[]),
+        None => sweep(&splat_runtime::pipeline::TILE_SIZES, true, &[]),
     };
     // The other methods the camera allows, for the evaluation-model knob.
     let models: Vec<&Method> = methods
@@ -625,7 +639,7 @@ fn print_table(rows: &[Row]) {
 const FLOOR: f64 = 1e-9;
 
 /// A color per knob, in the order the sweep first names them.
-const COLORS: [RGBColor; 8] = [
+const COLORS: [RGBColor; 11] = [
     RGBColor(200, 30, 40),
     RGBColor(40, 150, 60),
     RGBColor(30, 90, 200),
@@ -634,6 +648,9 @@ const COLORS: [RGBColor; 8] = [
     RGBColor(90, 90, 90),
     RGBColor(0, 150, 160),
     RGBColor(150, 100, 40),
+    RGBColor(220, 60, 150),
+    RGBColor(110, 160, 20),
+    RGBColor(20, 40, 110),
 ];
 
 /// Two panels: forward time against image RMSE, forward + backward time against the worst

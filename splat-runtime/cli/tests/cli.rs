@@ -1128,6 +1128,10 @@ fn tradeoff_sweeps_every_knob_and_writes_its_table_and_plot() {
         ("precision", "f16"),
         ("precision", "unorm16"),
         ("precision", "unorm8"),
+        ("shade_precision", "f16"),
+        ("shade_precision", "unorm16"),
+        ("shade_precision", "unorm8"),
+        ("gradient_precision", "f16"),
         ("sh_degree", "0"),
         ("model", "3dgs"),
         ("model", "3dgs-aa"),
@@ -1152,6 +1156,11 @@ fn tradeoff_sweeps_every_knob_and_writes_its_table_and_plot() {
     assert!(field("default", "", psnr) > 60.0);
     assert!(field("p_max", "8", psnr) < field("p_max", "512", psnr));
     assert!(field("p_max", "8", gradient) > field("default", "", gradient));
+    // Gradient sums never change the image; shade data coded in 255 steps of its range does.
+    let default_psnr = field("default", "", psnr);
+    assert_eq!(field("gradient_precision", "f16", psnr), default_psnr);
+    assert!(field("gradient_precision", "f16", gradient) > field("default", "", gradient));
+    assert!(field("shade_precision", "unorm8", psnr) < field("shade_precision", "unorm16", psnr));
     // The model rows are against 3DGEER's most accurate render: 3DGEER at the defaults is
     // close, the approximations are not.
     assert!(field("model", "3dgeer", psnr) > 60.0);
@@ -1185,11 +1194,11 @@ fn tradeoff_sweeps_every_knob_and_writes_its_table_and_plot() {
         assert!(std::env::var("SPLAT_REQUIRE_GPU").map_or(true, |v| v != "1"));
         return;
     }
-    // The GPU renders tiles of 8 and 16 only; the hardware path adds a row per target
-    // format (all four on lavapipe).
+    // The GPU renders tiles of 8 and 16 only and holds shade data and gradient sums in f32
+    // only; the hardware path adds a row per target format (all four on lavapipe).
     let gpu = csv_rows(&dir.path().join("gpu/tradeoff.csv"));
     let hardware: Vec<&Vec<String>> = gpu.iter().filter(|r| r[0] == "raster").collect();
-    assert_eq!(gpu.len(), rows.len() - 2 + hardware.len());
+    assert_eq!(gpu.len(), rows.len() - 2 - 4 + hardware.len());
     let tile = gpu.iter().find(|r| r[0] == "tile").unwrap();
     assert_eq!(tile[1], "8");
     assert!(tile[psnr].parse::<f64>().unwrap() > 60.0, "{tile:?}");

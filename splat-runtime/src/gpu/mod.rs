@@ -79,4 +79,28 @@ pub enum GpuError {
     TileSize(u32),
     #[error("the hardware-rasterized forward pass: {0}")]
     Hardware(String),
+    #[error(
+        "{what} held as {precision} is built on the CPU backend only: use `--backend cpu`, or f32"
+    )]
+    CpuOnly {
+        what: &'static str,
+        precision: &'static str,
+    },
+}
+
+/// Refuses the options only the CPU backend has: shade data and gradient sums held in a
+/// reduced format.
+pub(crate) fn check_cpu_only(opts: &crate::RenderOptions) -> Result<(), GpuError> {
+    use crate::pipeline::precision::Precision;
+    let held = [
+        ("shade data", opts.shade_precision),
+        ("the gradient sums", opts.gradient_precision),
+    ];
+    match held.into_iter().find(|(_, p)| *p != Precision::F32) {
+        Some((what, p)) => Err(GpuError::CpuOnly {
+            what,
+            precision: p.name(),
+        }),
+        None => Ok(()),
+    }
 }

@@ -71,6 +71,7 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
     /// A renderer producing the outputs `opts` asks for, stored at `opts.precision`
     /// (`tile_size` and `tile_cull` do not apply; `p_max` must be `None`).
     pub fn new(gpu: &'g Gpu, opts: &RenderOptions) -> Result<Self, GpuRenderError> {
+        super::check_cpu_only(opts)?;
         let refuse = |why: String| GpuError::Hardware(why);
         if opts.p_max.is_some() {
             return Err(

@@ -170,6 +170,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         if !super::TILE_SIZES.contains(&opts.tile_size) {
             return Err(GpuError::TileSize(opts.tile_size).into());
         }
+        super::check_cpu_only(opts)?;
         let layout = Layout::of::<M>();
         let state = PixelState {
             precision: opts.precision,

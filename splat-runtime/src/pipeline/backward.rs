@@ -12,6 +12,7 @@
 
 use super::ForwardState;
 use super::RenderError;
+use super::precision::{Precision, Range, Stored};
 use super::shade::{counts, group_pixels, misses_group};
 use crate::flat::Flat;
 use crate::lanes::{F32x8, LANES, M32x8};
@@ -53,19 +54,21 @@ impl FrameGrad {
     }
 }
 
-/// One worker's gradient sums per primitive: `shade[i * Shade::LEN..]` and `depth[i]`; and
-/// the camera's through the pixel data of its pixels (methods with `pixel_info`).
+/// One worker's gradient sums per primitive: `shade[i * Shade::LEN..]` and `depth[i]`, held
+/// at the frame's gradient precision; and the camera's through the pixel data of its pixels
+/// (methods with `pixel_info`).
 pub struct Accum {
-    pub shade: Vec<f32>,
-    pub depth: Vec<f32>,
+    pub shade: Stored,
+    pub depth: Stored,
     pub camera: Camera,
 }
 
 impl Accum {
-    pub fn new(primitives: usize, words: usize) -> Self {
+    pub fn new(primitives: usize, words: usize, precision: Precision) -> Self {
+        let zeros = |n| Stored::new(precision, Range::Relative, vec![0.0; n]);
         Accum {
-            shade: vec![0.0; primitives * words],
-            depth: vec![0.0; primitives],
+            shade: zeros(primitives * words),
+            depth: zeros(primitives),
             camera: Camera::ZERO,
         }
     }
@@ -153,6 +156,7 @@ fn backward_tile_body<M: SplatMethod, const MODEL: u32>(
     // Per-lane gradient sums for every entry of the tile's list, over all its pixel groups;
     // the lanes are summed once per entry at the end of the tile.
     let mut shade_lanes = vec![M::ShadeLanes::default(); list.len()];
+    let decoded = state.pre.decoded(list);
     let mut depth_lanes = vec![F32x8::splat(0.0); if want_depth { list.len() } else { 0 }];
     for row in 0..s {
         for gx in (0..s).step_by(LANES) {
@@ -201,7 +205,8 @@ fn backward_tile_body<M: SplatMethod, const MODEL: u32>(
                 if misses_group(p, x0, y) {
                     continue;
                 }
-                let c = M::evaluate_lanes(&pixels, &p.shade);
+                let shade = decoded.as_ref().map_or(&p.shade, |d| &d[k]);
+                let c = M::evaluate_lanes(&pixels, shade);
                 let before_end = M32x8::from(std::array::from_fn(|l| (k as u32) < ends[l]));
                 let take = before_end & counts(c.alpha, c.valid, state.blend);
                 if !take.any() {
@@ -248,7 +253,7 @@ fn backward_tile_body<M: SplatMethod, const MODEL: u32>(
                 };
                 M::evaluate_adjoint_lanes_accumulate(
                     &pixels,
-                    &p.shade,
+                    shade,
                     &d_out,
                     take,
                     &mut shade_lanes[k],
@@ -270,14 +275,11 @@ fn backward_tile_body<M: SplatMethod, const MODEL: u32>(
         }
         M::shade_from_float_slots(&sums).write_words(&mut shade_words);
         let p = prim as usize;
-        for (acc, v) in acc.shade[p * words..(p + 1) * words]
-            .iter_mut()
-            .zip(&shade_words)
-        {
-            *acc += v;
+        for (w, v) in shade_words.iter().enumerate() {
+            acc.shade.add(p * words + w, *v);
         }
         if want_depth {
-            acc.depth[p] += depth_lanes[k].masked_sum(all);
+            acc.depth.add(p, depth_lanes[k].masked_sum(all));
         }
     }
 }

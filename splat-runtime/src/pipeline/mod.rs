@@ -51,6 +51,12 @@ pub struct RenderOptions {
     /// How the per-pixel values (color, transmittance, depth sums) are stored: what the
     /// outputs are read from and the backward pass walks back from.
     pub precision: precision::Precision,
+    /// How the shade data (`project`'s output that the blend reads for every pair) is stored
+    /// between the preprocess and the blend ([`precision::PackedShade`]; CPU only).
+    pub shade_precision: precision::Precision,
+    /// How the backward pass holds its per-primitive gradient sums while they accumulate: f32
+    /// or f16 (sums have no fixed range for a unorm format; CPU only).
+    pub gradient_precision: precision::Precision,
     /// The gradients the backward pass computes: the groups left out are never computed and
     /// are zero. Without the camera (training without pose refinement) the rays' share
     /// (`pixel_info`'s adjoint per pixel) is not computed either and [`Gradients::camera`] is
@@ -68,6 +74,8 @@ impl Default for RenderOptions {
             tile_cull: true,
             blend: shade::Blend::default(),
             precision: precision::Precision::F32,
+            shade_precision: precision::Precision::F32,
+            gradient_precision: precision::Precision::F32,
             gradients: GradientSet::ALL,
         }
     }
@@ -98,6 +106,10 @@ pub enum RenderError {
         "method `{0}` renders global shutters only (no kernel calls `cam.shutter_time` or `cam.rotation_at`); the camera moves during its readout (shutter_turn, shutter_shift)"
     )]
     RollingShutter(&'static str),
+    #[error(
+        "gradient sums have no fixed range for {0}: hold them as f32 or f16 (--gradient-precision)"
+    )]
+    GradientPrecision(&'static str),
     #[error("primitive {0} has a NaN or infinite parameter")]
     NonFinite(usize),
     #[error(
@@ -153,6 +165,8 @@ pub struct ForwardState<M: SplatMethod> {
     pub lists: TileLists,
     pub p_max: Option<usize>,
     pub blend: shade::Blend,
+    /// How the per-primitive gradient sums are held ([`RenderOptions::gradient_precision`]).
+    pub gradient_precision: precision::Precision,
     /// The gradients the backward pass computes ([`RenderOptions::gradients`]).
     pub gradients: GradientSet,
     /// Final transmittance and sum of weight * depth per pixel (empty unless the frame
@@ -170,8 +184,8 @@ impl<M: SplatMethod> ForwardState<M> {
         &list[..self.p_max.map_or(list.len(), |p| p.min(list.len()))]
     }
 
-    /// Bytes held for the backward pass: the projected primitives, the visible set, the tile
-    /// lists and the per-pixel state.
+    /// Bytes held for the backward pass: the projected primitives (and their packed shade
+    /// data), the visible set, the tile lists and the per-pixel state.
     pub fn bytes(&self) -> usize {
         fn held<T>(v: &Vec<T>) -> usize {
             v.capacity() * std::mem::size_of::<T>()
@@ -183,6 +197,7 @@ impl<M: SplatMethod> ForwardState<M> {
             + self.transmittance.bytes()
             + self.depth_acc.bytes()
             + held(&self.ends)
+            + self.pre.packed.as_ref().map_or(0, |p| p.bytes())
     }
 }
 
@@ -224,6 +239,11 @@ pub(crate) fn check<M: SplatMethod>(
     let fraction = |v: f32| (0.0..1.0).contains(&v);
     if !(fraction(opts.blend.t_min) && fraction(opts.blend.alpha_min)) {
         return Err(RenderError::Blend(opts.blend));
+    }
+    if precision::sum_format(opts.gradient_precision) != opts.gradient_precision {
+        return Err(RenderError::GradientPrecision(
+            opts.gradient_precision.name(),
+        ));
     }
     let size = camera.size;
     let ok = |v: f32| v.is_finite() && v >= 1.0 && v <= MAX_SIDE as f32 && v.fract() == 0.0;
@@ -287,7 +307,7 @@ fn forward<M: SplatMethod>(
         ..Stats::default()
     };
     let t0 = Instant::now();
-    let pre = preprocess::preprocess::<M>(params, camera, &grid);
+    let pre = preprocess::preprocess::<M>(params, camera, &grid, opts.shade_precision);
     stats.visible = pre.visible.len();
     stats.preprocess = t0.elapsed();
 
@@ -311,7 +331,7 @@ fn forward<M: SplatMethod>(
                     camera,
                     t,
                     capped(t as usize),
-                    &pre.projected,
+                    &pre,
                     opts.depth,
                     opts.blend,
                 ),
@@ -372,6 +392,7 @@ fn forward<M: SplatMethod>(
         lists,
         p_max: opts.p_max,
         blend: opts.blend,
+        gradient_precision: opts.gradient_precision,
         gradients: opts.gradients,
         transmittance,
         depth_acc,
@@ -441,10 +462,10 @@ pub fn backward<M: SplatMethod>(
     let workers = rayon::current_num_threads().max(1);
     let mut order: Vec<u32> = (0..state.grid.tile_count() as u32).collect();
     order.sort_by_key(|&t| std::cmp::Reverse(state.visited(t as usize).len()));
-    let mut accs: Vec<backward::Accum> = (0..workers)
+    let accs: Vec<backward::Accum> = (0..workers)
         .into_par_iter()
         .map(|w| {
-            let mut acc = backward::Accum::new(n, words);
+            let mut acc = backward::Accum::new(n, words, state.gradient_precision);
             for &t in order.iter().skip(w).step_by(workers) {
                 backward::backward_tile::<M>(state, camera, grad, t, &mut acc);
             }
@@ -458,27 +479,26 @@ pub fn backward<M: SplatMethod>(
     let ray_camera = accs
         .iter()
         .fold(Camera::ZERO, |c, a| c.add_cotangent(&a.camera));
-    let backward::Accum {
-        mut shade,
-        mut depth,
-        ..
-    } = accs.remove(0);
     const CHUNK: usize = 1 << 14;
-    let add = |out: &mut [f32], pick: &dyn Fn(&backward::Accum) -> &[f32], c: usize| {
-        for a in &accs {
-            for (o, v) in out.iter_mut().zip(&pick(a)[c * CHUNK..]) {
-                *o += v;
+    // Summed in f32, then held at the gradient precision as each worker's sums were.
+    let held = precision::sum_format(state.gradient_precision);
+    let sum = |mut parts: Vec<Stored>| -> Vec<f32> {
+        let mut out = parts.remove(0).into_f32();
+        let rest: Vec<_> = parts.iter().map(Stored::as_f32).collect();
+        out.par_chunks_mut(CHUNK).enumerate().for_each(|(c, out)| {
+            for r in &rest {
+                for (o, v) in out.iter_mut().zip(&r[c * CHUNK..]) {
+                    *o += v;
+                }
             }
+        });
+        match held {
+            precision::Precision::F32 => out,
+            p => Stored::new(p, Range::Relative, out).into_f32(),
         }
     };
-    shade
-        .par_chunks_mut(CHUNK)
-        .enumerate()
-        .for_each(|(c, out)| add(out, &|a| &a.shade, c));
-    depth
-        .par_chunks_mut(CHUNK)
-        .enumerate()
-        .for_each(|(c, out)| add(out, &|a| &a.depth, c));
+    let (shades, depths) = accs.into_iter().map(|a| (a.shade, a.depth)).unzip();
+    let (shade, depth) = (sum(shades), sum(depths));
     let reduce = t1.elapsed();
     let t2 = Instant::now();
     let (zero_params, zero_cull) = (M::Params::zero(), M::Cull::zero());

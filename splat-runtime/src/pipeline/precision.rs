@@ -1,10 +1,16 @@
-//! Storage formats for the per-pixel values a frame's forward pass writes (its render targets,
-//! in the sense of Yuan and He's mixed-precision rendering): the color, which the image is
-//! read from, and the final transmittance and depth sums, which the outputs are read from and
-//! the backward pass walks back from. Arithmetic stays f32; only what is stored is rounded,
-//! and it really is stored in the format (2 or 1 bytes per value).
+//! Storage formats for what a frame keeps between its stages: the per-pixel values the forward
+//! pass writes (its render targets, in the sense of Yuan and He's mixed-precision rendering:
+//! the color, which the image is read from, and the final transmittance and depth sums, which
+//! the outputs are read from and the backward pass walks back from), the shade data `project`
+//! hands the blend ([`PackedShade`]), and the backward pass's per-primitive gradient sums.
+//! Arithmetic stays f32; only what is stored is rounded, and it really is stored in the
+//! format (2 or 1 bytes per value).
 
+use crate::flat::Flat;
+use crate::method::SplatMethod;
+use crate::types::Projected;
 use half::f16;
+use rayon::prelude::*;
 
 /// How the per-pixel state is stored.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -131,6 +137,20 @@ impl Stored {
         }
     }
 
+    /// Adds `v` to value `i`, the sum rounded to the format (f32 or f16: sums of any size are
+    /// [`Range::Relative`]); an f16 sum saturates at +-65504 rather than becoming infinite.
+    #[inline(always)]
+    pub fn add(&mut self, i: usize, v: f32) {
+        match self {
+            Stored::F32(s) => s[i] += v,
+            Stored::F16(s) => {
+                let sum = f16::from_bits(s[i]).to_f32() + v;
+                s[i] = f16::from_f32(sum.clamp(-F16_MAX, F16_MAX)).to_bits();
+            }
+            Stored::Unorm16(_) | Stored::Unorm8(_) => unreachable!("sums are stored as f32 or f16"),
+        }
+    }
+
     /// Bytes held.
     pub fn bytes(&self) -> usize {
         match self {
@@ -140,6 +160,165 @@ impl Stored {
         }
     }
 }
+
+/// The largest finite f16.
+const F16_MAX: f32 = 65504.0;
+
+/// The format sums are held in at `precision` (they have no fixed range: f16 for the unorm
+/// formats, as [`Range::Relative`] values are).
+pub fn sum_format(precision: Precision) -> Precision {
+    match precision {
+        Precision::F32 => Precision::F32,
+        _ => Precision::F16,
+    }
+}
+
+/// The shade data of a frame's primitives (what `project` hands `evaluate`), stored between
+/// the preprocess and the blend in a reduced format: the blend loads each tile's entries from
+/// here and decodes them once per tile. f16 holds every float as is; the unorm formats code
+/// each float word in the range it spans over the frame's visible primitives (a pixel centre
+/// spanning a 960-pixel image gets steps of 960/65535 or 960/255 pixels). Words that are not
+/// floats (flags, integers) are kept exact.
+pub struct PackedShade {
+    /// Words of the shade type, and which of them are floats.
+    float_words: Vec<bool>,
+    /// Per float word: the value coded as 0 and the span coded as 1 (unorm), or (0, 1) (f16).
+    ranges: Vec<(f32, f32)>,
+    /// The float words of each primitive, `ranges.len()` per primitive.
+    codes: Stored,
+    /// The other words of each primitive, as bits.
+    exact: Vec<u32>,
+}
+
+impl PackedShade {
+    /// Packs `projected`'s shade data at `precision` (not f32: that is the shade data itself).
+    pub fn new<M: SplatMethod>(
+        precision: Precision,
+        projected: &[Projected<M::Cull, M::Shade>],
+    ) -> PackedShade {
+        debug_assert!(precision != Precision::F32);
+        let len = M::Shade::LEN;
+        assert!(
+            len <= MAX_SHADE_WORDS,
+            "shade data larger than {MAX_SHADE_WORDS} words"
+        );
+        // A float word reads back the slot value it was given; the others stay zero.
+        let floats = M::ShadeLanes::default().as_ref().len();
+        let mut probe = [0.0; MAX_SHADE_WORDS];
+        M::shade_from_float_slots(&vec![1.0; floats]).write_words(&mut probe);
+        let float_words: Vec<bool> = probe[..len].iter().map(|w| *w == 1.0).collect();
+        let words = |p: &Projected<M::Cull, M::Shade>| {
+            let mut w = [0.0; MAX_SHADE_WORDS];
+            p.shade.write_words(&mut w);
+            w
+        };
+        let float_at: Vec<usize> = (0..len).filter(|w| float_words[*w]).collect();
+        let unorm = matches!(precision, Precision::Unorm16 | Precision::Unorm8);
+        let ranges: Vec<(f32, f32)> = match unorm {
+            false => vec![(0.0, 1.0); float_at.len()],
+            true => {
+                let none = || vec![(f32::INFINITY, f32::NEG_INFINITY); float_at.len()];
+                let bounds = projected
+                    .par_iter()
+                    .filter(|p| p.visible)
+                    .fold(none, |mut b, p| {
+                        let w = words(p);
+                        for (r, &at) in b.iter_mut().zip(&float_at) {
+                            *r = (r.0.min(w[at]), r.1.max(w[at]));
+                        }
+                        b
+                    })
+                    .reduce(none, |a, b| {
+                        a.iter()
+                            .zip(&b)
+                            .map(|(a, b)| (a.0.min(b.0), a.1.max(b.1)))
+                            .collect()
+                    });
+                let span = |(lo, hi): (f32, f32)| match lo <= hi {
+                    true => (lo, (hi - lo).max(f32::MIN_POSITIVE)),
+                    false => (0.0, 1.0),
+                };
+                bounds.into_iter().map(span).collect()
+            }
+        };
+        let normalized: Vec<f32> = projected
+            .par_iter()
+            .flat_map_iter(|p| {
+                let w = words(p);
+                let ranges = &ranges;
+                float_at
+                    .iter()
+                    .zip(ranges)
+                    .map(move |(&at, (lo, span))| match p.visible {
+                        true => (w[at] - lo) / span,
+                        false => 0.0,
+                    })
+            })
+            .collect();
+        let exact = projected
+            .iter()
+            .flat_map(|p| {
+                let w = words(p);
+                let float_words = &float_words;
+                (0..len)
+                    .filter(move |i| !float_words[*i])
+                    .map(move |i| w[i].to_bits())
+            })
+            .collect();
+        PackedShade {
+            float_words,
+            ranges,
+            codes: Stored::new(precision, Range::Unit, normalized),
+            exact,
+        }
+    }
+
+    /// The shade data of primitive `i`, decoded.
+    #[inline]
+    pub fn get<S: Flat>(&self, i: usize) -> S {
+        let mut words = [0.0f32; MAX_SHADE_WORDS];
+        let floats = self.ranges.len();
+        let others = self.float_words.len() - floats;
+        let (mut f, mut e) = (0, 0);
+        for (word, &float) in words.iter_mut().zip(&self.float_words) {
+            if float {
+                let (lo, span) = self.ranges[f];
+                *word = lo + self.codes.get(i * floats + f) * span;
+                f += 1;
+            } else {
+                *word = f32::from_bits(self.exact[i * others + e]);
+                e += 1;
+            }
+        }
+        S::read_words(&words)
+    }
+
+    /// The largest difference between two neighbouring stored values of float word `w` (the
+    /// word's range over 65535 or 255 steps in the unorm formats; 0 for f16, whose step is
+    /// relative to the value).
+    pub fn step(&self, w: usize) -> f32 {
+        let f = self.float_words[..w].iter().filter(|f| **f).count();
+        let steps = match self.codes {
+            Stored::Unorm16(_) => 65535.0,
+            Stored::Unorm8(_) => 255.0,
+            _ => return 0.0,
+        };
+        self.ranges[f].1 / steps
+    }
+
+    /// The decoded shade data of the primitives `list` names, in order.
+    pub fn decode<S: Flat>(&self, list: &[u32]) -> Vec<S> {
+        list.iter().map(|&i| self.get(i as usize)).collect()
+    }
+
+    /// Bytes held.
+    pub fn bytes(&self) -> usize {
+        self.codes.bytes() + self.exact.capacity() * 4 + self.ranges.capacity() * 8
+    }
+}
+
+/// The most words a shade type may have (3DGEER's has 16).
+const MAX_SHADE_WORDS: usize = 64;
 
 #[cfg(test)]
 mod tests {

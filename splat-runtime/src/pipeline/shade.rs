@@ -6,6 +6,7 @@
 //! every lane is done. `P_max` caps how many entries of a tile's list are visited.
 
 use super::grid::TileGrid;
+use super::preprocess::Preprocessed;
 use crate::flat::Flat;
 use crate::lanes::{F32x8, LANES, M32x8};
 use crate::method::SplatMethod;
@@ -128,7 +129,7 @@ pub fn shade_tile<M: SplatMethod>(
     camera: &Camera,
     tile: u32,
     list: &[u32],
-    projected: &[Projected<M::Cull, M::Shade>],
+    pre: &Preprocessed<M>,
     want_depth: bool,
     blend: Blend,
 ) -> TileOutput {
@@ -137,10 +138,10 @@ pub fn shade_tile<M: SplatMethod>(
         if crate::lanes::has_avx2() {
             // SAFETY: the CPU supports the features the function is compiled for.
             return unsafe {
-                shade_tile_avx2::<M, MODEL>(grid, camera, tile, list, projected, want_depth, blend)
+                shade_tile_avx2::<M, MODEL>(grid, camera, tile, list, pre, want_depth, blend)
             };
         }
-        shade_tile_body::<M, MODEL>(grid, camera, tile, list, projected, want_depth, blend)
+        shade_tile_body::<M, MODEL>(grid, camera, tile, list, pre, want_depth, blend)
     })
 }
 
@@ -151,11 +152,11 @@ fn shade_tile_avx2<M: SplatMethod, const MODEL: u32>(
     camera: &Camera,
     tile: u32,
     list: &[u32],
-    projected: &[Projected<M::Cull, M::Shade>],
+    pre: &Preprocessed<M>,
     want_depth: bool,
     blend: Blend,
 ) -> TileOutput {
-    shade_tile_body::<M, MODEL>(grid, camera, tile, list, projected, want_depth, blend)
+    shade_tile_body::<M, MODEL>(grid, camera, tile, list, pre, want_depth, blend)
 }
 
 #[inline(always)]
@@ -164,11 +165,13 @@ fn shade_tile_body<M: SplatMethod, const MODEL: u32>(
     camera: &Camera,
     tile: u32,
     list: &[u32],
-    projected: &[Projected<M::Cull, M::Shade>],
+    pre: &Preprocessed<M>,
     want_depth: bool,
     blend: Blend,
 ) -> TileOutput {
     let s = grid.size as usize;
+    // Reduced-precision shade data is loaded and decoded once per tile, not per pixel group.
+    let decoded = pre.decoded(list);
     let channels = M::Color::LEN;
     let mut out = TileOutput {
         color: vec![0.0; s * s * channels],
@@ -191,11 +194,12 @@ fn shade_tile_body<M: SplatMethod, const MODEL: u32>(
                 if done.all() {
                     break;
                 }
-                let p = &projected[prim as usize];
+                let p = &pre.projected[prim as usize];
                 if misses_group(p, x0, y) {
                     continue;
                 }
-                let c = M::evaluate_lanes(&pixels, &p.shade);
+                let shade = decoded.as_ref().map_or(&p.shade, |d| &d[k]);
+                let c = M::evaluate_lanes(&pixels, shade);
                 out.pairs += (!done).count() as u64;
                 let st = step(c.alpha, c.valid, done, t, blend);
                 let w = st.weight;
