@@ -1159,7 +1159,6 @@ fn tradeoff_sweeps_every_knob_and_writes_its_table_and_plot() {
     // Gradient sums never change the image; shade data coded in 255 steps of its range does.
     let default_psnr = field("default", "", psnr);
     assert_eq!(field("gradient_precision", "f16", psnr), default_psnr);
-    assert!(field("gradient_precision", "f16", gradient) > field("default", "", gradient));
     assert!(field("shade_precision", "unorm8", psnr) < field("shade_precision", "unorm16", psnr));
     // The model rows are against 3DGEER's most accurate render: 3DGEER at the defaults is
     // close, the approximations are not.

@@ -275,9 +275,7 @@ fn backward_tile_body<M: SplatMethod, const MODEL: u32>(
         }
         M::shade_from_float_slots(&sums).write_words(&mut shade_words);
         let p = prim as usize;
-        for (w, v) in shade_words.iter().enumerate() {
-            acc.shade.add(p * words + w, *v);
-        }
+        acc.shade.add_slice(p * words, &shade_words);
         if want_depth {
             acc.depth.add(p, depth_lanes[k].masked_sum(all));
         }

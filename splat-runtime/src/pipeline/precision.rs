@@ -10,6 +10,7 @@ use crate::flat::Flat;
 use crate::method::SplatMethod;
 use crate::types::Projected;
 use half::f16;
+use half::slice::{HalfBitsSliceExt, HalfFloatSliceExt};
 use rayon::prelude::*;
 
 /// How the per-pixel state is stored.
@@ -151,6 +152,34 @@ impl Stored {
         }
     }
 
+    /// Adds `values` to the values from `at` on, as [`Stored::add`] does one by one (f16:
+    /// converted a slice at a time, with the CPU's conversion instructions where it has them).
+    #[inline]
+    pub fn add_slice(&mut self, at: usize, values: &[f32]) {
+        let n = values.len();
+        match self {
+            Stored::F32(s) => {
+                for (sum, v) in s[at..at + n].iter_mut().zip(values) {
+                    *sum += v;
+                }
+            }
+            Stored::F16(s) => {
+                let held = s[at..at + n].reinterpret_cast_mut::<f16>();
+                let mut sums = [0.0f32; MAX_SHADE_WORDS];
+                for chunk in (0..n).step_by(MAX_SHADE_WORDS) {
+                    let m = (n - chunk).min(MAX_SHADE_WORDS);
+                    let held = &mut held[chunk..chunk + m];
+                    held.convert_to_f32_slice(&mut sums[..m]);
+                    for (sum, v) in sums.iter_mut().zip(&values[chunk..chunk + m]) {
+                        *sum = (*sum + v).clamp(-F16_MAX, F16_MAX);
+                    }
+                    held.convert_from_f32_slice(&sums[..m]);
+                }
+            }
+            Stored::Unorm16(_) | Stored::Unorm8(_) => unreachable!("sums are stored as f32 or f16"),
+        }
+    }
+
     /// Bytes held.
     pub fn bytes(&self) -> usize {
         match self {
@@ -276,14 +305,35 @@ impl PackedShade {
     /// The shade data of primitive `i`, decoded.
     #[inline]
     pub fn get<S: Flat>(&self, i: usize) -> S {
-        let mut words = [0.0f32; MAX_SHADE_WORDS];
         let floats = self.ranges.len();
+        let mut values = [0.0f32; MAX_SHADE_WORDS];
+        let at = i * floats..(i + 1) * floats;
+        let coded = values.iter_mut().zip(&self.ranges);
+        match &self.codes {
+            Stored::F16(c) => c[at]
+                .reinterpret_cast::<f16>()
+                .convert_to_f32_slice(&mut values[..floats]),
+            Stored::Unorm16(c) => {
+                for ((v, (lo, span)), q) in coded.zip(&c[at]) {
+                    *v = lo + *q as f32 * span / 65535.0;
+                }
+            }
+            Stored::Unorm8(c) => {
+                for ((v, (lo, span)), q) in coded.zip(&c[at]) {
+                    *v = lo + *q as f32 * span / 255.0;
+                }
+            }
+            Stored::F32(_) => unreachable!("f32 shade data is not packed"),
+        }
+        if self.exact.is_empty() {
+            return S::read_words(&values);
+        }
+        let mut words = [0.0f32; MAX_SHADE_WORDS];
         let others = self.float_words.len() - floats;
         let (mut f, mut e) = (0, 0);
         for (word, &float) in words.iter_mut().zip(&self.float_words) {
             if float {
-                let (lo, span) = self.ranges[f];
-                *word = lo + self.codes.get(i * floats + f) * span;
+                *word = values[f];
                 f += 1;
             } else {
                 *word = f32::from_bits(self.exact[i * others + e]);
@@ -345,6 +395,27 @@ mod tests {
                 [-0.2f32, 1.5, 300.0].map(|x| f16::from_f32(x).to_f32())
             );
         }
+    }
+
+    #[test]
+    fn sums_add_a_slice_at_a_time_as_one_by_one_and_saturate_in_f16() {
+        for p in [Precision::F32, Precision::F16] {
+            let mut by_slice = Stored::new(p, Range::Relative, vec![0.0; 150]);
+            let mut one_by_one = by_slice.clone();
+            for round in 0..5 {
+                let values: Vec<f32> = (0..150)
+                    .map(|i| ((i * 7 + round * 13) % 17) as f32 * 0.37 - 3.0)
+                    .collect();
+                by_slice.add_slice(0, &values);
+                for (i, v) in values.iter().enumerate() {
+                    one_by_one.add(i, *v);
+                }
+            }
+            assert_eq!(by_slice, one_by_one, "{p:?}");
+        }
+        let mut big = Stored::new(Precision::F16, Range::Relative, vec![60000.0, -60000.0]);
+        big.add_slice(0, &[60000.0, -60000.0]);
+        assert_eq!(big.to_f32(), [65504.0, -65504.0]);
     }
 
     #[test]
