@@ -6,7 +6,28 @@
 
 use codegen_tests::check::{jacobian_vs_differences, uniform};
 use codegen_tests::corpus::jacobians;
-use splat_runtime::glam::Vec4;
+use splat_macros::splat_functions;
+use splat_runtime::glam::{Vec2, Vec4};
+
+#[splat_functions]
+mod constant_helpers {
+    use splat_runtime::prelude::*;
+
+    #[adjoint(soft_adjoint)]
+    fn soft(x: f32) -> f32 {
+        (x * x + 0.01).sqrt()
+    }
+
+    fn soft_adjoint(x: f32, d_out: f32) -> f32 {
+        d_out * x / (x * x + 0.01).sqrt()
+    }
+
+    /// A helper with a hand-written adjoint, on a value the point does not reach.
+    pub fn scaled_by_a_helper(x: f32, c: f32) -> Vec2 {
+        let (v, j) = jacobian(|p| p * p * soft(c), x);
+        Vec2::new(v, j[0])
+    }
+}
 
 const TOL: f64 = 1e-6;
 
@@ -52,6 +73,21 @@ fn the_value_comes_with_its_jacobian() {
         let want = Vec4::new(t * t, t.sin() + t * t.exp(), 2.0 * t, t.cos() + t * t.exp());
         assert!(
             (got - want).length() <= 1e-5 * want.length(),
+            "{got} vs {want}"
+        );
+    }
+}
+
+/// A helper with a hand-written adjoint has no tangent rule, but needs none on values the
+/// point does not reach: the call stays a constant of the differentiation.
+#[test]
+fn a_helper_with_its_own_adjoint_is_a_constant_where_the_point_does_not_reach_it() {
+    for (x, c) in [(0.3f32, -0.5f32), (1.7, 0.0), (-2.0, 3.0)] {
+        let soft = (c * c + 0.01).sqrt();
+        let want = Vec2::new(x * x * soft, 2.0 * x * soft);
+        let got = constant_helpers::scaled_by_a_helper(x, c);
+        assert!(
+            (got - want).length() <= 1e-6 * want.length().max(1.0),
             "{got} vs {want}"
         );
     }

@@ -32,6 +32,23 @@ mod m {
         let (_, j) = jacobian(|p| soft(p), x);
         j[0]
     }
+
+    pub fn result_not_as_written(x: f32) -> f32 {
+        let (v, _) = jacobian(|p| -> f32 { Vec2::new(p, p) }, x);
+        v.x
+    }
+
+    pub fn assigns_outside(x: f32) -> f32 {
+        let mut total = 0.0;
+        let (v, _) = jacobian(
+            |p| {
+                total = p;
+                p * 2.0
+            },
+            x,
+        );
+        v + total
+    }
 }
 
 fn main() {}

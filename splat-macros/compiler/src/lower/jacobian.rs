@@ -72,11 +72,17 @@ impl Lowerer<'_> {
         };
         let outer = std::mem::take(&mut self.stmts);
         self.scopes.push(HashMap::new());
+        let enclosing = self.closure_scope.replace(self.scopes.len() - 1);
         let bound = self.bind_pattern(pattern, p);
         let value = bound.and_then(|_| self.expr(&closure.body));
+        self.closure_scope = enclosing;
         self.scopes.pop();
         let body = std::mem::replace(&mut self.stmts, outer);
         let value = value?;
+        if let syn::ReturnType::Type(_, written) = &closure.output {
+            let want = self.resolve_type(written)?;
+            self.check_ty(&value, &want, written.span(), "the closure's result")?;
+        }
         if !differentiable(&value.ty) {
             return self.err(
                 closure.body.span(),
@@ -121,7 +127,8 @@ impl Lowerer<'_> {
     }
 
     /// Re-emits `stmts` into the current block, each followed by its tangents (added to
-    /// `tangents`). Fails with the helper's name at a call of a helper with a custom adjoint.
+    /// `tangents`). Fails with the helper's name at a call of a helper with a custom adjoint on
+    /// values that vary with the point.
     fn push_forward(
         &mut self,
         stmts: Vec<Stmt>,
@@ -220,7 +227,29 @@ impl Lowerer<'_> {
                     });
                     tangents.extend(new_tangents);
                 }
-                Stmt::Call { callee, .. } => return Err(self.custom[callee].clone()),
+                Stmt::Call {
+                    callee,
+                    args,
+                    outs,
+                    body,
+                } => {
+                    // A helper with a hand-written adjoint has no tangent rule; called on
+                    // values the point does not reach, it needs none.
+                    let varying = |a: &Var| {
+                        tangents
+                            .get(a)
+                            .is_some_and(|t| t.iter().any(Option::is_some))
+                    };
+                    if args.iter().any(varying) {
+                        return Err(self.custom[callee].clone());
+                    }
+                    self.stmts.push(Stmt::Call {
+                        callee,
+                        args,
+                        outs,
+                        body,
+                    });
+                }
             }
         }
         Ok(())

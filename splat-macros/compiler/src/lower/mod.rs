@@ -75,6 +75,9 @@ pub struct Lowerer<'m> {
     consts: HashMap<Var, Const>,
     active: HashSet<Var>,
     scopes: Vec<HashMap<String, Binding>>,
+    /// Inside a `jacobian` closure, the index of its scope: names bound below it are read-only
+    /// there (the closure is a map of its argument alone).
+    closure_scope: Option<usize>,
     stmts: Vec<Stmt>,
     call_stack: Vec<String>,
     unrolled: usize,
@@ -108,6 +111,7 @@ pub fn lower_for_model(
         consts: HashMap::new(),
         active: HashSet::new(),
         scopes: vec![HashMap::new()],
+        closure_scope: None,
         stmts: vec![],
         call_stack: vec![def.name.clone()],
         unrolled: 0,
@@ -624,6 +628,17 @@ impl<'m> Lowerer<'m> {
 
     fn assign(&mut self, target: &syn::Expr, val: Val) -> R<()> {
         let (root, ty, range) = self.place(target)?;
+        let depth = self.scopes.iter().rposition(|s| s.contains_key(&root));
+        if let (Some(floor), Some(depth)) = (self.closure_scope, depth)
+            && depth < floor
+        {
+            return self.err(
+                target.span(),
+                format!(
+                    "`jacobian`'s closure cannot assign to `{root}`, declared outside it: the closure is a map of its argument alone"
+                ),
+            );
+        }
         self.check_ty(&val, &ty, target.span(), "the assigned value")?;
         let names = ty.slot_names(&root);
         for (v, n) in val.comps.iter().zip(names) {
@@ -818,6 +833,7 @@ impl<'m> Lowerer<'m> {
             self.check_ty(a, &p.ty, span, &format!("argument `{}`", p.name))?;
         }
         let saved_scopes = std::mem::replace(&mut self.scopes, vec![HashMap::new()]);
+        let saved_closure = self.closure_scope.take();
         for (a, p) in args.iter().zip(&def.params) {
             self.scopes[0].insert(
                 p.name.clone(),
@@ -833,6 +849,7 @@ impl<'m> Lowerer<'m> {
         let r = self.block(&def.item.block);
         self.call_stack.pop();
         self.scopes = saved_scopes;
+        self.closure_scope = saved_closure;
         let v = r?;
         self.check_ty(&v, &def.ret, span, &format!("the result of `{}`", def.name))?;
         let (Some(callee), Some(outer)) = (custom, outer) else {
