@@ -279,11 +279,13 @@ fn psnr(got: &[f32], want: &[f32]) -> f64 {
 }
 
 /// Gradient sums held in f16: every add rounds the sum (2^-11 of it), once per tile a
-/// primitive covers and once per worker's sum, so the gradients stay within that many f16
-/// steps of f32's; the accumulators really are half the size (f16 bits in `Stored::F16`); a
-/// unorm format, which needs a range sums do not have, is refused.
+/// primitive covers, then once more when the workers' sums are added, so the gradients stay
+/// within that many f16 steps of f32's; the accumulators really are half the size; at a
+/// training loss's scale (per-pixel gradients 2^-20 of these) the sums are scaled back up
+/// (loss scaling): the gradients are exactly 2^-20 of these, none lost among f16's
+/// subnormals; a unorm format, which needs a range sums do not have, is refused.
 #[test]
-fn gradient_sums_in_f16_stay_within_their_rounding_and_unorm_is_refused() {
+fn gradient_sums_in_f16_stay_within_their_rounding_at_any_loss_scale_and_unorm_is_refused() {
     let (cam, params) = scene(false);
     let grad = loss_gradient(48 * 40);
     let want = backward_f32(&params, &cam, &grad);
@@ -293,13 +295,27 @@ fn gradient_sums_in_f16_stay_within_their_rounding_and_unorm_is_refused() {
     };
     let (_, state) = render_for_backward::<Method>(&params, &cam, &opts).unwrap();
     let got = backward::<Method>(&state, &params, &cam, &grad).unwrap();
-    // A 48 x 40 frame has 3 x 3 tiles of 16: at most 9 adds per worker, then the workers'.
-    let adds = 9 + rayon::current_num_threads() + 1;
+    // A 48 x 40 frame has 3 x 3 tiles of 16: at most 9 adds, then the workers' sum.
+    let roundings = 9 + 1;
     let err = group_error(&flat(&got.params), &want);
-    println!("f16 gradient sums: {err:.2e} of the largest off f32's ({adds} roundings at most)");
+    println!(
+        "f16 gradient sums: {err:.2e} of the largest off f32's ({roundings} roundings at most)"
+    );
     assert!(err > 0.0, "the sums were not rounded");
-    assert!(err <= adds as f64 * 2f64.powi(-11), "{err}");
-    let acc = splat_runtime::pipeline::backward::Accum::new(1000, 9, Precision::F16);
+    assert!(err <= roundings as f64 * 2f64.powi(-11), "{err}");
+
+    let tiny = 2f32.powi(-20);
+    let scaled = |g: &Option<Vec<f32>>| g.as_ref().map(|g| g.iter().map(|v| v * tiny).collect());
+    let small = FrameGrad {
+        color: grad.color.iter().map(|v| v * tiny).collect(),
+        alpha: scaled(&grad.alpha),
+        depth: scaled(&grad.depth),
+    };
+    let got_small = backward::<Method>(&state, &params, &cam, &small).unwrap();
+    let times_tiny: Vec<f64> = flat(&got.params).iter().map(|v| v * tiny as f64).collect();
+    assert_eq!(flat(&got_small.params), times_tiny);
+
+    let acc = splat_runtime::pipeline::backward::Accum::new(1000, 9, Precision::F16, 1.0);
     assert_eq!(acc.shade.bytes(), 1000 * 9 * 2);
     for unorm in [Precision::Unorm16, Precision::Unorm8] {
         let opts = RenderOptions {
@@ -311,6 +327,32 @@ fn gradient_sums_in_f16_stay_within_their_rounding_and_unorm_is_refused() {
         };
         assert!(e.to_string().contains("no fixed range"), "{e}");
     }
+}
+
+/// The unorm ranges span the primitives the blend can read: one that `project` keeps but
+/// whose box misses the image (its centre 5,000 pixels away) does not widen them.
+#[test]
+fn unorm_shade_ranges_span_only_what_the_blend_reads() {
+    let (cam, mut params) = scene(false);
+    let mut rng = fastrand::Rng::with_seed(3);
+    params.push(gaussian_at(
+        &mut rng,
+        &cam,
+        Vec2::new(5000.0, 20.0),
+        3.0,
+        -2.0,
+    ));
+    let opts = RenderOptions {
+        shade_precision: Precision::Unorm16,
+        ..RenderOptions::default()
+    };
+    let (_, state) = render_for_backward::<Method>(&params, &cam, &opts).unwrap();
+    assert!(state.pre.projected.last().unwrap().visible);
+    let packed = state.pre.packed.as_ref().unwrap();
+    // The centre's x spans the 48-pixel image and the boxes' overhang (the scene's centres
+    // lie within 4 pixels of it): 56 pixels at most.
+    let span = packed.step(0) * 65535.0;
+    assert!(span <= 56.0, "{span}");
 }
 
 /// The GPU refuses what only the CPU stores in a reduced format, naming it.

@@ -76,7 +76,7 @@ pub struct Render<'a> {
 }
 
 /// A precision by its name.
-pub(crate) fn parse_precision(name: &str) -> Result<Precision, String> {
+fn parse_precision(name: &str) -> Result<Precision, String> {
     let all = Precision::ALL;
     all.into_iter().find(|p| p.name() == name).ok_or_else(|| {
         let names: Vec<&str> = all.iter().map(|p| p.name()).collect();

@@ -80,7 +80,7 @@ pub enum GpuError {
     #[error("the hardware-rasterized forward pass: {0}")]
     Hardware(String),
     #[error(
-        "{what} held as {precision} is built on the CPU backend only: use `--backend cpu`, or f32"
+        "{what} held as {precision}: built on the CPU backend only (use `--backend cpu`, or f32)"
     )]
     CpuOnly {
         what: &'static str,

@@ -12,7 +12,7 @@
 
 use super::ForwardState;
 use super::RenderError;
-use super::precision::{Precision, Range, Stored};
+use super::precision::{Precision, Stored};
 use super::shade::{counts, group_pixels, misses_group};
 use crate::flat::Flat;
 use crate::lanes::{F32x8, LANES, M32x8};
@@ -55,20 +55,21 @@ impl FrameGrad {
 }
 
 /// One worker's gradient sums per primitive: `shade[i * Shade::LEN..]` and `depth[i]`, held
-/// at the frame's gradient precision; and the camera's through the pixel data of its pixels
-/// (methods with `pixel_info`).
+/// at the frame's gradient precision, times `scale` ([`sum_scale`](super::precision::sum_scale)); and the
+/// camera's through the pixel data of its pixels (methods with `pixel_info`).
 pub struct Accum {
     pub shade: Stored,
     pub depth: Stored,
+    pub scale: f32,
     pub camera: Camera,
 }
 
 impl Accum {
-    pub fn new(primitives: usize, words: usize, precision: Precision) -> Self {
-        let zeros = |n| Stored::new(precision, Range::Relative, vec![0.0; n]);
+    pub fn new(primitives: usize, words: usize, precision: Precision, scale: f32) -> Self {
         Accum {
-            shade: zeros(primitives * words),
-            depth: zeros(primitives),
+            shade: Stored::zero_sums(precision, primitives * words),
+            depth: Stored::zero_sums(precision, primitives),
+            scale,
             camera: Camera::ZERO,
         }
     }
@@ -156,7 +157,7 @@ fn backward_tile_body<M: SplatMethod, const MODEL: u32>(
     // Per-lane gradient sums for every entry of the tile's list, over all its pixel groups;
     // the lanes are summed once per entry at the end of the tile.
     let mut shade_lanes = vec![M::ShadeLanes::default(); list.len()];
-    let decoded = state.pre.decoded(list);
+    let mut shades = state.pre.tile_shades(list);
     let mut depth_lanes = vec![F32x8::splat(0.0); if want_depth { list.len() } else { 0 }];
     for row in 0..s {
         for gx in (0..s).step_by(LANES) {
@@ -205,7 +206,7 @@ fn backward_tile_body<M: SplatMethod, const MODEL: u32>(
                 if misses_group(p, x0, y) {
                     continue;
                 }
-                let shade = decoded.as_ref().map_or(&p.shade, |d| &d[k]);
+                let shade = shades.get(k);
                 let c = M::evaluate_lanes(&pixels, shade);
                 let before_end = M32x8::from(std::array::from_fn(|l| (k as u32) < ends[l]));
                 let take = before_end & counts(c.alpha, c.valid, state.blend);
@@ -274,10 +275,13 @@ fn backward_tile_body<M: SplatMethod, const MODEL: u32>(
             *sum = lanes.masked_sum(all);
         }
         M::shade_from_float_slots(&sums).write_words(&mut shade_words);
+        if acc.scale != 1.0 {
+            shade_words.iter_mut().for_each(|v| *v *= acc.scale);
+        }
         let p = prim as usize;
         acc.shade.add_slice(p * words, &shade_words);
         if want_depth {
-            acc.depth.add(p, depth_lanes[k].masked_sum(all));
+            acc.depth.add(p, depth_lanes[k].masked_sum(all) * acc.scale);
         }
     }
 }

@@ -1,11 +1,12 @@
 //! The shared pipeline on the CPU, generic over any [`SplatMethod`]:
 //!
 //! 1. [`preprocess`]: `project` over all primitives, keep the visible ones (rayon over
-//!    primitives).
+//!    primitives); pack their shade data where it is stored in a reduced format
+//!    ([`precision`]).
 //! 2. [`rasterize`]: per-tile depth-sorted lists (count, prefix sum, emit, sort, ranges).
 //! 3. [`shade`]: front-to-back blending per tile (rayon over tiles, 8 SIMD lanes over pixels),
 //!    tiles scheduled longest list first (trip-count binning).
-//! 4. [`backward`](mod@backward): the front-to-back backward blend, a per-primitive
+//! 4. [`backward`](mod@backward): the back-to-front backward blend, a per-primitive
 //!    reduction, then `project`'s adjoint per primitive.
 
 pub mod backward;
@@ -106,9 +107,7 @@ pub enum RenderError {
         "method `{0}` renders global shutters only (no kernel calls `cam.shutter_time` or `cam.rotation_at`); the camera moves during its readout (shutter_turn, shutter_shift)"
     )]
     RollingShutter(&'static str),
-    #[error(
-        "gradient sums have no fixed range for {0}: hold them as f32 or f16 (--gradient-precision)"
-    )]
+    #[error("gradient sums have no fixed range for {0}: hold them as f32 or f16")]
     GradientPrecision(&'static str),
     #[error("primitive {0} has a NaN or infinite parameter")]
     NonFinite(usize),
@@ -458,6 +457,12 @@ pub fn backward<M: SplatMethod>(
     let n = state.pre.projected.len();
     let words = M::Shade::LEN;
     let t0 = Instant::now();
+    let largest = [Some(&grad.color), grad.alpha.as_ref(), grad.depth.as_ref()]
+        .into_iter()
+        .flatten()
+        .flat_map(|g| g.iter())
+        .fold(0.0f32, |m, v| m.max(v.abs()));
+    let scale = precision::sum_scale(state.gradient_precision, largest);
     // One dense accumulator per worker; tiles dealt round-robin, longest lists first.
     let workers = rayon::current_num_threads().max(1);
     let mut order: Vec<u32> = (0..state.grid.tile_count() as u32).collect();
@@ -465,7 +470,7 @@ pub fn backward<M: SplatMethod>(
     let accs: Vec<backward::Accum> = (0..workers)
         .into_par_iter()
         .map(|w| {
-            let mut acc = backward::Accum::new(n, words, state.gradient_precision);
+            let mut acc = backward::Accum::new(n, words, state.gradient_precision, scale);
             for &t in order.iter().skip(w).step_by(workers) {
                 backward::backward_tile::<M>(state, camera, grad, t, &mut acc);
             }
@@ -480,22 +485,19 @@ pub fn backward<M: SplatMethod>(
         .iter()
         .fold(Camera::ZERO, |c, a| c.add_cotangent(&a.camera));
     const CHUNK: usize = 1 << 14;
-    // Summed in f32, then held at the gradient precision as each worker's sums were.
-    let held = precision::sum_format(state.gradient_precision);
+    // Summed in f32, held at the gradient precision as each worker's sums were, then unscaled.
     let sum = |mut parts: Vec<Stored>| -> Vec<f32> {
         let mut out = parts.remove(0).into_f32();
-        let rest: Vec<_> = parts.iter().map(Stored::as_f32).collect();
         out.par_chunks_mut(CHUNK).enumerate().for_each(|(c, out)| {
-            for r in &rest {
-                for (o, v) in out.iter_mut().zip(&r[c * CHUNK..]) {
-                    *o += v;
-                }
+            for part in &parts {
+                part.add_to(c * CHUNK, out);
+            }
+            precision::hold_sums(state.gradient_precision, out);
+            if scale != 1.0 {
+                out.iter_mut().for_each(|v| *v /= scale);
             }
         });
-        match held {
-            precision::Precision::F32 => out,
-            p => Stored::new(p, Range::Relative, out).into_f32(),
-        }
+        out
     };
     let (shades, depths) = accs.into_iter().map(|a| (a.shade, a.depth)).unzip();
     let (shade, depth) = (sum(shades), sum(depths));

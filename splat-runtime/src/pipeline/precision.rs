@@ -8,12 +8,14 @@
 
 use crate::flat::Flat;
 use crate::method::SplatMethod;
+use crate::pipeline::grid::TileRect;
 use crate::types::Projected;
 use half::f16;
 use half::slice::{HalfBitsSliceExt, HalfFloatSliceExt};
 use rayon::prelude::*;
 
-/// How the per-pixel state is stored.
+/// A storage format: for the per-pixel state, the shade data between the stages
+/// ([`PackedShade`]) and the gradient sums ([`sum_format`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Precision {
     #[default]
@@ -21,9 +23,10 @@ pub enum Precision {
     /// IEEE half: 11 significant bits (relative error at most 2^-11), range to 65504.
     F16,
     /// Colors in [0, 1] in steps of 1/65535 (values outside saturate); transmittance and depth
-    /// sums as f16 ([`Range::Relative`]).
+    /// sums as f16 ([`Range::Relative`]); shade data in 65535 steps of each word's range.
     Unorm16,
-    /// Colors in [0, 1] in steps of 1/255; transmittance and depth sums as f16.
+    /// Colors in [0, 1] in steps of 1/255; transmittance and depth sums as f16; shade data in
+    /// 255 steps of each word's range.
     Unorm8,
 }
 
@@ -58,7 +61,8 @@ impl Precision {
 /// What a value means, which decides how a unorm format holds it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Range {
-    /// Colors: in [0, 1] (they may exceed 1, and saturate in unorm).
+    /// Colors in [0, 1] (they may exceed 1, and saturate in unorm), and shade data mapped to
+    /// [0, 1] by its range.
     Unit,
     /// Values whose relative precision matters, stored as f16 where the format is unorm: the
     /// final transmittance (the backward pass recovers every entry's T by dividing it back up,
@@ -138,15 +142,24 @@ impl Stored {
         }
     }
 
+    /// `n` sums of zero, held as `precision` holds sums ([`sum_format`]).
+    pub fn zero_sums(precision: Precision, n: usize) -> Stored {
+        match sum_format(precision) {
+            Precision::F32 => Stored::F32(vec![0.0; n]),
+            _ => Stored::F16(vec![0; n]),
+        }
+    }
+
     /// Adds `v` to value `i`, the sum rounded to the format (f32 or f16: sums of any size are
-    /// [`Range::Relative`]); an f16 sum saturates at +-65504 rather than becoming infinite.
+    /// [`Range::Relative`]); a finite f16 sum saturates at +-65504 rather than becoming
+    /// infinite (an infinite or NaN one stays so).
     #[inline(always)]
     pub fn add(&mut self, i: usize, v: f32) {
         match self {
             Stored::F32(s) => s[i] += v,
             Stored::F16(s) => {
                 let sum = f16::from_bits(s[i]).to_f32() + v;
-                s[i] = f16::from_f32(sum.clamp(-F16_MAX, F16_MAX)).to_bits();
+                s[i] = f16::from_f32(saturate(sum)).to_bits();
             }
             Stored::Unorm16(_) | Stored::Unorm8(_) => unreachable!("sums are stored as f32 or f16"),
         }
@@ -171,9 +184,35 @@ impl Stored {
                     let held = &mut held[chunk..chunk + m];
                     held.convert_to_f32_slice(&mut sums[..m]);
                     for (sum, v) in sums.iter_mut().zip(&values[chunk..chunk + m]) {
-                        *sum = (*sum + v).clamp(-F16_MAX, F16_MAX);
+                        *sum = saturate(*sum + v);
                     }
                     held.convert_from_f32_slice(&sums[..m]);
+                }
+            }
+            Stored::Unorm16(_) | Stored::Unorm8(_) => unreachable!("sums are stored as f32 or f16"),
+        }
+    }
+
+    /// Adds the values from `from` on to `out`, one per element (f16: converted a slice at a
+    /// time).
+    pub fn add_to(&self, from: usize, out: &mut [f32]) {
+        match self {
+            Stored::F32(s) => {
+                for (o, v) in out.iter_mut().zip(&s[from..]) {
+                    *o += v;
+                }
+            }
+            Stored::F16(s) => {
+                let held = s[from..from + out.len()].reinterpret_cast::<f16>();
+                let mut values = [0.0f32; MAX_SHADE_WORDS];
+                for (out, held) in out
+                    .chunks_mut(MAX_SHADE_WORDS)
+                    .zip(held.chunks(MAX_SHADE_WORDS))
+                {
+                    held.convert_to_f32_slice(&mut values[..out.len()]);
+                    for (o, v) in out.iter_mut().zip(&values) {
+                        *o += v;
+                    }
                 }
             }
             Stored::Unorm16(_) | Stored::Unorm8(_) => unreachable!("sums are stored as f32 or f16"),
@@ -193,6 +232,15 @@ impl Stored {
 /// The largest finite f16.
 const F16_MAX: f32 = 65504.0;
 
+/// `x` clamped to f16's finite range if finite (an infinity or NaN is a fault to pass on).
+#[inline(always)]
+fn saturate(x: f32) -> f32 {
+    match x.is_finite() {
+        true => x.clamp(-F16_MAX, F16_MAX),
+        false => x,
+    }
+}
+
 /// The format sums are held in at `precision` (they have no fixed range: f16 for the unorm
 /// formats, as [`Range::Relative`] values are).
 pub fn sum_format(precision: Precision) -> Precision {
@@ -202,12 +250,41 @@ pub fn sum_format(precision: Precision) -> Precision {
     }
 }
 
+/// Rounds `sums` to the format `precision` holds sums in, saturating as [`Stored::add`] does.
+pub fn hold_sums(precision: Precision, sums: &mut [f32]) {
+    if sum_format(precision) == Precision::F32 {
+        return;
+    }
+    let mut held = [f16::ZERO; MAX_SHADE_WORDS];
+    for chunk in sums.chunks_mut(MAX_SHADE_WORDS) {
+        for v in chunk.iter_mut() {
+            *v = saturate(*v);
+        }
+        let held = &mut held[..chunk.len()];
+        held.convert_from_f32_slice(chunk);
+        held.convert_to_f32_slice(chunk);
+    }
+}
+
+/// The power of two the backward pass scales its f16 gradient sums by (the loss scaling of
+/// mixed-precision training): the largest output gradient `largest` becomes 1 to 2, so sums
+/// keep f16's relative precision at a training loss's scale (per-pixel gradients near 1e-7,
+/// which unscaled would fall among f16's subnormals or to zero) and at any other. Scaling by
+/// a power of two adds no rounding; f32 sums are not scaled.
+pub fn sum_scale(precision: Precision, largest: f32) -> f32 {
+    if sum_format(precision) == Precision::F32 || !(largest.is_finite() && largest > 0.0) {
+        return 1.0;
+    }
+    2f32.powi(-(largest.log2().floor() as i32).clamp(-100, 100))
+}
+
 /// The shade data of a frame's primitives (what `project` hands `evaluate`), stored between
-/// the preprocess and the blend in a reduced format: the blend loads each tile's entries from
-/// here and decodes them once per tile. f16 holds every float as is; the unorm formats code
-/// each float word in the range it spans over the frame's visible primitives (a pixel centre
-/// spanning a 960-pixel image gets steps of 960/65535 or 960/255 pixels). Words that are not
-/// floats (flags, integers) are kept exact.
+/// the preprocess and the blend in a reduced format: the blend loads a tile's entries from
+/// here as it reaches them and decodes each once per tile. f16 holds every float as is; the
+/// unorm formats code each float word in the range it spans over the frame's visible
+/// primitives (pixel centres spread over 1,000 pixels get steps of 1000/65535 or 1000/255
+/// pixels; one primitive far outside the image widens them all). Words that are not floats
+/// (flags, integers) are kept exact.
 pub struct PackedShade {
     /// Words of the shade type, and which of them are floats.
     float_words: Vec<bool>,
@@ -220,10 +297,13 @@ pub struct PackedShade {
 }
 
 impl PackedShade {
-    /// Packs `projected`'s shade data at `precision` (not f32: that is the shade data itself).
+    /// Packs `projected`'s shade data at `precision` (not f32: that is the shade data itself);
+    /// the unorm ranges span the finite values of the `visible` primitives, the ones the blend
+    /// can read. f16 saturates finite values past its range at +-65504.
     pub fn new<M: SplatMethod>(
         precision: Precision,
         projected: &[Projected<M::Cull, M::Shade>],
+        visible: &[(u32, TileRect)],
     ) -> PackedShade {
         debug_assert!(precision != Precision::F32);
         let len = M::Shade::LEN;
@@ -242,18 +322,17 @@ impl PackedShade {
             w
         };
         let float_at: Vec<usize> = (0..len).filter(|w| float_words[*w]).collect();
-        let unorm = matches!(precision, Precision::Unorm16 | Precision::Unorm8);
-        let ranges: Vec<(f32, f32)> = match unorm {
-            false => vec![(0.0, 1.0); float_at.len()],
-            true => {
+        let ranges: Vec<(f32, f32)> = match precision {
+            Precision::Unorm16 | Precision::Unorm8 => {
                 let none = || vec![(f32::INFINITY, f32::NEG_INFINITY); float_at.len()];
-                let bounds = projected
+                let bounds = visible
                     .par_iter()
-                    .filter(|p| p.visible)
-                    .fold(none, |mut b, p| {
-                        let w = words(p);
+                    .fold(none, |mut b, (i, _)| {
+                        let w = words(&projected[*i as usize]);
                         for (r, &at) in b.iter_mut().zip(&float_at) {
-                            *r = (r.0.min(w[at]), r.1.max(w[at]));
+                            if w[at].is_finite() {
+                                *r = (r.0.min(w[at]), r.1.max(w[at]));
+                            }
                         }
                         b
                     })
@@ -263,13 +342,15 @@ impl PackedShade {
                             .map(|(a, b)| (a.0.min(b.0), a.1.max(b.1)))
                             .collect()
                     });
-                let span = |(lo, hi): (f32, f32)| match lo <= hi {
+                let span = |(lo, hi): (f32, f32)| match lo <= hi && (hi - lo).is_finite() {
                     true => (lo, (hi - lo).max(f32::MIN_POSITIVE)),
                     false => (0.0, 1.0),
                 };
                 bounds.into_iter().map(span).collect()
             }
+            _ => vec![(0.0, 1.0); float_at.len()],
         };
+        let half = precision == Precision::F16;
         let normalized: Vec<f32> = projected
             .par_iter()
             .flat_map_iter(|p| {
@@ -278,22 +359,25 @@ impl PackedShade {
                 float_at
                     .iter()
                     .zip(ranges)
-                    .map(move |(&at, (lo, span))| match p.visible {
-                        true => (w[at] - lo) / span,
-                        false => 0.0,
+                    .map(move |(&at, (lo, span))| match half {
+                        true => saturate(w[at]),
+                        false => (w[at] - lo) / span,
                     })
             })
             .collect();
-        let exact = projected
-            .iter()
-            .flat_map(|p| {
-                let w = words(p);
-                let float_words = &float_words;
-                (0..len)
-                    .filter(move |i| !float_words[*i])
-                    .map(move |i| w[i].to_bits())
-            })
-            .collect();
+        let exact = match float_at.len() == len {
+            true => vec![],
+            false => projected
+                .iter()
+                .flat_map(|p| {
+                    let w = words(p);
+                    let float_words = &float_words;
+                    (0..len)
+                        .filter(move |i| !float_words[*i])
+                        .map(move |i| w[i].to_bits())
+                })
+                .collect(),
+        };
         PackedShade {
             float_words,
             ranges,
@@ -347,6 +431,7 @@ impl PackedShade {
     /// word's range over 65535 or 255 steps in the unorm formats; 0 for f16, whose step is
     /// relative to the value).
     pub fn step(&self, w: usize) -> f32 {
+        debug_assert!(self.float_words[w], "word {w} is not a float");
         let f = self.float_words[..w].iter().filter(|f| **f).count();
         let steps = match self.codes {
             Stored::Unorm16(_) => 65535.0,
@@ -354,11 +439,6 @@ impl PackedShade {
             _ => return 0.0,
         };
         self.ranges[f].1 / steps
-    }
-
-    /// The decoded shade data of the primitives `list` names, in order.
-    pub fn decode<S: Flat>(&self, list: &[u32]) -> Vec<S> {
-        list.iter().map(|&i| self.get(i as usize)).collect()
     }
 
     /// Bytes held.

@@ -19,10 +19,44 @@ pub struct Preprocessed<M: SplatMethod> {
 }
 
 impl<M: SplatMethod> Preprocessed<M> {
-    /// The shade data of the primitives `list` names, as the blend reads them: decoded from
-    /// the packed store where there is one (none: `projected`'s own).
-    pub fn decoded(&self, list: &[u32]) -> Option<Vec<M::Shade>> {
-        self.packed.as_ref().map(|p| p.decode(list))
+    /// The shade data of a tile's `list`, as the blend reads it.
+    pub fn tile_shades<'a>(&'a self, list: &'a [u32]) -> TileShades<'a, M> {
+        TileShades {
+            pre: self,
+            list,
+            decoded: vec![],
+        }
+    }
+}
+
+/// The shade data of one tile's list: `project`'s own, or, where the frame packs it, decoded
+/// from the packed store the first time the walk reaches it, a block of entries at a time
+/// (the walks stop early, so the tail of a long list is never decoded).
+pub struct TileShades<'a, M: SplatMethod> {
+    pre: &'a Preprocessed<M>,
+    list: &'a [u32],
+    decoded: Vec<M::Shade>,
+}
+
+impl<M: SplatMethod> TileShades<'_, M> {
+    /// Entries decoded at a time.
+    const BLOCK: usize = 32;
+
+    /// The shade data of entry `k` of the list.
+    #[inline(always)]
+    pub fn get(&mut self, k: usize) -> &M::Shade {
+        let Some(packed) = &self.pre.packed else {
+            return &self.pre.projected[self.list[k] as usize].shade;
+        };
+        while self.decoded.len() <= k {
+            let from = self.decoded.len();
+            let to = (from + Self::BLOCK).max(k + 1).min(self.list.len());
+            let block = self.list[from..to]
+                .iter()
+                .map(|&i| packed.get::<M::Shade>(i as usize));
+            self.decoded.extend(block);
+        }
+        &self.decoded[k]
     }
 }
 
@@ -38,7 +72,8 @@ pub fn preprocess<M: SplatMethod>(
         .collect());
     let mut pre = filter::<M>(projected, grid);
     if shade_precision != Precision::F32 {
-        pre.packed = Some(PackedShade::new::<M>(shade_precision, &pre.projected));
+        let packed = PackedShade::new::<M>(shade_precision, &pre.projected, &pre.visible);
+        pre.packed = Some(packed);
     }
     pre
 }

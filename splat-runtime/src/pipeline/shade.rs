@@ -170,8 +170,8 @@ fn shade_tile_body<M: SplatMethod, const MODEL: u32>(
     blend: Blend,
 ) -> TileOutput {
     let s = grid.size as usize;
-    // Reduced-precision shade data is loaded and decoded once per tile, not per pixel group.
-    let decoded = pre.decoded(list);
+    // Reduced-precision shade data is decoded once per tile, not per pixel group.
+    let mut shades = pre.tile_shades(list);
     let channels = M::Color::LEN;
     let mut out = TileOutput {
         color: vec![0.0; s * s * channels],
@@ -198,8 +198,7 @@ fn shade_tile_body<M: SplatMethod, const MODEL: u32>(
                 if misses_group(p, x0, y) {
                     continue;
                 }
-                let shade = decoded.as_ref().map_or(&p.shade, |d| &d[k]);
-                let c = M::evaluate_lanes(&pixels, shade);
+                let c = M::evaluate_lanes(&pixels, shades.get(k));
                 out.pairs += (!done).count() as u64;
                 let st = step(c.alpha, c.valid, done, t, blend);
                 let w = st.weight;
