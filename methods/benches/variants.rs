@@ -6,10 +6,12 @@
 //! CPU frame (forward and backward, all threads) of each method's full instance against the
 //! instance for the scene's degree, on Gaussians of that degree. Gradient groups: `project`'s
 //! adjoint and the whole backward pass computing every gradient against computing some
-//! (`RenderOptions::gradients`). Times are best of 5, the two alternating after a warm-up of
+//! (`RenderOptions::gradients`). Storage between stages: 3DGS's forward and backward passes
+//! with the shade data packed (f16, unorm16, unorm8) and with the gradient sums held in f16,
+//! against f32 (`RenderOptions::shade_precision`, `gradient_precision`). Times are best of 5, the two alternating after a warm-up of
 //! each, kernels on a single thread; the ratio is generic (or full) / variant in the same run.
 //!
-//! `cargo bench -p splat-methods --bench variants [-- N WIDTH HEIGHT] [models|sh|groups]`
+//! `cargo bench -p splat-methods --bench variants [-- N WIDTH HEIGHT] [models|sh|groups|storage]`
 //! (the word runs that section alone)
 
 use splat_methods::{
@@ -278,7 +280,7 @@ fn main() {
     );
     let only: Vec<String> = std::env::args()
         .skip(1)
-        .filter(|a| ["models", "sh", "groups"].contains(&a.as_str()))
+        .filter(|a| ["models", "sh", "groups", "storage"].contains(&a.as_str()))
         .collect();
     let run = |section: &str| only.is_empty() || only.iter().any(|o| o == section);
     if run("models") {
@@ -290,6 +292,72 @@ fn main() {
     if run("groups") {
         groups(&gaussians, &gut_params, &geer_params, w, h);
     }
+    if run("storage") {
+        storage(&gaussians, w, h);
+    }
+}
+
+/// 3DGS's passes (all threads) storing the shade data or the gradient sums in a reduced
+/// format, against f32.
+fn storage(gaussians: &[Gaussian], w: f32, h: f32) {
+    use splat_runtime::pipeline::precision::Precision;
+    let cam = camera(w, h);
+    println!();
+    println!(
+        "storage between stages, 3dgs, pinhole; ms ({} threads), f32 / reduced",
+        threads()
+    );
+    println!("| pass | stored reduced | f32 | reduced | ratio |");
+    println!("|---|---|---:|---:|---:|");
+    let forward = |opts: RenderOptions| {
+        let cam = &cam;
+        move || {
+            let _ =
+                black_box(splat_runtime::render::<gs3d::Method>(gaussians, cam, &opts).unwrap());
+        }
+    };
+    let backward_of = |opts: RenderOptions| {
+        let (frame, state) = render_for_backward::<gs3d::Method>(gaussians, &cam, &opts).unwrap();
+        let grad = FrameGrad {
+            color: vec![1.0; frame.color.data.len()],
+            alpha: None,
+            depth: None,
+        };
+        let cam = &cam;
+        move || {
+            let _ = black_box(backward::<gs3d::Method>(&state, gaussians, cam, &grad).unwrap());
+        }
+    };
+    let row = |pass: &str, what: String, (full, reduced): Times| {
+        let ms = |d: Duration| d.as_secs_f64() * 1e3;
+        println!(
+            "| {pass} | {what} | {:.2} | {:.2} | {:.2} |",
+            ms(full),
+            ms(reduced),
+            full.as_secs_f64() / reduced.as_secs_f64()
+        );
+    };
+    let f32_opts = RenderOptions::default();
+    for p in [Precision::F16, Precision::Unorm16, Precision::Unorm8] {
+        let shade = RenderOptions {
+            shade_precision: p,
+            ..f32_opts
+        };
+        let what = format!("shade data {}", p.name());
+        row(
+            "forward",
+            what.clone(),
+            compare(forward(f32_opts), forward(shade)),
+        );
+        let times = compare(backward_of(f32_opts), backward_of(shade));
+        row("backward", what, times);
+    }
+    let sums = RenderOptions {
+        gradient_precision: Precision::F16,
+        ..f32_opts
+    };
+    let times = compare(backward_of(f32_opts), backward_of(sums));
+    row("backward", "gradient sums f16".into(), times);
 }
 
 fn models(gut_params: &[gut::Params], geer_params: &[geer::Params], w: f32, h: f32) {
