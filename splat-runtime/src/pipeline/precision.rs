@@ -283,8 +283,8 @@ pub fn sum_scale(precision: Precision, largest: f32) -> f32 {
 /// here as it reaches them and decodes each once per tile. f16 holds every float as is; the
 /// unorm formats code each float word in the range it spans over the frame's visible
 /// primitives (pixel centres spread over 1,000 pixels get steps of 1000/65535 or 1000/255
-/// pixels; one primitive far outside the image widens them all). Words that are not floats
-/// (flags, integers) are kept exact.
+/// pixels; one large primitive reaching in from far outside the image widens them all). Words
+/// that are not floats (flags, integers) are kept exact.
 pub struct PackedShade {
     /// Words of the shade type, and which of them are floats.
     float_words: Vec<bool>,
