@@ -27,6 +27,17 @@ mod constant_helpers {
         let (v, j) = jacobian(|p| p * p * soft(c), x);
         Vec2::new(v, j[0])
     }
+
+    /// A float cast to `f32`: the value itself, in forward mode ...
+    pub fn cast_to_itself(x: f32) -> Vec2 {
+        let (v, j) = jacobian(|p| (p * p) as f32, x);
+        Vec2::new(v, j[0])
+    }
+
+    /// ... and in reverse mode.
+    pub fn squared_then_cast(x: f32) -> f32 {
+        (x * x) as f32
+    }
 }
 
 const TOL: f64 = 1e-6;
@@ -90,5 +101,15 @@ fn a_helper_with_its_own_adjoint_is_a_constant_where_the_point_does_not_reach_it
             (got - want).length() <= 1e-6 * want.length().max(1.0),
             "{got} vs {want}"
         );
+    }
+}
+
+/// `x as f32` of a float is `x`: its derivative passes through (it was a cast's, zero).
+#[test]
+fn a_cast_of_a_float_to_f32_keeps_its_derivative() {
+    for x in [-1.5f32, 0.25, 3.0] {
+        let want = Vec2::new(x * x, 2.0 * x);
+        assert_eq!(constant_helpers::cast_to_itself(x), want);
+        assert_eq!(constant_helpers::squared_then_cast_adjoint(x, 1.0), 2.0 * x);
     }
 }

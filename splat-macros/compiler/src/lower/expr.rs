@@ -600,6 +600,15 @@ impl Lowerer<'_> {
             Ty::F32 | Ty::U32 | Ty::I32 | Ty::Index | Ty::Bool => {}
             _ => return self.err(c.span(), format!("cannot cast a `{}`", v.ty)),
         }
+        // A cast to the type a value already has is the value itself (no operation whose
+        // derivative would be taken as a cast's: zero).
+        let same = matches!(
+            (&v.ty, to),
+            (Ty::F32, Scalar::F32) | (Ty::U32, Scalar::U32) | (Ty::I32, Scalar::I32)
+        );
+        if same {
+            return Ok(v);
+        }
         if v.ty == Ty::Bool && to == Scalar::F32 {
             return self.err(
                 c.span(),
