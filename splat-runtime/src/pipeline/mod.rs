@@ -457,12 +457,19 @@ pub fn backward<M: SplatMethod>(
     let n = state.pre.projected.len();
     let words = M::Shade::LEN;
     let t0 = Instant::now();
-    let largest = [Some(&grad.color), grad.alpha.as_ref(), grad.depth.as_ref()]
-        .into_iter()
-        .flatten()
-        .flat_map(|g| g.iter())
-        .fold(0.0f32, |m, v| m.max(v.abs()));
-    let scale = precision::sum_scale(state.gradient_precision, largest);
+    // The f16 sums' loss scale; f32 sums are not scaled (and no pass over the gradient is
+    // needed to say so).
+    let scale = match precision::sum_format(state.gradient_precision) {
+        precision::Precision::F32 => 1.0,
+        held => {
+            let largest = [Some(&grad.color), grad.alpha.as_ref(), grad.depth.as_ref()]
+                .into_iter()
+                .flatten()
+                .flat_map(|g| g.iter())
+                .fold(0.0f32, |m, v| m.max(v.abs()));
+            precision::sum_scale(held, largest)
+        }
+    };
     // One dense accumulator per worker; tiles dealt round-robin, longest lists first.
     let workers = rayon::current_num_threads().max(1);
     let mut order: Vec<u32> = (0..state.grid.tile_count() as u32).collect();
