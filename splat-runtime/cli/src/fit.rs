@@ -46,6 +46,12 @@ pub struct FitArgs {
     /// 0.5 on the built-in dataset].
     #[arg(long)]
     init_extent: Option<f32>,
+    /// Multiplies the scene's extent, as gsplat's `global_scale`: the position learning rate,
+    /// density control's size thresholds and the random points' cube scale with it. Objects
+    /// that fill little of the cameras' sphere train better with less than 1 (pass the same
+    /// value when resuming).
+    #[arg(long, default_value_t = 1.0)]
+    global_scale: f32,
     /// Composite the images on white instead of black.
     #[arg(long)]
     white: bool,
@@ -201,6 +207,12 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
     if !(init_extent > 0.0 && init_extent.is_finite()) {
         bail!("--init-extent must be a positive number, not {init_extent}");
     }
+    if !(args.global_scale > 0.0 && args.global_scale.is_finite()) {
+        bail!(
+            "--global-scale must be a positive number, not {}",
+            args.global_scale
+        );
+    }
     if data.train.is_empty() {
         bail!("{name}: no training views");
     }
@@ -218,7 +230,7 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
     let centres: Vec<Vec3> = data.train.iter().map(|v| v.camera.center()).collect();
     let mid = centres.iter().copied().sum::<Vec3>() / centres.len() as f32;
     let extent = 1.1 * centres.iter().map(|c| c.distance(mid)).fold(0.0, f32::max);
-    let extent = if extent > 0.0 { extent } else { 1.0 };
+    let extent = if extent > 0.0 { extent } else { 1.0 } * args.global_scale;
     let opts = FitOptions {
         steps,
         background,
@@ -338,6 +350,8 @@ impl Fit<'_> {
         bar.set_position(state.step as u64);
         let first = state.step;
         let mut faulty_steps = 0usize;
+        let line_every = (opts.steps - first).div_ceil(20).next_multiple_of(10);
+        let t = Instant::now();
         let report = |r: &StepReport| {
             bar.inc(1);
             log.record(r);
@@ -365,16 +379,29 @@ impl Fit<'_> {
                     .with_context(|| format!("writing {}", checkpoint_path.display()))
                     .and_then(|()| log.write_csv(&metrics));
             }
-            if r.step.is_multiple_of(10) || r.refinement.is_some() || r.evaluation.is_some() {
+            // Without a terminal (a log, a batch job) the bar draws nothing: a line every
+            // twentieth of the run instead.
+            let done = r.step + 1 - first;
+            let line = bar.is_hidden() && done.is_multiple_of(line_every);
+            if r.step.is_multiple_of(10) || r.refinement.is_some() || r.evaluation.is_some() || line
+            {
                 let v = r.loss;
                 let test = log.evaluations.last().map_or(before.psnr, |e| e.1.psnr);
-                bar.set_message(format!(
+                let status = format!(
                     "loss {:.4} (L1 {:.4}, SSIM {:.3}), test PSNR {test:.2} dB, {} primitives",
                     v.loss, v.l1, v.ssim, r.primitives
-                ));
+                );
+                if line {
+                    let ms = t.elapsed().as_secs_f64() * 1e3 / done as f64;
+                    println!(
+                        "step {}/{}: {ms:.2} ms per step, {status}",
+                        r.step + 1,
+                        opts.steps
+                    );
+                }
+                bar.set_message(status);
             }
         };
-        let t = Instant::now();
         let place = match &gpu {
             Some(gpu) => {
                 fit_gpu_from::<M>(gpu, data, &mut state, extent, opts, report)?;

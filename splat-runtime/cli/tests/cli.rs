@@ -637,6 +637,14 @@ fn fit_trains_on_a_dataset_and_writes_its_outputs() {
         "{stdout}"
     );
     assert!(stdout.contains("PSNR"), "{stdout}");
+    // Not a terminal: a progress line every 10 steps (a twentieth of the run, rounded up
+    // to tens) instead of the bar.
+    let lines: Vec<&str> = stdout
+        .lines()
+        .filter(|l| l.contains(" ms per step, loss "))
+        .collect();
+    assert_eq!(lines.len(), 2, "{stdout}");
+    assert!(lines[0].starts_with("step 10/20: ") && lines[1].starts_with("step 20/20: "));
     let fit = fit_output(&dir.path().join("out"), 3, (16, 16));
     assert_eq!((fit.scene.sh_degree, fit.scene.gaussians.len()), (3, 200));
     // Step 0 (before training), then 20 steps; PSNR before and after only.
@@ -920,6 +928,14 @@ fn fit_refuses_a_missing_or_broken_dataset_by_name() {
         "transforms_test.json is not valid JSON",
         &out,
     );
+    tiny_dataset(&dir.path().join("good"), 2);
+    for (flag, value) in [("--global-scale", "0"), ("--init-extent", "nan")] {
+        fails(
+            &splat(&["fit", "good", "--steps", "2", flag, value], dir.path()),
+            &format!("{flag} must be a positive number, not"),
+            &out,
+        );
+    }
 }
 
 #[test]
