@@ -454,6 +454,12 @@ fn density_control_clones_splits_prunes_and_resets_as_3dgs_does() {
     }
     assert!(d.refines_at(600) && !d.refines_at(500) && !d.refines_at(650));
     assert!(d.resets_at(3000) && !d.resets_at(0));
+    let never = DensifyOptions {
+        opacity_resets: false,
+        ..Default::default()
+    };
+    let d = Densifier::new(never, params.len());
+    assert!(!d.resets_at(3000) && d.refines_at(3000));
 }
 
 /// Training from a few large primitives: density control splits and clones them until the
@@ -1029,4 +1035,78 @@ fn the_gpu_loop_resumes_from_its_checkpoint() {
     let (a, b) = (psnr(&whole), psnr(&resumed));
     println!("held-out PSNR after 40 steps: uninterrupted {a:.3}, resumed at 20 {b:.3} dB");
     assert!((a - b).abs() < 0.2, "{a} vs {b}");
+}
+
+/// Density control's statistics gathered on the device equal the CPU's for one frame: a
+/// Gaussian in front of the camera whose box misses the image is not seen (gsplat's radii are
+/// 0 there), nor is one behind the camera; those on the image are, with the same
+/// screen-space gradient. Before, the device counted every one `project` kept, so off-image
+/// views diluted the mean gradient and fewer primitives grew than on the CPU.
+#[test]
+fn device_statistics_count_what_the_image_shows_as_the_cpu_does() {
+    use splat_runtime::gpu::entries::Accumulation;
+    use splat_runtime::gpu::train::GpuObserver;
+    use splat_runtime::gpu::{GpuRenderer, GpuScene};
+    use splat_runtime::train::densify::Densifier;
+    use splat_runtime::{Flat, FrameGrad, backward, render_for_backward};
+    let Some(gpu) = splat_runtime::gpu::adapter_or_skip() else {
+        return;
+    };
+    let cam = common::camera(SIZE, SIZE);
+    let mut rng = fastrand::Rng::with_seed(8);
+    let mut at = |x: f32, y: f32, z: f32| gaussian_at(&mut rng, &cam, Vec2::new(x, y), z, -3.0);
+    let params = vec![
+        at(10.0, 12.0, 2.0),
+        at(30.0, 25.0, 3.0),
+        at(-400.0, 20.0, 2.0), // in front, its box far left of the image
+        at(20.0, 900.0, 2.5),  // in front, far below
+        at(20.0, 20.0, -2.0),  // behind the camera
+        at(21.0, 19.0, 1.5),
+    ];
+    let opts = RenderOptions::default();
+    let pixels = (SIZE * SIZE) as usize;
+    let grad = FrameGrad {
+        color: (0..pixels * 3).map(|_| rng.f32() - 0.5).collect(),
+        alpha: None,
+        depth: None,
+    };
+
+    let (_, state) = render_for_backward::<Method>(&params, &cam, &opts).unwrap();
+    let g = backward::<Method>(&state, &params, &cam, &grad).unwrap();
+    let mut cpu = Densifier::new(DensifyOptions::default(), params.len());
+    let visible = state.pre.visible.iter().map(|(i, _)| *i as usize);
+    cpu.observe::<Method>(&params, &g.params, visible, &cam);
+    let (cpu_grad2d, cpu_seen) = cpu.statistics();
+    assert_eq!(
+        cpu_seen,
+        [1, 1, 0, 0, 0, 1],
+        "the CPU sees what the image shows"
+    );
+
+    let scene = GpuScene::<Method>::new(&gpu, &params).unwrap();
+    let mut renderer = GpuRenderer::<Method>::new(&gpu, &opts).unwrap();
+    renderer.forward(&scene, &cam).unwrap();
+    renderer
+        .backward(&scene, &grad, Accumulation::default_for(&gpu))
+        .unwrap();
+    let mut observer = GpuObserver::new(&gpu).unwrap();
+    let (projected, stride) = renderer.projected();
+    let frame = [
+        projected,
+        scene.buffer(),
+        renderer.param_gradients(),
+        renderer.camera_buffer(),
+    ];
+    let mut enc = gpu.device.create_command_encoder(&Default::default());
+    // 3DGS's position is its first three words.
+    observer
+        .record(&gpu, &mut enc, frame, params.len(), stride, Params::LEN, 0)
+        .unwrap();
+    gpu.queue.submit([enc.finish()]);
+    let (grad2d, seen) = observer.take(&gpu, params.len()).unwrap();
+    assert_eq!(seen, cpu_seen);
+    for (i, (a, b)) in grad2d.iter().zip(&cpu_grad2d).enumerate() {
+        assert!((a - b).abs() <= 1e-4 * b.abs().max(1e-6), "{i}: {a} vs {b}");
+    }
+    assert!(cpu_grad2d[0] > 0.0 && cpu_grad2d[5] > 0.0);
 }

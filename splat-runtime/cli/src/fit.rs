@@ -68,6 +68,10 @@ pub struct FitArgs {
     /// with mcmc; 6000 on the built-in dataset].
     #[arg(long)]
     max_primitives: Option<usize>,
+    /// Adaptive density control without its opacity resets (huge primitives are still pruned
+    /// after step 3,000), as gsplat 1.5.3 trains: its reset test never passes.
+    #[arg(long)]
+    no_opacity_reset: bool,
     /// Measure the test views' PSNR and SSIM every this many steps (for the curve and
     /// metrics.csv; they are always measured before the first step and after the last);
     /// 0: only then.
@@ -207,6 +211,9 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
     if !(init_extent > 0.0 && init_extent.is_finite()) {
         bail!("--init-extent must be a positive number, not {init_extent}");
     }
+    if args.no_opacity_reset && !matches!(args.strategy, StrategyArg::Adc) {
+        bail!("--no-opacity-reset is for --strategy adc, the only one that resets opacities");
+    }
     if !(args.global_scale > 0.0 && args.global_scale.is_finite()) {
         bail!(
             "--global-scale must be a positive number, not {}",
@@ -240,6 +247,7 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
                 let d = DensifyOptions::default();
                 Some(Strategy::Adc(DensifyOptions {
                     max_primitives: max_primitives.unwrap_or(d.max_primitives),
+                    opacity_resets: !args.no_opacity_reset,
                     ..d
                 }))
             }

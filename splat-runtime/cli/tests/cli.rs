@@ -936,6 +936,14 @@ fn fit_refuses_a_missing_or_broken_dataset_by_name() {
             &out,
         );
     }
+    fails(
+        &splat(
+            &["fit", "good", "--strategy", "mcmc", "--no-opacity-reset"],
+            dir.path(),
+        ),
+        "--no-opacity-reset is for --strategy adc",
+        &out,
+    );
 }
 
 #[test]

@@ -18,6 +18,9 @@ use crate::types::{Camera, CameraModel};
 const TILES: &str = include_str!("shaders/tiles.wgsl");
 /// `fn finite`, for the shaders that test their inputs.
 pub const FINITE: &str = include_str!("shaders/finite.wgsl");
+/// `fn pixel_span`: the pixels a screen box covers, as the CPU's `TileGrid::rect` (needs
+/// [`FINITE`]).
+pub const PIXEL_SPAN: &str = include_str!("shaders/pixel_span.wgsl");
 const COUNT: &str = include_str!("shaders/count.wgsl");
 const EMIT: &str = include_str!("shaders/emit.wgsl");
 const TILE_PASS: &str = include_str!("shaders/tile_pass.wgsl");
@@ -133,7 +136,7 @@ pub fn tiles<M: SplatMethod>(emit: bool, use_cull: bool) -> Result<String, GpuEr
             ("ENTRY", entry.into()),
         ],
     );
-    Ok(format!("{wgsl}\n{FINITE}\n{body}"))
+    Ok(format!("{wgsl}\n{FINITE}\n{PIXEL_SPAN}\n{body}"))
 }
 
 /// Where the backward blend sums an entry's gradient over pixels before its global atomics.

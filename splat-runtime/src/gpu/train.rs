@@ -6,7 +6,7 @@
 //! and the state density control refines from every hundred steps).
 
 use super::device::{Grown, Kernel, dispatch};
-use super::entries::FINITE;
+use super::entries::{FINITE, PIXEL_SPAN};
 use super::{Gpu, GpuError};
 use crate::io::dataset::View;
 use crate::train::adam::{Faults, bias_corrections, remap_rows};
@@ -350,7 +350,7 @@ pub struct GpuObserver {
 impl GpuObserver {
     pub fn new(gpu: &Gpu) -> Result<GpuObserver, GpuError> {
         Ok(GpuObserver {
-            kernel: gpu.kernel(&format!("{FINITE}\n{OBSERVE}"), "observe")?,
+            kernel: gpu.kernel(&format!("{FINITE}\n{PIXEL_SPAN}\n{OBSERVE}"), "observe")?,
             grad2d: Grown::new(gpu, "screen-space gradient sums", 1)?,
             seen: Grown::new(gpu, "view counts", 1)?,
             info: gpu.uniform_buffer(8),

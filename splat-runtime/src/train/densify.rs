@@ -58,6 +58,10 @@ pub struct DensifyOptions {
     pub every: usize,
     /// Lower every opacity to `2 * prune_opacity` every `reset_every` steps (before `stop`).
     pub reset_every: usize,
+    /// Whether those resets happen (huge primitives are pruned after `reset_every` either
+    /// way). gsplat 1.5.3's never do: its test reads `step % reset_every == 0 & step > 0`,
+    /// and `&` binds before the comparisons.
+    pub opacity_resets: bool,
     pub prune_opacity: f32,
     /// Grow where the mean screen-space position gradient (in NDC units) passes this.
     pub grow_grad2d: f32,
@@ -76,6 +80,7 @@ impl Default for DensifyOptions {
             stop: 15_000,
             every: 100,
             reset_every: 3000,
+            opacity_resets: true,
             prune_opacity: 0.005,
             grow_grad2d: 0.0002,
             grow_scale3d: 0.01,
@@ -185,7 +190,7 @@ impl Densifier {
     /// Whether step `step` resets opacities.
     pub fn resets_at(&self, step: usize) -> bool {
         let o = &self.opts;
-        step > 0 && step < o.stop && step.is_multiple_of(o.reset_every.max(1))
+        o.opacity_resets && step > 0 && step < o.stop && step.is_multiple_of(o.reset_every.max(1))
     }
 
     /// Grows then prunes `params` from the statistics since the last refinement (then

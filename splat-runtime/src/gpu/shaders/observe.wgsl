@@ -1,5 +1,5 @@
 // Density control's statistics on the device (as `train::densify::Densifier::observe`): for
-// each primitive `project` saw, the norm of its screen-space position gradient in NDC units,
+// each primitive the image shows, the norm of its screen-space position gradient in NDC units,
 // recovered from the world-space one through the pinhole Jacobian (dL/du = z / f dL/dx_cam),
 // summed, and the number of views that saw it.
 
@@ -25,10 +25,20 @@ fn vec_at(a: u32) -> vec3<f32> {
 @compute @workgroup_size(256)
 fn observe(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let i = (wid.y * 65535u + wid.x) * 256u + lid;
-    if (i >= info.size.x || projected[i * info.size.y] == 0u) {
+    if (i >= info.size.x) {
         return;
     }
+    // Seen as the CPU's `pipeline::filter` sees it (and gsplat, whose radii are 0 off the
+    // image): marked visible, a finite depth, a box over at least one pixel centre.
     // Camera words: rotation by columns (0..9), translation, focal, principal, size.
+    let w = i * info.size.y;
+    let lo = vec2<f32>(bitcast<f32>(projected[w + 2u]), bitcast<f32>(projected[w + 3u]));
+    let hi = vec2<f32>(bitcast<f32>(projected[w + 4u]), bitcast<f32>(projected[w + 5u]));
+    let image = vec2<f32>(camera_words[16], camera_words[17]);
+    let on_image = spans_a_pixel(pixel_span(lo, hi, image));
+    if (projected[w] == 0u || !finite(bitcast<f32>(projected[w + 1u])) || !on_image) {
+        return;
+    }
     let r = mat3x3<f32>(vec_at(0u), vec_at(3u), vec_at(6u));
     let at = i * info.size.z + info.position.x;
     let p = vec3<f32>(params[at], params[at + 1u], params[at + 2u]);

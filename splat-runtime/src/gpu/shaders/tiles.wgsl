@@ -17,22 +17,17 @@ fn word(i: u32, k: u32) -> f32 {
 // The tiles holding a pixel centre inside primitive i's box, as (x0, y0, x1, y1) half-open;
 // x1 == x0 if none (the CPU's TileGrid::rect, operation for operation).
 fn tile_rect(i: u32) -> vec4<u32> {
-    let none = vec4<u32>(0u);
     if (projected[i * STRIDE] == 0u || !finite(word(i, 1u))) {
-        return none;
+        return vec4<u32>(0u);
     }
     let lo = vec2<f32>(word(i, 2u), word(i, 3u));
     let hi = vec2<f32>(word(i, 4u), word(i, 5u));
-    if (!(finite(lo.x) && finite(lo.y) && finite(hi.x) && finite(hi.y))) {
-        return none;
-    }
-    let first = max(ceil(lo - 0.5), vec2<f32>(0.0));
-    let last = min(floor(hi - 0.5), vec2<f32>(f32(frame[0].y) - 1.0, f32(frame[0].z) - 1.0));
-    if (first.x > last.x || first.y > last.y) {
-        return none;
+    let span = pixel_span(lo, hi, vec2<f32>(f32(frame[0].y), f32(frame[0].z)));
+    if (!spans_a_pixel(span)) {
+        return vec4<u32>(0u);
     }
     let size = frame[0].w;
-    return vec4<u32>(vec2<u32>(first) / size, vec2<u32>(last) / size + 1u);
+    return vec4<u32>(vec2<u32>(span.xy) / size, vec2<u32>(span.zw) / size + 1u);
 }
 
 // Visits the tiles of `rect` that tile_cull keeps; returns how many (emitting from `first`).
