@@ -31,7 +31,7 @@ pub mod train;
 
 pub use device::Gpu;
 pub use raster::HardwareRenderer;
-pub use resident::{GpuRenderError, GpuRenderer, GpuScene};
+pub use resident::{GpuRenderError, GpuRenderer, GpuScene, StageTimes};
 
 /// The tile sizes the GPU backend renders with: one invocation per pixel of a tile.
 pub const TILE_SIZES: [u32; 2] = [8, 16];

@@ -29,6 +29,7 @@ use crate::pipeline::{
 use crate::types::{Camera, CameraModel};
 use std::collections::HashMap;
 use std::marker::PhantomData;
+use std::time::Duration;
 
 #[derive(Debug, thiserror::Error)]
 pub enum GpuRenderError {
@@ -123,6 +124,18 @@ pub struct FrameInfo {
     pub primitives: usize,
     pub visible: usize,
     pub intersections: usize,
+}
+
+/// The last frame's stage times (GPU timestamps; zero on an adapter without them). The
+/// backward's are the last backward pass's.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct StageTimes {
+    pub preprocess: Duration,
+    /// Count, emit, sort, ranges and bins.
+    pub rasterize: Duration,
+    pub shade: Duration,
+    pub blend: Duration,
+    pub project: Duration,
 }
 
 /// Gradients, plus the number of global atomic adds the backward blend issued.
@@ -285,8 +298,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             dacc.push(px[channels + 1]);
         }
         let (alpha, depth) = crate::pipeline::alpha_and_depth(&grid, &self.opts, &t, &dacc);
-        let times = self.timer.read(self.gpu)?.unwrap_or_default();
-        let time = |s: u32| times.get(s as usize).copied().unwrap_or_default();
+        let times = self.stage_times()?;
         let stats = Stats {
             primitives: info.primitives,
             visible: info.visible,
@@ -297,9 +309,9 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
                 .max()
                 .unwrap_or(0) as usize,
             pairs: 0,
-            preprocess: time(PROJECT),
-            rasterize: time(COUNT) + time(SORT),
-            shade: time(SHADE),
+            preprocess: times.preprocess,
+            rasterize: times.rasterize,
+            shade: times.shade,
         };
         Ok(Frame {
             color: Image {
@@ -522,6 +534,20 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         &self.param_grads
     }
 
+    /// The last frame's stage times, read back alone (a few words; no image or gradient).
+    /// Waits for the GPU.
+    pub fn stage_times(&self) -> Result<StageTimes, GpuRenderError> {
+        let times = self.timer.read(self.gpu)?.unwrap_or_default();
+        let time = |s: u32| times.get(s as usize).copied().unwrap_or_default();
+        Ok(StageTimes {
+            preprocess: time(PROJECT),
+            rasterize: time(COUNT) + time(SORT),
+            shade: time(SHADE),
+            blend: time(BLEND),
+            project: time(ADJOINT),
+        })
+    }
+
     /// The last backward pass's gradients, read back.
     pub fn download_gradients(&self) -> Result<GpuGradients<M>, GpuRenderError> {
         let gpu = self.gpu;
@@ -556,16 +582,15 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             }
         }
         let cam: Vec<f32> = cam.into_iter().map(|c| c as f32).collect();
-        let times = self.timer.read(gpu)?.unwrap_or_default();
-        let time = |s: u32| times.get(s as usize).copied().unwrap_or_default();
+        let times = self.stage_times()?;
         Ok(GpuGradients {
             gradients: Gradients {
                 params,
                 camera: Camera::read_words(&cam),
                 stats: BackwardStats {
-                    blend: time(BLEND),
+                    blend: times.blend,
                     reduce: Default::default(),
-                    project: time(ADJOINT),
+                    project: times.project,
                 },
             },
             atomics: count[0] as u64 | (count[1] as u64) << 32,
