@@ -448,9 +448,16 @@ fn density_control_clones_splits_prunes_and_resets_as_3dgs_does() {
     let r = d.refine::<Method>(&mut params, 800, 1.0, &mut rng);
     assert_eq!((r.cloned, r.split, params.len()), (0, 0, 5));
 
+    // The reset moves the opacity alone: a rotation off the unit sphere and the log scales
+    // keep their words (and so their Adam moments).
+    params[0].rotation = Vec4::new(2.0, 0.3, 0.0, 0.0);
+    let before = params.clone();
     d.reset_opacity::<Method>(&mut params);
-    for p in &params {
+    for (p, b) in params.iter().zip(&before) {
         assert!((Method::shape(p).opacity - 0.01).abs() < 1e-6);
+        let (mut p, mut b) = (p.clone(), b.clone());
+        (p.opacity_logit, b.opacity_logit) = (0.0, 0.0);
+        assert_eq!(p, b);
     }
     assert!(d.refines_at(600) && !d.refines_at(500) && !d.refines_at(650));
     assert!(d.resets_at(3000) && !d.resets_at(0));

@@ -8,6 +8,7 @@
 //! have a position, an oriented scale and an opacity densifies without code of its own.
 
 use super::fit::Trainable;
+use crate::flat::Flat;
 use crate::types::Camera;
 use glam::{Quat, Vec3, Vec4};
 
@@ -255,16 +256,32 @@ impl Densifier {
     /// Lowers every opacity above `2 * prune_opacity` to it.
     pub fn reset_opacity<M: Trainable>(&self, params: &mut [M::Params]) {
         let ceiling = 2.0 * self.opts.prune_opacity;
+        let words = |p: &M::Params| {
+            let mut w = vec![0.0; M::Params::LEN];
+            p.write_words(&mut w);
+            w
+        };
         for p in params.iter_mut() {
             let shape = M::shape(p);
             if shape.opacity > ceiling {
-                *p = M::with_shape(
+                // Only the words the opacity moves change: the round trip through `Shape` also
+                // normalizes the rotation and rounds the scales, and the training loop forgets
+                // the Adam moments of every word that changed (gsplat resets opacities alone).
+                let same = words(&M::with_shape(p, &shape));
+                let lowered = M::with_shape(
                     p,
                     &Shape {
                         opacity: ceiling,
                         ..shape
                     },
                 );
+                let mut out = words(p);
+                for ((o, l), s) in out.iter_mut().zip(words(&lowered)).zip(same) {
+                    if l.to_bits() != s.to_bits() {
+                        *o = l;
+                    }
+                }
+                *p = M::Params::read_words(&out);
             }
         }
     }
