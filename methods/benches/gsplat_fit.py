@@ -8,7 +8,7 @@ data instead, as gsplat's simple_trainer and `splat fit` both do: the scene scal
 the cameras' largest distance from their centre, and the random start is POINTS points in a
 cube of half-side INIT_EXTENT times that scale around the cameras' centre, random colors,
 opacity 0.1, each sized by the RMS distance to its 3 nearest neighbours. Prints the time per
-step (training loop only) and the test PSNR and SSIM before and after (mean over views, the
+step (the training loop, with the evaluations every EVAL_EVERY steps when asked) and the test PSNR and SSIM before and after (mean over views, the
 render clamped to [0, 1]), as `splat fit` reports them.
 """
 import json, math, sys, time

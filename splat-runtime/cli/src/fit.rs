@@ -42,14 +42,15 @@ pub struct FitArgs {
     #[arg(long)]
     points: Option<usize>,
     /// The random points' cube: its half-side in units of the scene's extent (the cameras'
-    /// largest distance from their centre, times 1.1), as gsplat's `init_extent` [default: 3;
+    /// largest distance from their centre, times 1.1 and --global-scale), as gsplat's
+    /// `init_extent` [default: 3;
     /// 0.5 on the built-in dataset].
     #[arg(long)]
     init_extent: Option<f32>,
     /// Multiplies the scene's extent, as gsplat's `global_scale`: the position learning rate,
     /// density control's size thresholds and the random points' cube scale with it. Objects
-    /// that fill little of the cameras' sphere train better with less than 1 (pass the same
-    /// value when resuming).
+    /// that fill little of the cameras' sphere train better with less than 1 (a resumed run
+    /// must pass the same value).
     #[arg(long, default_value_t = 1.0)]
     global_scale: f32,
     /// Composite the images on white instead of black.
@@ -110,7 +111,7 @@ pub struct FitArgs {
 enum StrategyArg {
     /// 3DGS's adaptive density control (gsplat's DefaultStrategy): clone and split where the
     /// screen-space position gradient is large, prune faint and huge primitives, reset
-    /// opacities every 3,000 steps.
+    /// opacities every 3,000 steps (not with --no-opacity-reset).
     Adc,
     /// MCMC (gsplat's MCMCStrategy): move faint primitives onto opaque ones, add 5% every 100
     /// steps up to --max-primitives, stir faint ones with noise; starts the primitives at

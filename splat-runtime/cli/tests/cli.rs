@@ -861,10 +861,21 @@ fn fit_resumes_from_its_checkpoint() {
         &["--strategy", "mcmc"],
         "out/checkpoint.bin is a checkpoint of a run with --strategy adc, not mcmc",
     );
-    std::fs::write(out.join("checkpoint.bin"), "SPLATCK2 and then nothing").unwrap();
+    refused(
+        &["--no-opacity-reset"],
+        "a run with --strategy adc, not adc without opacity resets",
+    );
+    refused(&["--global-scale", "0.5"], "a run with scene extent");
+    std::fs::write(out.join("checkpoint.bin"), "SPLATCK3 and then nothing").unwrap();
     refused(&[], "out/checkpoint.bin is damaged");
-    std::fs::write(out.join("checkpoint.bin"), "SPLATCK1 and then nothing").unwrap();
-    refused(&[], "out/checkpoint.bin was written by an earlier splat");
+    for older in ["SPLATCK1", "SPLATCK2"] {
+        std::fs::write(
+            out.join("checkpoint.bin"),
+            format!("{older} and then nothing"),
+        )
+        .unwrap();
+        refused(&[], "out/checkpoint.bin was written by an earlier splat");
+    }
     std::fs::write(out.join("checkpoint.bin"), "ply").unwrap();
     refused(&[], "out/checkpoint.bin is not a splat checkpoint");
     assert_eq!(

@@ -2,7 +2,7 @@
 //! the primitives, Adam's moments, density control's statistics, the random generator), and
 //! their file format.
 //!
-//! The file is little-endian: the magic `SPLATCK2`, then `u64` counts and fields (see
+//! The file is little-endian: the magic `SPLATCK3`, then `u64` counts and fields (see
 //! [`Checkpoint::write_to`]), then the arrays. Every count is checked against the file's
 //! length before anything is allocated, so a damaged file is refused by name, never trusted.
 
@@ -11,9 +11,10 @@ use crate::method::SplatMethod;
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 
-const MAGIC: &[u8; 8] = b"SPLATCK2";
-/// The first format, without the strategy: refused with a word on why.
-const OLDER: &[&[u8; 8]] = &[b"SPLATCK1"];
+const MAGIC: &[u8; 8] = b"SPLATCK3";
+/// Earlier formats (the first without the strategy, the second without the scene's extent):
+/// refused with a word on why.
+const OLDER: &[&[u8; 8]] = &[b"SPLATCK1", b"SPLATCK2"];
 
 /// Adam's state: its step count and both moments, one per parameter word.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -44,6 +45,9 @@ pub struct Checkpoint {
     pub seen: Vec<u32>,
     /// The random generator's state.
     pub rng: u64,
+    /// The scene's extent the run trains with (position rates and density control's sizes
+    /// scale with it), set by the loop as the strategy is.
+    pub extent: f32,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -53,7 +57,7 @@ pub enum CheckpointError {
         path: PathBuf,
         error: std::io::Error,
     },
-    #[error("{path} is not a splat checkpoint (it does not start with SPLATCK2)")]
+    #[error("{path} is not a splat checkpoint (it does not start with SPLATCK3)")]
     Magic { path: PathBuf },
     #[error(
         "{path} was written by an earlier splat (format {format}), which this one cannot resume: start the run again"
@@ -81,6 +85,7 @@ impl Checkpoint {
             grad2d: vec![],
             seen: vec![],
             rng: seed,
+            extent: 0.0,
         }
     }
 
@@ -103,7 +108,7 @@ impl Checkpoint {
     }
 
     /// The header (magic, method name, strategy name, then words, step, steps, primitives, Adam's step,
-    /// statistics count, generator state as `u64`), then the parameters, both moments and the
+    /// statistics count, generator state, the extent's bits as `u64`), then the parameters, both moments and the
     /// statistics.
     pub fn write_to(&self, w: &mut dyn Write) -> std::io::Result<()> {
         w.write_all(MAGIC)?;
@@ -119,6 +124,7 @@ impl Checkpoint {
             self.adam.step,
             self.grad2d.len() as u64,
             self.rng,
+            self.extent.to_bits() as u64,
         ] {
             w.write_all(&n.to_le_bytes())?;
         }
@@ -176,6 +182,9 @@ impl Checkpoint {
         let adam_step = r.u64("Adam's step")?;
         let stats = r.count("statistics")?;
         let rng = r.u64("generator")?;
+        let extent = u32::try_from(r.u64("extent")?)
+            .map(f32::from_bits)
+            .map_err(|_| damaged("the extent is not an f32".into()))?;
         if step > steps {
             return Err(damaged(format!(
                 "step {step} is past the run's {steps} steps"
@@ -219,6 +228,7 @@ impl Checkpoint {
             grad2d,
             seen,
             rng,
+            extent,
         })
     }
 }
@@ -294,6 +304,7 @@ mod tests {
             grad2d: vec![0.5, 0.25],
             seen: vec![3, 7],
             rng: u64::MAX - 3,
+            extent: 4.5,
         }
     }
 

@@ -57,7 +57,8 @@ pub struct DensifyOptions {
     pub start: usize,
     pub stop: usize,
     pub every: usize,
-    /// Lower every opacity to `2 * prune_opacity` every `reset_every` steps (before `stop`).
+    /// Lower every opacity to `2 * prune_opacity` every `reset_every` steps (before `stop`);
+    /// huge primitives are pruned from the first of those steps on.
     pub reset_every: usize,
     /// Whether those resets happen (huge primitives are pruned after `reset_every` either
     /// way). gsplat 1.5.3's never do: its test reads `step % reset_every == 0 & step > 0`,
@@ -68,7 +69,7 @@ pub struct DensifyOptions {
     pub grow_grad2d: f32,
     /// Clone up to this largest scale (times the extent), split above it.
     pub grow_scale3d: f32,
-    /// After the first reset, prune above this largest scale (times the extent).
+    /// After step `reset_every`, prune above this largest scale (times the extent).
     pub prune_scale3d: f32,
     /// No growth past this many primitives.
     pub max_primitives: usize,
@@ -237,7 +238,8 @@ impl Densifier {
                 }
             }
         }
-        // Huge primitives go only once an opacity reset has given them a chance to fade.
+        // Huge primitives go only after the first reset step (once a reset, if resets are on,
+        // has given them a chance to fade).
         let huge = (step > o.reset_every).then_some(o.prune_scale3d * extent);
         let before = grown.len();
         grown.retain(|(p, _)| {

@@ -133,6 +133,7 @@ impl Strategy {
     /// The strategy's name, as the command line spells it (`fixed` for none).
     pub fn name(strategy: Option<&Strategy>) -> &'static str {
         match strategy {
+            Some(Strategy::Adc(d)) if !d.opacity_resets => "adc without opacity resets",
             Some(Strategy::Adc(_)) => "adc",
             Some(Strategy::Mcmc(_)) => "mcmc",
             None => "fixed",
@@ -314,7 +315,7 @@ pub fn fit_from<M: Trainable>(
     mut progress: impl FnMut(&StepReport),
 ) -> Result<(), FitError> {
     let rates = rates_for::<M>(data, extent, opts)?;
-    adopt::<M>(state, opts)?;
+    adopt::<M>(state, extent, opts)?;
     let words = M::Params::LEN;
     let mut params = state.params::<M>();
     let mut flat = state.params.clone();
@@ -419,9 +420,11 @@ pub fn fit_from<M: Trainable>(
 }
 
 /// Makes `state` this run's: refuses a state of another method, run length or (once
-/// started) strategy, or with a non-finite parameter, and records the strategy.
+/// started) strategy or scene extent, or with a non-finite parameter, and records the
+/// strategy and the extent.
 pub(crate) fn adopt<M: Trainable>(
     state: &mut Checkpoint,
+    extent: f32,
     opts: &FitOptions,
 ) -> Result<(), FitError> {
     if state.method != M::NAME || state.words != M::Params::LEN {
@@ -446,6 +449,12 @@ pub(crate) fn adopt<M: Trainable>(
             state.strategy
         )));
     }
+    if state.step > 0 && state.extent.to_bits() != extent.to_bits() {
+        return Err(FitError::Unsupported(format!(
+            "the checkpoint is of a run with scene extent {}, not {extent} (the cameras' spread times --global-scale: the position rates and density control's sizes follow it)",
+            state.extent
+        )));
+    }
     if let Some(k) = state.params.iter().position(|x| !x.is_finite()) {
         return Err(FitError::Unsupported(format!(
             "the scene to train is not finite: {} is {}",
@@ -454,6 +463,7 @@ pub(crate) fn adopt<M: Trainable>(
         )));
     }
     state.strategy = strategy.to_string();
+    state.extent = extent;
     Ok(())
 }
 

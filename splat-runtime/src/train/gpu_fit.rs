@@ -63,7 +63,7 @@ pub fn fit_gpu_from<M: Trainable>(
     mut progress: impl FnMut(&StepReport),
 ) -> Result<(), FitError> {
     let rates = rates_for::<M>(data, extent, opts)?;
-    adopt::<M>(state, opts)?;
+    adopt::<M>(state, extent, opts)?;
     let words = M::Params::LEN;
     let position = position_word::<M>().ok_or_else(|| {
         FitError::Unsupported(format!(

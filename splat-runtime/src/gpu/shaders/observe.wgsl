@@ -47,7 +47,7 @@ fn observe(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_inde
     let gc = r * g;
     let z = max(x.z, 1e-6);
     let focal = vec2<f32>(camera_words[12], camera_words[13]);
-    let half = vec2<f32>(camera_words[16], camera_words[17]) * 0.5;
+    let half = image * 0.5;
     let d = gc.xy * z / focal * half;
     let norm = length(d);
     // A gradient Adam skips (not finite) does not count either.
