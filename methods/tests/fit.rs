@@ -455,7 +455,7 @@ fn density_control_clones_splits_prunes_and_resets_as_3dgs_does() {
     d.reset_opacity::<Method>(&mut params);
     for (p, b) in params.iter().zip(&before) {
         assert!((Method::shape(p).opacity - 0.01).abs() < 1e-6);
-        let (mut p, mut b) = (p.clone(), b.clone());
+        let (mut p, mut b) = (*p, *b);
         (p.opacity_logit, b.opacity_logit) = (0.0, 0.0);
         assert_eq!(p, b);
     }
