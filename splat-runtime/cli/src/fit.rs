@@ -43,8 +43,7 @@ pub struct FitArgs {
     points: Option<usize>,
     /// The random points' cube: its half-side in units of the scene's extent (the cameras'
     /// largest distance from their centre, times 1.1 and --global-scale), as gsplat's
-    /// `init_extent` [default: 3;
-    /// 0.5 on the built-in dataset].
+    /// `init_extent` [default: 3; 0.5 on the built-in dataset].
     #[arg(long)]
     init_extent: Option<f32>,
     /// Multiplies the scene's extent, as gsplat's `global_scale`: the position learning rate,

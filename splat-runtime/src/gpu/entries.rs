@@ -18,8 +18,8 @@ use crate::types::{Camera, CameraModel};
 const TILES: &str = include_str!("shaders/tiles.wgsl");
 /// `fn finite`, for the shaders that test their inputs.
 pub const FINITE: &str = include_str!("shaders/finite.wgsl");
-/// `fn pixel_span`: the pixels a screen box covers, as the CPU's `TileGrid::rect` (needs
-/// [`FINITE`]).
+/// `fn pixel_span`: the pixels a projected primitive covers, as the CPU's `pipeline::filter`
+/// and `TileGrid::rect` (needs [`FINITE`]).
 pub const PIXEL_SPAN: &str = include_str!("shaders/pixel_span.wgsl");
 const COUNT: &str = include_str!("shaders/count.wgsl");
 const EMIT: &str = include_str!("shaders/emit.wgsl");

@@ -359,8 +359,8 @@ impl GpuObserver {
 
     /// Records the statistics of one frame: `projected` (`stride` words per primitive:
     /// visible, depth, box; counted where `project` saw it and its box covers a pixel), the
-    /// parameters (`words` per primitive, the
-    /// position at `position`) and their gradients (the same layout), the frame's camera.
+    /// parameters (`words` per primitive, the position at `position`) and their gradients
+    /// (the same layout), the frame's camera.
     #[allow(clippy::too_many_arguments)]
     pub fn record(
         &mut self,

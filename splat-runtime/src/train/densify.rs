@@ -7,7 +7,7 @@
 //! It reads a method's primitives through [`Trainable::shape`], so any method whose primitives
 //! have a position, an oriented scale and an opacity densifies without code of its own.
 
-use super::fit::Trainable;
+use super::fit::{Trainable, flatten};
 use crate::flat::Flat;
 use crate::types::Camera;
 use glam::{Quat, Vec3, Vec4};
@@ -258,11 +258,7 @@ impl Densifier {
     /// Lowers every opacity above `2 * prune_opacity` to it.
     pub fn reset_opacity<M: Trainable>(&self, params: &mut [M::Params]) {
         let ceiling = 2.0 * self.opts.prune_opacity;
-        let words = |p: &M::Params| {
-            let mut w = vec![0.0; M::Params::LEN];
-            p.write_words(&mut w);
-            w
-        };
+        let words = |p: &M::Params| flatten::<M>(std::slice::from_ref(p));
         for p in params.iter_mut() {
             let shape = M::shape(p);
             if shape.opacity > ceiling {

@@ -32,11 +32,11 @@ fn observe(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_inde
     // image): marked visible, a finite depth, a box over at least one pixel centre.
     // Camera words: rotation by columns (0..9), translation, focal, principal, size.
     let w = i * info.size.y;
+    let depth = bitcast<f32>(projected[w + 1u]);
     let lo = vec2<f32>(bitcast<f32>(projected[w + 2u]), bitcast<f32>(projected[w + 3u]));
     let hi = vec2<f32>(bitcast<f32>(projected[w + 4u]), bitcast<f32>(projected[w + 5u]));
     let image = vec2<f32>(camera_words[16], camera_words[17]);
-    let on_image = spans_a_pixel(pixel_span(lo, hi, image));
-    if (projected[w] == 0u || !finite(bitcast<f32>(projected[w + 1u])) || !on_image) {
+    if (!spans_a_pixel(pixel_span(projected[w], depth, lo, hi, image))) {
         return;
     }
     let r = mat3x3<f32>(vec_at(0u), vec_at(3u), vec_at(6u));

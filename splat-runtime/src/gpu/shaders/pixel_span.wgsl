@@ -1,8 +1,10 @@
-// The first and last pixel (column, row) whose centre lies inside the box (lo, hi) on an image
-// of `size` pixels, as (first, last); none when last < first on either axis. Operation for
-// operation the CPU's TileGrid::rect (which then takes tiles). Needs `fn finite`.
-fn pixel_span(lo: vec2<f32>, hi: vec2<f32>, size: vec2<f32>) -> vec4<f32> {
-    if (!(finite(lo.x) && finite(lo.y) && finite(hi.x) && finite(hi.y))) {
+// The first and last pixel (column, row) whose centre lies inside a primitive's box (lo, hi)
+// on an image of `size` pixels, as (first, last); none (last < first) when `project` did not
+// mark it `visible`, its depth or box is not finite, or the box covers no pixel centre.
+// Operation for operation the CPU's `pipeline::filter` with TileGrid::rect. Needs `fn finite`.
+fn pixel_span(visible: u32, depth: f32, lo: vec2<f32>, hi: vec2<f32>, size: vec2<f32>) -> vec4<f32> {
+    let finite_box = finite(lo.x) && finite(lo.y) && finite(hi.x) && finite(hi.y);
+    if (visible == 0u || !finite(depth) || !finite_box) {
         return vec4<f32>(0.0, 0.0, -1.0, -1.0);
     }
     let first = max(ceil(lo - 0.5), vec2<f32>(0.0));

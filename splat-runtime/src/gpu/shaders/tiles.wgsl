@@ -17,17 +17,15 @@ fn word(i: u32, k: u32) -> f32 {
 // The tiles holding a pixel centre inside primitive i's box, as (x0, y0, x1, y1) half-open;
 // x1 == x0 if none (the CPU's TileGrid::rect, operation for operation).
 fn tile_rect(i: u32) -> vec4<u32> {
-    if (projected[i * STRIDE] == 0u || !finite(word(i, 1u))) {
-        return vec4<u32>(0u);
-    }
     let lo = vec2<f32>(word(i, 2u), word(i, 3u));
     let hi = vec2<f32>(word(i, 4u), word(i, 5u));
-    let span = pixel_span(lo, hi, vec2<f32>(f32(frame[0].y), f32(frame[0].z)));
+    let size = vec2<f32>(f32(frame[0].y), f32(frame[0].z));
+    let span = pixel_span(projected[i * STRIDE], word(i, 1u), lo, hi, size);
     if (!spans_a_pixel(span)) {
         return vec4<u32>(0u);
     }
-    let size = frame[0].w;
-    return vec4<u32>(vec2<u32>(span.xy) / size, vec2<u32>(span.zw) / size + 1u);
+    let tile = frame[0].w;
+    return vec4<u32>(vec2<u32>(span.xy) / tile, vec2<u32>(span.zw) / tile + 1u);
 }
 
 // Visits the tiles of `rect` that tile_cull keeps; returns how many (emitting from `first`).
