@@ -221,6 +221,10 @@ macro_rules! gaussians_3d {
             fn position_gradient(g: &$name::Params) -> splat_runtime::glam::Vec3 {
                 g.mean
             }
+
+            fn screen_gradient(g: &$name::Shade) -> Option<splat_runtime::glam::Vec2> {
+                Some(g.center)
+            }
         }
     };
 }

@@ -65,9 +65,11 @@ stored_as_is!(
 
 /// 3DGUT, 3DGEER and LinPrim train like 3DGS (their parameters are the same Gaussian's, or
 /// for LinPrim's octahedra the Gaussian they are stored as): the same learning rates and
-/// initialization, and density control sees the stored Gaussian's shape.
+/// initialization, and density control sees the stored Gaussian's shape. `screen: |g| ...`
+/// reads where the primitive lands on the image from a shade gradient, for a method whose
+/// shade data holds it (the ray-based methods' does not).
 macro_rules! trained_like_3dgs {
-    ($($m:ident),*) => {$(
+    ($m:ident $(, screen: |$g:ident| $screen:expr)?) => {
         impl splat_runtime::train::Trainable for $m::Method {
             fn learning_rates(extent: f32) -> Vec<splat_runtime::train::Rate> {
                 <gs3d::Method as splat_runtime::train::Trainable>::learning_rates(extent)
@@ -94,11 +96,17 @@ macro_rules! trained_like_3dgs {
             fn position_gradient(g: &$m::Params) -> splat_runtime::glam::Vec3 {
                 g.mean
             }
+
+            $(fn screen_gradient($g: &$m::Shade) -> Option<splat_runtime::glam::Vec2> {
+                Some($screen)
+            })?
         }
-    )*};
+    };
 }
 
-trained_like_3dgs!(gut, geer, linprim);
+trained_like_3dgs!(gut);
+trained_like_3dgs!(geer);
+trained_like_3dgs!(linprim, screen: |g| g.slabs.center);
 
 /// The 3DGS primitive with the same stored fields.
 fn as_3dgs(p: &impl ToStored) -> gs3d::Params {

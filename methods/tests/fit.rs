@@ -393,7 +393,6 @@ fn three_dgs_fits_a_nerfstudio_fisheye_dataset() {
 #[test]
 fn density_control_clones_splits_prunes_and_resets_as_3dgs_does() {
     use splat_runtime::train::densify::Densifier;
-    let cam = common::camera(SIZE, SIZE);
     let at = |x: f32, scale: f32, opacity: f32| {
         let mut p = Method::from_point(Vec3::new(x, 0.0, 2.0), Vec3::splat(0.5), scale);
         p.opacity_logit = (opacity / (1.0 - opacity)).ln();
@@ -406,15 +405,10 @@ fn density_control_clones_splits_prunes_and_resets_as_3dgs_does() {
         at(0.1, 0.005, 0.001), // faint, quiet: pruned
         at(0.2, 0.005, 0.5),   // quiet: kept
     ];
-    // A pull along x of 0.01 per unit of position: on screen (z = 2, f = 40, NDC half-width
-    // 20), 0.01 * 2 / 40 * 20 = 0.01, far above the threshold of 0.0002.
-    let pull = |x: f32| Params {
-        mean: Vec3::new(x, 0.0, 0.0),
-        ..Method::from_point(Vec3::ZERO, Vec3::ZERO, 1.0)
-    };
-    let grads = [pull(0.01), pull(0.01), pull(1e-6), pull(1e-6)];
+    // Screen-space pulls (NDC units) far above and far below the threshold of 0.0002.
+    let (strong, weak) = (Vec2::new(0.01, 0.0), Vec2::new(1e-6, 0.0));
     let mut d = Densifier::new(DensifyOptions::default(), params.len());
-    d.observe::<Method>(&params, &grads, 0..4, &cam);
+    d.observe([(0, strong), (1, strong), (2, weak), (3, weak)]);
     let mut rng = fastrand::Rng::with_seed(5);
     let parent = Method::shape(&params[1]);
     let r = d.refine::<Method>(&mut params, 600, 1.0, &mut rng);
@@ -443,8 +437,7 @@ fn density_control_clones_splits_prunes_and_resets_as_3dgs_does() {
         ..Default::default()
     };
     let mut d = Densifier::new(capped, params.len());
-    let grads = vec![pull(0.01); params.len()];
-    d.observe::<Method>(&params, &grads, 0..params.len(), &cam);
+    d.observe((0..params.len()).map(|i| (i, strong)));
     let r = d.refine::<Method>(&mut params, 800, 1.0, &mut rng);
     assert_eq!((r.cloned, r.split, params.len()), (0, 0, 5));
 
@@ -1048,20 +1041,39 @@ fn the_gpu_loop_resumes_from_its_checkpoint() {
 /// Gaussian in front of the camera whose box misses the image is not seen (gsplat's radii are
 /// 0 there), nor is one behind the camera; those on the image are, with the same
 /// screen-space gradient. Before, the device counted every one `project` kept, so off-image
-/// views diluted the mean gradient and fewer primitives grew than on the CPU.
+/// views diluted the mean gradient and fewer primitives grew than on the CPU. 3DGS reads the
+/// gradient of its projected centre, as gsplat does; 3DGUT, whose shade data holds no screen
+/// position, pulls its position gradient back through the pinhole Jacobian.
 #[test]
 fn device_statistics_count_what_the_image_shows_as_the_cpu_does() {
+    use splat_runtime::gpu::train::ScreenSource;
+    device_statistics_match_the_cpu::<Method>(ScreenSource::Shade { slot: 0 });
+    device_statistics_match_the_cpu::<splat_methods::gut::Method>(ScreenSource::Position {
+        word: 0,
+    });
+}
+
+fn device_statistics_match_the_cpu<M: Trainable>(source: splat_runtime::gpu::train::ScreenSource)
+where
+    M::Params: splat_methods::FromStored,
+{
+    use splat_methods::{FromStored, ToStored};
     use splat_runtime::gpu::entries::Accumulation;
     use splat_runtime::gpu::train::GpuObserver;
     use splat_runtime::gpu::{GpuRenderer, GpuScene};
-    use splat_runtime::train::densify::Densifier;
+    use splat_runtime::train::densify::{Densifier, screen_gradient};
+    use splat_runtime::train::gpu_fit::screen_source;
     use splat_runtime::{Flat, FrameGrad, backward, render_for_backward};
     let Some(gpu) = splat_runtime::gpu::adapter_or_skip() else {
         return;
     };
+    assert_eq!(screen_source::<M>(), Some(source), "{}", M::NAME);
     let cam = common::camera(SIZE, SIZE);
     let mut rng = fastrand::Rng::with_seed(8);
-    let mut at = |x: f32, y: f32, z: f32| gaussian_at(&mut rng, &cam, Vec2::new(x, y), z, -3.0);
+    let mut at = |x: f32, y: f32, z: f32| {
+        let g = gaussian_at(&mut rng, &cam, Vec2::new(x, y), z, -3.0);
+        M::Params::from_stored(&g.to_stored())
+    };
     let params = vec![
         at(10.0, 12.0, 2.0),
         at(30.0, 25.0, 3.0),
@@ -1078,44 +1090,48 @@ fn device_statistics_count_what_the_image_shows_as_the_cpu_does() {
         depth: None,
     };
 
-    let (_, state) = render_for_backward::<Method>(&params, &cam, &opts).unwrap();
-    let g = backward::<Method>(&state, &params, &cam, &grad).unwrap();
+    let (_, state) = render_for_backward::<M>(&params, &cam, &opts).unwrap();
+    let g = backward::<M>(&state, &params, &cam, &grad).unwrap();
     let mut cpu = Densifier::new(DensifyOptions::default(), params.len());
-    let visible = state.pre.visible.iter().map(|(i, _)| *i as usize);
-    cpu.observe::<Method>(&params, &g.params, visible, &cam);
+    let words = <M::Shade as Flat>::LEN;
+    cpu.observe(state.pre.visible.iter().map(|&(i, _)| {
+        let i = i as usize;
+        let shade = &g.shade[i * words..(i + 1) * words];
+        (
+            i,
+            screen_gradient::<M>(&params[i], &g.params[i], shade, &cam),
+        )
+    }));
     let (cpu_grad2d, cpu_seen) = cpu.statistics();
     assert_eq!(
         cpu_seen,
         [1, 1, 0, 0, 0, 1],
-        "the CPU sees what the image shows"
+        "{}: the CPU sees what the image shows",
+        M::NAME
     );
 
-    let scene = GpuScene::<Method>::new(&gpu, &params).unwrap();
-    let mut renderer = GpuRenderer::<Method>::new(&gpu, &opts).unwrap();
+    let scene = GpuScene::<M>::new(&gpu, &params).unwrap();
+    let mut renderer = GpuRenderer::<M>::new(&gpu, &opts).unwrap();
     renderer.forward(&scene, &cam).unwrap();
     renderer
         .backward(&scene, &grad, Accumulation::default_for(&gpu))
         .unwrap();
     let mut observer = GpuObserver::new(&gpu).unwrap();
-    let (projected, stride) = renderer.projected();
-    let frame = [
-        projected,
-        scene.buffer(),
-        renderer.param_gradients(),
-        renderer.camera_buffer(),
-    ];
     let mut enc = gpu.device.create_command_encoder(&Default::default());
-    // 3DGS's position is its first three words.
     observer
-        .record(&gpu, &mut enc, frame, params.len(), stride, Params::LEN, 0)
+        .record(&gpu, &mut enc, &renderer, &scene, source)
         .unwrap();
     gpu.queue.submit([enc.finish()]);
     let (grad2d, seen) = observer.take(&gpu, params.len()).unwrap();
-    assert_eq!(seen, cpu_seen);
+    assert_eq!(seen, cpu_seen, "{}", M::NAME);
     // Within gpu_parity's bound for gradients summed by atomics: 1e-3 of the largest.
     let largest = cpu_grad2d.iter().fold(0.0f32, |m, g| m.max(*g));
     for (i, (a, b)) in grad2d.iter().zip(&cpu_grad2d).enumerate() {
-        assert!((a - b).abs() <= 1e-3 * largest, "{i}: {a} vs {b}");
+        assert!(
+            (a - b).abs() <= 1e-3 * largest,
+            "{} {i}: {a} vs {b}",
+            M::NAME
+        );
     }
     assert!(cpu_grad2d[0] > 0.0 && cpu_grad2d[5] > 0.0);
 }

@@ -3,7 +3,7 @@
 //! of invalid pairs, and the GPU backward against the CPU's.
 
 use super::adjoint::{self, ReferenceGrad};
-use super::reference::render_words;
+use super::reference::{render_words, render_words_edited};
 use super::{camera_words, channels, frame_grad, group_error, options, weights, words};
 use crate::flat::Flat;
 use crate::method::{GradientSet, SplatMethod};
@@ -57,6 +57,7 @@ pub fn gradients_match_finite_differences<M: SplatMethod>(
         println!("{label} {name}: max error {err:.2e} of the largest gradient");
         assert!(err <= tol, "{label} {name}: {got:?} vs {want:?}");
     }
+    shade_gradient_matches_finite_differences::<M>(label, &ws, cam, &w, &g.shade, tol);
     let cam_grad = camera_words(&g.camera);
     for (name, range) in camera_groups {
         let got: Vec<f64> = range.clone().map(|k| cam_grad[k]).collect();
@@ -75,6 +76,47 @@ pub fn gradients_match_finite_differences<M: SplatMethod>(
         println!("{label} camera {name}: max error {err:.2e} of the largest gradient");
         assert!(err <= tol, "{label} camera {name}: {got:?} vs {want:?}");
     }
+}
+
+/// The gradient of the shade data (`project`'s output that the blend reads, and where density
+/// control reads the screen position) against central differences of the reference with that
+/// word moved after `project`, for methods whose shade words are all floats.
+fn shade_gradient_matches_finite_differences<M: SplatMethod>(
+    label: &str,
+    params: &[Vec<f64>],
+    cam: &Camera,
+    weights: &[Vec<f64>; 3],
+    got: &[f32],
+    tol: f64,
+) {
+    let words = <M::Shade as Flat>::LEN;
+    if M::ShadeLanes::default().as_ref().len() != words {
+        return;
+    }
+    let cw = camera_words(cam);
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let want: Vec<f64> = (0..params.len() * words)
+        .map(|at| {
+            let f = |delta: f64| {
+                let edit = |i: usize, shade: &mut [f64]| {
+                    if i == at / words {
+                        shade[at % words] += delta;
+                    }
+                };
+                let r = render_words_edited::<M>(params, &cw, cam.model, edit);
+                dot(&r.color, &weights[0]) + dot(&r.alpha, &weights[1]) + dot(&r.depth, &weights[2])
+            };
+            // A step far below the parameters' (1e-5): the blend is only piecewise smooth in
+            // the shade data (LinPrim's chord is a min / max over slab ends, whose kinks pass
+            // within 1e-5 of a row of its inverse Jacobian), and the sums are f64.
+            let h = 1e-7;
+            (f(h) - f(-h)) / (2.0 * h)
+        })
+        .collect();
+    let got: Vec<f64> = got.iter().map(|g| *g as f64).collect();
+    let err = group_error(&got, &want);
+    println!("{label} shade data: max error {err:.2e} of the largest gradient");
+    assert!(err <= tol, "{label} shade data: {got:?} vs {want:?}");
 }
 
 /// Backward-pass gradients of a random linear loss on color, alpha and depth (tiles 8 and 16)

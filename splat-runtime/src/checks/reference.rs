@@ -30,7 +30,13 @@ pub fn render_with<M: SplatMethod>(
     blend: Blend,
 ) -> Reference {
     let words: Vec<Vec<f64>> = params.iter().map(words).collect();
-    render_words_with::<M>(&words, &camera_words(camera), camera.model, blend)
+    render_words_with::<M>(
+        &words,
+        &camera_words(camera),
+        camera.model,
+        blend,
+        |_, _| {},
+    )
 }
 
 /// Renders parameters given as f64 words (`M::Params`' words per primitive) through a camera
@@ -41,7 +47,18 @@ pub fn render_words<M: SplatMethod>(
     camera: &[f64],
     model: CameraModel,
 ) -> Reference {
-    render_words_with::<M>(params, camera, model, Blend::default())
+    render_words_with::<M>(params, camera, model, Blend::default(), |_, _| {})
+}
+
+/// [`render_words`] with `edit(i, shade)` applied to primitive `i`'s shade words after
+/// `project`: the form finite differences of the shade data's gradient perturb.
+pub fn render_words_edited<M: SplatMethod>(
+    params: &[Vec<f64>],
+    camera: &[f64],
+    model: CameraModel,
+    edit: impl Fn(usize, &mut [f64]),
+) -> Reference {
+    render_words_with::<M>(params, camera, model, Blend::default(), edit)
 }
 
 fn render_words_with<M: SplatMethod>(
@@ -49,6 +66,7 @@ fn render_words_with<M: SplatMethod>(
     camera: &[f64],
     model: CameraModel,
     blend: Blend,
+    edit: impl Fn(usize, &mut [f64]),
 ) -> Reference {
     // The thresholds are f32 in the renderer: compare with the same values.
     let (t_min, alpha_min) = (blend.t_min as f64, blend.alpha_min as f64);
@@ -63,7 +81,9 @@ fn render_words_with<M: SplatMethod>(
         if b[0] == 0 || !f[0].is_finite() {
             continue;
         }
-        prims.push((f[0], i, f[5 + cull_words..].to_vec()));
+        let mut shade = f[5 + cull_words..].to_vec();
+        edit(i, &mut shade);
+        prims.push((f[0], i, shade));
     }
     prims.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
     let mut out = Reference {

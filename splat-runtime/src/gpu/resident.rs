@@ -534,6 +534,13 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         &self.param_grads
     }
 
+    /// The gradient of each primitive's shade data on the device, [`Layout::grad_words`] per
+    /// primitive (`M::Shade`'s float slots, then the depth's), as the last backward blend
+    /// left it.
+    pub fn shade_gradients(&self) -> (&wgpu::Buffer, usize) {
+        (&self.grads, self.layout.grad_words)
+    }
+
     /// The last frame's stage times, read back alone (a few words; no image or gradient).
     /// Waits for the GPU.
     pub fn stage_times(&self) -> Result<StageTimes, GpuRenderError> {
@@ -564,6 +571,16 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             .take(n)
             .map(M::params_from_float_slots)
             .collect();
+        let (ng, nsf) = (self.layout.grad_words, self.layout.shade_floats);
+        let mut shade = vec![0.0; n * M::Shade::LEN];
+        let slots = gpu.read(&self.grads, n * ng)?;
+        for (g, out) in slots
+            .chunks_exact(ng)
+            .zip(shade.chunks_exact_mut(M::Shade::LEN))
+        {
+            let g: Vec<f32> = g[..nsf].iter().map(|w| f32::from_bits(*w)).collect();
+            M::shade_from_float_slots(&g).write_words(out);
+        }
         let groups = (n as u32).div_ceil(64).max(1) as usize;
         let mut partials = match self.opts.gradients.camera() {
             true => gpu.read(&self.camera_partials, groups * Camera::FLOAT_SLOTS)?,
@@ -586,6 +603,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         Ok(GpuGradients {
             gradients: Gradients {
                 params,
+                shade,
                 camera: Camera::read_words(&cam),
                 stats: BackwardStats {
                     blend: times.blend,

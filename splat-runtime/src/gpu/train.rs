@@ -7,8 +7,9 @@
 
 use super::device::{Grown, Kernel, dispatch};
 use super::entries::{FINITE, PIXEL_SPAN};
-use super::{Gpu, GpuError};
+use super::{Gpu, GpuError, GpuRenderer, GpuScene};
 use crate::io::dataset::View;
+use crate::method::SplatMethod;
 use crate::train::adam::{Faults, bias_corrections, remap_rows};
 use crate::train::checkpoint::AdamState;
 use crate::train::loss::{LossValue, WINDOW, window};
@@ -339,6 +340,18 @@ impl GpuAdam {
     }
 }
 
+/// Where [`GpuObserver`] reads a primitive's screen-space gradient (as
+/// [`crate::train::densify::screen_gradient`] does on the CPU).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ScreenSource {
+    /// The shade data's gradient, the screen position's x and y at float slots `slot` and
+    /// `slot + 1`.
+    Shade { slot: usize },
+    /// The position's gradient, x, y, z at parameter words `word` .. `word + 2`, through the
+    /// pinhole Jacobian.
+    Position { word: usize },
+}
+
 /// Density control's per-primitive statistics, gathered on the device.
 pub struct GpuObserver {
     kernel: Kernel,
@@ -357,36 +370,43 @@ impl GpuObserver {
         })
     }
 
-    /// Records the statistics of one frame: `projected` (`stride` words per primitive:
-    /// visible, depth, box; counted where `project` saw it and its box covers a pixel), the
-    /// parameters (`words` per primitive, the position at `position`) and their gradients
-    /// (the same layout), the frame's camera.
-    #[allow(clippy::too_many_arguments)]
-    pub fn record(
+    /// Records the statistics of the renderer's last frame of `scene` (after its backward
+    /// pass): each primitive counted where `project` saw it and its box covers a pixel, its
+    /// screen-space gradient read from `source`.
+    pub fn record<M: SplatMethod>(
         &mut self,
         gpu: &Gpu,
         encoder: &mut wgpu::CommandEncoder,
-        frame: [&wgpu::Buffer; 4],
-        primitives: usize,
-        stride: usize,
-        words: usize,
-        position: usize,
+        renderer: &GpuRenderer<M>,
+        scene: &GpuScene<M>,
+        source: ScreenSource,
     ) -> Result<(), GpuError> {
+        let primitives = scene.len();
         self.grad2d.ensure(gpu, primitives)?;
         self.seen.ensure(gpu, primitives)?;
+        let (projected, stride) = renderer.projected();
+        let (shade_grads, grad_words) = renderer.shade_gradients();
+        let (position, slot, from_shade) = match source {
+            ScreenSource::Position { word } => (word, 0, 0),
+            ScreenSource::Shade { slot } => (0, slot, 1),
+        };
         let n = primitives as u32;
-        gpu.write(
-            &self.info,
-            &[n, stride as u32, words as u32, 0, position as u32, 0, 0, 0],
-        );
-        let [projected, params, grads, camera] = frame;
+        let info = [
+            n,
+            stride as u32,
+            renderer.param_floats() as u32,
+            grad_words as u32,
+        ];
+        let at = [position as u32, slot as u32, from_shade, 0];
+        gpu.write(&self.info, &[info, at].concat());
         let bind = gpu.bind_named(
             &self.kernel,
             &[
                 ("projected", projected),
-                ("params", params),
-                ("param_grads", grads),
-                ("camera_words", camera),
+                ("params", scene.buffer()),
+                ("param_grads", renderer.param_gradients()),
+                ("camera_words", renderer.camera_buffer()),
+                ("shade_grads", shade_grads),
                 ("grad2d", &self.grad2d),
                 ("seen", &self.seen),
                 ("info", &self.info),

@@ -203,6 +203,9 @@ impl<M: SplatMethod> ForwardState<M> {
 /// Per-primitive gradients and the camera's.
 pub struct Gradients<M: SplatMethod> {
     pub params: Vec<M::Params>,
+    /// The gradient of each primitive's shade data (`project`'s output that the blend reads),
+    /// `M::Shade::LEN` words per primitive: what the blend sends back to `project`'s adjoint.
+    pub shade: Vec<f32>,
     /// Zero when [`RenderOptions::gradients`] leaves the camera out.
     pub camera: Camera,
     pub stats: BackwardStats,
@@ -557,6 +560,7 @@ pub fn backward<M: SplatMethod>(
     };
     Ok(Gradients {
         params: param_grads,
+        shade,
         camera: camera_grad,
         stats,
     })

@@ -10,7 +10,7 @@
 use super::fit::{Trainable, flatten};
 use crate::flat::Flat;
 use crate::types::Camera;
-use glam::{Quat, Vec3, Vec4};
+use glam::{Quat, Vec2, Vec3, Vec4};
 
 /// A primitive as density control sees it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -48,6 +48,32 @@ impl Shape {
             (o / (1.0 - o)).ln(),
         )
     }
+}
+
+/// The gradient of the loss with respect to where primitive `p` lands on the image, in NDC
+/// units (pixels times half the image size, as gsplat scales it), given the gradient of its
+/// parameters `grad` and of its shade data `shade` (`M::Shade::LEN` words).
+///
+/// From the shade data where the method says where the point is in it
+/// ([`Trainable::screen_gradient`], 3DGS's `center`): then it is the gradient 3DGS grows from.
+/// Otherwise a method's projection is its own, so it is recovered from the world-space
+/// position gradient through the pinhole Jacobian: for x_cam = R p + t and u = f x/z + c,
+/// dL/dx_cam = (f / z) dL/du exactly when u is the only use of x_cam (the x column of the
+/// Jacobian has no other term), so dL/du = (z / f) dL/dx_cam. What reaches the position
+/// through the footprint's shape and view-dependent color is counted too.
+pub fn screen_gradient<M: Trainable>(
+    p: &M::Params,
+    grad: &M::Params,
+    shade: &[f32],
+    camera: &Camera,
+) -> Vec2 {
+    let half = camera.size / 2.0;
+    if let Some(g) = M::screen_gradient(&M::Shade::read_words(shade)) {
+        return g * half;
+    }
+    let x = camera.rotation * M::shape(p).position + camera.translation;
+    let g = camera.rotation * M::position_gradient(grad);
+    g.truncate() * x.z.max(1e-6) / camera.focal * half
 }
 
 /// When and how density control acts; scales are relative to the scene's extent.
@@ -141,29 +167,11 @@ impl Densifier {
         (self.grad2d.clone(), self.count.clone())
     }
 
-    /// Adds one view's screen-space position gradient of each primitive in `visible`, given
-    /// the gradient of every primitive's parameters.
-    ///
-    /// A method's projection is its own, so the screen-space gradient is recovered from the
-    /// world-space one through the pinhole Jacobian: for x_cam = R p + t and u = f x/z + c,
-    /// dL/dx_cam = (f / z) dL/du exactly (the x column of the Jacobian has no other term), so
-    /// dL/du = (z / f) dL/dx_cam. What reaches the position through the shape's projection
-    /// (EWA's Jacobian, view-dependent color) is counted too; 3DGS counts only the mean.
-    pub fn observe<M: Trainable>(
-        &mut self,
-        params: &[M::Params],
-        grads: &[M::Params],
-        visible: impl Iterator<Item = usize>,
-        camera: &Camera,
-    ) {
-        let half = camera.size / 2.0;
-        for i in visible {
-            let x = camera.rotation * M::shape(&params[i]).position + camera.translation;
-            let g = camera.rotation * M::position_gradient(&grads[i]);
-            let z = x.z.max(1e-6);
-            let du = g.x * z / camera.focal.x * half.x;
-            let dv = g.y * z / camera.focal.y * half.y;
-            let norm = (du * du + dv * dv).sqrt();
+    /// Adds one view's screen-space position gradient (NDC units, [`screen_gradient`]) of
+    /// each primitive the view shows.
+    pub fn observe(&mut self, seen: impl IntoIterator<Item = (usize, Vec2)>) {
+        for (i, g) in seen {
+            let norm = g.length();
             // A gradient Adam skips (not finite) does not count either.
             if norm.is_finite() {
                 self.grad2d[i] += norm;

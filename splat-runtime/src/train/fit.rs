@@ -6,14 +6,14 @@
 
 use super::adam::{Adam, Faults};
 use super::checkpoint::Checkpoint;
-use super::densify::{Densifier, DensifyOptions, Refinement, Shape};
+use super::densify::{Densifier, DensifyOptions, Refinement, Shape, screen_gradient};
 use super::loss::{self, LossError, LossValue};
 use super::mcmc::{Mcmc, McmcOptions};
 use crate::flat::Flat;
 use crate::io::dataset::{Dataset, View};
 use crate::method::{SplatMethod, param_groups, word_name};
 use crate::pipeline::{FrameGrad, Image, RenderError, RenderOptions};
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 
 /// How one parameter word is trained: its learning rate decays exponentially from `first` to
 /// `last` over the run, and it stays fixed (no gradient, no moment) before step `from_step`
@@ -73,6 +73,16 @@ pub trait Trainable: SplatMethod {
 
     /// The gradient of the position, read from a gradient of `Params`.
     fn position_gradient(g: &Self::Params) -> Vec3;
+
+    /// The gradient of where the primitive lands on the image (pixels), read from a gradient
+    /// of `Shade`, for a method whose shade data holds that point (3DGS's `center`). Density
+    /// control grows from it, as 3DGS does; without it (`None`), from the position gradient
+    /// pulled back through the pinhole Jacobian, which also counts what reaches the position
+    /// through the footprint's shape and view-dependent color.
+    fn screen_gradient(g: &Self::Shade) -> Option<Vec2> {
+        let _ = g;
+        None
+    }
 }
 
 #[derive(Clone, Debug)]
@@ -374,8 +384,13 @@ pub fn fit_from<M: Trainable>(
         }
         read_into::<M>(&mut params, &flat);
         if let Some(d) = densifier.as_mut().filter(|d| step < d.opts.stop) {
-            let visible = pass.pre.visible.iter().map(|(i, _)| *i as usize);
-            d.observe::<M>(&params, &g.params, visible, &view.camera);
+            let shade_words = M::Shade::LEN;
+            d.observe(pass.pre.visible.iter().map(|&(i, _)| {
+                let i = i as usize;
+                let shade = &g.shade[i * shade_words..(i + 1) * shade_words];
+                let grad = screen_gradient::<M>(&params[i], &g.params[i], shade, &view.camera);
+                (i, grad)
+            }));
             if d.refines_at(step) {
                 let r = d.refine::<M>(&mut params, step, extent, &mut rng);
                 adam.remap(&r.origin);

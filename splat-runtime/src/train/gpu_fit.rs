@@ -13,12 +13,12 @@ use super::fit::{
 };
 use crate::flat::Flat;
 use crate::gpu::entries::Accumulation;
-use crate::gpu::train::{GpuAdam, GpuLoss, GpuMcmc, GpuObserver, GpuTrainError};
+use crate::gpu::train::{GpuAdam, GpuLoss, GpuMcmc, GpuObserver, GpuTrainError, ScreenSource};
 use crate::gpu::{Gpu, GpuRenderError, GpuRenderer, GpuScene};
 use crate::io::dataset::{Dataset, View};
 use crate::method::SplatMethod;
 use crate::pipeline::Image;
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 
 impl From<GpuTrainError> for FitError {
     fn from(e: GpuTrainError) -> FitError {
@@ -65,9 +65,9 @@ pub fn fit_gpu_from<M: Trainable>(
     let rates = rates_for::<M>(data, extent, opts)?;
     adopt::<M>(state, extent, opts)?;
     let words = M::Params::LEN;
-    let position = position_word::<M>().ok_or_else(|| {
+    let source = screen_source::<M>().ok_or_else(|| {
         FitError::Unsupported(format!(
-            "{}: its position is not three consecutive parameter words",
+            "{}: its shade data holds no screen position and its position is not three consecutive parameter words",
             M::NAME
         ))
     })?;
@@ -131,14 +131,7 @@ pub fn fit_gpu_from<M: Trainable>(
         adam.record(gpu, &mut enc, scene.buffer(), param_grads, n, &lr)?;
         let observing = densifier.as_ref().filter(|d| step < d.opts.stop);
         if observing.is_some() {
-            let (projected, stride) = renderer.projected();
-            let frame = [
-                projected,
-                scene.buffer(),
-                param_grads,
-                renderer.camera_buffer(),
-            ];
-            observer.record(gpu, &mut enc, frame, n, stride, words, position)?;
+            observer.record(gpu, &mut enc, &renderer, &scene, source)?;
         }
         gpu.queue.submit([enc.finish()]);
         let value = loss.value(gpu)?;
@@ -215,9 +208,21 @@ pub fn fit_gpu_from<M: Trainable>(
     Ok(())
 }
 
-/// The first of the three consecutive parameter words that hold the position: the slots whose
-/// unit gradient reads as a unit position gradient along x, y, z.
-fn position_word<M: Trainable>() -> Option<usize> {
+/// Where a step's screen-space gradients are read on the device, as
+/// [`super::densify::screen_gradient`] reads them: the shade data's float slots whose unit
+/// gradient reads as a unit screen gradient along x then y, else the three consecutive
+/// parameter words whose unit gradient reads as a unit position gradient along x, y, z.
+pub fn screen_source<M: Trainable>() -> Option<ScreenSource> {
+    let slots = M::ShadeLanes::default().as_ref().len();
+    let screen = |k: usize| {
+        let mut w = vec![0.0; slots];
+        w[k] = 1.0;
+        M::screen_gradient(&M::shade_from_float_slots(&w))
+    };
+    let shade = (0..slots).find(|&k| screen(k) == Some(Vec2::X));
+    if let Some(slot) = shade.filter(|&k| k + 1 < slots && screen(k + 1) == Some(Vec2::Y)) {
+        return Some(ScreenSource::Shade { slot });
+    }
     let words = M::Params::LEN;
     let unit = |k: usize| {
         let mut w = vec![0.0; words];
@@ -225,7 +230,8 @@ fn position_word<M: Trainable>() -> Option<usize> {
         M::position_gradient(&M::Params::read_words(&w))
     };
     let first = (0..words).find(|&k| unit(k) == Vec3::X)?;
-    (first + 2 < words && unit(first + 1) == Vec3::Y && unit(first + 2) == Vec3::Z).then_some(first)
+    (first + 2 < words && unit(first + 1) == Vec3::Y && unit(first + 2) == Vec3::Z)
+        .then_some(ScreenSource::Position { word: first })
 }
 
 /// Renders each of `views` with `params` on `gpu`, as [`super::fit::render_views`] does on
