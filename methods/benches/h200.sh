@@ -53,13 +53,14 @@ print(f"gsplat peak CUDA memory allocated: {torch.cuda.max_memory_allocated() / 
 fi
 
 # The comparison with gsplat 1.5.3's trainer as shared/bench/gsplat_train.py runs it: 100,000
-# random points in a cube of half-side 1.5, scene scale 1.3 (= 0.2618 x the cameras' extent,
-# 4.97), and no opacity resets (gsplat 1.5.3's reset test never passes). No evaluations
-# during the run, so the time per step is the loop's.
+# random points in a cube of half-side 1.5, each of size 0.02 and gray, scene scale 1.3
+# (= 0.2618 x the cameras' extent, 4.97), and no opacity resets (gsplat 1.5.3's reset test
+# never passes). No evaluations during the run, so the time per step is the loop's.
 part "issue 12: splat fit, 3DGS on the GPU, stilllife (Mitsuba 3), $STEPS steps, as gsplat_train.py"
 fit=/tmp/fit
 timeout 120 $splat fit .dev/stilllife --backend gpu --steps $STEPS --global-scale 0.2618 \
-    --init-extent 1.1538 --no-opacity-reset --eval-every 0 --checkpoint-every 0 --out $fit
+    --init-extent 1.1538 --init-size 0.02 --init-color 0.5,0.5,0.5 --no-opacity-reset \
+    --eval-every 0 --checkpoint-every 0 --out $fit
 tar czf "$OUT/fit.tgz" -C $fit --exclude scene.ply . 2>/dev/null
 if [ $GSPLAT = 1 ]; then
     part "issue 12: gsplat DefaultStrategy on the same data (shared/bench/gsplat_train.py)"

@@ -1,7 +1,7 @@
 """A 360-degree Blender-format dataset path-traced by Mitsuba 3 (independent of this project's
 renderers), for comparing `splat fit` with gsplat's trainer on the same data.
 
-Usage: mitsuba_dataset.py OUT [VIEWS=100] [SIZE=200] [SPP=256]   (pip install mitsuba)
+Usage: mitsuba_dataset.py OUT [VIEWS=100] [SIZE=200] [SPP=256]   (pip install mitsuba numpy)
 
 The scene ("still life"): a checker-textured cube, a rough red plastic sphere, a rough gold
 cylinder and a ring of eight small diffuse spheres in eight colors, lit by a constant

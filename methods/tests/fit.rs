@@ -634,7 +634,7 @@ fn mcmc_relocates_dead_primitives_grows_and_stirs_the_faint() {
 /// The primitives of the MCMC tests: 60 random ones in the cube around the known scene, most
 /// of them in empty space at first.
 fn random_start() -> Vec<Params> {
-    splat_runtime::train::init::in_cube::<Method>(60, Vec3::ZERO, 1.5, 5)
+    splat_runtime::train::init::in_cube::<Method>(60, Vec3::ZERO, 1.5, Default::default(), 5)
 }
 
 /// The MCMC strategy of the tests: from step 100, growing by 30% up to 240 primitives.

@@ -46,6 +46,15 @@ pub struct FitArgs {
     /// `init_extent` [default: 3; 0.5 on the built-in dataset].
     #[arg(long)]
     init_extent: Option<f32>,
+    /// Start every primitive at this size (the dataset's world units) instead of
+    /// the root mean square distance to its 3 nearest neighbours, as 3DGS sizes them
+    /// (`../shared/bench/gsplat_train.py` starts at 0.02).
+    #[arg(long)]
+    init_size: Option<f32>,
+    /// Start every primitive with this linear RGB color, `R,G,B` in [0, 1], instead of its
+    /// point's (random ones: a random color; gsplat_train.py starts at 0.5,0.5,0.5).
+    #[arg(long, value_parser = parse_color)]
+    init_color: Option<Vec3>,
     /// Multiplies the scene's extent, as gsplat's `global_scale`: the position learning rate,
     /// density control's size thresholds and the random points' cube scale with it. Objects
     /// that fill little of the cameras' sphere train better with less than 1 (a resumed run
@@ -211,6 +220,11 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
     if !(init_extent > 0.0 && init_extent.is_finite()) {
         bail!("--init-extent must be a positive number, not {init_extent}");
     }
+    if let Some(s) = args.init_size
+        && !(s > 0.0 && s.is_finite())
+    {
+        bail!("--init-size must be a positive number, not {s}");
+    }
     if args.no_opacity_reset && !matches!(args.strategy, StrategyArg::Adc) {
         bail!("--no-opacity-reset is for --strategy adc, the only one that resets opacities");
     }
@@ -335,7 +349,12 @@ impl Fit<'_> {
             ),
             Some(c) => (c.clone(), Log::read_csv(&args.out.join(METRICS), c.step)?),
             None => {
-                let mut params = start::<M>(data, points, mid, init_extent * extent, args.seed);
+                let half = init_extent * extent;
+                let first = init::Start {
+                    size: args.init_size,
+                    color: args.init_color,
+                };
+                let mut params = start::<M>(data, points, mid, half, first, args.seed);
                 if let Some(Strategy::Mcmc(_)) = opts.densify {
                     McmcOptions::prepare::<M>(&mut params);
                 }
@@ -517,19 +536,33 @@ fn explain<M: Trainable>(data: &Dataset, opts: &FitOptions) {
     );
 }
 
+/// `R,G,B`, each in [0, 1].
+fn parse_color(text: &str) -> Result<Vec3, String> {
+    let channels: Vec<f32> = text
+        .split(',')
+        .map(|c| c.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("`{text}` is not R,G,B: {e}"))?;
+    match channels[..] {
+        [r, g, b] if channels.iter().all(|c| (0.0..=1.0).contains(c)) => Ok(Vec3::new(r, g, b)),
+        _ => Err(format!("`{text}` is not R,G,B, three numbers in [0, 1]")),
+    }
+}
+
 /// The primitives a run starts from: the dataset's points, or random ones in the cube of
-/// half-side `half` around `mid`.
+/// half-side `half` around `mid`, with the size and color `first` gives them.
 fn start<M: Trainable>(
     data: &Dataset,
     points: usize,
     mid: Vec3,
     half: f32,
+    first: init::Start,
     seed: u64,
 ) -> Vec<M::Params> {
     if data.points.is_empty() {
-        return init::in_cube::<M>(points, mid, half, seed);
+        return init::in_cube::<M>(points, mid, half, first, seed);
     }
-    let params = init::from_points::<M>(&data.points, points);
+    let params = init::from_points::<M>(&data.points, points, first);
     println!(
         "starting from {} of the dataset's {} points",
         params.len(),

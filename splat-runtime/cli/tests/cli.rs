@@ -940,10 +940,21 @@ fn fit_refuses_a_missing_or_broken_dataset_by_name() {
         &out,
     );
     tiny_dataset(&dir.path().join("good"), 2);
-    for (flag, value) in [("--global-scale", "0"), ("--init-extent", "nan")] {
+    for (flag, value) in [
+        ("--global-scale", "0"),
+        ("--init-extent", "nan"),
+        ("--init-size", "0"),
+    ] {
         fails(
             &splat(&["fit", "good", "--steps", "2", flag, value], dir.path()),
             &format!("{flag} must be a positive number, not"),
+            &out,
+        );
+    }
+    for color in ["0.5,0.5", "0.5,2,0.5", "gray"] {
+        fails(
+            &splat(&["fit", "good", "--init-color", color], dir.path()),
+            &format!("`{color}` is not R,G,B"),
             &out,
         );
     }

@@ -1,20 +1,37 @@
 //! Where training starts: primitives from a dataset's point cloud, or random ones in a cube
-//! when the dataset has no points, each sized by its neighbours as 3DGS does.
+//! when the dataset has no points, each sized by its neighbours as 3DGS does (or all of one
+//! given size and color).
 
 use super::fit::Trainable;
 use crate::io::dataset::Point;
 use glam::Vec3;
 use rayon::prelude::*;
 
-/// Primitives at (at most `cap`, evenly spaced) `points` with their colors, each sized to
-/// its neighbours' distance (a lone point: 0.01).
-pub fn from_points<M: Trainable>(points: &[Point], cap: usize) -> Vec<M::Params> {
+/// What every first primitive shares, where a run sets it rather than the points do.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Start {
+    /// Its size (world units); `None`: the root mean square distance to its 3 nearest
+    /// neighbours, as 3DGS sizes its first Gaussians.
+    pub size: Option<f32>,
+    /// Its color (linear RGB); `None`: its point's.
+    pub color: Option<Vec3>,
+}
+
+/// Primitives at (at most `cap`, evenly spaced) `points` with their colors, each sized to its
+/// neighbours' distance (a lone point: 0.01), unless `start` sets the size or color.
+pub fn from_points<M: Trainable>(points: &[Point], cap: usize, start: Start) -> Vec<M::Params> {
     let points = evenly_spaced(points, cap);
-    let positions: Vec<Vec3> = points.iter().map(|p| p.position).collect();
+    let sizes = match start.size {
+        Some(s) => vec![s; points.len()],
+        None => {
+            let positions: Vec<Vec3> = points.iter().map(|p| p.position).collect();
+            neighbour_spacing(&positions, 0.01)
+        }
+    };
     points
         .iter()
-        .zip(neighbour_spacing(&positions, 0.01))
-        .map(|(p, scale)| M::from_point(p.position, p.color, scale))
+        .zip(sizes)
+        .map(|(p, scale)| M::from_point(p.position, start.color.unwrap_or(p.color), scale))
         .collect()
 }
 
@@ -89,8 +106,15 @@ fn kd_nearest(tree: &[(Vec3, usize)], depth: usize, q: Vec3, skip: usize, best: 
 }
 
 /// `n` primitives at random points of the cube of half-side `half` around `centre`, random
-/// colors, each sized to its neighbours as [`from_points`] does (gsplat's random start).
-pub fn in_cube<M: Trainable>(n: usize, centre: Vec3, half: f32, seed: u64) -> Vec<M::Params> {
+/// colors, unless `start` sets them, sized as [`from_points`] sizes them (gsplat's random
+/// start).
+pub fn in_cube<M: Trainable>(
+    n: usize,
+    centre: Vec3,
+    half: f32,
+    start: Start,
+    seed: u64,
+) -> Vec<M::Params> {
     let mut rng = fastrand::Rng::with_seed(seed);
     let mut unit = || Vec3::new(rng.f32(), rng.f32(), rng.f32());
     let points: Vec<Point> = (0..n)
@@ -99,7 +123,7 @@ pub fn in_cube<M: Trainable>(n: usize, centre: Vec3, half: f32, seed: u64) -> Ve
             color: unit(),
         })
         .collect();
-    from_points::<M>(&points, n)
+    from_points::<M>(&points, n, start)
 }
 
 #[cfg(test)]
