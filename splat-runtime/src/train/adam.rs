@@ -4,6 +4,7 @@
 
 use super::checkpoint::AdamState;
 use crate::method::{SplatMethod, word_name};
+use rayon::prelude::*;
 
 /// Adam's state for `primitives` x `words` parameter words.
 pub struct Adam {
@@ -31,38 +32,57 @@ impl Adam {
     }
 
     /// One step: `params -= lr * m_hat / (sqrt(v_hat) + eps)`, where `lr[k]` is the rate of
-    /// word `k` of every primitive. `params` and `grads` hold `words` words per primitive.
-    /// Words the step cannot move are left as [`Faults`] says, and counted there.
+    /// word `k` of every primitive; a negative rate freezes the word this step (no move, no
+    /// moment update). `params` and `grads` hold `words` words per primitive. Words the step
+    /// cannot move are left as [`Faults`] says, and counted there. Chunks of primitives run
+    /// in parallel; each word's update is independent of the others, so the result is the
+    /// same for any thread count.
     pub fn step(&mut self, params: &mut [f32], grads: &[f32], lr: &[f32]) -> Faults {
         assert_eq!(lr.len(), self.words, "one learning rate per parameter word");
         assert_eq!(params.len(), self.m.len(), "parameters and optimizer state");
         assert_eq!(grads.len(), self.m.len(), "gradients and optimizer state");
         self.step += 1;
-        let (b1, b2) = (self.beta1, self.beta2);
+        let (b1, b2, eps) = (self.beta1, self.beta2, self.eps);
         let (c1, c2) = bias_corrections(b1, b2, self.step);
         let words = self.words.max(1);
-        let mut faults = Faults::default();
-        for (i, ((p, g), (m, v))) in params
-            .iter_mut()
-            .zip(grads)
-            .zip(self.m.iter_mut().zip(self.v.iter_mut()))
+        let chunk = words * 1024;
+        params
+            .par_chunks_mut(chunk)
+            .zip(grads.par_chunks(chunk))
+            .zip(self.m.par_chunks_mut(chunk))
+            .zip(self.v.par_chunks_mut(chunk))
             .enumerate()
-        {
-            if !g.is_finite() {
-                faults.add(i, Fault::Gradient);
-                continue;
-            }
-            let mi = b1 * *m + (1.0 - b1) * g;
-            let vi = b2 * *v + (1.0 - b2) * g * g;
-            let pi = *p - lr[i % words] * (mi / c1) / ((vi / c2).sqrt() + self.eps);
-            if !(pi.is_finite() && vi.is_finite()) {
-                faults.add(i, Fault::Step);
-                (*m, *v) = (0.0, 0.0);
-                continue;
-            }
-            (*m, *v, *p) = (mi, vi, pi);
-        }
-        faults
+            .map(|(c, (((p, g), m), v))| {
+                let mut faults = Faults::default();
+                let rows = p
+                    .chunks_exact_mut(words)
+                    .zip(g.chunks_exact(words))
+                    .zip(m.chunks_exact_mut(words).zip(v.chunks_exact_mut(words)));
+                for (i, ((p, g), (m, v))) in rows.enumerate() {
+                    for k in 0..words {
+                        let (rate, g) = (lr[k], g[k]);
+                        if rate < 0.0 {
+                            continue;
+                        }
+                        let at = c * chunk + i * words + k;
+                        if !g.is_finite() {
+                            faults.add(at, Fault::Gradient);
+                            continue;
+                        }
+                        let mi = b1 * m[k] + (1.0 - b1) * g;
+                        let vi = b2 * v[k] + (1.0 - b2) * g * g;
+                        let pi = p[k] - rate * (mi / c1) / ((vi / c2).sqrt() + eps);
+                        if !(pi.is_finite() && vi.is_finite()) {
+                            faults.add(at, Fault::Step);
+                            (m[k], v[k]) = (0.0, 0.0);
+                            continue;
+                        }
+                        (m[k], v[k], p[k]) = (mi, vi, pi);
+                    }
+                }
+                faults
+            })
+            .reduce(Faults::default, Faults::merge)
     }
 }
 
@@ -97,6 +117,19 @@ impl Faults {
             Fault::Step => self.steps += 1,
         }
         self.first = Some(self.first.map_or(word, |f| f.min(word)));
+    }
+
+    /// Both counts together.
+    fn merge(a: Faults, b: Faults) -> Faults {
+        let first = match (a.first, b.first) {
+            (Some(x), Some(y)) => Some(x.min(y)),
+            (x, y) => x.or(y),
+        };
+        Faults {
+            gradients: a.gradients + b.gradients,
+            steps: a.steps + b.steps,
+            first,
+        }
     }
 
     /// Whether any word was left alone.
@@ -201,6 +234,51 @@ mod tests {
         let want = [0.9, 1.01, 0.9, 1.0];
         for (a, b) in p.iter().zip(want) {
             assert!((a - b).abs() < 1e-6, "{p:?}");
+        }
+    }
+
+    /// A negative rate freezes its word (3DGS's higher SH bands before their step): it keeps
+    /// its value and gathers no moment, whatever its gradient, even a non-finite one.
+    #[test]
+    fn a_negative_rate_freezes_its_word() {
+        let mut adam = Adam::new(2, 2);
+        let mut p = vec![1.0; 4];
+        let faults = adam.step(&mut p, &[0.5, f32::NAN, 3.0, 2.0], &[0.1, -1.0]);
+        assert_eq!(faults, Faults::default());
+        assert_eq!((p[1], p[3]), (1.0, 1.0));
+        assert!(p[0] < 1.0 && p[2] < 1.0);
+        let state = adam.state();
+        assert_eq!(
+            (state.m[1], state.v[1], state.m[3], state.v[3]),
+            (0.0, 0.0, 0.0, 0.0)
+        );
+    }
+
+    /// Thousands of primitives run in parallel chunks: every word steps as it would alone,
+    /// and the faults are counted across chunks with the lowest word first.
+    #[test]
+    fn chunks_step_as_one_and_count_faults_across_them() {
+        let (n, words) = (5000, 3);
+        let grads: Vec<f32> = (0..n * words).map(|k| (k % 7) as f32 - 3.0).collect();
+        let mut bad = grads.clone();
+        (bad[4000 * words + 1], bad[3100 * words]) = (f32::INFINITY, f32::NAN);
+        let mut adam = Adam::new(n, words);
+        let mut p = vec![0.0; n * words];
+        let faults = adam.step(&mut p, &bad, &[0.1, 0.2, 0.3]);
+        assert_eq!(
+            faults,
+            Faults {
+                gradients: 2,
+                steps: 0,
+                first: Some(3100 * words)
+            }
+        );
+        for (k, (x, g)) in p.iter().zip(&bad).enumerate() {
+            let want = match g.is_finite() {
+                true => -[0.1, 0.2, 0.3][k % words] * g.signum() * (*g != 0.0) as u8 as f32,
+                false => 0.0,
+            };
+            assert!((x - want).abs() < 1e-5, "word {k}: {x} vs {want}");
         }
     }
 

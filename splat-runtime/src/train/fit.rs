@@ -85,6 +85,18 @@ pub trait Trainable: SplatMethod {
     }
 }
 
+/// Each word's rate at `step` of `steps` as Adam takes it (on both backends): negative for a
+/// word not trained yet, which then neither moves nor gathers moments (they start from zero).
+pub(crate) fn step_rates(rates: &[Rate], step: usize, steps: usize) -> Vec<f32> {
+    rates
+        .iter()
+        .map(|r| match step < r.from_step {
+            true => -1.0,
+            false => r.at(step, steps),
+        })
+        .collect()
+}
+
 #[derive(Clone, Debug)]
 pub struct FitOptions {
     pub steps: usize,
@@ -362,13 +374,7 @@ pub fn fit_from<M: Trainable>(
         if let Some(m) = &mcmc {
             m.regularize(&flat, &mut grads, words);
         }
-        let lr: Vec<f32> = rates.iter().map(|r| r.at(step, opts.steps)).collect();
-        // Words not trained yet get no gradient, so their moments start from zero.
-        for (k, g) in grads.iter_mut().enumerate() {
-            if step < rates[k % words].from_step {
-                *g = 0.0;
-            }
-        }
+        let lr = step_rates(&rates, step, opts.steps);
         let faults = adam.step(&mut flat, &grads, &lr);
         let mut refinement = None;
         if let Some(m) = &mcmc {

@@ -9,7 +9,7 @@ use super::checkpoint::Checkpoint;
 use super::densify::Densifier;
 use super::fit::{
     Evaluation, FitError, FitOptions, StepReport, Trainable, adopt, after_every, composite,
-    flatten, for_training, rates_for, saves_at, step_background,
+    flatten, for_training, rates_for, saves_at, step_background, step_rates,
 };
 use crate::flat::Flat;
 use crate::gpu::entries::Accumulation;
@@ -115,13 +115,7 @@ pub fn fit_gpu_from<M: Trainable>(
         gpu.queue.submit([enc.finish()]);
         renderer.backward_on_device(&scene, acc)?;
 
-        let lr: Vec<f32> = rates
-            .iter()
-            .map(|r| match step < r.from_step {
-                true => -1.0,
-                false => r.at(step, opts.steps),
-            })
-            .collect();
+        let lr = step_rates(&rates, step, opts.steps);
         let n = scene.len();
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         let param_grads = renderer.param_gradients();
