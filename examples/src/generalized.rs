@@ -8,7 +8,7 @@
 //! at 0, and multiplicative steps (β 1 -> 2 and 4 -> 8 are the same distance).
 
 use splat_macros::splat_method;
-use splat_runtime::glam::{Vec3, Vec4};
+use splat_runtime::glam::{Vec2, Vec3, Vec4};
 use splat_runtime::train::Shape;
 
 #[splat_method]
@@ -204,5 +204,9 @@ impl splat_runtime::train::Trainable for generalized::Method {
 
     fn position_gradient(g: &generalized::Params) -> Vec3 {
         g.mean
+    }
+
+    fn screen_gradient(g: &generalized::Shade) -> Option<Vec2> {
+        Some(g.center)
     }
 }

@@ -48,11 +48,12 @@ pub struct FitArgs {
     init_extent: Option<f32>,
     /// Start every primitive at this size (the dataset's world units) instead of
     /// the root mean square distance to its 3 nearest neighbours, as 3DGS sizes them
-    /// (`../shared/bench/gsplat_train.py` starts at 0.02).
+    /// (shared/bench/gsplat_train.py starts at 0.02).
     #[arg(long)]
     init_size: Option<f32>,
-    /// Start every primitive with this linear RGB color, `R,G,B` in [0, 1], instead of its
-    /// point's (random ones: a random color; gsplat_train.py starts at 0.5,0.5,0.5).
+    /// Start every primitive with this color, `R,G,B` in [0, 1] as the images store it,
+    /// instead of its point's (random ones: a random color; gsplat_train.py starts at
+    /// 0.5,0.5,0.5).
     #[arg(long, value_parser = parse_color)]
     init_color: Option<Vec3>,
     /// Multiplies the scene's extent, as gsplat's `global_scale`: the position learning rate,

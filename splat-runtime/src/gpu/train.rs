@@ -382,6 +382,11 @@ impl GpuObserver {
         source: ScreenSource,
     ) -> Result<(), GpuError> {
         let primitives = scene.len();
+        // One stride serves the parameters and their gradients (GPU training checks this).
+        debug_assert_eq!(
+            renderer.param_floats(),
+            <M::Params as crate::flat::Flat>::LEN
+        );
         self.grad2d.ensure(gpu, primitives)?;
         self.seen.ensure(gpu, primitives)?;
         let (projected, stride) = renderer.projected();

@@ -386,7 +386,9 @@ pub fn fit_from<M: Trainable>(
                 grads = vec![0.0; flat.len()];
                 refinement = Some(r);
             }
-            m.perturb(&mut flat, words, lr[m.words.position], rng.u32(..));
+            // A position not trained yet (a negative rate) is not stirred either.
+            let rate = lr[m.words.position].max(0.0);
+            m.perturb(&mut flat, words, rate, rng.u32(..));
         }
         read_into::<M>(&mut params, &flat);
         if let Some(d) = densifier.as_mut().filter(|d| step < d.opts.stop) {

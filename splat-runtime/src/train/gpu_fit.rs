@@ -67,7 +67,7 @@ pub fn fit_gpu_from<M: Trainable>(
     let words = M::Params::LEN;
     let source = screen_source::<M>().ok_or_else(|| {
         FitError::Unsupported(format!(
-            "{}: its shade data holds no screen position and its position is not three consecutive parameter words",
+            "{}: its screen position is not two consecutive shade words, or (without one) its position not three consecutive parameter words",
             M::NAME
         ))
     })?;
@@ -140,7 +140,8 @@ pub fn fit_gpu_from<M: Trainable>(
                 scene.upload(gpu, &host)?;
                 refinement = Some(r);
             }
-            let (n, lr) = (scene.len(), lr[m.mcmc.words.position]);
+            // A position not trained yet (a negative rate) is not stirred either.
+            let (n, lr) = (scene.len(), lr[m.mcmc.words.position].max(0.0));
             let mut enc = gpu.device.create_command_encoder(&Default::default());
             m.record_perturb(gpu, &mut enc, scene.buffer(), n, lr, rng.u32(..))?;
             gpu.queue.submit([enc.finish()]);
@@ -203,9 +204,10 @@ pub fn fit_gpu_from<M: Trainable>(
 }
 
 /// Where a step's screen-space gradients are read on the device, as
-/// [`super::densify::screen_gradient`] reads them: the shade data's float slots whose unit
-/// gradient reads as a unit screen gradient along x then y, else the three consecutive
-/// parameter words whose unit gradient reads as a unit position gradient along x, y, z.
+/// [`super::densify::screen_gradient`] reads them: for a method with a screen gradient, the
+/// two consecutive shade float slots whose unit gradient reads as a unit screen gradient along
+/// x then y; otherwise the three consecutive parameter words whose unit gradient reads as a
+/// unit position gradient along x, y, z. `None` where they are not consecutive.
 pub fn screen_source<M: Trainable>() -> Option<ScreenSource> {
     let slots = M::ShadeLanes::default().as_ref().len();
     let screen = |k: usize| {
@@ -213,9 +215,11 @@ pub fn screen_source<M: Trainable>() -> Option<ScreenSource> {
         w[k] = 1.0;
         M::screen_gradient(&M::shade_from_float_slots(&w))
     };
-    let shade = (0..slots).find(|&k| screen(k) == Some(Vec2::X));
-    if let Some(slot) = shade.filter(|&k| k + 1 < slots && screen(k + 1) == Some(Vec2::Y)) {
-        return Some(ScreenSource::Shade { slot });
+    if M::screen_gradient(&M::shade_from_float_slots(&vec![0.0; slots])).is_some() {
+        // The CPU reads the shade gradient: the device must read the same, or refuse.
+        let slot = (0..slots).find(|&k| screen(k) == Some(Vec2::X))?;
+        return (slot + 1 < slots && screen(slot + 1) == Some(Vec2::Y))
+            .then_some(ScreenSource::Shade { slot });
     }
     let words = M::Params::LEN;
     let unit = |k: usize| {

@@ -13,7 +13,7 @@ pub struct Start {
     /// Its size (world units); `None`: the root mean square distance to its 3 nearest
     /// neighbours, as 3DGS sizes its first Gaussians.
     pub size: Option<f32>,
-    /// Its color (linear RGB); `None`: its point's.
+    /// Its color (RGB in [0, 1], as the images store it); `None`: its point's.
     pub color: Option<Vec3>,
 }
 
