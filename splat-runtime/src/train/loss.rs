@@ -7,6 +7,7 @@
 //! Also PSNR and SSIM for evaluation.
 
 use crate::pipeline::Image;
+use rayon::prelude::*;
 
 /// Side of the SSIM window.
 pub const WINDOW: usize = 11;
@@ -147,9 +148,9 @@ fn check(render: &Image, target: &Image) -> Result<(), LossError> {
     Ok(())
 }
 
-/// Mean SSIM of one channel, and (when `grad` is given) its gradient with respect to `x`
-/// scaled by `scale`, added into `grad` (interleaved like the image).
-fn ssim_channel(x: &Plane, y: &Plane, scale: f64, grad: Option<(&mut [f32], usize, usize)>) -> f64 {
+/// Mean SSIM of one channel, and (when `scale` is given) its gradient with respect to `x`
+/// times `scale`, per pixel of the channel.
+fn ssim_channel(x: &Plane, y: &Plane, scale: Option<f64>) -> (f64, Option<Vec<f64>>) {
     let g = window();
     let (mx, my) = (x.filter_valid(&g), y.filter_valid(&g));
     let exx = x.map2(x, |a, _| a * a).filter_valid(&g);
@@ -171,7 +172,7 @@ fn ssim_channel(x: &Plane, y: &Plane, scale: f64, grad: Option<(&mut [f32], usiz
         d_exx[i] = -s / d;
         d_exy[i] = 2.0 * a / (c * d);
     }
-    if let Some((out, channels, channel)) = grad {
+    let grad = scale.map(|scale| {
         let k = scale / n as f64;
         let spread = |v: Vec<f64>| {
             Plane {
@@ -182,20 +183,23 @@ fn ssim_channel(x: &Plane, y: &Plane, scale: f64, grad: Option<(&mut [f32], usiz
             .filter_transposed(&g)
         };
         let (gm, gxx, gxy) = (spread(d_mx), spread(d_exx), spread(d_exy));
-        for p in 0..x.v.len() {
-            let d = gm.v[p] + 2.0 * x.v[p] * gxx.v[p] + y.v[p] * gxy.v[p];
-            out[p * channels + channel] += d as f32;
-        }
-    }
-    sum / n as f64
+        (0..x.v.len())
+            .map(|p| gm.v[p] + 2.0 * x.v[p] * gxx.v[p] + y.v[p] * gxy.v[p])
+            .collect()
+    });
+    (sum / n as f64, grad)
 }
 
 /// Mean SSIM of `a` against `b` over positions and channels.
 pub fn ssim(a: &Image, b: &Image) -> Result<f64, LossError> {
     check(a, b)?;
     let c = a.channels;
+    // Channels in parallel, summed in order.
     let total: f64 = (0..c)
-        .map(|ch| ssim_channel(&Plane::of(a, ch), &Plane::of(b, ch), 0.0, None))
+        .into_par_iter()
+        .map(|ch| ssim_channel(&Plane::of(a, ch), &Plane::of(b, ch), None).0)
+        .collect::<Vec<_>>()
+        .iter()
         .sum();
     Ok(total / c as f64)
 }
@@ -248,10 +252,17 @@ pub fn loss_and_gradient(
     let c = render.channels;
     // d(1 - mean SSIM) = -d(sum over channels of the channel means) / c.
     let scale = -ssim_weight / c as f64;
+    // Channels in parallel; their sums and gradients added in order.
+    let channels: Vec<(f64, Option<Vec<f64>>)> = (0..c)
+        .into_par_iter()
+        .map(|ch| ssim_channel(&Plane::of(render, ch), &Plane::of(target, ch), Some(scale)))
+        .collect();
     let mut total = 0.0;
-    for ch in 0..c {
-        let (x, y) = (Plane::of(render, ch), Plane::of(target, ch));
-        total += ssim_channel(&x, &y, scale, Some((&mut grad, c, ch)));
+    for (ch, (s, d)) in channels.into_iter().enumerate() {
+        total += s;
+        for (p, d) in d.into_iter().flatten().enumerate() {
+            grad[p * c + ch] += d as f32;
+        }
     }
     let ssim = total / c as f64;
     let value = LossValue {
