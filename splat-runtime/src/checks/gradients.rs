@@ -3,13 +3,19 @@
 //! of invalid pairs, and the GPU backward against the CPU's.
 
 use super::adjoint::{self, ReferenceGrad};
-use super::reference::{render_words, render_words_edited};
+use super::reference::{Reference, render_words, render_words_edited};
 use super::{camera_words, channels, frame_grad, group_error, options, weights, words};
 use crate::flat::Flat;
 use crate::method::{GradientSet, SplatMethod};
 use crate::pipeline::{backward, render_for_backward};
 use crate::types::Camera;
 use std::ops::Range;
+
+/// The random linear loss of the checks: each output (color, alpha, depth) weighted by `w`.
+fn linear_loss(r: &Reference, w: &[Vec<f64>; 3]) -> f64 {
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    dot(&r.color, &w[0]) + dot(&r.alpha, &w[1]) + dot(&r.depth, &w[2])
+}
 
 fn central_difference(f: impl Fn(f64) -> f64, x: f64) -> f64 {
     let h = 1e-5 * x.abs().max(1.0);
@@ -32,11 +38,7 @@ pub fn gradients_match_finite_differences<M: SplatMethod>(
     let cw = camera_words(cam);
     let n = (cam.size.x * cam.size.y) as usize;
     let w = weights(n, channels::<M>());
-    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-    let loss = |ps: &[Vec<f64>], c: &[f64]| {
-        let r = render_words::<M>(ps, c, cam.model);
-        dot(&r.color, &w[0]) + dot(&r.alpha, &w[1]) + dot(&r.depth, &w[2])
-    };
+    let loss = |ps: &[Vec<f64>], c: &[f64]| linear_loss(&render_words::<M>(ps, c, cam.model), &w);
     let (_, state) = render_for_backward::<M>(params, cam, &options(8)).unwrap();
     let g = backward::<M>(&state, params, cam, &frame_grad(&w)).unwrap();
     for (name, range) in groups {
@@ -94,7 +96,6 @@ fn shade_gradient_matches_finite_differences<M: SplatMethod>(
         return;
     }
     let cw = camera_words(cam);
-    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
     let want: Vec<f64> = (0..params.len() * words)
         .map(|at| {
             let f = |delta: f64| {
@@ -103,8 +104,10 @@ fn shade_gradient_matches_finite_differences<M: SplatMethod>(
                         shade[at % words] += delta;
                     }
                 };
-                let r = render_words_edited::<M>(params, &cw, cam.model, edit);
-                dot(&r.color, &weights[0]) + dot(&r.alpha, &weights[1]) + dot(&r.depth, &weights[2])
+                linear_loss(
+                    &render_words_edited::<M>(params, &cw, cam.model, edit),
+                    weights,
+                )
             };
             // A step far below the parameters' (1e-5): the blend is only piecewise smooth in
             // the shade data (LinPrim's chord is a min / max over slab ends, whose kinks pass

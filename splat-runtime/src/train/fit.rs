@@ -79,8 +79,7 @@ pub trait Trainable: SplatMethod {
     /// control grows from it, as 3DGS does; without it (`None`), from the position gradient
     /// pulled back through the pinhole Jacobian, which also counts what reaches the position
     /// through the footprint's shape and view-dependent color.
-    fn screen_gradient(g: &Self::Shade) -> Option<Vec2> {
-        let _ = g;
+    fn screen_gradient(_: &Self::Shade) -> Option<Vec2> {
         None
     }
 }

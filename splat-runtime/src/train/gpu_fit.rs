@@ -210,26 +210,28 @@ pub fn fit_gpu_from<M: Trainable>(
 /// unit position gradient along x, y, z. `None` where they are not consecutive.
 pub fn screen_source<M: Trainable>() -> Option<ScreenSource> {
     let slots = M::ShadeLanes::default().as_ref().len();
-    let screen = |k: usize| {
-        let mut w = vec![0.0; slots];
-        w[k] = 1.0;
-        M::screen_gradient(&M::shade_from_float_slots(&w))
-    };
-    if M::screen_gradient(&M::shade_from_float_slots(&vec![0.0; slots])).is_some() {
+    let screen = |w: &[f32]| M::screen_gradient(&M::shade_from_float_slots(w));
+    if screen(&vec![0.0; slots]).is_some() {
         // The CPU reads the shade gradient: the device must read the same, or refuse.
-        let slot = (0..slots).find(|&k| screen(k) == Some(Vec2::X))?;
-        return (slot + 1 < slots && screen(slot + 1) == Some(Vec2::Y))
-            .then_some(ScreenSource::Shade { slot });
+        let axes = [Vec2::X, Vec2::Y].map(Some);
+        return consecutive(slots, |w| screen(w), &axes).map(|slot| ScreenSource::Shade { slot });
     }
-    let words = M::Params::LEN;
+    let position = |w: &[f32]| M::position_gradient(&M::Params::read_words(w));
+    consecutive(M::Params::LEN, position, &[Vec3::X, Vec3::Y, Vec3::Z])
+        .map(|word| ScreenSource::Position { word })
+}
+
+/// The first of `axes.len()` consecutive words (of `len`) whose unit vectors `read` reads as
+/// `axes`, in order.
+fn consecutive<T: PartialEq>(len: usize, read: impl Fn(&[f32]) -> T, axes: &[T]) -> Option<usize> {
     let unit = |k: usize| {
-        let mut w = vec![0.0; words];
+        let mut w = vec![0.0; len];
         w[k] = 1.0;
-        M::position_gradient(&M::Params::read_words(&w))
+        read(&w)
     };
-    let first = (0..words).find(|&k| unit(k) == Vec3::X)?;
-    (first + 2 < words && unit(first + 1) == Vec3::Y && unit(first + 2) == Vec3::Z)
-        .then_some(ScreenSource::Position { word: first })
+    let first = (0..len).find(|&k| unit(k) == axes[0])?;
+    let fits = first + axes.len() <= len;
+    (fits && axes.iter().enumerate().all(|(j, a)| unit(first + j) == *a)).then_some(first)
 }
 
 /// Renders each of `views` with `params` on `gpu`, as [`super::fit::render_views`] does on
