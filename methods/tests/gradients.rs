@@ -207,7 +207,7 @@ fn only_groups_alpha_reaches_need_its_cotangent() {
 /// rest zero, on both backends.
 #[test]
 fn gradient_subsets_match_the_full_pass() {
-    let cam = camera(64, 48);
+    let cam = camera(32, 16);
     let params = realistic_scene(&cam, 200);
     splat_runtime::checks::gradients::gradient_subsets_match_the_full_pass::<Method>(
         "3dgs", &params, &cam,
