@@ -14,8 +14,9 @@ const BINS: &str = include_str!("shaders/bins.wgsl");
 
 /// Keys per radix-sort workgroup (shaders/radix.wgsl `BLOCK`).
 const SORT_BLOCK: u32 = 4096;
-/// Bits of the key sorted per pass (16 buckets).
-const DIGIT_BITS: u32 = 4;
+/// Bits of the key sorted per pass, and the buckets they make (shaders/radix.wgsl `RADIX`).
+const DIGIT_BITS: u32 = 8;
+const BUCKETS: u32 = 1 << DIGIT_BITS;
 /// Words per prefix-sum block (shaders/scan.wgsl).
 const SCAN_BLOCK: u32 = 256;
 
@@ -118,7 +119,7 @@ impl RadixSort {
         Ok(RadixSort {
             histogram: gpu.kernel(RADIX, "radix_histogram")?,
             scatter: gpu.kernel(RADIX, "radix_scatter")?,
-            hist: Grown::new(gpu, "radix-sort histograms", 16)?,
+            hist: Grown::new(gpu, "radix-sort histograms", BUCKETS as usize)?,
             keys_tmp: Grown::new(gpu, "sorted keys", 2)?,
             vals_tmp: Grown::new(gpu, "sorted values", 1)?,
             scan: Scan::new(gpu)?,
@@ -138,10 +139,10 @@ impl RadixSort {
     pub fn prepare(&mut self, gpu: &Gpu, n: u32, tiles: u32) -> Result<(), GpuError> {
         let tile_bits = 32 - tiles.saturating_sub(1).leading_zeros();
         let blocks = n.div_ceil(SORT_BLOCK).max(1);
-        self.hist.ensure(gpu, 16 * blocks as usize)?;
+        self.hist.ensure(gpu, (BUCKETS * blocks) as usize)?;
         self.keys_tmp.ensure(gpu, 2 * n as usize)?;
         self.vals_tmp.ensure(gpu, n as usize)?;
-        self.scan.prepare(gpu, 16 * blocks)?;
+        self.scan.prepare(gpu, BUCKETS * blocks)?;
         // Least significant digit first: depth (word 0), then tile (word 1).
         self.digits = (0..32 / DIGIT_BITS)
             .map(|d| (0, d * DIGIT_BITS))
@@ -298,16 +299,22 @@ mod tests {
         let Some(gpu) = super::super::adapter_or_skip() else {
             return;
         };
+        // 300 tiles take two passes over the tile word (six in all), 200 one (five: the keys
+        // end in the scratch buffers and are copied back).
+        for tiles in [300, 200] {
+            sorts_by_tile_then_depth(&gpu, tiles);
+        }
+    }
+
+    fn sorts_by_tile_then_depth(gpu: &Gpu, tiles: u32) {
         let mut rng = fastrand::Rng::with_seed(4);
-        let tiles = 300u32;
-        // Few distinct depths, so many equal keys test stability; 9,001 keys = 3 blocks.
+        // Few distinct depths, so many equal keys test stability, each with random bits in
+        // every byte; 9,001 keys = 3 blocks.
+        let depths: Vec<u32> = (0..40)
+            .map(|_| (0.1 + 100.0 * rng.f32()).to_bits())
+            .collect();
         let keys: Vec<(u32, u32)> = (0..9001)
-            .map(|_| {
-                (
-                    (rng.u32(0..40) as f32 * 0.25 + 1.0).to_bits(),
-                    rng.u32(0..tiles),
-                )
-            })
+            .map(|_| (depths[rng.usize(0..40)], rng.u32(0..tiles)))
             .collect();
         let flat: Vec<u32> = keys.iter().flat_map(|(d, t)| [*d, *t]).collect();
         let vals: Vec<u32> = (0..keys.len() as u32).collect();
@@ -316,13 +323,13 @@ mod tests {
             gpu.buffer_from("keys", &flat).unwrap(),
             gpu.buffer_from("vals", &vals).unwrap(),
         );
-        let mut sort = RadixSort::new(&gpu).unwrap();
-        sort.prepare(&gpu, n, tiles).unwrap();
-        let mut ranges = TileRanges::new(&gpu).unwrap();
-        ranges.prepare(&gpu, n, tiles, u32::MAX).unwrap();
+        let mut sort = RadixSort::new(gpu).unwrap();
+        sort.prepare(gpu, n, tiles).unwrap();
+        let mut ranges = TileRanges::new(gpu).unwrap();
+        ranges.prepare(gpu, n, tiles, u32::MAX).unwrap();
         let mut enc = gpu.device.create_command_encoder(&Default::default());
-        sort.record(&gpu, &mut enc, &k, &v).unwrap();
-        ranges.record(&gpu, &mut enc, &k).unwrap();
+        sort.record(gpu, &mut enc, &k, &v).unwrap();
+        ranges.record(gpu, &mut enc, &k).unwrap();
         gpu.finish(enc).unwrap();
         let ranges = &ranges.ranges;
         let got_vals = gpu.read(&v, n as usize).unwrap();
