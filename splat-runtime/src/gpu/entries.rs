@@ -411,11 +411,13 @@ pub fn backward<M: SplatMethod>(
             }"
         }
         Reduction::Subgroup => {
-            "            for (var k = 0u; k < NG; k++) {
-                let v = subgroupAdd(g[k]);
-                if (lane == 0u && v != 0.0) {
-                    add_grad(prim * NG + k, v);
-                    my_issued++;
+            "            if (subgroupAny(hit)) {
+                for (var k = 0u; k < NG; k++) {
+                    let v = subgroupAdd(g[k]);
+                    if (lane == 0u && v != 0.0) {
+                        add_grad(prim * NG + k, v);
+                        my_issued++;
+                    }
                 }
             }"
         }

@@ -98,11 +98,15 @@ fn backward_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
         for (var j = min(BATCH, at.end - b); j > 0u; j--) {
             let i = j - 1u;
             var g: array<f32, NG>;
+            // Whether the entry reaches this pixel: a subgroup none of whose pixels it reaches
+            // skips its reduction.
+            var hit = false;
             if (b - at.start + i < end) {
                 let s = i * NS;
                 let r = {{EVALUATE}};
                 if (r.{{VALID}} != 0u && r.{{ALPHA}} >= ALPHA_MIN) {
                     let alpha = r.{{ALPHA}};
+                    hit = true;
                     let one_minus = 1.0 - alpha;
                     t = t / one_minus;
                     let w = alpha * t;
