@@ -12,6 +12,7 @@
 //! The result is ordinary IR, emitted by the same backends as the primal.
 
 use crate::ir::{Binary, Block, Const, Function, Op, Scalar, Stmt, Unary, Var};
+use crate::ops;
 use std::collections::{BTreeMap, HashMap, HashSet};
 
 /// The adjoint of `f`: parameters are `f`'s followed by one cotangent per `f32` result slot
@@ -266,110 +267,13 @@ impl Ad<'_> {
         match *op {
             Op::Const(_) => {}
             Op::Unary(u, a) => {
-                let n = self.d_name(a);
-                let mut e = |s: &mut Self, op: Op| s.emit(out, op, &n);
-                let c = match u {
-                    U::Neg => Some(e(self, Op::Unary(U::Neg, g))),
-                    U::NoDiff
-                    | U::Floor
-                    | U::Ceil
-                    | U::Round
-                    | U::Trunc
-                    | U::Signum
-                    | U::Cast(_)
-                    | U::Not => None,
-                    U::Fract => Some(g),
-                    U::Exp => Some(e(self, Op::Binary(B::Mul, g, r))),
-                    U::Ln => {
-                        let z = self.zero(out);
-                        let pos = self.emit(out, Op::Binary(B::Gt, a, z), "pos");
-                        let d = self.emit(out, Op::Binary(B::Div, g, a), &n);
-                        Some(self.guard(out, pos, d, false, &n))
-                    }
-                    U::Ln1p => {
-                        let one = self.konst(out, 1.0);
-                        let m1 = self.konst(out, -1.0);
-                        let ok = self.emit(out, Op::Binary(B::Gt, a, m1), "ok");
-                        let den = self.emit(out, Op::Binary(B::Add, one, a), "den");
-                        let d = self.emit(out, Op::Binary(B::Div, g, den), &n);
-                        Some(self.guard(out, ok, d, false, &n))
-                    }
-                    U::Sqrt => {
-                        let z = self.zero(out);
-                        let pos = self.emit(out, Op::Binary(B::Gt, a, z), "pos");
-                        let half = self.konst(out, 0.5);
-                        let hg = self.emit(out, Op::Binary(B::Mul, half, g), &n);
-                        let d = self.emit(out, Op::Binary(B::Div, hg, r), &n);
-                        Some(self.guard(out, pos, d, false, &n))
-                    }
-                    U::Rsqrt => {
-                        let z = self.zero(out);
-                        let pos = self.emit(out, Op::Binary(B::Gt, a, z), "pos");
-                        let k = self.konst(out, -0.5);
-                        let r2 = self.emit(out, Op::Binary(B::Mul, r, r), "r2");
-                        let r3 = self.emit(out, Op::Binary(B::Mul, r2, r), "r3");
-                        let kg = self.emit(out, Op::Binary(B::Mul, k, g), &n);
-                        let d = self.emit(out, Op::Binary(B::Mul, kg, r3), &n);
-                        Some(self.guard(out, pos, d, false, &n))
-                    }
-                    U::Recip => {
-                        let z = self.zero(out);
-                        let nz = self.emit(out, Op::Binary(B::Ne, a, z), "nz");
-                        let r2 = self.emit(out, Op::Binary(B::Mul, r, r), "r2");
-                        let gr = self.emit(out, Op::Binary(B::Mul, g, r2), &n);
-                        let d = self.emit(out, Op::Unary(U::Neg, gr), &n);
-                        Some(self.guard(out, nz, d, false, &n))
-                    }
-                    U::Abs => {
-                        let z = self.zero(out);
-                        let nonneg = self.emit(out, Op::Binary(B::Ge, a, z), "nonneg");
-                        let ng = self.emit(out, Op::Unary(U::Neg, g), &n);
-                        Some(self.emit(out, Op::Select(nonneg, g, ng), &n))
-                    }
-                    U::Sin => {
-                        let c = self.emit(out, Op::Unary(U::Cos, a), "cos");
-                        Some(self.emit(out, Op::Binary(B::Mul, g, c), &n))
-                    }
-                    U::Cos => {
-                        let s = self.emit(out, Op::Unary(U::Sin, a), "sin");
-                        let gs = self.emit(out, Op::Binary(B::Mul, g, s), &n);
-                        Some(self.emit(out, Op::Unary(U::Neg, gs), &n))
-                    }
-                    U::Tan => {
-                        let one = self.konst(out, 1.0);
-                        let r2 = self.emit(out, Op::Binary(B::Mul, r, r), "r2");
-                        let d = self.emit(out, Op::Binary(B::Add, one, r2), "sec2");
-                        Some(self.emit(out, Op::Binary(B::Mul, g, d), &n))
-                    }
-                    U::Tanh => {
-                        let one = self.konst(out, 1.0);
-                        let r2 = self.emit(out, Op::Binary(B::Mul, r, r), "r2");
-                        let d = self.emit(out, Op::Binary(B::Sub, one, r2), "sech2");
-                        Some(self.emit(out, Op::Binary(B::Mul, g, d), &n))
-                    }
-                    U::Atan => {
-                        let one = self.konst(out, 1.0);
-                        let a2 = self.emit(out, Op::Binary(B::Mul, a, a), "a2");
-                        let d = self.emit(out, Op::Binary(B::Add, one, a2), "den");
-                        Some(self.emit(out, Op::Binary(B::Div, g, d), &n))
-                    }
-                    U::Asin | U::Acos => {
-                        let one = self.konst(out, 1.0);
-                        let z = self.zero(out);
-                        let a2 = self.emit(out, Op::Binary(B::Mul, a, a), "a2");
-                        let t = self.emit(out, Op::Binary(B::Sub, one, a2), "t");
-                        let inside = self.emit(out, Op::Binary(B::Gt, t, z), "inside");
-                        let s = self.emit(out, Op::Unary(U::Sqrt, t), "s");
-                        let d = self.emit(out, Op::Binary(B::Div, g, s), &n);
-                        let d = if u == U::Acos {
-                            self.emit(out, Op::Unary(U::Neg, d), &n)
-                        } else {
-                            d
-                        };
-                        Some(self.guard(out, inside, d, false, &n))
-                    }
+                let name = self.d_name(a);
+                let mut e = Reverse {
+                    ad: self,
+                    out,
+                    name,
                 };
-                if let Some(c) = c {
+                if let Some(c) = ops::unary_derivative(&mut e, u, a, r, g) {
                     self.acc(adj, a, c, out);
                 }
             }
@@ -512,5 +416,39 @@ fn shift_block(b: &Block, base: u32, params: &HashMap<Var, Var>) -> Block {
     Block {
         stmts,
         yields: b.yields.iter().map(m).collect(),
+    }
+}
+
+/// Writes a derivative rule into the reverse sweep, naming its result after the operand.
+struct Reverse<'a, 'b> {
+    ad: &'a mut Ad<'b>,
+    out: &'a mut Vec<Stmt>,
+    /// The adjoint's name (`d_x`).
+    name: String,
+}
+
+impl Reverse<'_, '_> {
+    fn emit(&mut self, op: Op, name: &str) -> Var {
+        let name = if name == ops::DERIVATIVE {
+            &self.name
+        } else {
+            name
+        };
+        self.ad.emit(self.out, op, name)
+    }
+}
+
+impl ops::Emit for Reverse<'_, '_> {
+    fn konst(&mut self, x: f64) -> Var {
+        self.ad.konst(self.out, x)
+    }
+    fn un(&mut self, u: Unary, a: Var, name: &str) -> Var {
+        self.emit(Op::Unary(u, a), name)
+    }
+    fn bin(&mut self, b: Binary, x: Var, y: Var, name: &str) -> Var {
+        self.emit(Op::Binary(b, x, y), name)
+    }
+    fn select(&mut self, c: Var, x: Var, y: Var, name: &str) -> Var {
+        self.emit(Op::Select(c, x, y), name)
     }
 }

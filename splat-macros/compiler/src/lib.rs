@@ -23,6 +23,7 @@ pub mod gate;
 pub mod ir;
 pub mod lower;
 pub mod model;
+pub mod ops;
 pub mod opt;
 pub mod types;
 

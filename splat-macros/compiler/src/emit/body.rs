@@ -249,14 +249,14 @@ impl<'f> BodyEmitter<'f> {
                     Unary::Neg => quote!(-#x),
                     Unary::Not => quote!(!#x),
                     Unary::NoDiff => x,
-                    Unary::Exp | Unary::Ln | Unary::Ln1p if self.flavor == Flavor::F32 => {
-                        let f = format_ident!("{}", unary_method(u));
+                    _ if u.info().runtime_math && self.flavor == Flavor::F32 => {
+                        let f = format_ident!("{}", u.info().method.expect("a method"));
                         quote!(#rt::math::#f(#x))
                     }
                     Unary::Rsqrt => quote!(#one / #x.sqrt()),
                     Unary::Recip => quote!(#one / #x),
                     Unary::Cast(to) => self.cast(x, ty, to),
-                    _ => method(unary_method(u)),
+                    _ => method(u.info().method.expect("an operation with a method")),
                 }
             }
             Op::Binary(b, x, y) => {
@@ -340,30 +340,6 @@ impl<'f> BodyEmitter<'f> {
             Scalar::Bool => return quote!((#x != 0)),
         };
         quote!((#x as #t))
-    }
-}
-
-fn unary_method(u: Unary) -> &'static str {
-    match u {
-        Unary::Exp => "exp",
-        Unary::Ln => "ln",
-        Unary::Ln1p => "ln_1p",
-        Unary::Sqrt => "sqrt",
-        Unary::Abs => "abs",
-        Unary::Sin => "sin",
-        Unary::Cos => "cos",
-        Unary::Tan => "tan",
-        Unary::Asin => "asin",
-        Unary::Acos => "acos",
-        Unary::Atan => "atan",
-        Unary::Tanh => "tanh",
-        Unary::Floor => "floor",
-        Unary::Ceil => "ceil",
-        Unary::Round => "round",
-        Unary::Trunc => "trunc",
-        Unary::Fract => "fract",
-        Unary::Signum => "signum",
-        _ => unreachable!("handled by the caller"),
     }
 }
 

@@ -423,6 +423,9 @@ impl<'f> FnBuilder<'f> {
         let from = self.ir.ty(a);
         let x = self.get(a);
         let one = |s: &mut Self| s.lit_f32(1.0);
+        if let Some(f) = u.info().wgsl {
+            return self.math(f, x, None);
+        }
         match u {
             Unary::Neg => self.add(E::Unary {
                 op: UnaryOperator::Negate,
@@ -437,8 +440,6 @@ impl<'f> FnBuilder<'f> {
                 expr: x,
             }),
             Unary::NoDiff => x,
-            Unary::Exp => self.math(M::Exp, x, None),
-            Unary::Ln => self.math(M::Log, x, None),
             Unary::Ln1p => {
                 // ln(u) * x / (u - 1) with u = 1 + x, and x itself where u rounds to 1 (as on the CPU).
                 let o = one(self);
@@ -462,7 +463,6 @@ impl<'f> FnBuilder<'f> {
                     reject: r,
                 })
             }
-            Unary::Sqrt => self.math(M::Sqrt, x, None),
             Unary::Rsqrt => {
                 let s = self.math(M::Sqrt, x, None);
                 let o = one(self);
@@ -472,17 +472,6 @@ impl<'f> FnBuilder<'f> {
                 let o = one(self);
                 self.bin(B::Divide, o, x)
             }
-            Unary::Abs => self.math(M::Abs, x, None),
-            Unary::Sin => self.math(M::Sin, x, None),
-            Unary::Cos => self.math(M::Cos, x, None),
-            Unary::Tan => self.math(M::Tan, x, None),
-            Unary::Asin => self.math(M::Asin, x, None),
-            Unary::Acos => self.math(M::Acos, x, None),
-            Unary::Atan => self.math(M::Atan, x, None),
-            Unary::Tanh => self.math(M::Tanh, x, None),
-            Unary::Floor => self.math(M::Floor, x, None),
-            Unary::Ceil => self.math(M::Ceil, x, None),
-            Unary::Trunc => self.math(M::Trunc, x, None),
             Unary::Round => {
                 // Rust rounds ties away from zero; WGSL's round() rounds them to even.
                 let a = self.math(M::Abs, x, None);
@@ -499,6 +488,7 @@ impl<'f> FnBuilder<'f> {
             }
             Unary::Signum => self.signum(x),
             Unary::Cast(to) => self.cast(x, from, to),
+            _ => unreachable!("{u:?} is a WGSL built-in (`ops::UnaryInfo::wgsl`)"),
         }
     }
 

@@ -13,41 +13,6 @@ use crate::types::Ty;
 use proc_macro2::Span;
 use syn::spanned::Spanned;
 
-const F32_UNARY: &[(&str, Unary)] = &[
-    ("exp", Unary::Exp),
-    ("ln", Unary::Ln),
-    ("ln_1p", Unary::Ln1p),
-    ("sqrt", Unary::Sqrt),
-    ("recip", Unary::Recip),
-    ("abs", Unary::Abs),
-    ("sin", Unary::Sin),
-    ("cos", Unary::Cos),
-    ("tan", Unary::Tan),
-    ("asin", Unary::Asin),
-    ("acos", Unary::Acos),
-    ("atan", Unary::Atan),
-    ("tanh", Unary::Tanh),
-    ("floor", Unary::Floor),
-    ("ceil", Unary::Ceil),
-    ("round", Unary::Round),
-    ("trunc", Unary::Trunc),
-    ("fract", Unary::Fract),
-    ("signum", Unary::Signum),
-];
-
-/// Element-wise methods glam offers on vectors.
-const VEC_UNARY: &[(&str, Unary)] = &[
-    ("abs", Unary::Abs),
-    ("exp", Unary::Exp),
-    ("recip", Unary::Recip),
-    ("floor", Unary::Floor),
-    ("ceil", Unary::Ceil),
-    ("round", Unary::Round),
-    ("trunc", Unary::Trunc),
-    ("fract", Unary::Fract),
-    ("signum", Unary::Signum),
-];
-
 /// The methods [`Lowerer::method`] accepts on a receiver of type `t` (for suggestions; a
 /// unit test checks that each is accepted).
 pub(crate) fn method_names(t: &Ty) -> Vec<&'static str> {
@@ -70,7 +35,7 @@ pub(crate) fn method_names(t: &Ty) -> Vec<&'static str> {
                 "clamp",
             ];
             let more = ["atan2", "powf", "powi", "mul_add", "sin_cos", "hypot"];
-            let unary = F32_UNARY.iter().map(|(n, _)| *n);
+            let unary = Unary::method_names(false);
             own.into_iter().chain(more).chain(unary).collect()
         }
         Ty::U32 => vec!["min", "max"],
@@ -92,7 +57,7 @@ pub(crate) fn method_names(t: &Ty) -> Vec<&'static str> {
                 "element_product",
             ];
             let sized = [(*n == 3, "cross"), (*n < 4, "extend"), (*n > 2, "truncate")];
-            let unary = VEC_UNARY.iter().map(|(n, _)| *n);
+            let unary = Unary::method_names(true);
             (own.into_iter()
                 .chain(reductions)
                 .chain(vector_and_quat)
@@ -253,9 +218,8 @@ impl Lowerer<'_> {
                 all.extend(args);
                 self.call_helper(def, all, span)
             }
-            (Ty::F32, _) if F32_UNARY.iter().any(|(n, _)| *n == name) => {
+            (Ty::F32, _) if let Some(op) = Unary::method(name, false) => {
                 want(self, 0)?;
-                let op = F32_UNARY.iter().find(|(n, _)| *n == name).unwrap().1;
                 Ok(self.map(&recv, op))
             }
             (Ty::F32, "log2" | "log10") => {
@@ -389,9 +353,8 @@ impl Lowerer<'_> {
                     Ok(Self::scalar(self.dot(&d.comps, &d.comps)))
                 }
             }
-            (Ty::Vec(_), _) if VEC_UNARY.iter().any(|(n, _)| *n == name) => {
+            (Ty::Vec(_), _) if let Some(op) = Unary::method(name, true) => {
                 want(self, 0)?;
-                let op = VEC_UNARY.iter().find(|(n, _)| *n == name).unwrap().1;
                 Ok(self.map(&recv, op))
             }
             (Ty::Vec(_), "powf") => {

@@ -19,6 +19,7 @@
 
 use super::{Lowerer, R, Val};
 use crate::ir::{Binary, Block, Op, Scalar, Stmt, Unary, Var};
+use crate::ops;
 use crate::types::Ty;
 use proc_macro2::Span;
 use std::collections::HashMap;
@@ -272,92 +273,7 @@ impl Lowerer<'_> {
         use Unary as U;
         match *op {
             Op::Const(_) => None,
-            Op::Unary(u, a) => {
-                let da = d[0]?;
-                let scaled = |s: &mut Self, k: Var| Some(s.bin(B::Mul, da, k));
-                match u {
-                    U::Neg => Some(self.un(U::Neg, da)),
-                    U::Fract => Some(da),
-                    U::NoDiff
-                    | U::Floor
-                    | U::Ceil
-                    | U::Round
-                    | U::Trunc
-                    | U::Signum
-                    | U::Cast(_)
-                    | U::Not => None,
-                    U::Exp => scaled(self, r),
-                    U::Ln => {
-                        let q = self.bin(B::Div, da, a);
-                        self.guarded(a, B::Gt, 0.0, q)
-                    }
-                    U::Ln1p => {
-                        let one = self.fconst(1.0);
-                        let den = self.bin(B::Add, one, a);
-                        let q = self.bin(B::Div, da, den);
-                        self.guarded(a, B::Gt, -1.0, q)
-                    }
-                    U::Sqrt => {
-                        let half = self.fconst(0.5);
-                        let h = self.bin(B::Mul, half, da);
-                        let q = self.bin(B::Div, h, r);
-                        self.guarded(a, B::Gt, 0.0, q)
-                    }
-                    U::Rsqrt => {
-                        let k = self.fconst(-0.5);
-                        let r2 = self.bin(B::Mul, r, r);
-                        let r3 = self.bin(B::Mul, r2, r);
-                        let kd = self.bin(B::Mul, k, da);
-                        let q = self.bin(B::Mul, kd, r3);
-                        self.guarded(a, B::Gt, 0.0, q)
-                    }
-                    U::Recip => {
-                        let r2 = self.bin(B::Mul, r, r);
-                        let q = self.bin(B::Mul, da, r2);
-                        let q = self.un(U::Neg, q);
-                        self.guarded(a, B::Ne, 0.0, q)
-                    }
-                    U::Abs => {
-                        let z = self.fconst(0.0);
-                        let nonneg = self.bin(B::Ge, a, z);
-                        let neg = self.un(U::Neg, da);
-                        Some(self.select(nonneg, da, neg))
-                    }
-                    U::Sin => {
-                        let c = self.un(U::Cos, a);
-                        scaled(self, c)
-                    }
-                    U::Cos => {
-                        let s = self.un(U::Sin, a);
-                        let q = self.bin(B::Mul, da, s);
-                        Some(self.un(U::Neg, q))
-                    }
-                    U::Tan | U::Tanh => {
-                        let one = self.fconst(1.0);
-                        let r2 = self.bin(B::Mul, r, r);
-                        let k = match u {
-                            U::Tan => self.bin(B::Add, one, r2),
-                            _ => self.bin(B::Sub, one, r2),
-                        };
-                        scaled(self, k)
-                    }
-                    U::Atan => {
-                        let one = self.fconst(1.0);
-                        let a2 = self.bin(B::Mul, a, a);
-                        let den = self.bin(B::Add, one, a2);
-                        Some(self.bin(B::Div, da, den))
-                    }
-                    U::Asin | U::Acos => {
-                        let one = self.fconst(1.0);
-                        let a2 = self.bin(B::Mul, a, a);
-                        let t = self.bin(B::Sub, one, a2);
-                        let s = self.un(U::Sqrt, t);
-                        let q = self.bin(B::Div, da, s);
-                        let q = if u == U::Acos { self.un(U::Neg, q) } else { q };
-                        self.guarded(t, B::Gt, 0.0, q)
-                    }
-                }
-            }
+            Op::Unary(u, a) => ops::unary_derivative(self, u, a, r, d[0]?),
             Op::Binary(b, x, y) => {
                 let (dx, dy) = (d[0], d[1]);
                 match b {
@@ -457,5 +373,21 @@ impl Lowerer<'_> {
             (a, None) => a,
             (None, b) => b,
         }
+    }
+}
+
+/// Derivative rules write tangents as any other lowered code (names come from bindings).
+impl ops::Emit for Lowerer<'_> {
+    fn konst(&mut self, x: f64) -> Var {
+        self.fconst(x)
+    }
+    fn un(&mut self, u: Unary, a: Var, _: &str) -> Var {
+        Lowerer::un(self, u, a)
+    }
+    fn bin(&mut self, b: Binary, x: Var, y: Var, _: &str) -> Var {
+        Lowerer::bin(self, b, x, y)
+    }
+    fn select(&mut self, c: Var, x: Var, y: Var, _: &str) -> Var {
+        Lowerer::select(self, c, x, y)
     }
 }
