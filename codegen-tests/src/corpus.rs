@@ -48,9 +48,9 @@ pub mod scalars {
         k * 0.1 + x.fract() * x
     }
 
-    /// sigmoid, log2, log10, unit conversions, constants.
+    /// sigmoid, erf, log2, log10, unit conversions, constants.
     pub fn misc(x: f32, y: f32) -> f32 {
-        let s = sigmoid(x) * sigmoid(-3.0 * y);
+        let s = sigmoid(x) * sigmoid(-3.0 * y) + erf(x - 1.0) * y;
         s + x.log2() * y.log10()
             + x.to_radians()
             + y.to_degrees() * core::f32::consts::PI
@@ -349,6 +349,7 @@ pub mod jacobians {
         let b = x.sqrt() + rsqrt(y) + y.recip() + (x - 0.5).abs() + x.min(y) + x.max(0.2 * y);
         let c = x.sin() * y.cos() + x.tan() + y.tanh() + x.asin() + y.acos() + x.atan();
         let d = x.powf(y) + y.powi(3) + x.fract() * x.floor() + sigmoid(x - y) + y.atan2(x);
+        let d = d + erf(x - y);
         let e = if x > y { x * x } else { y.sqrt() * x };
         Vec4::new(a, b + e, c, select(x > 0.3, d, -d))
     }

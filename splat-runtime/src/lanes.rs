@@ -280,6 +280,7 @@ lane_unary!(
     exp => math::exp,
     ln => math::ln,
     ln_1p => math::ln_1p,
+    erf => math::erf,
     sin => f32::sin,
     cos => f32::cos,
     tan => f32::tan,

@@ -25,6 +25,13 @@ pub fn rsqrt(x: f32) -> f32 {
     1.0 / x.sqrt()
 }
 
+/// The error function, 2 / sqrt(pi) times the integral of e^(-t^2) from 0 to x (std has no
+/// stable `erf`).
+#[inline(always)]
+pub fn erf(x: f32) -> f32 {
+    crate::math::erf(x)
+}
+
 /// 1 / (1 + e^-x).
 #[inline(always)]
 pub fn sigmoid(x: f32) -> f32 {

@@ -66,6 +66,8 @@ pub enum Unary {
     Acos,
     Atan,
     Tanh,
+    /// The error function (`erf(x)`).
+    Erf,
     Floor,
     Ceil,
     Round,

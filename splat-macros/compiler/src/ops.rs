@@ -3,8 +3,9 @@
 //! on vectors, how the Rust and the WGSL compute it, and its derivative, which both the
 //! reverse sweep (`ad`) and the in-kernel Jacobians (`lower::jacobian`) build from the same
 //! rule. Every table here is an exhaustive `match`: a new `ir::Unary` variant does not compile
-//! until it has a row and a rule. Beyond this file it needs only `F32x8`'s method of the same
-//! name in the runtime (the SIMD kernels call it).
+//! until it has a row and a rule. Beyond this file an operation needs `F32x8`'s method of the
+//! same name in the runtime (the SIMD kernels call it), a WGSL form in `emit::naga` where WGSL
+//! has no built-in, and `splat_runtime::math` functions where std has none.
 
 use crate::ir::{Binary, Unary, Var};
 use naga::MathFunction;
@@ -12,32 +13,60 @@ use naga::MathFunction;
 /// How the generated code computes a unary operation.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct UnaryInfo {
-    /// The `f32` method users call (`x.exp()`) and the emitted Rust calls; `None` for
-    /// operators and for operations only the lowering builds.
+    /// The `f32` method users call (`x.exp()`); `None` for operators, for free functions and
+    /// for operations only the lowering builds.
     pub method: Option<&'static str>,
+    /// The free function users call (`erf(x)`, in `splat_runtime::prelude`) where there is no
+    /// method (std has none, or it is unstable).
+    pub function: Option<&'static str>,
     /// glam has the method on vectors too, component by component.
     pub on_vectors: bool,
-    /// The generated `f32` Rust calls `splat_runtime::math`'s version (shared with the SIMD
-    /// lanes, so a scalar and a lane kernel round alike) instead of `std`'s.
-    pub runtime_math: bool,
-    /// The WGSL built-in computing it exactly as the Rust does; `None` where `emit::naga`
-    /// spells it out (`ln_1p`, `rsqrt`, `recip`, Rust's rounding and `fract` and `signum`).
+    /// How the generated Rust computes it.
+    pub rust: Rust,
+    /// The WGSL built-in computing it as the Rust does; `None` where `emit::naga` spells it
+    /// out (`ln_1p`, `erf`, `rsqrt`, `recip`, Rust's rounding, `fract` and `signum`).
     pub wgsl: Option<MathFunction>,
 }
 
-const fn op(method: &'static str, wgsl: Option<MathFunction>) -> UnaryInfo {
+/// How the generated Rust computes an operation named `name` (its method or function name).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Rust {
+    /// `x.name()` in every form (`f32`, the `f64` twin, `F32x8` lanes).
+    Std,
+    /// `splat_runtime::math::name(x)` in `f32` (branch-free, shared with the lanes' `x.name()`
+    /// so scalar and lane kernels round alike), std's `x.name()` in the `f64` twin.
+    RuntimeF32,
+    /// `splat_runtime::math::name(x)` in `f32` and `name_f64(x)` in the twin (std has none).
+    Runtime,
+    /// Spelled out by `emit::body` (operators, `rsqrt`, `recip`, casts).
+    Custom,
+}
+
+const fn method(name: &'static str, wgsl: Option<MathFunction>) -> UnaryInfo {
     UnaryInfo {
-        method: Some(method),
+        method: Some(name),
+        function: None,
         on_vectors: false,
-        runtime_math: false,
+        rust: Rust::Std,
         wgsl,
+    }
+}
+
+const fn function(name: &'static str, rust: Rust) -> UnaryInfo {
+    UnaryInfo {
+        method: None,
+        function: Some(name),
+        on_vectors: false,
+        rust,
+        wgsl: None,
     }
 }
 
 const BUILT: UnaryInfo = UnaryInfo {
     method: None,
+    function: None,
     on_vectors: false,
-    runtime_math: false,
+    rust: Rust::Custom,
     wgsl: None,
 };
 
@@ -49,17 +78,19 @@ impl UnaryInfo {
         }
     }
 
-    const fn runtime_math(self) -> Self {
-        UnaryInfo {
-            runtime_math: true,
-            ..self
-        }
+    const fn rust(self, rust: Rust) -> Self {
+        UnaryInfo { rust, ..self }
+    }
+
+    /// The name the generated Rust calls it by.
+    pub fn name(self) -> &'static str {
+        self.method.or(self.function).expect("a named operation")
     }
 }
 
 impl Unary {
-    /// The operations users call as `f32` methods, in the order suggestions list them.
-    pub const METHODS: [Unary; 19] = [
+    /// The operations users call by name, methods in the order suggestions list them.
+    pub const NAMED: [Unary; 21] = [
         Unary::Exp,
         Unary::Ln,
         Unary::Ln1p,
@@ -79,44 +110,57 @@ impl Unary {
         Unary::Trunc,
         Unary::Fract,
         Unary::Signum,
+        Unary::Rsqrt,
+        Unary::Erf,
     ];
 
     pub fn info(self) -> UnaryInfo {
         use MathFunction as M;
         match self {
-            Unary::Neg | Unary::Not | Unary::NoDiff | Unary::Rsqrt | Unary::Cast(_) => BUILT,
-            Unary::Exp => op("exp", Some(M::Exp)).on_vectors().runtime_math(),
-            Unary::Ln => op("ln", Some(M::Log)).runtime_math(),
-            Unary::Ln1p => op("ln_1p", None).runtime_math(),
-            Unary::Sqrt => op("sqrt", Some(M::Sqrt)),
-            Unary::Recip => op("recip", None).on_vectors(),
-            Unary::Abs => op("abs", Some(M::Abs)).on_vectors(),
-            Unary::Sin => op("sin", Some(M::Sin)),
-            Unary::Cos => op("cos", Some(M::Cos)),
-            Unary::Tan => op("tan", Some(M::Tan)),
-            Unary::Asin => op("asin", Some(M::Asin)),
-            Unary::Acos => op("acos", Some(M::Acos)),
-            Unary::Atan => op("atan", Some(M::Atan)),
-            Unary::Tanh => op("tanh", Some(M::Tanh)),
-            Unary::Floor => op("floor", Some(M::Floor)).on_vectors(),
-            Unary::Ceil => op("ceil", Some(M::Ceil)).on_vectors(),
-            Unary::Round => op("round", None).on_vectors(),
-            Unary::Trunc => op("trunc", Some(M::Trunc)).on_vectors(),
-            Unary::Fract => op("fract", None).on_vectors(),
-            Unary::Signum => op("signum", None).on_vectors(),
+            Unary::Neg | Unary::Not | Unary::NoDiff | Unary::Cast(_) => BUILT,
+            Unary::Exp => method("exp", Some(M::Exp))
+                .on_vectors()
+                .rust(Rust::RuntimeF32),
+            Unary::Ln => method("ln", Some(M::Log)).rust(Rust::RuntimeF32),
+            Unary::Ln1p => method("ln_1p", None).rust(Rust::RuntimeF32),
+            Unary::Sqrt => method("sqrt", Some(M::Sqrt)),
+            Unary::Rsqrt => function("rsqrt", Rust::Custom),
+            Unary::Recip => method("recip", None).on_vectors().rust(Rust::Custom),
+            Unary::Erf => function("erf", Rust::Runtime),
+            Unary::Abs => method("abs", Some(M::Abs)).on_vectors(),
+            Unary::Sin => method("sin", Some(M::Sin)),
+            Unary::Cos => method("cos", Some(M::Cos)),
+            Unary::Tan => method("tan", Some(M::Tan)),
+            Unary::Asin => method("asin", Some(M::Asin)),
+            Unary::Acos => method("acos", Some(M::Acos)),
+            Unary::Atan => method("atan", Some(M::Atan)),
+            Unary::Tanh => method("tanh", Some(M::Tanh)),
+            Unary::Floor => method("floor", Some(M::Floor)).on_vectors(),
+            Unary::Ceil => method("ceil", Some(M::Ceil)).on_vectors(),
+            Unary::Round => method("round", None).on_vectors(),
+            Unary::Trunc => method("trunc", Some(M::Trunc)).on_vectors(),
+            Unary::Fract => method("fract", None).on_vectors(),
+            Unary::Signum => method("signum", None).on_vectors(),
         }
     }
 
     /// The operation users call as the method `name` on an `f32` (`vector`: on a vector).
     pub fn method(name: &str, vector: bool) -> Option<Unary> {
-        Unary::METHODS
+        Unary::NAMED
             .into_iter()
             .find(|u| u.info().method == Some(name) && (!vector || u.info().on_vectors))
     }
 
-    /// The method names of [`Unary::METHODS`] (`vector`: those glam has on vectors).
+    /// The operation users call as the free function `name`.
+    pub fn function(name: &str) -> Option<Unary> {
+        Unary::NAMED
+            .into_iter()
+            .find(|u| u.info().function == Some(name))
+    }
+
+    /// The method names (`vector`: those glam has on vectors).
     pub fn method_names(vector: bool) -> impl Iterator<Item = &'static str> {
-        (Unary::METHODS.into_iter())
+        (Unary::NAMED.into_iter())
             .filter(move |u| !vector || u.info().on_vectors)
             .filter_map(|u| u.info().method)
     }
@@ -212,6 +256,15 @@ pub fn unary_derivative(e: &mut impl Emit, u: Unary, a: Var, r: Var, d: Var) -> 
             };
             e.bin(B::Mul, d, k, out)
         }
+        U::Erf => {
+            // 2 / sqrt(pi) e^(-a^2)
+            let a2 = e.bin(B::Mul, a, a, "a2");
+            let n = e.un(U::Neg, a2, "a2");
+            let g = e.un(U::Exp, n, "gauss");
+            let k = e.konst(std::f64::consts::FRAC_2_SQRT_PI);
+            let q = e.bin(B::Mul, d, k, out);
+            e.bin(B::Mul, q, g, out)
+        }
         U::Atan => {
             let one = e.konst(1.0);
             let a2 = e.bin(B::Mul, a, a, "a2");
@@ -239,12 +292,19 @@ mod tests {
     use super::*;
 
     #[test]
-    fn every_method_is_found_by_its_name_and_only_vector_ones_on_vectors() {
-        for u in Unary::METHODS {
-            let name = u.info().method.expect("a method has a name");
-            assert_eq!(Unary::method(name, false), Some(u), "{name}");
-            let on_vectors = Unary::method(name, true) == Some(u);
-            assert_eq!(on_vectors, u.info().on_vectors, "{name}");
+    fn every_operation_is_found_by_its_name_and_only_vector_ones_on_vectors() {
+        for u in Unary::NAMED {
+            let info = u.info();
+            if let Some(name) = info.method {
+                assert_eq!(Unary::method(name, false), Some(u), "{name}");
+                let on_vectors = Unary::method(name, true) == Some(u);
+                assert_eq!(on_vectors, info.on_vectors, "{name}");
+            }
+            if let Some(name) = info.function {
+                assert_eq!(Unary::function(name), Some(u), "{name}");
+                assert!(!info.on_vectors, "{name}: functions take an f32");
+            }
+            assert!(info.method.is_some() != info.function.is_some(), "{u:?}");
         }
         assert_eq!(Unary::method("nope", false), None);
     }

@@ -3,6 +3,7 @@
 //! becomes a `let` with a readable, unique name.
 
 use crate::ir::{Binary, Block, Const, Function, Op, Scalar, Stmt, Unary, Var};
+use crate::ops::Rust;
 use proc_macro2::{Ident, Literal, Span, TokenStream};
 use quote::{format_ident, quote};
 use std::collections::{HashMap, HashSet};
@@ -249,14 +250,24 @@ impl<'f> BodyEmitter<'f> {
                     Unary::Neg => quote!(-#x),
                     Unary::Not => quote!(!#x),
                     Unary::NoDiff => x,
-                    _ if u.info().runtime_math && self.flavor == Flavor::F32 => {
-                        let f = format_ident!("{}", u.info().method.expect("a method"));
-                        quote!(#rt::math::#f(#x))
-                    }
                     Unary::Rsqrt => quote!(#one / #x.sqrt()),
                     Unary::Recip => quote!(#one / #x),
                     Unary::Cast(to) => self.cast(x, ty, to),
-                    _ => method(u.info().method.expect("an operation with a method")),
+                    _ => {
+                        let info = u.info();
+                        let name = info.name();
+                        match (info.rust, self.flavor) {
+                            (Rust::RuntimeF32 | Rust::Runtime, Flavor::F32) => {
+                                let f = format_ident!("{name}");
+                                quote!(#rt::math::#f(#x))
+                            }
+                            (Rust::Runtime, Flavor::F64) => {
+                                let f = format_ident!("{name}_f64");
+                                quote!(#rt::math::#f(#x))
+                            }
+                            _ => method(name),
+                        }
+                    }
                 }
             }
             Op::Binary(b, x, y) => {

@@ -487,9 +487,81 @@ impl<'f> FnBuilder<'f> {
                 self.bin(B::Subtract, x, t)
             }
             Unary::Signum => self.signum(x),
+            Unary::Erf => self.erf(x),
             Unary::Cast(to) => self.cast(x, from, to),
             _ => unreachable!("{u:?} is a WGSL built-in (`ops::UnaryInfo::wgsl`)"),
         }
+    }
+
+    /// `splat_runtime::math::erf`, step for step: the Maclaurin series below |x| = 0.5, else
+    /// 1 - erfc from Numerical Recipes' fit (its coefficients are the runtime's `ERF_SERIES`
+    /// and `ERFC_FIT`; codegen-tests' GPU test holds the two to the f64 twin).
+    #[allow(clippy::excessive_precision)] // as published
+    fn erf(&mut self, x: Handle<E>) -> Handle<E> {
+        const SERIES: [f32; 7] = [
+            1.0 / 9360.0,
+            -1.0 / 1320.0,
+            1.0 / 216.0,
+            -1.0 / 42.0,
+            1.0 / 10.0,
+            -1.0 / 3.0,
+            1.0,
+        ];
+        const FIT: [f32; 10] = [
+            0.170_872_77,
+            -0.822_152_23,
+            1.488_515_87,
+            -1.135_203_98,
+            0.278_868_07,
+            -0.186_288_06,
+            0.096_784_18,
+            0.374_091_96,
+            1.000_023_68,
+            -1.265_512_23,
+        ];
+        let a = self.math(M::Abs, x, None);
+        let z = self.bin(B::Multiply, a, a);
+        let series = self.horner(&SERIES, z);
+        let k = self.lit_f32(std::f32::consts::FRAC_2_SQRT_PI);
+        let ka = self.bin(B::Multiply, k, a);
+        let near = self.bin(B::Multiply, ka, series);
+        let (one, half) = (self.lit_f32(1.0), self.lit_f32(0.5));
+        let ha = self.bin(B::Multiply, half, a);
+        let den = self.bin(B::Add, one, ha);
+        let t = self.bin(B::Divide, one, den);
+        let fit = self.horner(&FIT, t);
+        let arg = self.bin(B::Subtract, fit, z);
+        let e = self.math(M::Exp, arg, None);
+        let te = self.bin(B::Multiply, t, e);
+        let far = self.bin(B::Subtract, one, te);
+        let small = self.bin(B::Less, a, half);
+        let r = self.add(E::Select {
+            condition: small,
+            accept: near,
+            reject: far,
+        });
+        let zero = self.lit_f32(0.0);
+        let negative = self.bin(B::Less, x, zero);
+        let nr = self.add(E::Unary {
+            op: UnaryOperator::Negate,
+            expr: r,
+        });
+        self.add(E::Select {
+            condition: negative,
+            accept: nr,
+            reject: r,
+        })
+    }
+
+    /// The polynomial with coefficients `c` (highest power first) at `x`, by Horner's rule.
+    fn horner(&mut self, c: &[f32], x: Handle<E>) -> Handle<E> {
+        let mut p = self.lit_f32(c[0]);
+        for &k in &c[1..] {
+            let px = self.bin(B::Multiply, p, x);
+            let k = self.lit_f32(k);
+            p = self.bin(B::Add, px, k);
+        }
+        p
     }
 
     /// Rust's `signum`: -1 when the sign bit is set (including -0.0), else 1.

@@ -150,7 +150,7 @@ const FREE_AS_METHOD: &[(&str, &str)] = &[
     ("determinant", "determinant"),
 ];
 
-pub const INTRINSIC_LIST: &str = "exp, log/ln, log1p, sqrt, rsqrt, abs, min, max, clamp, select, sin, \
+pub const INTRINSIC_LIST: &str = "exp, log/ln, log1p, sqrt, rsqrt, erf, abs, min, max, clamp, select, sin, \
     cos, tan, atan2, dot, cross, length, normalize, transpose, inverse, determinant, sigmoid, no_diff, \
     spherical_harmonics, jacobian, and the camera methods project_point, pixel_ray, can_project, center";
 
@@ -576,7 +576,7 @@ impl Lowerer<'_> {
                 )?;
                 self.lazy_select(cond.comps[0], &c.args[1], &c.args[2], span)
             }
-            "no_diff" | "rsqrt" | "sigmoid" => {
+            _ if matches!(name, "no_diff" | "sigmoid") || Unary::function(name).is_some() => {
                 let args = self.args_of(&c.args)?;
                 if args.len() != 1 {
                     return self.err(span, format!("`{name}` takes 1 argument"));
@@ -587,8 +587,8 @@ impl Lowerer<'_> {
                     _ if v.ty != Ty::F32 => {
                         self.err(span, format!("`{name}` takes an `f32`, found `{}`", v.ty))
                     }
-                    "rsqrt" => Ok(self.map(v, Unary::Rsqrt)),
-                    _ => Ok(Self::scalar(self.sigmoid(v.comps[0]))),
+                    "sigmoid" => Ok(Self::scalar(self.sigmoid(v.comps[0]))),
+                    _ => Ok(self.map(v, Unary::function(name).expect("a function"))),
                 }
             }
             "jacobian" => self.jacobian(c, span),
