@@ -262,8 +262,6 @@ impl Ad<'_> {
 
     /// Transposes one operation: `g` is the adjoint of its result `r`.
     fn rule(&mut self, r: Var, op: &Op, g: Var, adj: &mut HashMap<Var, Var>, out: &mut Vec<Stmt>) {
-        use Binary as B;
-        use Unary as U;
         match *op {
             Op::Const(_) => {}
             Op::Unary(u, a) => {
@@ -279,86 +277,19 @@ impl Ad<'_> {
             }
             Op::Binary(b, x, y) => {
                 let (nx, ny) = (self.d_name(x), self.d_name(y));
-                match b {
-                    B::Add => {
-                        self.acc(adj, x, g, out);
-                        self.acc(adj, y, g, out);
+                let mut rev = Reverse {
+                    ad: self,
+                    out,
+                    name: nx,
+                };
+                let mut e = ops::Shared::new(&mut rev);
+                let cx = ops::binary_derivative(&mut e, b, x, y, r, 0, g);
+                e.inner.name = ny;
+                let cy = ops::binary_derivative(&mut e, b, x, y, r, 1, g);
+                for (v, c) in [(x, cx), (y, cy)] {
+                    if let Some(c) = c {
+                        self.acc(adj, v, c, out);
                     }
-                    B::Sub => {
-                        self.acc(adj, x, g, out);
-                        let ng = self.emit(out, Op::Unary(U::Neg, g), &ny);
-                        self.acc(adj, y, ng, out);
-                    }
-                    B::Mul => {
-                        let dx = self.emit(out, Op::Binary(B::Mul, g, y), &nx);
-                        self.acc(adj, x, dx, out);
-                        let dy = self.emit(out, Op::Binary(B::Mul, g, x), &ny);
-                        self.acc(adj, y, dy, out);
-                    }
-                    B::Div => {
-                        let z = self.zero(out);
-                        let nz = self.emit(out, Op::Binary(B::Ne, y, z), "nz");
-                        let q = self.emit(out, Op::Binary(B::Div, g, y), &nx);
-                        let dx = self.guard(out, nz, q, false, &nx);
-                        self.acc(adj, x, dx, out);
-                        let qr = self.emit(out, Op::Binary(B::Mul, q, r), &ny);
-                        let nqr = self.emit(out, Op::Unary(U::Neg, qr), &ny);
-                        let dy = self.guard(out, nz, nqr, false, &ny);
-                        self.acc(adj, y, dy, out);
-                    }
-                    B::Rem => {
-                        self.acc(adj, x, g, out);
-                        let z = self.zero(out);
-                        let nz = self.emit(out, Op::Binary(B::Ne, y, z), "nz");
-                        let q = self.emit(out, Op::Binary(B::Div, x, y), "q");
-                        let t = self.emit(out, Op::Unary(U::Trunc, q), "q");
-                        let gt = self.emit(out, Op::Binary(B::Mul, g, t), &ny);
-                        let ngt = self.emit(out, Op::Unary(U::Neg, gt), &ny);
-                        let dy = self.guard(out, nz, ngt, false, &ny);
-                        self.acc(adj, y, dy, out);
-                    }
-                    B::Min | B::Max => {
-                        // Ties go to the first operand.
-                        let cmp = if b == B::Min { B::Le } else { B::Ge };
-                        let first = self.emit(out, Op::Binary(cmp, x, y), "first");
-                        let dx = self.guard(out, first, g, false, &nx);
-                        self.acc(adj, x, dx, out);
-                        let dy = self.guard(out, first, g, true, &ny);
-                        self.acc(adj, y, dy, out);
-                    }
-                    B::Atan2 => {
-                        let z = self.zero(out);
-                        let x2 = self.emit(out, Op::Binary(B::Mul, x, x), "y2");
-                        let y2 = self.emit(out, Op::Binary(B::Mul, y, y), "x2");
-                        let den = self.emit(out, Op::Binary(B::Add, x2, y2), "den");
-                        let pos = self.emit(out, Op::Binary(B::Gt, den, z), "pos");
-                        let gy = self.emit(out, Op::Binary(B::Mul, g, y), &nx);
-                        let dx = self.emit(out, Op::Binary(B::Div, gy, den), &nx);
-                        let dx = self.guard(out, pos, dx, false, &nx);
-                        self.acc(adj, x, dx, out);
-                        let gx = self.emit(out, Op::Binary(B::Mul, g, x), &ny);
-                        let dy = self.emit(out, Op::Binary(B::Div, gx, den), &ny);
-                        let dy = self.emit(out, Op::Unary(U::Neg, dy), &ny);
-                        let dy = self.guard(out, pos, dy, false, &ny);
-                        self.acc(adj, y, dy, out);
-                    }
-                    B::Powf => {
-                        let z = self.zero(out);
-                        let nz = self.emit(out, Op::Binary(B::Ne, x, z), "nz");
-                        let gy = self.emit(out, Op::Binary(B::Mul, g, y), &nx);
-                        let gyr = self.emit(out, Op::Binary(B::Mul, gy, r), &nx);
-                        let dx = self.emit(out, Op::Binary(B::Div, gyr, x), &nx);
-                        let dx = self.guard(out, nz, dx, false, &nx);
-                        self.acc(adj, x, dx, out);
-                        let pos = self.emit(out, Op::Binary(B::Gt, x, z), "pos");
-                        let l = self.emit(out, Op::Unary(U::Ln, x), "ln");
-                        let gr = self.emit(out, Op::Binary(B::Mul, g, r), &ny);
-                        let dy = self.emit(out, Op::Binary(B::Mul, gr, l), &ny);
-                        let dy = self.guard(out, pos, dy, false, &ny);
-                        self.acc(adj, y, dy, out);
-                    }
-                    // Comparisons and bit operations have no float result.
-                    _ => {}
                 }
             }
             Op::Select(c, x, y) => {

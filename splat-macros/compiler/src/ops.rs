@@ -7,7 +7,7 @@
 //! same name in the runtime (the SIMD kernels call it), a WGSL form in `emit::naga` where WGSL
 //! has no built-in, and `splat_runtime::math` functions where std has none.
 
-use crate::ir::{Binary, Unary, Var};
+use crate::ir::{Binary, Const, Op, Unary, Var};
 use naga::MathFunction;
 
 /// How the generated code computes a unary operation.
@@ -179,6 +179,46 @@ pub trait Emit {
 /// The name a rule gives its result.
 pub const DERIVATIVE: &str = "";
 
+/// An [`Emit`] that writes each distinct operation once, so the parts of a binary rule share
+/// what they have in common (a quotient, a guard's comparison) as a hand-written rule would.
+pub struct Shared<'a, E> {
+    pub inner: &'a mut E,
+    seen: Vec<(Op, Var)>,
+}
+
+impl<'a, E: Emit> Shared<'a, E> {
+    pub fn new(inner: &'a mut E) -> Self {
+        Shared {
+            inner,
+            seen: vec![],
+        }
+    }
+
+    fn once(&mut self, op: Op, emit: impl FnOnce(&mut E) -> Var) -> Var {
+        if let Some((_, v)) = self.seen.iter().find(|(o, _)| *o == op) {
+            return *v;
+        }
+        let v = emit(self.inner);
+        self.seen.push((op, v));
+        v
+    }
+}
+
+impl<E: Emit> Emit for Shared<'_, E> {
+    fn konst(&mut self, x: f64) -> Var {
+        self.once(Op::Const(Const::F(x)), |e| e.konst(x))
+    }
+    fn un(&mut self, u: Unary, a: Var, name: &str) -> Var {
+        self.once(Op::Unary(u, a), |e| e.un(u, a, name))
+    }
+    fn bin(&mut self, b: Binary, x: Var, y: Var, name: &str) -> Var {
+        self.once(Op::Binary(b, x, y), |e| e.bin(b, x, y, name))
+    }
+    fn select(&mut self, c: Var, x: Var, y: Var, name: &str) -> Var {
+        self.once(Op::Select(c, x, y), |e| e.select(c, x, y, name))
+    }
+}
+
 /// `value` where `v cmp k`, zero elsewhere: the kink rule, a zero derivative where the true
 /// one is infinite or undefined.
 fn guarded(e: &mut impl Emit, v: Var, cmp: Binary, k: f64, value: Var, name: &str) -> Var {
@@ -284,6 +324,95 @@ pub fn unary_derivative(e: &mut impl Emit, u: Unary, a: Var, r: Var, d: Var) -> 
             };
             guarded(e, t, B::Gt, 0.0, q, "inside")
         }
+    })
+}
+
+/// `d` times the partial derivative of `r = x b y` by operand `operand` (0: `x`, 1: `y`), where
+/// `d` is that operand's tangent (forward: the tangent of `r` sums both) or the adjoint of `r`
+/// (reverse: each operand receives its own). `None` where it is zero (comparisons and bit
+/// operations have no float result).
+#[allow(clippy::too_many_arguments)]
+pub fn binary_derivative(
+    e: &mut impl Emit,
+    b: Binary,
+    x: Var,
+    y: Var,
+    r: Var,
+    operand: usize,
+    d: Var,
+) -> Option<Var> {
+    use Binary as B;
+    use Unary as U;
+    let out = DERIVATIVE;
+    let first = operand == 0;
+    Some(match b {
+        B::Add => d,
+        B::Sub if first => d,
+        B::Sub => e.un(U::Neg, d, out),
+        B::Mul => e.bin(B::Mul, d, if first { y } else { x }, out),
+        B::Div => {
+            let q = e.bin(B::Div, d, y, out);
+            let q = match first {
+                true => q,
+                false => {
+                    let qr = e.bin(B::Mul, q, r, out);
+                    e.un(U::Neg, qr, out)
+                }
+            };
+            guarded(e, y, B::Ne, 0.0, q, "nz")
+        }
+        B::Rem if first => d,
+        B::Rem => {
+            let q = e.bin(B::Div, x, y, "q");
+            let t = e.un(U::Trunc, q, "q");
+            let dt = e.bin(B::Mul, d, t, out);
+            let n = e.un(U::Neg, dt, out);
+            guarded(e, y, B::Ne, 0.0, n, "nz")
+        }
+        B::Min | B::Max => {
+            // Ties go to the first operand.
+            let cmp = if b == B::Min { B::Le } else { B::Ge };
+            let x_wins = e.bin(cmp, x, y, "first");
+            let z = e.konst(0.0);
+            match first {
+                true => e.select(x_wins, d, z, out),
+                false => e.select(x_wins, z, d, out),
+            }
+        }
+        B::Atan2 => {
+            // atan2(x, y): (dx y - x dy) / (x^2 + y^2), zero at the origin.
+            let x2 = e.bin(B::Mul, x, x, "x2");
+            let y2 = e.bin(B::Mul, y, y, "y2");
+            let den = e.bin(B::Add, x2, y2, "den");
+            let q = e.bin(B::Mul, d, if first { y } else { x }, out);
+            let q = e.bin(B::Div, q, den, out);
+            let q = if first { q } else { e.un(U::Neg, q, out) };
+            guarded(e, den, B::Gt, 0.0, q, "pos")
+        }
+        // x^y: y r / x (zero at x = 0) and r ln x (zero for x <= 0).
+        B::Powf if first => {
+            let dy = e.bin(B::Mul, d, y, out);
+            let dyr = e.bin(B::Mul, dy, r, out);
+            let q = e.bin(B::Div, dyr, x, out);
+            guarded(e, x, B::Ne, 0.0, q, "nz")
+        }
+        B::Powf => {
+            let l = e.un(U::Ln, x, "ln");
+            let dr = e.bin(B::Mul, d, r, out);
+            let q = e.bin(B::Mul, dr, l, out);
+            guarded(e, x, B::Gt, 0.0, q, "pos")
+        }
+        B::And
+        | B::Or
+        | B::Xor
+        | B::Shl
+        | B::Shr
+        | B::Lt
+        | B::Le
+        | B::Gt
+        | B::Ge
+        | B::Eq
+        | B::Ne => return None,
     })
 }
 

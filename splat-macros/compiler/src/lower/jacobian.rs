@@ -269,84 +269,14 @@ impl Lowerer<'_> {
 
     /// The tangent of `r = op(..)` in one direction, given its operands' (`None`: zero).
     fn tangent_rule(&mut self, r: Var, op: &Op, d: &[Option<Var>]) -> Option<Var> {
-        use Binary as B;
-        use Unary as U;
         match *op {
             Op::Const(_) => None,
             Op::Unary(u, a) => ops::unary_derivative(self, u, a, r, d[0]?),
             Op::Binary(b, x, y) => {
-                let (dx, dy) = (d[0], d[1]);
-                match b {
-                    // No tangent in this direction (others may have one).
-                    _ if dx.is_none() && dy.is_none() => None,
-                    B::Add => self.sum(dx, dy),
-                    B::Sub => {
-                        let ndy = dy.map(|v| self.un(U::Neg, v));
-                        self.sum(dx, ndy)
-                    }
-                    B::Mul => {
-                        let a = dx.map(|v| self.bin(B::Mul, v, y));
-                        let c = dy.map(|v| self.bin(B::Mul, x, v));
-                        self.sum(a, c)
-                    }
-                    B::Div => {
-                        // (dx - r dy) / y, zero where y is 0.
-                        let rdy = dy.map(|v| self.bin(B::Mul, r, v));
-                        let nrdy = rdy.map(|v| self.un(U::Neg, v));
-                        let num = self.sum(dx, nrdy)?;
-                        let q = self.bin(B::Div, num, y);
-                        self.guarded(y, B::Ne, 0.0, q)
-                    }
-                    B::Rem => {
-                        let k = dy.and_then(|v| {
-                            let q = self.bin(B::Div, x, y);
-                            let t = self.un(U::Trunc, q);
-                            let kv = self.bin(B::Mul, t, v);
-                            let nk = self.un(U::Neg, kv);
-                            self.guarded(y, B::Ne, 0.0, nk)
-                        });
-                        self.sum(dx, k)
-                    }
-                    B::Min | B::Max => {
-                        // Ties go to the first operand.
-                        let cmp = if b == B::Min { B::Le } else { B::Ge };
-                        let first = self.bin(cmp, x, y);
-                        let (a, c) = (self.materialize(dx), self.materialize(dy));
-                        Some(self.select(first, a, c))
-                    }
-                    B::Atan2 => {
-                        // atan2(x, y): (dx y - x dy) / (x^2 + y^2), zero at the origin.
-                        let x2 = self.bin(B::Mul, x, x);
-                        let y2 = self.bin(B::Mul, y, y);
-                        let den = self.bin(B::Add, x2, y2);
-                        let a = dx.map(|v| self.bin(B::Mul, v, y));
-                        let c = dy.map(|v| {
-                            let xv = self.bin(B::Mul, x, v);
-                            self.un(U::Neg, xv)
-                        });
-                        let num = self.sum(a, c)?;
-                        let q = self.bin(B::Div, num, den);
-                        self.guarded(den, B::Gt, 0.0, q)
-                    }
-                    B::Powf => {
-                        // x^y: y r / x dx (zero at x = 0) + r ln x dy (zero for x <= 0).
-                        let a = dx.and_then(|v| {
-                            let vy = self.bin(B::Mul, v, y);
-                            let vyr = self.bin(B::Mul, vy, r);
-                            let q = self.bin(B::Div, vyr, x);
-                            self.guarded(x, B::Ne, 0.0, q)
-                        });
-                        let c = dy.and_then(|v| {
-                            let l = self.un(U::Ln, x);
-                            let vr = self.bin(B::Mul, v, r);
-                            let q = self.bin(B::Mul, vr, l);
-                            self.guarded(x, B::Gt, 0.0, q)
-                        });
-                        self.sum(a, c)
-                    }
-                    // Comparisons and bit operations have no float result.
-                    _ => None,
-                }
+                let mut e = ops::Shared::new(self);
+                let mut part = |k: usize| ops::binary_derivative(&mut e, b, x, y, r, k, d[k]?);
+                let (px, py) = (part(0), part(1));
+                self.sum(px, py)
             }
             Op::Select(c, _, _) => {
                 let (dx, dy) = (d[1], d[2]);
@@ -357,14 +287,6 @@ impl Lowerer<'_> {
                 Some(self.select(c, a, b))
             }
         }
-    }
-
-    /// `value` where `v cmp k` holds, else 0 (the kink rule of `ad.rs`).
-    fn guarded(&mut self, v: Var, cmp: Binary, k: f64, value: Var) -> Option<Var> {
-        let k = self.fconst(k);
-        let ok = self.bin(cmp, v, k);
-        let z = self.fconst(0.0);
-        Some(self.select(ok, value, z))
     }
 
     fn sum(&mut self, a: Option<Var>, b: Option<Var>) -> Option<Var> {
