@@ -68,11 +68,7 @@ struct Ad<'a> {
 
 impl Ad<'_> {
     fn emit(&mut self, out: &mut Vec<Stmt>, op: Op, name: &str) -> Var {
-        let ty = match &op {
-            Op::Const(c) => c.ty(),
-            Op::Binary(b, _, _) if b.is_comparison() => Scalar::Bool,
-            _ => Scalar::F32,
-        };
+        let ty = op.result_ty(|v| self.g.ty(v));
         let v = self.g.new_var(ty, name);
         out.push(Stmt::Let { var: v, op });
         v

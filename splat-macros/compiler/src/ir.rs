@@ -123,6 +123,18 @@ pub enum Op {
 }
 
 impl Op {
+    /// The type of the operation's result, given its operands' (`ty`).
+    pub fn result_ty(&self, ty: impl Fn(Var) -> Scalar) -> Scalar {
+        match self {
+            Op::Const(c) => c.ty(),
+            Op::Unary(Unary::Cast(t), _) => *t,
+            Op::Unary(_, a) => ty(*a),
+            Op::Binary(b, _, _) if b.is_comparison() => Scalar::Bool,
+            Op::Binary(_, a, _) => ty(*a),
+            Op::Select(_, a, _) => ty(*a),
+        }
+    }
+
     pub fn operands(&self) -> Vec<Var> {
         match *self {
             Op::Const(_) => vec![],

@@ -225,14 +225,7 @@ impl<'m> Lowerer<'m> {
         if let Some(v) = self.fold(&op) {
             return v;
         }
-        let ty = match &op {
-            Op::Const(c) => c.ty(),
-            Op::Unary(Unary::Cast(t), _) => *t,
-            Op::Unary(_, a) => self.f.ty(*a),
-            Op::Binary(b, _, _) if b.is_comparison() => Scalar::Bool,
-            Op::Binary(_, a, _) => self.f.ty(*a),
-            Op::Select(_, a, _) => self.f.ty(*a),
-        };
+        let ty = op.result_ty(|v| self.f.ty(v));
         let v = self.f.new_var(ty, "t");
         let no_diff = matches!(op, Op::Unary(Unary::NoDiff, _));
         if ty == Scalar::F32 && !no_diff && op.operands().iter().any(|o| self.is_active(*o)) {
