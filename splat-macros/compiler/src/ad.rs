@@ -302,48 +302,7 @@ impl Ad<'_> {
 /// Renumbers a callee's variables by `base` (after appending its variable table to the
 /// caller's), then substitutes its parameters.
 fn shift_block(b: &Block, base: u32, params: &HashMap<Var, Var>) -> Block {
-    let m = |v: &Var| params.get(v).copied().unwrap_or(Var(v.0 + base));
-    let stmts = b
-        .stmts
-        .iter()
-        .map(|s| match s {
-            Stmt::Let { var, op } => Stmt::Let {
-                var: m(var),
-                op: match *op {
-                    Op::Const(c) => Op::Const(c),
-                    Op::Unary(u, a) => Op::Unary(u, m(&a)),
-                    Op::Binary(o, a, c) => Op::Binary(o, m(&a), m(&c)),
-                    Op::Select(c, a, d) => Op::Select(m(&c), m(&a), m(&d)),
-                },
-            },
-            Stmt::If {
-                cond,
-                then_block,
-                else_block,
-                outs,
-            } => Stmt::If {
-                cond: m(cond),
-                then_block: shift_block(then_block, base, params),
-                else_block: shift_block(else_block, base, params),
-                outs: outs.iter().map(m).collect(),
-            },
-            Stmt::Call {
-                callee,
-                args,
-                outs,
-                body,
-            } => Stmt::Call {
-                callee: *callee,
-                args: args.iter().map(m).collect(),
-                outs: outs.iter().map(m).collect(),
-                body: shift_block(body, base, params),
-            },
-        })
-        .collect();
-    Block {
-        stmts,
-        yields: b.yields.iter().map(m).collect(),
-    }
+    b.rename(&mut |v, _| params.get(&v).copied().unwrap_or(Var(v.0 + base)))
 }
 
 /// Writes a derivative rule into the reverse sweep, naming its result after the operand.

@@ -135,6 +135,16 @@ impl Op {
         }
     }
 
+    /// The same operation on operands `f(operand)`.
+    pub fn map_operands(&self, mut f: impl FnMut(Var) -> Var) -> Op {
+        match *self {
+            Op::Const(c) => Op::Const(c),
+            Op::Unary(u, a) => Op::Unary(u, f(a)),
+            Op::Binary(b, x, y) => Op::Binary(b, f(x), f(y)),
+            Op::Select(c, x, y) => Op::Select(f(c), f(x), f(y)),
+        }
+    }
+
     pub fn operands(&self) -> Vec<Var> {
         match *self {
             Op::Const(_) => vec![],
@@ -165,6 +175,13 @@ pub enum Stmt {
         outs: Vec<Var>,
         body: Block,
     },
+}
+
+/// How a variable occurs in a statement, for [`Block::rename`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Occurs {
+    Read,
+    Defined,
 }
 
 #[derive(Clone, Debug, Default)]
@@ -230,6 +247,46 @@ impl Block {
                 b.visit(f);
             }
         }
+    }
+
+    /// The block with each variable `v` replaced by `f(v, how it occurs)`, met in the order the
+    /// code runs: a statement's reads, its nested blocks, then what it defines; yields last.
+    pub fn rename(&self, f: &mut impl FnMut(Var, Occurs) -> Var) -> Block {
+        let stmts = (self.stmts.iter())
+            .map(|s| match s {
+                Stmt::Let { var, op } => {
+                    let op = op.map_operands(|v| f(v, Occurs::Read));
+                    Stmt::Let {
+                        var: f(*var, Occurs::Defined),
+                        op,
+                    }
+                }
+                Stmt::If {
+                    cond,
+                    then_block,
+                    else_block,
+                    outs,
+                } => Stmt::If {
+                    cond: f(*cond, Occurs::Read),
+                    then_block: then_block.rename(f),
+                    else_block: else_block.rename(f),
+                    outs: outs.iter().map(|o| f(*o, Occurs::Defined)).collect(),
+                },
+                Stmt::Call {
+                    callee,
+                    args,
+                    outs,
+                    body,
+                } => Stmt::Call {
+                    callee: *callee,
+                    args: args.iter().map(|a| f(*a, Occurs::Read)).collect(),
+                    body: body.rename(f),
+                    outs: outs.iter().map(|o| f(*o, Occurs::Defined)).collect(),
+                },
+            })
+            .collect();
+        let yields = self.yields.iter().map(|v| f(*v, Occurs::Read)).collect();
+        Block { stmts, yields }
     }
 
     /// Whether `v` is read anywhere in the block or nested in it.
@@ -341,76 +398,15 @@ impl Function {
     /// Copies `block` with every variable it defines renamed to a fresh one; uses of variables
     /// defined outside it are kept. `remap` receives the renaming.
     pub fn clone_fresh(&mut self, block: &Block, remap: &mut HashMap<Var, Var>) -> Block {
-        let stmts = block
-            .stmts
-            .iter()
-            .map(|s| self.clone_stmt_fresh(s, remap))
-            .collect();
-        let yields = block
-            .yields
-            .iter()
-            .map(|v| *remap.get(v).unwrap_or(v))
-            .collect();
-        Block { stmts, yields }
-    }
-
-    fn clone_stmt_fresh(&mut self, stmt: &Stmt, remap: &mut HashMap<Var, Var>) -> Stmt {
-        let map = |remap: &HashMap<Var, Var>, v: &Var| *remap.get(v).unwrap_or(v);
-        let fresh = |f: &mut Self, remap: &mut HashMap<Var, Var>, v: Var| {
-            let info = f.vars[v.0 as usize].clone();
-            let n = f.new_var(info.ty, info.name);
-            remap.insert(v, n);
-            n
-        };
-        match stmt {
-            Stmt::Let { var, op } => {
-                let op = match *op {
-                    Op::Const(c) => Op::Const(c),
-                    Op::Unary(u, a) => Op::Unary(u, map(remap, &a)),
-                    Op::Binary(b, x, y) => Op::Binary(b, map(remap, &x), map(remap, &y)),
-                    Op::Select(c, x, y) => {
-                        Op::Select(map(remap, &c), map(remap, &x), map(remap, &y))
-                    }
-                };
-                Stmt::Let {
-                    var: fresh(self, remap, *var),
-                    op,
-                }
+        block.rename(&mut |v, occurs| match occurs {
+            Occurs::Read => *remap.get(&v).unwrap_or(&v),
+            Occurs::Defined => {
+                let info = self.vars[v.0 as usize].clone();
+                let n = self.new_var(info.ty, info.name);
+                remap.insert(v, n);
+                n
             }
-            Stmt::If {
-                cond,
-                then_block,
-                else_block,
-                outs,
-            } => {
-                let cond = map(remap, cond);
-                let then_block = self.clone_fresh(then_block, remap);
-                let else_block = self.clone_fresh(else_block, remap);
-                let outs = outs.iter().map(|&o| fresh(self, remap, o)).collect();
-                Stmt::If {
-                    cond,
-                    then_block,
-                    else_block,
-                    outs,
-                }
-            }
-            Stmt::Call {
-                callee,
-                args,
-                outs,
-                body,
-            } => {
-                let args = args.iter().map(|a| map(remap, a)).collect();
-                let body = self.clone_fresh(body, remap);
-                let outs = outs.iter().map(|&o| fresh(self, remap, o)).collect();
-                Stmt::Call {
-                    callee: *callee,
-                    args,
-                    outs,
-                    body,
-                }
-            }
-        }
+        })
     }
 }
 
