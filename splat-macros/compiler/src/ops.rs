@@ -1,11 +1,14 @@
-//! What the compiler knows about each unary operation, kept in one place (as naga keeps the
-//! facts about an expression on the expression): the method users call, whether glam has it
-//! on vectors, how the Rust and the WGSL compute it, and its derivative, which both the
-//! reverse sweep (`ad`) and the in-kernel Jacobians (`lower::jacobian`) build from the same
-//! rule. Every table here is an exhaustive `match`: a new `ir::Unary` variant does not compile
-//! until it has a row and a rule. Beyond this file an operation needs `F32x8`'s method of the
-//! same name in the runtime (the SIMD kernels call it), a WGSL form in `emit::naga` where WGSL
-//! has no built-in, and `splat_runtime::math` functions where std has none.
+//! What the compiler knows about each operation, kept in one place (as naga keeps the facts
+//! about an expression on the expression): for a unary operation the method or function users
+//! call, whether glam has it on vectors, how the Rust and the WGSL compute it; for unary and
+//! binary operations their derivative, which the reverse sweep (`ad`) and the in-kernel
+//! Jacobians (`lower::jacobian`) both build from the same rule. `Unary::info` and the rules are
+//! exhaustive `match`es: a new `ir::Unary` variant does not compile until it has a row and a
+//! rule. It also needs a place in [`Unary::NAMED`] to be callable (and, for a free function, in
+//! the error message's `lower::intrinsics::INTRINSIC_LIST`); `F32x8`'s method of the same name
+//! in the runtime (the SIMD kernels call it); where WGSL has no built-in, its form in
+//! `emit::naga` (until then, expanding a kernel that uses it panics with the operation's name);
+//! and where std has none, `splat_runtime::math` functions.
 
 use crate::ir::{Binary, Const, Op, Unary, Var};
 use naga::MathFunction;
@@ -299,7 +302,7 @@ pub fn unary_derivative(e: &mut impl Emit, u: Unary, a: Var, r: Var, d: Var) -> 
         U::Erf => {
             // 2 / sqrt(pi) e^(-a^2)
             let a2 = e.bin(B::Mul, a, a, "a2");
-            let n = e.un(U::Neg, a2, "a2");
+            let n = e.un(U::Neg, a2, "neg_a2");
             let g = e.un(U::Exp, n, "gauss");
             let k = e.konst(std::f64::consts::FRAC_2_SQRT_PI);
             let q = e.bin(B::Mul, d, k, out);

@@ -336,8 +336,8 @@ pub fn gpu_gradients_match_cpu_with<M: SplatMethod>(
 }
 
 /// Each [`GradientSet`] computes what it names and nothing else: every parameter group alone,
-/// the camera alone, and everything but the camera. The groups a set holds come out bit for bit
-/// as in the full pass (gating skips work, it does not reorder the arithmetic) and the others
+/// the camera alone, and everything but the camera. The groups a set holds come out equal to
+/// the full pass's, word for word (gating skips work, it does not reorder the arithmetic) and the others
 /// are zero, on the CPU and, where there is an adapter, on the GPU. The GPU blend adds each
 /// tile's sum with a float atomic in whatever order the tiles finish, so the image must have at
 /// most two tiles: with one tree reduction per tile (not subgroups, whose atomics race within a

@@ -13,9 +13,9 @@
 //! linearization of its operation for every direction (tangents known to be zero are not
 //! materialized). A branch gets its tangents inside each side, as extra outputs. The result is
 //! ordinary IR: `project`'s reverse-mode adjoint differentiates through it (second derivatives
-//! of the camera model), and each tangent rule uses the kink rules of `ad.rs` (a derivative
-//! that would be infinite at a singular point is 0; `min` / `max` ties go to the first
-//! operand), so both modes agree where the function is smooth.
+//! of the camera model). Each tangent is built by the same rule as the adjoint (`crate::ops`,
+//! with its kink rules: a derivative that would be infinite at a singular point is 0; `min` /
+//! `max` ties go to the first operand), so both modes agree where the function is smooth.
 
 use super::{Lowerer, R, Val};
 use crate::ir::{Binary, Block, Op, Scalar, Stmt, Unary, Var};

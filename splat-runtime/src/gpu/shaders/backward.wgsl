@@ -98,8 +98,8 @@ fn backward_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
         for (var j = min(BATCH, at.end - b); j > 0u; j--) {
             let i = j - 1u;
             var g: array<f32, NG>;
-            // Whether the entry reaches this pixel: a subgroup none of whose pixels it reaches
-            // skips its reduction.
+            // Whether the entry reaches this pixel: with the subgroup reduction, a subgroup none
+            // of whose pixels it reaches skips it.
             var hit = false;
             if (b - at.start + i < end) {
                 let s = i * NS;

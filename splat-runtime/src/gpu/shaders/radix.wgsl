@@ -5,13 +5,14 @@
 // `radix_scatter`: a block's keys go out a chunk of 256 at a time. Each invocation sets its
 // bit in its digit's 256-bit member mask; its rank among the chunk's keys of that digit is the
 // number of member bits below its own, so keys leave in input order (stable) after three
-// barriers per chunk, whatever the digit width.
+// barriers per chunk. Invocation `d` also owns digit `d`'s mask and next output slot, so
+// RADIX must equal WG.
 
 const WG: u32 = 256u;
 const CHUNKS: u32 = 16u;
 const BLOCK: u32 = 4096u; // WG * CHUNKS
 const RADIX: u32 = 256u;
-const MASK_WORDS: u32 = 8u; // WG / 32
+const MASK_WORDS: u32 = WG / 32u;
 
 @group(0) @binding(0) var<storage, read> keys_in: array<vec2<u32>>;
 @group(0) @binding(1) var<storage, read_write> hist: array<u32>;
@@ -22,7 +23,7 @@ const MASK_WORDS: u32 = 8u; // WG / 32
 
 var<workgroup> counts: array<atomic<u32>, RADIX>;
 // Bit `lid % 32` of word `digit * MASK_WORDS + lid / 32`: invocation `lid` holds `digit`.
-var<workgroup> members: array<atomic<u32>, 2048>; // RADIX * MASK_WORDS
+var<workgroup> members: array<atomic<u32>, RADIX * MASK_WORDS>;
 var<workgroup> next_slot: array<u32, RADIX>;
 
 fn digit_of(key: vec2<u32>) -> u32 {
@@ -32,6 +33,10 @@ fn digit_of(key: vec2<u32>) -> u32 {
 @compute @workgroup_size(256)
 fn radix_histogram(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let block = wid.y * 65535u + wid.x;
+    // A dispatch of more than 65,535 blocks is a grid with spare workgroups at its end.
+    if (block >= info.w) {
+        return;
+    }
     atomicStore(&counts[lid], 0u);
     workgroupBarrier();
     for (var c = 0u; c < CHUNKS; c++) {
@@ -54,6 +59,9 @@ fn clear_own_mask(lid: u32) {
 @compute @workgroup_size(256)
 fn radix_scatter(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let block = wid.y * 65535u + wid.x;
+    if (block >= info.w) {
+        return;
+    }
     next_slot[lid] = hist[lid * info.w + block];
     clear_own_mask(lid);
     let word = lid / 32u;
