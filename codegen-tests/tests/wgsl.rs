@@ -147,3 +147,13 @@ fn every_module_reparses_and_validates() {
 fn generated_wgsl_snapshot() {
     insta::assert_snapshot!(splat_examples::isotropic::isotropic::GENERATED_WGSL);
 }
+
+/// The WGSL `erf` is written with the compiler's copy of the runtime's coefficients (the
+/// compiler cannot depend on the runtime): the two must be the same numbers.
+#[test]
+fn wgsl_erf_uses_the_runtime_coefficients() {
+    use splat_compiler::emit::naga as wgsl;
+    use splat_runtime::math;
+    assert_eq!(wgsl::ERF_SERIES, math::ERF_SERIES);
+    assert_eq!(wgsl::ERFC_FIT, math::ERFC_FIT);
+}

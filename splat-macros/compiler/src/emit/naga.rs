@@ -16,6 +16,31 @@ use naga::{
 };
 use std::collections::HashMap;
 
+/// The coefficients of `splat_runtime::math::erf` (its `ERF_SERIES` and `ERFC_FIT`, which
+/// codegen-tests' `wgsl.rs` holds equal to these), for the WGSL form of `erf`.
+pub const ERF_SERIES: [f32; 7] = [
+    1.0 / 9360.0,
+    -1.0 / 1320.0,
+    1.0 / 216.0,
+    -1.0 / 42.0,
+    1.0 / 10.0,
+    -1.0 / 3.0,
+    1.0,
+];
+#[allow(clippy::excessive_precision)] // as published
+pub const ERFC_FIT: [f32; 10] = [
+    0.170_872_77,
+    -0.822_152_23,
+    1.488_515_87,
+    -1.135_203_98,
+    0.278_868_07,
+    -0.186_288_06,
+    0.096_784_18,
+    0.374_091_96,
+    1.000_023_68,
+    -1.265_512_23,
+];
+
 /// A written WGSL function as the runtime calls it: the kernel it came from, its name in the
 /// WGSL, its argument types and its result members.
 pub struct Signature {
@@ -494,34 +519,11 @@ impl<'f> FnBuilder<'f> {
     }
 
     /// `splat_runtime::math::erf`, step for step: the Maclaurin series below |x| = 0.5, else
-    /// 1 - erfc from Numerical Recipes' fit (its coefficients are the runtime's `ERF_SERIES`
-    /// and `ERFC_FIT`; codegen-tests' GPU test holds the two to the f64 twin).
-    #[allow(clippy::excessive_precision)] // as published
+    /// 1 - erfc from Numerical Recipes' fit.
     fn erf(&mut self, x: Handle<E>) -> Handle<E> {
-        const SERIES: [f32; 7] = [
-            1.0 / 9360.0,
-            -1.0 / 1320.0,
-            1.0 / 216.0,
-            -1.0 / 42.0,
-            1.0 / 10.0,
-            -1.0 / 3.0,
-            1.0,
-        ];
-        const FIT: [f32; 10] = [
-            0.170_872_77,
-            -0.822_152_23,
-            1.488_515_87,
-            -1.135_203_98,
-            0.278_868_07,
-            -0.186_288_06,
-            0.096_784_18,
-            0.374_091_96,
-            1.000_023_68,
-            -1.265_512_23,
-        ];
         let a = self.math(M::Abs, x, None);
         let z = self.bin(B::Multiply, a, a);
-        let series = self.horner(&SERIES, z);
+        let series = self.horner(&ERF_SERIES, z);
         let k = self.lit_f32(std::f32::consts::FRAC_2_SQRT_PI);
         let ka = self.bin(B::Multiply, k, a);
         let near = self.bin(B::Multiply, ka, series);
@@ -529,7 +531,7 @@ impl<'f> FnBuilder<'f> {
         let ha = self.bin(B::Multiply, half, a);
         let den = self.bin(B::Add, one, ha);
         let t = self.bin(B::Divide, one, den);
-        let fit = self.horner(&FIT, t);
+        let fit = self.horner(&ERFC_FIT, t);
         let arg = self.bin(B::Subtract, fit, z);
         let e = self.math(M::Exp, arg, None);
         let te = self.bin(B::Multiply, t, e);
