@@ -124,9 +124,9 @@ pub const ERFC_FIT: [f32; 10] = [
 ];
 
 /// The error function: below |x| = 0.5 the Maclaurin series, above it 1 - erfc from
-/// [`ERFC_FIT`]; within 4e-7 of the exact value relative to it (3.8e-7 just above 0.5, below
-/// 2e-7 elsewhere); erf(-x) = -erf(x) (but erf(-0) = +0), NaN in gives NaN out. The generated WGSL computes the same steps
-/// (`emit::naga`).
+/// [`ERFC_FIT`]; within 4e-7 of the exact value relative to it (3.8e-7 just above 0.5,
+/// falling below 2e-7 by 0.8); erf(-x) = -erf(x) (but erf(-0) = +0), NaN in gives NaN out.
+/// The generated WGSL computes the same steps (`emit::naga`).
 #[inline(always)]
 pub fn erf(x: f32) -> f32 {
     let a = x.abs();
