@@ -45,7 +45,7 @@ pub struct RenderArgs {
     #[arg(long, default_value = "f32", value_parser = parse_precision)]
     precision: Precision,
     /// How the shade data the blend reads per primitive is stored: f32, f16, unorm16 or unorm8
-    /// (unorm: each value coded in the range it spans over the frame; CPU backend only).
+    /// (unorm: each value coded in the range it spans over the frame; not with --hardware).
     #[arg(long, default_value = "f32", value_parser = parse_precision)]
     shade_precision: Precision,
     /// On the GPU, rasterize with the graphics pipeline: quads in depth order, blended by

@@ -72,9 +72,8 @@ pub(crate) enum Forward {
 }
 
 /// The defaults, then each knob alone at its other settings (the tile sizes the backend has,
-/// the shade data's and gradient sums' precisions where it has them (the CPU), and the
-/// hardware path at the precisions in `hardware`).
-pub(crate) fn sweep(tile_sizes: &[u32], cpu: bool, hardware: &[Precision]) -> Vec<Setting> {
+/// and the hardware path at the precisions in `hardware`).
+pub(crate) fn sweep(tile_sizes: &[u32], hardware: &[Precision]) -> Vec<Setting> {
     let base = RenderOptions::default();
     let mut out = vec![Setting {
         knob: "default",
@@ -127,21 +126,19 @@ pub(crate) fn sweep(tile_sizes: &[u32], cpu: bool, hardware: &[Precision]) -> Ve
         let opts = RenderOptions { precision, ..base };
         add("precision", precision.name().into(), opts);
     }
-    if cpu {
-        for shade_precision in reduced {
-            let opts = RenderOptions {
-                shade_precision,
-                ..base
-            };
-            add("shade_precision", shade_precision.name().into(), opts);
-        }
-        // Sums have no fixed range: f16 is the one reduced format they are held in.
+    for shade_precision in reduced {
         let opts = RenderOptions {
-            gradient_precision: Precision::F16,
+            shade_precision,
             ..base
         };
-        add("gradient_precision", "f16".into(), opts);
+        add("shade_precision", shade_precision.name().into(), opts);
     }
+    // Sums have no fixed range: f16 is the one reduced format they are held in.
+    let opts = RenderOptions {
+        gradient_precision: Precision::F16,
+        ..base
+    };
+    add("gradient_precision", "f16".into(), opts);
     for &precision in hardware {
         out.push(Setting {
             knob: "raster",
@@ -212,9 +209,9 @@ pub fn tradeoff_cmd(args: &TradeoffArgs, methods: &[Method]) -> Result<()> {
             let hardware: Vec<Precision> = blendable
                 .filter(|p| splat_runtime::gpu::raster::supports(gpu, *p))
                 .collect();
-            sweep(&splat_runtime::gpu::TILE_SIZES, false, &hardware)
+            sweep(&splat_runtime::gpu::TILE_SIZES, &hardware)
         }
-        None => sweep(&splat_runtime::pipeline::TILE_SIZES, true, &[]),
+        None => sweep(&splat_runtime::pipeline::TILE_SIZES, &[]),
     };
     // The other methods the camera allows, for the evaluation-model knob.
     let models: Vec<&Method> = methods

@@ -1239,11 +1239,18 @@ fn tradeoff_sweeps_every_knob_and_writes_its_table_and_plot() {
         assert!(std::env::var("SPLAT_REQUIRE_GPU").map_or(true, |v| v != "1"));
         return;
     }
-    // The GPU renders tiles of 8 and 16 only and holds shade data and gradient sums in f32
-    // only; the hardware path adds a row per target format (all four on lavapipe).
+    // The GPU renders tiles of 8 and 16 only; the hardware path adds a row per target format
+    // (all four on lavapipe).
     let gpu = csv_rows(&dir.path().join("gpu/tradeoff.csv"));
     let hardware: Vec<&Vec<String>> = gpu.iter().filter(|r| r[0] == "raster").collect();
-    assert_eq!(gpu.len(), rows.len() - 2 - 4 + hardware.len());
+    assert_eq!(gpu.len(), rows.len() - 2 + hardware.len());
+    let shade = |value: &str| {
+        let row = gpu
+            .iter()
+            .find(|r| r[0] == "shade_precision" && r[1] == value);
+        row.unwrap()[psnr].parse::<f64>().unwrap()
+    };
+    assert!(shade("unorm8") < shade("unorm16"));
     let tile = gpu.iter().find(|r| r[0] == "tile").unwrap();
     assert_eq!(tile[1], "8");
     assert!(tile[psnr].parse::<f64>().unwrap() > 60.0, "{tile:?}");

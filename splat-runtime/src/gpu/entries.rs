@@ -7,7 +7,9 @@
 //! changes between backends.
 
 use super::kernel::{self, load};
+use super::shade_pack::ShadePacking;
 use super::state::PixelState;
+use super::sums::Sums;
 use super::{Gpu, GpuError};
 use crate::flat::Flat;
 use crate::method::{GradientSet, SplatMethod, WgslFunction};
@@ -29,6 +31,9 @@ const BACKWARD: &str = include_str!("shaders/backward.wgsl");
 const PROJECT_BACKWARD: &str = include_str!("shaders/project_backward.wgsl");
 const PIXEL_BACKWARD: &str = include_str!("shaders/pixel_backward.wgsl");
 const RASTER: &str = include_str!("shaders/raster.wgsl");
+const SHADE_PACK: &str = include_str!("shaders/shade_pack.wgsl");
+/// `fn to_half`, `fn from_half`: f16 conversions on the bits.
+pub const HALF: &str = include_str!("shaders/half.wgsl");
 
 /// Bytes of workgroup memory kept free of the batch (counters, flags).
 const RESERVED_BYTES: u32 = 256;
@@ -255,10 +260,59 @@ fn evaluate_call<M: SplatMethod>(
     Ok((format!("{}({})", eval.name, args.join(", ")), eval))
 }
 
-fn tile_pass(layout: &Layout, tile: u32, b: &BlendSizes, rule: Blend) -> String {
-    fill(
+/// The shade packing's module for `M` (`shade_range`, `shade_pack`), its own placeholders
+/// filled with `pairs`.
+pub(crate) fn shade_pack<M: SplatMethod>(pairs: &[(&str, String)]) -> Result<String, GpuError> {
+    let layout = Layout::of::<M>();
+    let mut pairs = pairs.to_vec();
+    pairs.push(("SHADE_AT", layout.shade_at.to_string()));
+    let entry = fill(SHADE_PACK, &pairs);
+    let body = fill(
+        TILES,
+        &[
+            ("STRIDE", layout.stride.to_string()),
+            ("KEEP", "true".into()),
+            ("EMIT", String::new()),
+            ("ENTRY", entry),
+        ],
+    );
+    Ok(format!("{FINITE}\n{PIXEL_SPAN}\n{HALF}\n{body}"))
+}
+
+fn tile_pass(
+    layout: &Layout,
+    tile: u32,
+    b: &BlendSizes,
+    rule: Blend,
+    packing: Option<&ShadePacking>,
+) -> String {
+    let (bindings, stage) = match packing {
+        None => (
+            String::new(),
+            "        for (var w = 0u; w < NS; w++) {
+            batch_words[lid * NS + w] = projected[p * STRIDE + SHADE_AT + w];
+        }"
+            .to_string(),
+        ),
+        Some(packing) => {
+            let mut bindings = format!(
+                "// The shade data packed at {} (`gpu::shade_pack`).
+@group(0) @binding(11) var<storage, read> packed_shade: array<u32>;
+",
+                packing.precision.name()
+            );
+            if packing.has_ranges() {
+                bindings += "@group(0) @binding(12) var<storage, read> shade_ranges: array<u32>;\n";
+            }
+            (bindings, packing.wgsl_stage())
+        }
+    };
+    // f16 conversions for packed shade data and f16 gradient sums (unused ones are pruned).
+    let pass = fill(
         TILE_PASS,
         &[
+            ("SHADE_BINDINGS", bindings),
+            ("STAGE_SHADE", stage),
             ("TILE", tile.to_string()),
             ("WG", b.wg.to_string()),
             ("BATCH", b.batch.to_string()),
@@ -273,11 +327,13 @@ fn tile_pass(layout: &Layout, tile: u32, b: &BlendSizes, rule: Blend) -> String 
                 (b.batch as usize * layout.shade_words.max(1)).to_string(),
             ),
         ],
-    )
+    );
+    format!("{FINITE}\n{HALF}\n{pass}")
 }
 
 /// `shade_tiles`: the forward blend under the camera `model`, one workgroup per tile of
-/// `tile` x `tile` pixels, storing each pixel as `state` says.
+/// `tile` x `tile` pixels, reading the shade data packed as `packing` says (or `project`'s
+/// own), storing each pixel as `state` says.
 pub fn shade<M: SplatMethod>(
     gpu: &Gpu,
     model: CameraModel,
@@ -285,6 +341,7 @@ pub fn shade<M: SplatMethod>(
     want_depth: bool,
     rule: Blend,
     state: PixelState,
+    packing: Option<&ShadePacking>,
 ) -> Result<String, GpuError> {
     let wgsl = M::SOURCE.wgsl;
     let layout = Layout::of::<M>();
@@ -321,12 +378,13 @@ pub fn shade<M: SplatMethod>(
     );
     Ok(format!(
         "{wgsl}\n{}\n{body}",
-        tile_pass(&layout, tile, &b, rule)
+        tile_pass(&layout, tile, &b, rule, packing)
     ))
 }
 
 /// `backward_tiles`: the backward blend under the camera `model` with the gradient
-/// accumulation `acc`, replaying against the pixels stored as `state` says, for the tile size,
+/// accumulation `acc`, replaying against the pixels stored as `state` says (the shade data
+/// packed as `packing` says, as in the forward pass), for the tile size,
 /// blend and gradient groups of `opts` (the groups a constant of the pipeline: `evaluate`'s
 /// adjoint branches on them fold).
 pub fn backward<M: SplatMethod>(
@@ -336,6 +394,7 @@ pub fn backward<M: SplatMethod>(
     want_depth: bool,
     acc: Accumulation,
     state: PixelState,
+    packing: Option<&ShadePacking>,
 ) -> Result<String, GpuError> {
     let (tile, rule) = (opts.tile_size, opts.blend);
     let wgsl = M::SOURCE.wgsl;
@@ -430,7 +489,10 @@ pub fn backward<M: SplatMethod>(
             }"
         }
     };
-    let (grad_atomic, atomic_add) = if acc.float_atomics {
+    let sums = Sums::at(opts.gradient_precision);
+    let (grad_atomic, atomic_add) = if sums.half {
+        ("atomic<u32>", Sums::WGSL_ADD_HALF)
+    } else if acc.float_atomics {
         ("atomic<f32>", "    atomicAdd(&grads[i], v);")
     } else {
         (
@@ -511,6 +573,7 @@ pub fn backward<M: SplatMethod>(
                 .to_string(),
             ),
             ("LANE", lane.into()),
+            ("SUM_BINDING", sum_binding(sums, 13)),
             ("ATOMIC_ADD", atomic_add.into()),
             ("WG", b.wg.to_string()),
             ("PIXEL", pixel_code),
@@ -542,7 +605,7 @@ pub fn backward<M: SplatMethod>(
     );
     Ok(format!(
         "{wgsl}\n{}\n{body}",
-        tile_pass(&layout, tile, &b, rule)
+        tile_pass(&layout, tile, &b, rule, packing)
     ))
 }
 
@@ -621,6 +684,7 @@ pub fn param_floats<M: SplatMethod>() -> Result<usize, GpuError> {
 pub fn project_backward<M: SplatMethod>(
     model: CameraModel,
     wanted: GradientSet,
+    sums: Sums,
 ) -> Result<String, GpuError> {
     let wgsl = M::SOURCE.wgsl;
     let layout = Layout::of::<M>();
@@ -645,9 +709,9 @@ pub fn project_backward<M: SplatMethod>(
             .enumerate()
             .map(|(k, kind)| load(*kind, &format!("camera_words[{k}u]"))),
     );
-    args.push("bitcast<f32>(grads[i * NG + NG - 1u])".into());
+    args.push("grad(i * NG + NG - 1u)".into());
     args.extend(std::iter::repeat_n("0.0".to_string(), 4 + cull_floats));
-    args.extend((0..layout.shade_floats).map(|k| format!("bitcast<f32>(grads[i * NG + {k}u])")));
+    args.extend((0..layout.shade_floats).map(|k| format!("grad(i * NG + {k}u)")));
     args.push(format!("{}u", wanted.bits()));
     let mut write = String::new();
     for (k, (m, _)) in adj.results.iter().enumerate() {
@@ -672,9 +736,19 @@ pub fn project_backward<M: SplatMethod>(
                 format!("{}({})", adj.name, args.join(", ")),
             ),
             ("WRITE", write),
+            ("SUM_BINDING", sum_binding(sums, 7)),
+            ("GRAD_READ", sums.wgsl_read()),
         ],
     );
-    Ok(format!("{wgsl}\n{body}"))
+    Ok(format!("{wgsl}\n{FINITE}\n{HALF}\n{body}"))
+}
+
+/// The binding of the largest output gradient's bits at `slot`, for f16 sums.
+fn sum_binding(sums: Sums, slot: u32) -> String {
+    match sums.half {
+        true => format!("@group(0) @binding({slot}) var<storage, read> grad_largest: array<u32>;"),
+        false => String::new(),
+    }
 }
 
 /// `pixel_backward`: `pixel_info`'s adjoint under the camera `model` per pixel, camera

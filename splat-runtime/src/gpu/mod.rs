@@ -11,6 +11,9 @@
 //!   by fixed-function blending into render targets of each precision.
 //! - [`render`]: one-shot render and backward for parameters on the host, over `resident`.
 //! - [`state`]: the per-pixel state of the tile path, packed at each precision.
+//! - [`sums`]: the backward blend's per-primitive gradient sums, f32 or f16.
+//! - [`shade_pack`]: the shade data between the preprocess and the blends, packed at each
+//!   precision.
 //! - [`timing`]: stage times from GPU timestamps.
 //! - [`train`]: the loss, Adam and density control's statistics on the device.
 
@@ -24,8 +27,10 @@ mod prune;
 pub mod raster;
 pub mod render;
 pub mod resident;
+pub mod shade_pack;
 pub mod sort;
 pub mod state;
+pub mod sums;
 pub mod timing;
 pub mod train;
 
@@ -79,28 +84,4 @@ pub enum GpuError {
     TileSize(u32),
     #[error("the hardware-rasterized forward pass: {0}")]
     Hardware(String),
-    #[error(
-        "{what} held as {precision}: built on the CPU backend only (use `--backend cpu`, or f32)"
-    )]
-    CpuOnly {
-        what: &'static str,
-        precision: &'static str,
-    },
-}
-
-/// Refuses the options only the CPU backend has: shade data and gradient sums held in a
-/// reduced format.
-pub(crate) fn check_cpu_only(opts: &crate::RenderOptions) -> Result<(), GpuError> {
-    use crate::pipeline::precision::Precision;
-    let held = [
-        ("shade data", opts.shade_precision),
-        ("the gradient sums", opts.gradient_precision),
-    ];
-    match held.into_iter().find(|(_, p)| *p != Precision::F32) {
-        Some((what, p)) => Err(GpuError::CpuOnly {
-            what,
-            precision: p.name(),
-        }),
-        None => Ok(()),
-    }
 }

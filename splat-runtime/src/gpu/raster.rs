@@ -71,8 +71,14 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
     /// A renderer producing the outputs `opts` asks for, stored at `opts.precision`
     /// (`tile_size` and `tile_cull` do not apply; `p_max` must be `None`).
     pub fn new(gpu: &'g Gpu, opts: &RenderOptions) -> Result<Self, GpuRenderError> {
-        super::check_cpu_only(opts)?;
         let refuse = |why: String| GpuError::Hardware(why);
+        if opts.shade_precision != Precision::F32 {
+            return Err(refuse(format!(
+                "its fragments read `project`'s shade data at f32, not {} (use the tile path)",
+                opts.shade_precision.name()
+            ))
+            .into());
+        }
         if opts.p_max.is_some() {
             return Err(
                 refuse("there are no tile lists to cap: P_max must be unset".into()).into(),

@@ -16,8 +16,10 @@ use super::device::{Grown, Kernel, dispatch};
 use super::entries::{self, Accumulation, Layout, Reduction};
 use super::front::{COUNT, Front, PROJECT, SORT};
 use super::per_model::PerModel;
+use super::shade_pack::{ShadePacker, ShadePacking};
 use super::sort::TileRanges;
 use super::state::PixelState;
+use super::sums::{Largest, Sums};
 use super::timing::StageTimer;
 use super::{Gpu, GpuError};
 use crate::flat::Flat;
@@ -113,9 +115,11 @@ pub(crate) fn words_of<T: Flat>(values: &[T]) -> Vec<u32> {
 
 // The renderer's timed stages after the front's (two timestamps each).
 const SHADE: u32 = 3;
-const BLEND: u32 = 4;
-const ADJOINT: u32 = 5;
-const STAGES: u32 = 6;
+/// Packing the shade data (empty at f32), part of the preprocess.
+const PACK: u32 = 4;
+const BLEND: u32 = 5;
+const ADJOINT: u32 = 6;
+const STAGES: u32 = 7;
 
 /// What the last frame was: its tile grid and sizes.
 #[derive(Clone, Copy, Debug)]
@@ -152,12 +156,18 @@ pub struct GpuRenderer<'g, M: SplatMethod> {
     /// How the per-pixel state is stored.
     state: PixelState,
     front: Front,
+    /// The shade data packed at a reduced precision (`None` at f32: the blends read `project`'s).
+    packer: Option<ShadePacker>,
     /// The kernels that call the method's model-aware functions, per camera model used.
     shade: PerModel<Kernel>,
     project_backward: PerModel<Kernel>,
     pixel_backward: PerModel<Kernel>,
     /// Parameter float slots (gradient words per primitive).
     param_floats: usize,
+    /// How the per-primitive gradient sums (`grads`) are held.
+    sums: Sums,
+    /// The pass finding the largest output gradient (f16 sums' loss scale).
+    largest: Option<Largest>,
     /// Backward blends built on first use, per (camera model, depth gradient, accumulation).
     blends: HashMap<(CameraModel, bool, Accumulation), Kernel>,
     /// (width, height, 0, 0).
@@ -183,7 +193,6 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         if !super::TILE_SIZES.contains(&opts.tile_size) {
             return Err(GpuError::TileSize(opts.tile_size).into());
         }
-        super::check_cpu_only(opts)?;
         let layout = Layout::of::<M>();
         let state = PixelState {
             precision: opts.precision,
@@ -197,10 +206,18 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             layout,
             state,
             front: Front::new::<M>(gpu, opts.tile_cull)?,
+            packer: ShadePacking::of::<M>(opts.shade_precision)
+                .map(|p| ShadePacker::new::<M>(gpu, p))
+                .transpose()?,
             shade: PerModel::new(),
             project_backward: PerModel::new(),
             pixel_backward: PerModel::new(),
             param_floats: entries::param_floats::<M>()?,
+            sums: Sums::at(opts.gradient_precision),
+            largest: match Sums::at(opts.gradient_precision).half {
+                true => Some(Largest::new(gpu, layout.channels + 2)?),
+                false => None,
+            },
             blends: HashMap::new(),
             pixel_info: gpu.uniform_buffer(4),
             tiles: TileRanges::new(gpu)?,
@@ -250,15 +267,21 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         let pixels = (grid.width * grid.height) as usize;
         self.pixels.ensure(gpu, pixels * self.state.words())?;
         let mut enc = gpu.device.create_command_encoder(&Default::default());
+        self.timer.start(&mut enc, PACK);
+        if let Some(packer) = &mut self.packer {
+            packer.record(gpu, &mut enc, &self.front, n)?;
+        }
+        self.timer.end(&mut enc, PACK);
         self.timer.start(&mut enc, SORT);
         self.front.emit_sorted(gpu, &mut enc, counted)?;
         self.tiles.record(gpu, &mut enc, &self.front.keys)?;
         self.timer.end(&mut enc, SORT);
         self.timer.start(&mut enc, SHADE);
         let (model, opts, state) = (camera.model, self.opts, self.state);
+        let packing = self.packer.as_ref().map(ShadePacker::packing);
         let shade = self.shade.get(model, || {
-            let source =
-                entries::shade::<M>(gpu, model, opts.tile_size, opts.depth, opts.blend, state)?;
+            let (tile, depth, blend) = (opts.tile_size, opts.depth, opts.blend);
+            let source = entries::shade::<M>(gpu, model, tile, depth, blend, state, packing)?;
             gpu.kernel(&source, "shade_tiles")
         })?;
         let mut inputs = self.tile_pass_inputs();
@@ -392,6 +415,27 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         (&self.front.projected, self.layout.stride)
     }
 
+    /// How the shade data is packed for the blends (`None` at f32: they read
+    /// [`GpuRenderer::projected`]).
+    pub fn shade_packing(&self) -> Option<&ShadePacking> {
+        self.packer.as_ref().map(ShadePacker::packing)
+    }
+
+    /// The last frame's packed shade data, decoded as the blends decode it: `M::Shade::LEN`
+    /// values per primitive (`None` at f32).
+    pub fn download_shade_data(&self) -> Result<Option<Vec<f32>>, GpuRenderError> {
+        let info = self.frame.ok_or(GpuRenderError::NoFrame)?;
+        let Some(packer) = &self.packer else {
+            return Ok(None);
+        };
+        let packing = packer.packing();
+        let words = self
+            .gpu
+            .read(&packer.packed, info.primitives * packing.words())?;
+        let ranges = self.gpu.read(&packer.ranges, packing.range_words())?;
+        Ok(Some(packing.decode(&words, &ranges)))
+    }
+
     /// The last frame's camera, as its words.
     pub fn camera_buffer(&self) -> &wgpu::Buffer {
         &self.front.camera
@@ -422,7 +466,8 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         let n = info.primitives;
         let groups = (n as u32).div_ceil(64).max(1);
         let npx = M::PixelLanes::default().as_ref().len();
-        self.grads.ensure(gpu, n * layout.grad_words)?;
+        let sum_words = self.sums.words(n * layout.grad_words);
+        self.grads.ensure(gpu, sum_words)?;
         self.param_grads.ensure(gpu, n * self.param_floats)?;
         self.camera_partials
             .ensure(gpu, groups as usize * Camera::FLOAT_SLOTS)?;
@@ -435,12 +480,12 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         }
 
         let mut enc = gpu.device.create_command_encoder(&Default::default());
-        enc.clear_buffer(
-            &self.grads,
-            0,
-            Some(4 * (n * layout.grad_words).max(1) as u64),
-        );
+        enc.clear_buffer(&self.grads, 0, Some(4 * sum_words.max(1) as u64));
         enc.clear_buffer(&self.issued, 0, None);
+        if let Some(largest) = &self.largest {
+            let read = layout.channels + 1 + want_depth as usize;
+            largest.record(gpu, &mut enc, &self.pixel_grad, (pixels, read))?;
+        }
         self.timer.start(&mut enc, BLEND);
         let mut inputs = self.tile_pass_inputs();
         inputs.extend([
@@ -453,6 +498,9 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             inputs.push(("camera_words", &self.front.camera));
             inputs.push(("pixel_cotangent", &self.pixel_cotangent));
         }
+        if let Some(largest) = &self.largest {
+            inputs.push(("grad_largest", &largest.bits));
+        }
         let tiles = grid.tile_count() as u32;
         let bind = gpu.bind_named(&blend, &inputs)?;
         dispatch(&mut enc, &blend.pipeline, &bind, tiles);
@@ -461,22 +509,23 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         let model = self.front.model;
         let k = self.project_backward.get(model, || {
             gpu.kernel(
-                &entries::project_backward::<M>(model, self.opts.gradients)?,
+                &entries::project_backward::<M>(model, self.opts.gradients, self.sums)?,
                 "project_backward",
             )
         })?;
-        let bind = gpu.bind_named(
-            &k,
-            &[
-                ("params", scene.buffer()),
-                ("camera_words", &self.front.camera),
-                ("projected", &self.front.projected),
-                ("grads", &self.grads),
-                ("param_grads", &self.param_grads),
-                ("camera_partials", &self.camera_partials),
-                ("info", &self.front.count_info),
-            ],
-        )?;
+        let mut inputs = vec![
+            ("params", scene.buffer()),
+            ("camera_words", &self.front.camera),
+            ("projected", &self.front.projected),
+            ("grads", &self.grads),
+            ("param_grads", &self.param_grads),
+            ("camera_partials", &self.camera_partials),
+            ("info", &self.front.count_info),
+        ];
+        if let Some(largest) = &self.largest {
+            inputs.push(("grad_largest", &largest.bits));
+        }
+        let bind = gpu.bind_named(&k, &inputs)?;
         dispatch(&mut enc, &k.pipeline, &bind, groups);
         if M::HAS_PIXEL_INFO && self.opts.gradients.camera() {
             let k = self.pixel_backward.get(model, || {
@@ -501,13 +550,20 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
 
     /// The bindings every tile pass (forward and backward blend) shares (`tile_pass.wgsl`).
     fn tile_pass_inputs(&self) -> Vec<(&'static str, &wgpu::Buffer)> {
-        vec![
+        let mut inputs = vec![
             ("projected", &*self.front.projected),
             ("tile_prims", &*self.front.prims),
             ("tile_ranges", &*self.tiles.ranges),
             ("tile_order", &*self.tiles.order),
             ("frame", &self.front.frame_info),
-        ]
+        ];
+        if let Some(packer) = &self.packer {
+            inputs.push(("packed_shade", &packer.packed));
+            if packer.packing().has_ranges() {
+                inputs.push(("shade_ranges", &packer.ranges));
+            }
+        }
+        inputs
     }
 
     fn blend(&mut self, want_depth: bool, acc: Accumulation) -> Result<Kernel, GpuRenderError> {
@@ -522,7 +578,9 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         if let Some(p) = self.blends.get(&key) {
             return Ok(p.clone());
         }
-        let source = entries::backward::<M>(gpu, key.0, &self.opts, want_depth, acc, self.state)?;
+        let packing = self.packer.as_ref().map(ShadePacker::packing);
+        let source =
+            entries::backward::<M>(gpu, key.0, &self.opts, want_depth, acc, self.state, packing)?;
         let k = gpu.kernel(&source, "backward_tiles")?;
         self.blends.insert(key, k.clone());
         Ok(k)
@@ -534,11 +592,17 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         &self.param_grads
     }
 
-    /// The gradient of each primitive's shade data on the device, [`Layout::grad_words`] per
-    /// primitive (`M::Shade`'s float slots, then the depth's), as the last backward blend
-    /// left it.
-    pub fn shade_gradients(&self) -> (&wgpu::Buffer, usize) {
-        (&self.grads, self.layout.grad_words)
+    /// The gradient of each primitive's shade data on the device, [`Layout::grad_words`] f32
+    /// words per primitive (`M::Shade`'s float slots, then the depth's), as the last backward
+    /// blend left it; `None` where the sums are held in f16.
+    pub fn shade_gradients(&self) -> Option<(&wgpu::Buffer, usize)> {
+        (!self.sums.half).then_some((&*self.grads, self.layout.grad_words))
+    }
+
+    /// Bytes the last backward pass's per-primitive gradient sums took.
+    pub fn gradient_sum_bytes(&self) -> usize {
+        let n = self.frame.map_or(0, |f| f.primitives);
+        4 * self.sums.words(n * self.layout.grad_words)
     }
 
     /// The last frame's stage times, read back alone (a few words; no image or gradient).
@@ -547,7 +611,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         let times = self.timer.read(self.gpu)?.unwrap_or_default();
         let time = |s: u32| times.get(s as usize).copied().unwrap_or_default();
         Ok(StageTimes {
-            preprocess: time(PROJECT),
+            preprocess: time(PROJECT) + time(PACK),
             rasterize: time(COUNT) + time(SORT),
             shade: time(SHADE),
             blend: time(BLEND),
@@ -573,13 +637,17 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             .collect();
         let (ng, nsf) = (self.layout.grad_words, self.layout.shade_floats);
         let mut shade = vec![0.0; n * M::Shade::LEN];
-        let slots = gpu.read(&self.grads, n * ng)?;
+        let largest = match &self.largest {
+            Some(l) => gpu.read(&l.bits, 1)?[0],
+            None => 0,
+        };
+        let sums = gpu.read(&self.grads, self.sums.words(n * ng))?;
+        let slots = self.sums.decode(&sums, n * ng, largest);
         for (g, out) in slots
             .chunks_exact(ng)
             .zip(shade.chunks_exact_mut(M::Shade::LEN))
         {
-            let g: Vec<f32> = g[..nsf].iter().map(|w| f32::from_bits(*w)).collect();
-            M::shade_from_float_slots(&g).write_words(out);
+            M::shade_from_float_slots(&g[..nsf]).write_words(out);
         }
         let groups = (n as u32).div_ceil(64).max(1) as usize;
         let mut partials = match self.opts.gradients.camera() {

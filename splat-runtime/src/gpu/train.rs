@@ -390,7 +390,9 @@ impl GpuObserver {
         self.grad2d.ensure(gpu, primitives)?;
         self.seen.ensure(gpu, primitives)?;
         let (projected, stride) = renderer.projected();
-        let (shade_grads, grad_words) = renderer.shade_gradients();
+        let (shade_grads, grad_words) = renderer.shade_gradients().ok_or_else(|| {
+            GpuError::Shader("density statistics read f32 gradient sums, not f16".into())
+        })?;
         let (position, slot, from_shade) = match source {
             ScreenSource::Position { word } => (word, 0, 0),
             ScreenSource::Shade { slot } => (0, slot, 1),

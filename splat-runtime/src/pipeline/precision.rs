@@ -275,7 +275,10 @@ pub fn sum_scale(precision: Precision, largest: f32) -> f32 {
     if sum_format(precision) == Precision::F32 || !(largest.is_finite() && largest > 0.0) {
         return 1.0;
     }
-    2f32.powi(-(largest.log2().floor() as i32).clamp(-100, 100))
+    // The floor of log2, read from the exponent bits (f32's `log2` may round up to the next
+    // integer just below a power of two; subnormals count as 2^-127), as the GPU reads it.
+    let exponent = (largest.to_bits() >> 23) as i32 - 127;
+    2f32.powi(-exponent.clamp(-100, 100))
 }
 
 /// The shade data of a frame's primitives (what `project` hands `evaluate`), stored between
@@ -311,11 +314,7 @@ impl PackedShade {
             len <= MAX_SHADE_WORDS,
             "shade data larger than {MAX_SHADE_WORDS} words"
         );
-        // A float word reads back the slot value it was given; the others stay zero.
-        let floats = M::ShadeLanes::default().as_ref().len();
-        let mut probe = [0.0; MAX_SHADE_WORDS];
-        M::shade_from_float_slots(&vec![1.0; floats]).write_words(&mut probe);
-        let float_words: Vec<bool> = probe[..len].iter().map(|w| *w == 1.0).collect();
+        let float_words = float_words::<M>();
         let words = |p: &Projected<M::Cull, M::Shade>| {
             let mut w = [0.0; MAX_SHADE_WORDS];
             p.shade.write_words(&mut w);
@@ -448,7 +447,16 @@ impl PackedShade {
 }
 
 /// The most words a shade type may have (3DGEER's has 16).
-const MAX_SHADE_WORDS: usize = 64;
+pub const MAX_SHADE_WORDS: usize = 64;
+
+/// Which words of `M::Shade` are floats (the others, flags and integers, are stored exact).
+pub fn float_words<M: SplatMethod>() -> Vec<bool> {
+    // A float word reads back the slot value it was given; the others stay zero.
+    let floats = M::ShadeLanes::default().as_ref().len();
+    let mut probe = [0.0; MAX_SHADE_WORDS];
+    M::shade_from_float_slots(&vec![1.0; floats]).write_words(&mut probe);
+    probe[..M::Shade::LEN].iter().map(|w| *w == 1.0).collect()
+}
 
 #[cfg(test)]
 mod tests {

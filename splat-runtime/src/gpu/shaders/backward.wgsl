@@ -16,6 +16,7 @@ const ALPHA_COTANGENT: bool = {{ALPHA_COTANGENT}};
 @group(0) @binding(7) var<storage, read_write> grads: array<{{GRAD_ATOMIC}}>;
 // Global atomic adds issued (low word, high word).
 @group(0) @binding(8) var<storage, read_write> issued: array<atomic<u32>, 2>;
+{{SUM_BINDING}}
 {{CAMERA_BINDING}}
 {{PIXEL_GRAD_BINDING}}
 

@@ -16,6 +16,10 @@ const SUM_CAMERA: bool = {{SUM_CAMERA}};
 @group(0) @binding(4) var<storage, read_write> param_grads: array<u32>;
 @group(0) @binding(5) var<storage, read_write> camera_partials: array<f32>;
 @group(0) @binding(6) var<uniform> info: vec4<u32>; // x = primitives
+{{SUM_BINDING}}
+
+// Each primitive's summed gradient words, as the backward blend held them (`gpu::sums`).
+{{GRAD_READ}}
 
 var<workgroup> red: array<f32, {{RED_WORDS}}>; // 64 * NCAM
 
@@ -27,7 +31,7 @@ fn project_backward(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invoca
     if (i < info.x) {
         var touched = false;
         for (var k = 0u; k < NG; k++) {
-            touched = touched || grads[i * NG + k] != 0u;
+            touched = touched || grad_bits(i * NG + k) != 0u;
         }
         if (projected[i * STRIDE] != 0u && touched) {
             let a = {{PROJECT_ADJOINT}};

@@ -20,6 +20,7 @@ const ALPHA_MIN: f32 = {{ALPHA_MIN}};
 @group(0) @binding(3) var<storage, read> tile_order: array<u32>;
 // frame[0] = (primitives, width, height, tile size), frame[1] = (tiles_x, P_max, ..)
 @group(0) @binding(4) var<uniform> frame: array<vec4<u32>, 2>;
+{{SHADE_BINDINGS}}
 
 var<workgroup> batch_words: array<u32, {{BATCH_WORDS}}>;
 var<workgroup> batch_depth: array<f32, BATCH>;
@@ -58,15 +59,14 @@ fn start_walk(lid: u32, done: bool) {
     }
 }
 
-// Entries [b, b + BATCH) of the tile's list, one per invocation.
+// Entries [b, b + BATCH) of the tile's list, one per invocation (their shade words decoded
+// where they are packed: `gpu::shade_pack`).
 fn stage_batch(lid: u32, b: u32, end: u32) {
     let k = b + lid;
     if (lid < BATCH && k < end) {
         let p = tile_prims[k];
         batch_prim[lid] = p;
-        for (var w = 0u; w < NS; w++) {
-            batch_words[lid * NS + w] = projected[p * STRIDE + SHADE_AT + w];
-        }
+{{STAGE_SHADE}}
         batch_depth[lid] = bitcast<f32>(projected[p * STRIDE + 1u]);
     }
 }
