@@ -55,6 +55,16 @@ fn loss_gradient(pixels: usize) -> FrameGrad {
     }
 }
 
+/// `grad` with every output gradient times `factor` (a training loss's scale).
+fn scaled(grad: &FrameGrad, factor: f32) -> FrameGrad {
+    let times = |g: &[f32]| g.iter().map(|v| v * factor).collect::<Vec<_>>();
+    FrameGrad {
+        color: times(&grad.color),
+        alpha: grad.alpha.as_deref().map(times),
+        depth: grad.depth.as_deref().map(times),
+    }
+}
+
 fn flat(ps: &[Params]) -> Vec<f64> {
     ps.iter().flat_map(words).collect()
 }
@@ -306,12 +316,7 @@ fn gradient_sums_in_f16_stay_within_their_rounding_at_any_loss_scale_and_unorm_i
     assert!(err <= roundings as f64 * 2f64.powi(-11), "{err}");
 
     let tiny = 2f32.powi(-20);
-    let scaled = |g: &Option<Vec<f32>>| g.as_ref().map(|g| g.iter().map(|v| v * tiny).collect());
-    let small = FrameGrad {
-        color: grad.color.iter().map(|v| v * tiny).collect(),
-        alpha: scaled(&grad.alpha),
-        depth: scaled(&grad.depth),
-    };
+    let small = scaled(&grad, tiny);
     let got_small = backward::<Method>(&state, &params, &cam, &small).unwrap();
     let times_tiny: Vec<f64> = flat(&got.params).iter().map(|v| v * tiny as f64).collect();
     assert_eq!(flat(&got_small.params), times_tiny);
@@ -479,12 +484,7 @@ fn the_gpu_holds_gradient_sums_in_f16_within_their_rounding_at_any_loss_scale() 
     };
     let (_, mut state) = render::render_for_backward::<Method>(&gpu, &params, &cam, &opts).unwrap();
     let tiny = 2f32.powi(-20);
-    let scaled = |g: &Option<Vec<f32>>| g.as_ref().map(|g| g.iter().map(|v| v * tiny).collect());
-    let small = FrameGrad {
-        color: grad.color.iter().map(|v| v * tiny).collect(),
-        alpha: scaled(&grad.alpha),
-        depth: scaled(&grad.depth),
-    };
+    let small = scaled(&grad, tiny);
     let roundings = 9;
     for (name, grad, acc, unscale) in [
         ("workgroup reduction", &grad, tiles, 1.0),

@@ -194,6 +194,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             return Err(GpuError::TileSize(opts.tile_size).into());
         }
         let layout = Layout::of::<M>();
+        let sums = Sums::at(opts.gradient_precision);
         let state = PixelState {
             precision: opts.precision,
             channels: layout.channels,
@@ -213,8 +214,8 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             project_backward: PerModel::new(),
             pixel_backward: PerModel::new(),
             param_floats: entries::param_floats::<M>()?,
-            sums: Sums::at(opts.gradient_precision),
-            largest: match Sums::at(opts.gradient_precision).half {
+            sums,
+            largest: match sums.half {
                 true => Some(Largest::new(gpu, layout.channels + 2)?),
                 false => None,
             },

@@ -447,7 +447,7 @@ impl PackedShade {
 }
 
 /// The most words a shade type may have (3DGEER's has 16).
-pub const MAX_SHADE_WORDS: usize = 64;
+const MAX_SHADE_WORDS: usize = 64;
 
 /// Which words of `M::Shade` are floats (the others, flags and integers, are stored exact).
 pub fn float_words<M: SplatMethod>() -> Vec<bool> {
