@@ -3,7 +3,9 @@
 //! Pipeline (each stage a module, each unit-testable without going through a proc-macro):
 //!
 //! ```text
-//! syn::ItemMod --model--> Module (structs, consts, fns, roles)
+//! syn::ItemMod --model--> Module (structs, consts, fns, their resolved signatures)
+//!              --check--> Checked (a method's roles against the runtime's contract, custom
+//!                         adjoints' signatures)
 //!              --lower--> ir::Function per kernel (typed, scalar SSA, structured ifs,
 //!                         loops unrolled, helpers inlined)
 //!              --ad-----> adjoint ir::Function (recompute primal + reverse sweep)
@@ -17,6 +19,7 @@
 
 pub mod ad;
 pub mod builtins;
+pub mod check;
 pub mod diag;
 pub mod emit;
 pub mod gate;
@@ -27,6 +30,7 @@ pub mod ops;
 pub mod opt;
 pub mod types;
 
+use check::Checked;
 use diag::Diag;
 use emit::api::Kernel;
 use emit::body::Flavor;
@@ -42,9 +46,6 @@ pub enum Kind {
     /// `#[splat_functions]`: every function is a kernel (forward, adjoint, twin, lanes).
     Functions,
 }
-
-/// The method roles, in the order the runtime calls them.
-pub const METHOD_FNS: &[&str] = &["project", "tile_cull", "pixel_info", "evaluate"];
 
 /// The compiled IR of a module, for tests and tools.
 pub struct Compiled {
@@ -74,8 +75,9 @@ pub fn expand(kind: Kind, attr: TokenStream, item: TokenStream) -> TokenStream {
 pub fn compile_ir(kind: Kind, item: syn::ItemMod) -> Result<Compiled, Vec<String>> {
     let diag = Diag::default();
     let r = Module::parse(item, &diag).and_then(|m| {
-        let custom = custom_adjoints(&m, &diag)?;
-        let kernels = build_kernels(kind, &m, &custom, &diag)?;
+        let checked = check::check(kind, &m, &diag)?;
+        let custom = custom_adjoints(&checked, &diag)?;
+        let kernels = build_kernels(kind, &checked, &custom, &diag)?;
         Some(Compiled {
             kernels: kernels.into_iter().map(|k| (k.primal, k.adjoint)).collect(),
         })
@@ -91,71 +93,35 @@ pub fn compile_ir(kind: Kind, item: syn::ItemMod) -> Result<Compiled, Vec<String
 struct Custom {
     names: Vec<String>,
     adjoints: Vec<ir::Function>,
-    adjoint_fn_names: Vec<String>,
 }
 
-fn custom_adjoints(m: &Module, diag: &Diag) -> Option<Custom> {
-    let mut c = Custom {
+fn custom_adjoints(c: &Checked, diag: &Diag) -> Option<Custom> {
+    let mut custom = Custom {
         names: vec![],
         adjoints: vec![],
-        adjoint_fn_names: vec![],
     };
-    let helpers: Vec<&model::FnDef> = m.fns.iter().filter(|f| f.adjoint.is_some()).collect();
-    c.names = helpers.iter().map(|f| f.name.clone()).collect();
-    for h in helpers {
-        let adj_ident = h.adjoint.as_ref().unwrap();
-        let Some(adj) = m.find_fn(&adj_ident.to_string()) else {
-            diag.error_at(
-                adj_ident,
-                format!("cannot find the adjoint function `{adj_ident}` in this module"),
-            );
-            continue;
-        };
-        let mut want: Vec<types::Ty> = h.params.iter().map(|p| p.ty.clone()).collect();
-        want.push(h.ret.clone());
-        let got: Vec<types::Ty> = adj.params.iter().map(|p| p.ty.clone()).collect();
-        let cot: Vec<types::Ty> = h.params.iter().map(|p| p.ty.clone()).collect();
-        let want_ret = if cot.len() == 1 {
-            cot[0].clone()
-        } else {
-            types::Ty::Tuple(cot)
-        };
-        if got != want || adj.ret != want_ret {
-            let shown: Vec<String> = want.iter().map(|t| t.to_string()).collect();
-            diag.error_at(
-                &adj.item.sig.ident,
-                format!(
-                    "the adjoint of `{}` must have the signature fn({}) -> {}: the helper's parameters, then the cotangent of its result; it returns the cotangents of the parameters",
-                    h.name,
-                    shown.join(", "),
-                    want_ret
-                ),
-            );
-            continue;
-        }
-        c.adjoint_fn_names.push(adj.name.clone());
-        let lowered = lower::lower_fn(m, diag, adj, &[])?;
-        c.adjoints.push(lowered.func);
+    for (helper, adjoint) in &c.adjoints {
+        custom.names.push(helper.name.clone());
+        custom
+            .adjoints
+            .push(lower::lower_fn(c.module, diag, adjoint, &[])?.func);
     }
-    (!diag.has_errors()).then_some(c)
+    Some(custom)
 }
 
 fn build_kernels<'m>(
     kind: Kind,
-    m: &'m Module,
+    c: &Checked<'m>,
     custom: &Custom,
     diag: &Diag,
 ) -> Option<Vec<Kernel<'m>>> {
-    let defs: Vec<&model::FnDef> = match kind {
-        Kind::Method => m
+    let m = c.module;
+    let defs: Vec<&model::FnDef> = match &c.roles {
+        Some(r) => m.fns.iter().filter(|f| r.has(f)).collect(),
+        None => m
             .fns
             .iter()
-            .filter(|f| METHOD_FNS.contains(&f.name.as_str()))
-            .collect(),
-        Kind::Functions => m
-            .fns
-            .iter()
-            .filter(|f| !f.builtin && !custom.adjoint_fn_names.contains(&f.name))
+            .filter(|f| !f.builtin && !c.is_adjoint(f))
             .collect(),
     };
     let mut kernels = vec![];
@@ -247,8 +213,9 @@ fn build_kernel<'m>(
 
 fn expand_module(kind: Kind, item: syn::ItemMod, diag: &Diag) -> Option<TokenStream> {
     let m = Module::parse(item, diag)?;
-    let custom = custom_adjoints(&m, diag)?;
-    let kernels = build_kernels(kind, &m, &custom, diag)?;
+    let checked = check::check(kind, &m, diag)?;
+    let custom = custom_adjoints(&checked, diag)?;
+    let kernels = build_kernels(kind, &checked, &custom, diag)?;
     let lanes_for = |k: &Kernel| kind == Kind::Functions || k.def.name == "evaluate";
     let mut items = TokenStream::new();
     items.extend(m.uses.iter().map(|u| quote!(#[allow(unused_imports)] #u)));
@@ -311,8 +278,8 @@ fn expand_module(kind: Kind, item: syn::ItemMod, diag: &Diag) -> Option<TokenStr
             pub mod scalar { #scalar }
         });
     }
-    if kind == Kind::Method {
-        items.extend(emit::method::method_impl(&m, &kernels, diag)?);
+    if let Some(roles) = &checked.roles {
+        items.extend(emit::method::method_impl(&m, roles, &kernels));
     }
     let (wgsl, signatures) = match emit::naga::wgsl(&wgsl_kernels(&kernels)) {
         Ok(w) => w,

@@ -2,84 +2,12 @@
 //! user's four functions and the runtime's contract.
 
 use super::api::{Kernel, pack, slot_access};
-use crate::diag::Diag;
+use crate::check::{Roles, builtin};
 use crate::ir::Scalar;
 use crate::model::{FnDef, Module};
-use crate::types::{Ty, builtin_struct};
+use crate::types::Ty;
 use proc_macro2::{Literal, TokenStream};
 use quote::quote;
-
-fn struct_field(ty: &Ty, name: &str) -> Option<Ty> {
-    match ty {
-        Ty::Struct(s) => s
-            .fields
-            .iter()
-            .find(|(f, _)| f == name)
-            .map(|(_, t)| t.clone()),
-        _ => None,
-    }
-}
-
-/// The type of parameter `i` of `def` as written, for errors about it (the parameter itself
-/// when the type cannot be found).
-fn written_type(def: &FnDef, i: usize) -> &dyn quote::ToTokens {
-    match def.item.sig.inputs.iter().nth(i) {
-        Some(syn::FnArg::Typed(t)) => &*t.ty,
-        Some(other) => other,
-        None => &def.item.sig.ident,
-    }
-}
-
-fn builtin(name: &str) -> Ty {
-    builtin_struct(name, &[])
-        .expect("builtin")
-        .expect("no args")
-}
-
-/// Checks that `def` has the parameter types `want` (by position) and returns `Err` after
-/// reporting otherwise.
-fn check_params(def: &FnDef, want: &[(&str, Option<&Ty>)], diag: &Diag) -> Result<(), ()> {
-    if def.params.len() != want.len() {
-        let names: Vec<&str> = want.iter().map(|w| w.0).collect();
-        diag.error(
-            def.item.sig.paren_token.span.join(),
-            format!(
-                "`{}` must take {} parameter(s): {}",
-                def.name,
-                want.len(),
-                names.join(", ")
-            ),
-        );
-        return Err(());
-    }
-    for (i, (p, (what, ty))) in def.params.iter().zip(want).enumerate() {
-        if let Some(t) = ty
-            && p.ty != **t
-        {
-            diag.error_at(
-                &written_type(def, i),
-                format!("{what} of `{}` must be `{t}`, found `{}`", def.name, p.ty),
-            );
-            return Err(());
-        }
-    }
-    Ok(())
-}
-
-/// The user function that was probably meant as the missing role function `role`: one that
-/// returns the role's type (`returns`) under another name, or a name one or two edits away.
-fn near_miss<'m>(m: &'m Module, role: &str, returns: &str) -> Option<(&'m FnDef, String)> {
-    let user = || m.fns.iter().filter(|f| !f.builtin);
-    let typed = user().find(|f| matches!(&f.ret, Ty::Struct(s) if s.display.starts_with(returns)));
-    if let Some(f) = typed {
-        let hint = format!("`fn {}` returns `{returns}`: name it `{role}`", f.name);
-        return Some((f, hint));
-    }
-    let (distance, f) = user()
-        .map(|f| (crate::diag::edit_distance(&f.name, role), f))
-        .min_by_key(|(d, _)| *d)?;
-    (distance <= 2).then(|| (f, format!("did you mean `{role}` for `fn {}`?", f.name)))
-}
 
 /// The `checks::Twin` of the method: its f64 twins (module `twin`) behind slice signatures.
 fn twin_const(has_pixel_info: bool) -> TokenStream {
@@ -145,118 +73,24 @@ fn call_args(def: &FnDef, names: &[TokenStream], by_value: &[bool]) -> Vec<Token
         .collect()
 }
 
-pub fn method_impl(m: &Module, kernels: &[Kernel], diag: &Diag) -> Option<TokenStream> {
-    let module = &m.name;
-    let module_name = module.to_string();
-    let find = |n: &str| kernels.iter().find(|k| k.def.name == n);
-    let missing = |what: &str, returns: &str| {
-        let need = format!(
-            "a #[splat_method] module needs `fn {what}` (see splat_runtime::SplatMethod for the signature)"
-        );
-        match near_miss(m, what, returns) {
-            Some((f, hint)) => diag.error_at(&f.item.sig.ident, format!("{need}; {hint}")),
-            None => diag.error_at(module, need),
-        }
+pub fn method_impl(m: &Module, roles: &Roles, kernels: &[Kernel]) -> TokenStream {
+    let module_name = m.name.to_string();
+    let kernel = |def: &FnDef| {
+        let k = kernels.iter().find(|k| std::ptr::eq(k.def, def));
+        k.expect("every role function of a checked method is a kernel")
     };
-    let Some(project) = find("project") else {
-        missing("project", "Projected");
-        return None;
-    };
-    let Some(evaluate) = find("evaluate") else {
-        missing("evaluate", "Contribution");
-        return None;
-    };
-    let tile_cull = find("tile_cull");
-    let pixel_info = find("pixel_info");
+    let (project, evaluate) = (kernel(roles.project), kernel(roles.evaluate));
+    let tile_cull = roles.tile_cull.map(kernel);
+    let pixel_info = roles.pixel_info.map(kernel);
     let camera = builtin("Camera");
-    check_params(
-        project.def,
-        &[("the parameters", None), ("the camera", Some(&camera))],
-        diag,
-    )
-    .ok()?;
-    let params_ty = project.def.params[0].ty.clone();
-    let (Some(cull_ty), Some(shade_ty)) = (
-        struct_field(&project.ret, "cull"),
-        struct_field(&project.ret, "shade"),
-    ) else {
-        diag.error_at(
-            &project.def.item.sig.output,
-            "`project` must return `Projected<Cull, Shade>`",
-        );
-        return None;
-    };
-    check_params(
-        evaluate.def,
-        &[
-            ("the pixel data", None),
-            ("the shade data", Some(&shade_ty)),
-        ],
-        diag,
-    )
-    .ok()?;
-    let pixel_ty = evaluate.def.params[0].ty.clone();
-    let Some(color_ty) = struct_field(&evaluate.ret, "color") else {
-        diag.error_at(
-            &evaluate.def.item.sig.output,
-            "`evaluate` must return `Contribution<Color>`",
-        );
-        return None;
-    };
-    let lanes = "(they become SIMD lanes)";
-    if !pixel_ty.all_float() {
-        diag.error_at(
-            &written_type(evaluate.def, 0),
-            format!("the pixel data of `evaluate` must be made of f32 only {lanes}"),
-        );
-        return None;
-    }
-    if !color_ty.all_float() {
-        diag.error_at(
-            &evaluate.def.item.sig.output,
-            format!("the color of `evaluate` must be made of f32 only {lanes}"),
-        );
-        return None;
-    }
-    if let Some(tc) = tile_cull {
-        check_params(
-            tc.def,
-            &[
-                ("the tile", Some(&builtin("Tile"))),
-                ("the cull data", Some(&cull_ty)),
-            ],
-            diag,
-        )
-        .ok()?;
-        if tc.ret != Ty::Bool {
-            diag.error_at(&tc.def.item.sig.output, "`tile_cull` must return `bool`");
-            return None;
-        }
-    }
-    if let Some(pi) = pixel_info {
-        check_params(
-            pi.def,
-            &[
-                ("the pixel centre", Some(&Ty::Vec(2))),
-                ("the camera", Some(&camera)),
-            ],
-            diag,
-        )
-        .ok()?;
-        if pi.ret != pixel_ty {
-            diag.error_at(
-                &pi.def.item.sig.output,
-                format!("`pixel_info` must return `{pixel_ty}`"),
-            );
-            return None;
-        }
-    } else if pixel_ty != Ty::Vec(2) {
-        diag.error_at(
-            &written_type(evaluate.def, 0),
-            "without `pixel_info`, the pixel data of `evaluate` is the pixel centre: `Vec2`",
-        );
-        return None;
-    }
+    let Roles {
+        params: params_ty,
+        cull: cull_ty,
+        shade: shade_ty,
+        pixel: pixel_ty,
+        color: color_ty,
+        ..
+    } = roles;
 
     let param_fields: Vec<TokenStream> = match &params_ty {
         Ty::Struct(s) => s
@@ -273,8 +107,8 @@ pub fn method_impl(m: &Module, kernels: &[Kernel], diag: &Diag) -> Option<TokenS
         }
     };
     let shade_field_groups =
-        crate::gate::shade_field_groups(&project.primal, &params_ty, &camera, &shade_ty);
-    let alpha_groups = crate::gate::alpha_groups(&evaluate.primal, &pixel_ty, &shade_ty);
+        crate::gate::shade_field_groups(&project.primal, params_ty, &camera, shade_ty);
+    let alpha_groups = crate::gate::alpha_groups(&evaluate.primal, pixel_ty, shade_ty);
     let (p_t, c_t, s_t, px_t, col_t) = (
         params_ty.rust(),
         cull_ty.rust(),
@@ -295,7 +129,7 @@ pub fn method_impl(m: &Module, kernels: &[Kernel], diag: &Diag) -> Option<TokenS
     // Every parameter group asked for: the plain adjoint (the AD's own statement order, so
     // that costs what it did before gating), the camera dropped unless asked for; otherwise
     // the gated one. `by_model` turns each call into its model's.
-    let all_params = crate::gate::all_fields(&params_ty);
+    let all_params = crate::gate::all_fields(params_ty);
     let choose_project_adjoint = |model: &dyn Fn(TokenStream) -> TokenStream| {
         let plain = model(quote!(project_adjoint(#(#project_call,)* *d_out)));
         let gated = model(quote!(project_adjoint_gated(#(#project_call,)* *d_out, wanted.bits())));
@@ -358,7 +192,7 @@ pub fn method_impl(m: &Module, kernels: &[Kernel], diag: &Diag) -> Option<TokenS
 
     // Lane wrappers: pixel slots come from the lanes, shade slots are broadcast.
     let shade_slots = shade_ty.slots();
-    let shade_access = slot_access(&shade_ty, quote!(shade));
+    let shade_access = slot_access(shade_ty, quote!(shade));
     let idx = Literal::usize_unsuffixed;
     let mut lane_in: Vec<TokenStream> = (0..np)
         .map(|i| {
@@ -400,12 +234,12 @@ pub fn method_impl(m: &Module, kernels: &[Kernel], diag: &Diag) -> Option<TokenS
         })
         .collect::<Vec<_>>()
         .into_iter();
-    let shade_from_bars = pack(&shade_ty, &mut shade_bars);
+    let shade_from_bars = pack(shade_ty, &mut shade_bars);
     // The same packing from plain float sums, and the lane-wise accumulation.
     let mut from_sums = float_slots(&shade_slots);
     let float_index = shade_slots.iter().filter(|s| **s == Scalar::F32).count();
-    let shade_from_sums = pack(&shade_ty, &mut from_sums);
-    let params_from_sums = pack(&params_ty, &mut float_slots(&params_ty.slots()));
+    let shade_from_sums = pack(shade_ty, &mut from_sums);
+    let params_from_sums = pack(params_ty, &mut float_slots(&params_ty.slots()));
     let nsf = idx(float_index);
     let mut accumulate: Vec<TokenStream> = (0..float_index)
         .map(|k| {
@@ -455,7 +289,7 @@ pub fn method_impl(m: &Module, kernels: &[Kernel], diag: &Diag) -> Option<TokenS
     let rolling_shutter = kernels.iter().any(|k| k.rolling_shutter);
     let twin = twin_const(has_pi);
     let (np, nc) = (idx(np), idx(nc));
-    Some(quote! {
+    quote! {
         /// The method as the runtime sees it.
         #[derive(Clone, Copy, Debug, Default)]
         pub struct Method;
@@ -565,7 +399,7 @@ pub fn method_impl(m: &Module, kernels: &[Kernel], diag: &Diag) -> Option<TokenS
                 #params_from_sums
             }
         }
-    })
+    }
 }
 
 /// `call`, a call of a kernel's module-level function (`project(params, camera)`), made
