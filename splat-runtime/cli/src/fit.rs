@@ -348,6 +348,16 @@ impl Fit<'_> {
                 c.strategy,
                 Strategy::name(opts.densify.as_ref())
             ),
+            Some(c)
+                if let Some(cap) = opts.densify.as_ref().map(Strategy::max_primitives)
+                    && c.primitives() > cap =>
+            {
+                bail!(
+                    "{} holds {} primitives, more than --max-primitives {cap}",
+                    args.out.join(CHECKPOINT).display(),
+                    c.primitives()
+                )
+            }
             Some(c) => (c.clone(), Log::read_csv(&args.out.join(METRICS), c.step)?),
             None => {
                 let half = init_extent * extent;

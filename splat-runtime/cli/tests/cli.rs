@@ -866,6 +866,15 @@ fn fit_resumes_from_its_checkpoint() {
         "a run with --strategy adc, not adc without opacity resets",
     );
     refused(&["--global-scale", "0.5"], "a run with scene extent");
+    let header = String::from_utf8_lossy(&scene[..scene.len().min(1024)]);
+    let held = header
+        .lines()
+        .find_map(|l| l.strip_prefix("element vertex "))
+        .expect("scene.ply names its vertex count");
+    refused(
+        &["--max-primitives", "1"],
+        &format!("out/checkpoint.bin holds {held} primitives, more than --max-primitives 1"),
+    );
     std::fs::write(out.join("checkpoint.bin"), "SPLATCK3 and then nothing").unwrap();
     refused(&[], "out/checkpoint.bin is damaged");
     for older in ["SPLATCK1", "SPLATCK2"] {

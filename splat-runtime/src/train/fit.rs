@@ -160,6 +160,14 @@ impl Strategy {
             None => "fixed",
         }
     }
+
+    /// The cap on the number of primitives.
+    pub fn max_primitives(&self) -> usize {
+        match self {
+            Strategy::Adc(d) => d.max_primitives,
+            Strategy::Mcmc(m) => m.max_primitives,
+        }
+    }
 }
 
 impl FitOptions {
