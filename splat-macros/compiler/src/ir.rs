@@ -20,8 +20,9 @@ use std::collections::{HashMap, HashSet};
 pub struct Var(pub u32);
 
 /// The scalar types of the IR.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, strum::EnumIter)]
 pub enum Scalar {
+    #[default]
     F32,
     Bool,
     U32,
@@ -48,7 +49,7 @@ impl Const {
     }
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, strum::EnumIter)]
 pub enum Unary {
     Neg,
     Not,
@@ -80,7 +81,7 @@ pub enum Unary {
     Cast(Scalar),
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, strum::EnumIter)]
 pub enum Binary {
     Add,
     Sub,
@@ -102,15 +103,6 @@ pub enum Binary {
     Ge,
     Eq,
     Ne,
-}
-
-impl Binary {
-    pub fn is_comparison(self) -> bool {
-        matches!(
-            self,
-            Binary::Lt | Binary::Le | Binary::Gt | Binary::Ge | Binary::Eq | Binary::Ne
-        )
-    }
 }
 
 #[derive(Clone, Debug, PartialEq)]

@@ -2,16 +2,19 @@
 //! about an expression on the expression): for a unary operation the method or function users
 //! call, whether glam has it on vectors, how the Rust and the WGSL compute it; for unary and
 //! binary operations their derivative, which the reverse sweep (`ad`) and the in-kernel
-//! Jacobians (`lower::jacobian`) both build from the same rule. `Unary::info` and the rules are
-//! exhaustive `match`es: a new `ir::Unary` variant does not compile until it has a row and a
-//! rule. It also needs a place in [`Unary::NAMED`] to be callable (and, for a free function, in
-//! the error message's `lower::intrinsics::INTRINSIC_LIST`); `F32x8`'s method of the same name
-//! in the runtime (the SIMD kernels call it); where WGSL has no built-in, its form in
-//! `emit::naga` (until then, expanding a kernel that uses it panics with the operation's name);
-//! and where std has none, `splat_runtime::math` functions.
+//! Jacobians (`lower::jacobian`) both build from the same rule; for a binary operation its
+//! Rust and WGSL spelling. The tables and the rules are exhaustive `match`es: a new `ir::Unary`
+//! or `ir::Binary` variant does not compile until it has a row and a rule, and a named row is
+//! callable at once ([`Unary::named`] iterates the variants). A new unary operation also needs
+//! `F32x8`'s method of the same name in the runtime (the SIMD kernels call it); where WGSL has
+//! no built-in, its form in `emit::naga` (this module's test emits every operation on every
+//! operand type, and fails until it has one); where std has none, `splat_runtime::math`
+//! functions; and for a free function, its place in the error message's
+//! `lower::intrinsics::INTRINSIC_LIST`.
 
 use crate::ir::{Binary, Const, Op, Unary, Var};
-use naga::MathFunction;
+use naga::{BinaryOperator, MathFunction};
+use strum::IntoEnumIterator;
 
 /// How the generated code computes a unary operation.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -92,30 +95,10 @@ impl UnaryInfo {
 }
 
 impl Unary {
-    /// The operations users call by name, methods in the order suggestions list them.
-    pub const NAMED: [Unary; 21] = [
-        Unary::Exp,
-        Unary::Ln,
-        Unary::Ln1p,
-        Unary::Sqrt,
-        Unary::Recip,
-        Unary::Abs,
-        Unary::Sin,
-        Unary::Cos,
-        Unary::Tan,
-        Unary::Asin,
-        Unary::Acos,
-        Unary::Atan,
-        Unary::Tanh,
-        Unary::Floor,
-        Unary::Ceil,
-        Unary::Round,
-        Unary::Trunc,
-        Unary::Fract,
-        Unary::Signum,
-        Unary::Rsqrt,
-        Unary::Erf,
-    ];
+    /// The operations users call by name (methods in the order suggestions list them).
+    pub fn named() -> impl Iterator<Item = Unary> {
+        Unary::iter().filter(|u| u.info() != BUILT)
+    }
 
     pub fn info(self) -> UnaryInfo {
         use MathFunction as M;
@@ -149,23 +132,94 @@ impl Unary {
 
     /// The operation users call as the method `name` on an `f32` (`vector`: on a vector).
     pub fn method(name: &str, vector: bool) -> Option<Unary> {
-        Unary::NAMED
-            .into_iter()
-            .find(|u| u.info().method == Some(name) && (!vector || u.info().on_vectors))
+        Unary::named().find(|u| u.info().method == Some(name) && (!vector || u.info().on_vectors))
     }
 
     /// The operation users call as the free function `name`.
     pub fn function(name: &str) -> Option<Unary> {
-        Unary::NAMED
-            .into_iter()
-            .find(|u| u.info().function == Some(name))
+        Unary::named().find(|u| u.info().function == Some(name))
     }
 
     /// The method names (`vector`: those glam has on vectors).
     pub fn method_names(vector: bool) -> impl Iterator<Item = &'static str> {
-        (Unary::NAMED.into_iter())
+        Unary::named()
             .filter(move |u| !vector || u.info().on_vectors)
             .filter_map(|u| u.info().method)
+    }
+}
+
+/// How the generated code computes a binary operation on floats (and, unless an emitter
+/// special-cases the type, on integers and booleans: Rust's integer arithmetic wraps and
+/// divides by zero to zero, WGSL's logic on booleans and its shifts differ).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BinaryInfo {
+    /// The Rust spelling: `x + y` for an operator (as users write it, but `&&` and `||`,
+    /// which the generated code writes `&` and `|`), `x.min(y)` for a method.
+    pub rust: Spelling,
+    /// The `F32x8` method comparing lanes into a mask (comparisons only).
+    pub lanes: Option<&'static str>,
+    /// The WGSL computing it.
+    pub wgsl: Wgsl,
+}
+
+/// How Rust writes a binary operation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Spelling {
+    Operator(&'static str),
+    Method(&'static str),
+}
+
+/// How WGSL writes a binary operation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Wgsl {
+    Operator(BinaryOperator),
+    Function(MathFunction),
+}
+
+impl Binary {
+    pub fn info(self) -> BinaryInfo {
+        use BinaryOperator as O;
+        use MathFunction as M;
+        let op = |rust, wgsl| BinaryInfo {
+            rust: Spelling::Operator(rust),
+            lanes: None,
+            wgsl: Wgsl::Operator(wgsl),
+        };
+        let method = |rust, wgsl| BinaryInfo {
+            rust: Spelling::Method(rust),
+            lanes: None,
+            wgsl: Wgsl::Function(wgsl),
+        };
+        let cmp = |rust, lanes, wgsl| BinaryInfo {
+            lanes: Some(lanes),
+            ..op(rust, wgsl)
+        };
+        match self {
+            Binary::Add => op("+", O::Add),
+            Binary::Sub => op("-", O::Subtract),
+            Binary::Mul => op("*", O::Multiply),
+            Binary::Div => op("/", O::Divide),
+            Binary::Rem => op("%", O::Modulo),
+            Binary::Min => method("min", M::Min),
+            Binary::Max => method("max", M::Max),
+            Binary::Atan2 => method("atan2", M::Atan2),
+            Binary::Powf => method("powf", M::Pow),
+            Binary::And => op("&", O::And),
+            Binary::Or => op("|", O::InclusiveOr),
+            Binary::Xor => op("^", O::ExclusiveOr),
+            Binary::Shl => op("<<", O::ShiftLeft),
+            Binary::Shr => op(">>", O::ShiftRight),
+            Binary::Lt => cmp("<", "lt", O::Less),
+            Binary::Le => cmp("<=", "le", O::LessEqual),
+            Binary::Gt => cmp(">", "gt", O::Greater),
+            Binary::Ge => cmp(">=", "ge", O::GreaterEqual),
+            Binary::Eq => cmp("==", "eq", O::Equal),
+            Binary::Ne => cmp("!=", "ne", O::NotEqual),
+        }
+    }
+
+    pub fn is_comparison(self) -> bool {
+        self.info().lanes.is_some()
     }
 }
 
@@ -422,10 +476,11 @@ pub fn binary_derivative(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::ir::Scalar;
 
     #[test]
     fn every_operation_is_found_by_its_name_and_only_vector_ones_on_vectors() {
-        for u in Unary::NAMED {
+        for u in Unary::named() {
             let info = u.info();
             if let Some(name) = info.method {
                 assert_eq!(Unary::method(name, false), Some(u), "{name}");
@@ -439,5 +494,55 @@ mod tests {
             assert!(info.method.is_some() != info.function.is_some(), "{u:?}");
         }
         assert_eq!(Unary::method("nope", false), None);
+    }
+
+    /// The operand types the lowering applies `op` to.
+    fn operand_types(op: &Op) -> Vec<Scalar> {
+        use crate::ir::Scalar::*;
+        use Binary as B;
+        use Unary as U;
+        match op {
+            Op::Unary(U::Not, _) => vec![Bool, U32, I32],
+            Op::Unary(U::Neg | U::Abs, _) => vec![F32, I32],
+            Op::Unary(U::Cast(_), _) => Scalar::iter().collect(),
+            Op::Unary(..) => vec![F32],
+            Op::Binary(B::Atan2 | B::Powf, ..) => vec![F32],
+            Op::Binary(B::Shl | B::Shr, ..) => vec![U32, I32],
+            Op::Binary(B::And | B::Or | B::Xor, ..) => vec![Bool, U32, I32],
+            Op::Binary(B::Eq | B::Ne, ..) => vec![F32, Bool, U32, I32],
+            Op::Binary(..) => vec![F32, U32, I32],
+            Op::Const(_) | Op::Select(..) => unreachable!("not an operation of a table"),
+        }
+    }
+
+    /// Every operation, on every operand type the lowering gives it, through both emitters: a
+    /// new operation WGSL has no built-in for fails here until `emit::naga` spells it out.
+    #[test]
+    fn every_operation_emits_wgsl_and_rust() {
+        use crate::emit::body::{BodyEmitter, Flavor};
+        use crate::ir::{Function, Stmt};
+        let (x, y) = (Var(0), Var(1));
+        let casts = Scalar::iter().map(|t| Op::Unary(Unary::Cast(t), x));
+        let unary = Unary::iter().map(|u| Op::Unary(u, x));
+        let binary = Binary::iter().map(|b| Op::Binary(b, x, y));
+        for op in casts.chain(unary).chain(binary) {
+            for ty in operand_types(&op) {
+                let mut f = Function::new("t");
+                f.params = vec![f.new_var(ty, "x"), f.new_var(ty, "y")];
+                let r = f.new_var(op.result_ty(|_| ty), "r");
+                f.body.stmts.push(Stmt::Let {
+                    var: r,
+                    op: op.clone(),
+                });
+                f.body.yields.push(r);
+                if let Err(e) = crate::emit::naga::wgsl(&[(&f, vec!["r".into()])]) {
+                    panic!("{op:?} on {ty:?}: {e}");
+                }
+                for flavor in [Flavor::F32, Flavor::F64, Flavor::Lanes] {
+                    let body = BodyEmitter::new(&f, flavor, &[]).block(&f.body);
+                    assert!(!body.is_empty(), "{op:?} on {ty:?}");
+                }
+            }
+        }
     }
 }

@@ -3,7 +3,7 @@
 //! becomes a `let` with a readable, unique name.
 
 use crate::ir::{Binary, Block, Const, Function, Op, Scalar, Stmt, Unary, Var};
-use crate::ops::Rust;
+use crate::ops::{Rust, Spelling};
 use proc_macro2::{Ident, Literal, Span, TokenStream};
 use quote::{format_ident, quote};
 use std::collections::{HashMap, HashSet};
@@ -293,38 +293,20 @@ impl<'f> BodyEmitter<'f> {
                     Binary::Shr if !lanes => quote!(#xv.wrapping_shr(#yv as u32)),
                     Binary::Shl => quote!(::core::ops::Shl::shl(#xv, #yv)),
                     Binary::Shr => quote!(::core::ops::Shr::shr(#xv, #yv)),
-                    Binary::Add => quote!(#xv + #yv),
-                    Binary::Sub => quote!(#xv - #yv),
-                    Binary::Mul => quote!(#xv * #yv),
-                    Binary::Div => quote!(#xv / #yv),
-                    Binary::Rem => quote!(#xv % #yv),
-                    Binary::And => quote!(#xv & #yv),
-                    Binary::Or => quote!(#xv | #yv),
-                    Binary::Xor => quote!(#xv ^ #yv),
-                    Binary::Min => quote!(#xv.min(#yv)),
-                    Binary::Max => quote!(#xv.max(#yv)),
-                    Binary::Atan2 => quote!(#xv.atan2(#yv)),
-                    Binary::Powf => quote!(#xv.powf(#yv)),
-                    cmp if lanes => {
-                        let m = format_ident!(
-                            "{}",
-                            match cmp {
-                                Binary::Lt => "lt",
-                                Binary::Le => "le",
-                                Binary::Gt => "gt",
-                                Binary::Ge => "ge",
-                                Binary::Eq => "eq",
-                                _ => "ne",
-                            }
-                        );
-                        quote!(#xv.#m(#yv))
-                    }
-                    Binary::Lt => quote!(#xv < #yv),
-                    Binary::Le => quote!(#xv <= #yv),
-                    Binary::Gt => quote!(#xv > #yv),
-                    Binary::Ge => quote!(#xv >= #yv),
-                    Binary::Eq => quote!(#xv == #yv),
-                    Binary::Ne => quote!(#xv != #yv),
+                    _ => match (b.info().lanes, b.info().rust) {
+                        (Some(mask), _) if lanes => {
+                            let m = format_ident!("{mask}");
+                            quote!(#xv.#m(#yv))
+                        }
+                        (_, Spelling::Operator(op)) => {
+                            let op: syn::BinOp = syn::parse_str(op).expect("a Rust operator");
+                            quote!(#xv #op #yv)
+                        }
+                        (_, Spelling::Method(m)) => {
+                            let m = format_ident!("{m}");
+                            quote!(#xv.#m(#yv))
+                        }
+                    },
                 }
             }
         }

@@ -10,6 +10,7 @@
 //! by zero, shift amounts), the Rust meaning is spelled out so both backends agree.
 
 use crate::ir::{Binary, Block, Const, Function, Op, Scalar, Stmt, Unary, Var};
+use crate::ops::Wgsl;
 use naga::{
     Arena, BinaryOperator as B, Expression as E, Handle, Literal, MathFunction as M, ScalarKind,
     Span, Statement, StructMember, Type, TypeInner, UnaryOperator,
@@ -618,19 +619,11 @@ impl<'f> FnBuilder<'f> {
         let (l, r) = (self.get(x), self.get(y));
         let int = matches!(ty, Scalar::U32 | Scalar::I32);
         match b {
-            Binary::Add => self.bin(B::Add, l, r),
-            Binary::Sub => self.bin(B::Subtract, l, r),
-            Binary::Mul => self.bin(B::Multiply, l, r),
             Binary::Div | Binary::Rem if int => {
                 // Rust's generated code gives 0 for a zero divisor; WGSL gives the dividend.
-                let op = if b == Binary::Div {
-                    B::Divide
-                } else {
-                    B::Modulo
-                };
                 let z = self.zero_of(ty);
                 let nz = self.bin(B::NotEqual, r, z);
-                let q = self.bin(op, l, r);
+                let q = self.bin(wgsl_operator(b), l, r);
                 let z2 = self.zero_of(ty);
                 self.add(E::Select {
                     condition: nz,
@@ -638,18 +631,9 @@ impl<'f> FnBuilder<'f> {
                     reject: z2,
                 })
             }
-            Binary::Div => self.bin(B::Divide, l, r),
-            Binary::Rem => self.bin(B::Modulo, l, r),
-            Binary::Min => self.math(M::Min, l, Some(r)),
-            Binary::Max => self.math(M::Max, l, Some(r)),
-            Binary::Atan2 => self.math(M::Atan2, l, Some(r)),
-            Binary::Powf => self.math(M::Pow, l, Some(r)),
             Binary::And if ty == Scalar::Bool => self.bin(B::LogicalAnd, l, r),
             Binary::Or if ty == Scalar::Bool => self.bin(B::LogicalOr, l, r),
             Binary::Xor if ty == Scalar::Bool => self.bin(B::NotEqual, l, r),
-            Binary::And => self.bin(B::And, l, r),
-            Binary::Or => self.bin(B::InclusiveOr, l, r),
-            Binary::Xor => self.bin(B::ExclusiveOr, l, r),
             Binary::Shl | Binary::Shr => {
                 // The shift amount is a u32 taken modulo 32, like Rust's wrapping shifts.
                 let amount = if ty == Scalar::I32 {
@@ -663,19 +647,20 @@ impl<'f> FnBuilder<'f> {
                 };
                 let m = self.add(E::Literal(Literal::U32(31)));
                 let amount = self.bin(B::And, amount, m);
-                let op = if b == Binary::Shl {
-                    B::ShiftLeft
-                } else {
-                    B::ShiftRight
-                };
-                self.bin(op, l, amount)
+                self.bin(wgsl_operator(b), l, amount)
             }
-            Binary::Lt => self.bin(B::Less, l, r),
-            Binary::Le => self.bin(B::LessEqual, l, r),
-            Binary::Gt => self.bin(B::Greater, l, r),
-            Binary::Ge => self.bin(B::GreaterEqual, l, r),
-            Binary::Eq => self.bin(B::Equal, l, r),
-            Binary::Ne => self.bin(B::NotEqual, l, r),
+            _ => match b.info().wgsl {
+                Wgsl::Operator(op) => self.bin(op, l, r),
+                Wgsl::Function(f) => self.math(f, l, Some(r)),
+            },
         }
+    }
+}
+
+/// The WGSL operator computing `b` (one WGSL writes as an operator).
+fn wgsl_operator(b: Binary) -> naga::BinaryOperator {
+    match b.info().wgsl {
+        Wgsl::Operator(op) => op,
+        Wgsl::Function(f) => unreachable!("{b:?} is the WGSL function {f:?}"),
     }
 }

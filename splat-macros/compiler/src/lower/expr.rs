@@ -58,50 +58,28 @@ pub(super) fn index_range(ty: &Ty, i: usize) -> Option<(Ty, Range<usize>)> {
     }
 }
 
-fn binop_name(op: &syn::BinOp) -> &'static str {
-    use syn::BinOp::*;
-    match op {
-        Add(_) | AddAssign(_) => "+",
-        Sub(_) | SubAssign(_) => "-",
-        Mul(_) | MulAssign(_) => "*",
-        Div(_) | DivAssign(_) => "/",
-        Rem(_) | RemAssign(_) => "%",
-        And(_) => "&&",
-        Or(_) => "||",
-        BitXor(_) | BitXorAssign(_) => "^",
-        BitAnd(_) | BitAndAssign(_) => "&",
-        BitOr(_) | BitOrAssign(_) => "|",
-        Shl(_) | ShlAssign(_) => "<<",
-        Shr(_) | ShrAssign(_) => ">>",
-        Eq(_) => "==",
-        Lt(_) => "<",
-        Le(_) => "<=",
-        Ne(_) => "!=",
-        Ge(_) => ">=",
-        Gt(_) => ">",
-        _ => "?",
-    }
-}
-
-fn ir_binop(op: &syn::BinOp) -> Option<Binary> {
+/// The operation `op` computes (for `x += y`, that of `+`), and its spelling in messages.
+fn ir_binop(op: &syn::BinOp) -> Option<(Binary, &'static str)> {
     use syn::BinOp::*;
     Some(match op {
-        Add(_) | AddAssign(_) => Binary::Add,
-        Sub(_) | SubAssign(_) => Binary::Sub,
-        Mul(_) | MulAssign(_) => Binary::Mul,
-        Div(_) | DivAssign(_) => Binary::Div,
-        Rem(_) | RemAssign(_) => Binary::Rem,
-        And(_) | BitAnd(_) | BitAndAssign(_) => Binary::And,
-        Or(_) | BitOr(_) | BitOrAssign(_) => Binary::Or,
-        BitXor(_) | BitXorAssign(_) => Binary::Xor,
-        Shl(_) | ShlAssign(_) => Binary::Shl,
-        Shr(_) | ShrAssign(_) => Binary::Shr,
-        Eq(_) => Binary::Eq,
-        Lt(_) => Binary::Lt,
-        Le(_) => Binary::Le,
-        Ne(_) => Binary::Ne,
-        Ge(_) => Binary::Ge,
-        Gt(_) => Binary::Gt,
+        Add(_) | AddAssign(_) => (Binary::Add, "+"),
+        Sub(_) | SubAssign(_) => (Binary::Sub, "-"),
+        Mul(_) | MulAssign(_) => (Binary::Mul, "*"),
+        Div(_) | DivAssign(_) => (Binary::Div, "/"),
+        Rem(_) | RemAssign(_) => (Binary::Rem, "%"),
+        And(_) => (Binary::And, "&&"),
+        Or(_) => (Binary::Or, "||"),
+        BitAnd(_) | BitAndAssign(_) => (Binary::And, "&"),
+        BitOr(_) | BitOrAssign(_) => (Binary::Or, "|"),
+        BitXor(_) | BitXorAssign(_) => (Binary::Xor, "^"),
+        Shl(_) | ShlAssign(_) => (Binary::Shl, "<<"),
+        Shr(_) | ShrAssign(_) => (Binary::Shr, ">>"),
+        Eq(_) => (Binary::Eq, "=="),
+        Lt(_) => (Binary::Lt, "<"),
+        Le(_) => (Binary::Le, "<="),
+        Ne(_) => (Binary::Ne, "!="),
+        Ge(_) => (Binary::Ge, ">="),
+        Gt(_) => (Binary::Gt, ">"),
         _ => return None,
     })
 }
@@ -435,10 +413,10 @@ impl Lowerer<'_> {
         );
         let l = self.expr(&b.left)?;
         let r = self.expr(&b.right)?;
-        let Some(op) = ir_binop(&b.op) else {
+        let Some((op, spelled)) = ir_binop(&b.op) else {
             return self.err(b.op.span(), "this operator is not supported");
         };
-        let v = self.binary(op, binop_name(&b.op), l, r, b.span())?;
+        let v = self.binary(op, spelled, l, r, b.span())?;
         if compound {
             self.assign(&b.left, v)?;
             return Ok(Val::unit());
