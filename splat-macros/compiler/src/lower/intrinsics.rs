@@ -1,10 +1,10 @@
 //! Method calls on the supported types and the free intrinsic functions, lowered to scalar IR.
 //!
-//! The rules at kinks and singular points (documented in the crate docs, `INTRINSICS.md`):
-//! `normalize(0) = 0` with zero gradient; `length` and `sqrt` have zero gradient at 0;
-//! `min`/`max`/`clamp` send the gradient to the first argument on ties; division, `recip`,
-//! `ln`, `rsqrt`, `asin`, `acos`, `atan2` and `powf` have zero gradient where the derivative
-//! is infinite; `select` and `if` differentiate only the side taken.
+//! The rules at kinks and singular points (the "Derivative rules" table of
+//! `splat-macros/README.md`): `normalize(0) = 0` with zero gradient; `length` and `sqrt` have
+//! zero gradient at 0; `min`/`max`/`clamp` send the gradient to the first argument on ties;
+//! division, `recip`, `ln`, `rsqrt`, `asin`, `acos`, `atan2` and `powf` have zero gradient
+//! where the derivative is infinite; `select` and `if` differentiate only the side taken.
 
 use super::{Failed, Lowerer, R, Val};
 use crate::builtins::{SH_COEFFICIENTS, camera_helper, model_aware, sh_helper, shutter_aware};
