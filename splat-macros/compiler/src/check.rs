@@ -9,7 +9,7 @@
 use crate::Kind;
 use crate::diag::{Diag, edit_distance};
 use crate::model::{FnDef, Module};
-use crate::types::{Ty, builtin_struct};
+use crate::types::{Ty, plain_builtin};
 
 /// A module whose signatures were checked.
 pub struct Checked<'m> {
@@ -59,8 +59,12 @@ impl Checked<'_> {
     }
 }
 
-/// Checks `m`'s signatures; every error found is reported.
+/// Checks `m`'s signatures; every error found is reported. A module with items that failed
+/// to parse is not checked: its errors would be about the functions the parse dropped.
 pub fn check<'m>(kind: Kind, m: &'m Module, diag: &Diag) -> Option<Checked<'m>> {
+    if diag.has_errors() {
+        return None;
+    }
     let adjoints = adjoints(m, diag);
     let roles = match kind {
         Kind::Method => Some(roles(m, diag)?),
@@ -136,7 +140,7 @@ fn roles<'m>(m: &'m Module, diag: &Diag) -> Option<Roles<'m>> {
     }
     let (project, evaluate) = (project?, evaluate?);
     let (tile_cull, pixel_info) = (role("tile_cull"), role("pixel_info"));
-    let camera = builtin("Camera");
+    let camera = plain_builtin("Camera");
     check_params(
         project,
         &[("the parameters", None), ("the camera", Some(&camera))],
@@ -181,7 +185,7 @@ fn roles<'m>(m: &'m Module, diag: &Diag) -> Option<Roles<'m>> {
         return None;
     }
     if let Some(tc) = tile_cull {
-        let tile = builtin("Tile");
+        let tile = plain_builtin("Tile");
         check_params(
             tc,
             &[("the tile", Some(&tile)), ("the cull data", Some(&cull))],
@@ -253,12 +257,6 @@ fn written_type(def: &FnDef, i: usize) -> &dyn quote::ToTokens {
     }
 }
 
-pub fn builtin(name: &str) -> Ty {
-    builtin_struct(name, &[])
-        .expect("builtin")
-        .expect("no args")
-}
-
 /// Checks that `def` has the parameter types `want` (by position); `None` after reporting
 /// otherwise.
 fn check_params(def: &FnDef, want: &[(&str, Option<&Ty>)], diag: &Diag) -> Option<()> {
@@ -302,4 +300,132 @@ fn near_miss<'m>(m: &'m Module, role: &str, returns: &str) -> Option<(&'m FnDef,
         .map(|f| (edit_distance(&f.name, role), f))
         .min_by_key(|(d, _)| *d)?;
     (distance <= 2).then(|| (f, format!("did you mean `{role}` for `fn {}`?", f.name)))
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::{Kind, compile_ir};
+
+    /// A method with `items` after a `project` whose shade data is one `f32`.
+    fn method(items: &str) -> String {
+        format!(
+            "mod m {{
+                pub struct P {{ pub x: Vec3 }}
+                pub fn project(p: &P, cam: &Camera) -> Projected<f32, f32> {{
+                    Projected {{ visible: true, depth: 1.0, bbox_min: Vec2::ZERO,
+                        bbox_max: Vec2::ONE, cull: 0.0, shade: p.x.x }}
+                }}
+                {items}
+            }}"
+        )
+    }
+
+    const EVALUATE: &str = "pub fn evaluate(px: Vec2, s: &f32) -> Contribution<Vec3> {
+        Contribution { alpha: *s + px.x, color: Vec3::ONE, valid: true }
+    }";
+
+    fn errors(kind: Kind, src: &str) -> Vec<String> {
+        let item: syn::ItemMod = syn::parse_str(src).expect("valid Rust");
+        match compile_ir(kind, item) {
+            Ok(_) => vec![],
+            Err(e) => e,
+        }
+    }
+
+    /// The one error `src` has, which must contain `want`.
+    fn fails_with(kind: Kind, src: &str, want: &str) {
+        let e = errors(kind, src);
+        assert!(
+            e.len() == 1 && e[0].contains(want),
+            "expected one error with {want:?}, got {e:?}"
+        );
+    }
+
+    #[test]
+    fn the_base_method_compiles() {
+        assert_eq!(
+            errors(Kind::Method, &method(EVALUATE)),
+            Vec::<String>::new()
+        );
+    }
+
+    #[test]
+    fn a_signature_that_fails_to_parse_is_its_only_error() {
+        let bad = EVALUATE.replace("s: &f32", "s: &f64");
+        fails_with(Kind::Method, &method(&bad), "f64");
+        // A call to a helper the parse dropped is not reported again.
+        let src = "mod m {
+            fn h(x: &mut f32) -> f32 { 1.0 }
+            fn f(x: f32) -> f32 { h(x) }
+        }";
+        fails_with(Kind::Functions, src, "&mut");
+    }
+
+    #[test]
+    fn an_adjoint_that_is_missing_or_mistyped_is_refused() {
+        let helper = |adjoint: &str| {
+            format!(
+                "mod m {{
+                    #[adjoint(h_adjoint)]
+                    fn h(x: f32, y: Vec2) -> f32 {{ x * y.x }}
+                    {adjoint}
+                    fn f(x: f32) -> f32 {{ h(x, Vec2::ONE) }}
+                }}"
+            )
+        };
+        fails_with(
+            Kind::Functions,
+            &helper(""),
+            "cannot find the adjoint function `h_adjoint`",
+        );
+        fails_with(
+            Kind::Functions,
+            &helper("fn h_adjoint(x: f32, y: Vec2, d: f32) -> f32 { d }"),
+            "must have the signature fn(f32, Vec2, f32) -> (f32, Vec2)",
+        );
+        let right =
+            "fn h_adjoint(x: f32, y: Vec2, d: f32) -> (f32, Vec2) { (d * y.x, Vec2::ZERO) }";
+        assert_eq!(
+            errors(Kind::Functions, &helper(right)),
+            Vec::<String>::new()
+        );
+    }
+
+    #[test]
+    fn role_functions_are_held_to_the_runtime_contract() {
+        let cases = [
+            (
+                "pub fn tile_cull(t: &Tile, c: &f32) -> f32 { 1.0 }",
+                "`tile_cull` must return `bool`",
+            ),
+            (
+                "pub fn tile_cull(t: &Tile, c: &Vec2) -> bool { true }",
+                "the cull data of `tile_cull` must be `f32`",
+            ),
+            (
+                "pub fn pixel_info(px: Vec2, cam: &Camera) -> Vec2 { px }",
+                "`pixel_info` must return `Vec3`",
+            ),
+        ];
+        for (role, want) in cases {
+            let evaluate = EVALUATE.replace("px: Vec2", "px: Vec3");
+            let evaluate = match role.contains("pixel_info") {
+                true => evaluate,
+                false => EVALUATE.to_string(),
+            };
+            fails_with(Kind::Method, &method(&format!("{evaluate} {role}")), want);
+        }
+        let evaluate = EVALUATE.replace("px: Vec2", "px: Vec3");
+        fails_with(
+            Kind::Method,
+            &method(&evaluate),
+            "without `pixel_info`, the pixel data of `evaluate` is the pixel centre",
+        );
+        let evaluate = EVALUATE.replace("px: Vec2", "px: u32");
+        fails_with(Kind::Method, &method(&evaluate), "must be made of f32 only");
+        let evaluate = EVALUATE
+            .replace("Contribution<Vec3>", "Contribution<u32>")
+            .replace("Vec3::ONE", "1");
+        fails_with(Kind::Method, &method(&evaluate), "the color of `evaluate`");
+    }
 }

@@ -77,7 +77,7 @@ pub fn compile_ir(kind: Kind, item: syn::ItemMod) -> Result<Compiled, Vec<String
     let r = Module::parse(item, &diag).and_then(|m| {
         let checked = check::check(kind, &m, &diag)?;
         let custom = custom_adjoints(&checked, &diag)?;
-        let kernels = build_kernels(kind, &checked, &custom, &diag)?;
+        let kernels = build_kernels(&checked, &custom, &diag)?;
         Some(Compiled {
             kernels: kernels.into_iter().map(|k| (k.primal, k.adjoint)).collect(),
         })
@@ -109,12 +109,7 @@ fn custom_adjoints(c: &Checked, diag: &Diag) -> Option<Custom> {
     Some(custom)
 }
 
-fn build_kernels<'m>(
-    kind: Kind,
-    c: &Checked<'m>,
-    custom: &Custom,
-    diag: &Diag,
-) -> Option<Vec<Kernel<'m>>> {
+fn build_kernels<'m>(c: &Checked<'m>, custom: &Custom, diag: &Diag) -> Option<Vec<Kernel<'m>>> {
     let m = c.module;
     let defs: Vec<&model::FnDef> = match &c.roles {
         Some(r) => m.fns.iter().filter(|f| r.has(f)).collect(),
@@ -127,16 +122,15 @@ fn build_kernels<'m>(
     let mut kernels = vec![];
     for def in defs {
         // A method's `project` and `evaluate` adjoints compute only the groups asked for.
-        let gated = kind == Kind::Method
-            && ["project", "evaluate"].contains(&def.name.as_str())
-            && def.params.len() == 2;
+        let gated = (c.roles.as_ref())
+            .is_some_and(|r| std::ptr::eq(def, r.project) || std::ptr::eq(def, r.evaluate));
         let Some((mut kernel, model_slot)) = build_kernel(m, def, custom, diag, None, gated) else {
             continue;
         };
         let reads_model = model_slot.is_some_and(|v| {
             kernel.primal.body.uses(v) || kernel.adjoint.as_ref().is_some_and(|g| g.body.uses(v))
         });
-        if kind == Kind::Method && reads_model {
+        if c.roles.is_some() && reads_model {
             for builtins::CameraModel {
                 name: model, code, ..
             } in builtins::camera_models()
@@ -215,8 +209,9 @@ fn expand_module(kind: Kind, item: syn::ItemMod, diag: &Diag) -> Option<TokenStr
     let m = Module::parse(item, diag)?;
     let checked = check::check(kind, &m, diag)?;
     let custom = custom_adjoints(&checked, diag)?;
-    let kernels = build_kernels(kind, &checked, &custom, diag)?;
-    let lanes_for = |k: &Kernel| kind == Kind::Functions || k.def.name == "evaluate";
+    let kernels = build_kernels(&checked, &custom, diag)?;
+    let lanes_for =
+        |k: &Kernel| (checked.roles.as_ref()).is_none_or(|r| std::ptr::eq(k.def, r.evaluate));
     let mut items = TokenStream::new();
     items.extend(m.uses.iter().map(|u| quote!(#[allow(unused_imports)] #u)));
     items.extend(emit::structs(&m));

@@ -204,6 +204,13 @@ pub fn is_camera(ty: &Ty) -> bool {
 /// The names of the built-in generic structs and their parameters.
 pub const BUILTIN_STRUCTS: &[&str] = &["Camera", "Tile", "Projected", "Contribution"];
 
+/// A built-in struct that takes no type arguments (`Camera`, `Tile`).
+pub fn plain_builtin(name: &str) -> Ty {
+    builtin_struct(name, &[])
+        .expect("a built-in struct")
+        .expect("without type arguments")
+}
+
 /// Instantiates a built-in struct of splat-runtime (`types.rs` there) with type arguments.
 /// Returns `None` for an unknown name; the caller checks the argument count.
 pub fn builtin_struct(name: &str, args: &[Ty]) -> Option<Result<Ty, String>> {

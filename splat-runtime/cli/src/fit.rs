@@ -348,16 +348,6 @@ impl Fit<'_> {
                 c.strategy,
                 Strategy::name(opts.densify.as_ref())
             ),
-            Some(c)
-                if let Some(cap) = opts.densify.as_ref().map(Strategy::max_primitives)
-                    && c.primitives() > cap =>
-            {
-                bail!(
-                    "{} holds {} primitives, more than --max-primitives {cap}",
-                    args.out.join(CHECKPOINT).display(),
-                    c.primitives()
-                )
-            }
             Some(c) => (c.clone(), Log::read_csv(&args.out.join(METRICS), c.step)?),
             None => {
                 let half = init_extent * extent;
@@ -377,6 +367,16 @@ impl Fit<'_> {
                 (Checkpoint::start::<M>(&params, opts.steps, args.seed), log)
             }
         };
+        // The cap bounds growth (as gsplat's): a start above it is kept, and ADC may prune it
+        // below; MCMC never removes primitives.
+        if let Some(cap) = opts.densify.as_ref().map(Strategy::max_primitives)
+            && state.primitives() > cap
+        {
+            println!(
+                "note: {} primitives at the start, more than --max-primitives {cap}: the cap only stops growth",
+                state.primitives()
+            );
+        }
         let before = log.evaluations.first().map(|e| e.1).unwrap_or_default();
         let checkpoint_path = args.out.join(CHECKPOINT);
         let metrics = args.out.join(METRICS);

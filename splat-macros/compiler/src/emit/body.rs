@@ -246,7 +246,11 @@ impl<'f> BodyEmitter<'f> {
                     let m = format_ident!("{m}");
                     quote!(#x.#m())
                 };
+                // Integers wrap, as in WGSL and the lanes (`-i32::MIN` is `i32::MIN`).
+                let int = matches!(ty, Scalar::U32 | Scalar::I32) && !lanes;
                 match u {
+                    Unary::Neg if int => quote!(#x.wrapping_neg()),
+                    Unary::Abs if int && ty == Scalar::I32 => quote!(#x.wrapping_abs()),
                     Unary::Neg => quote!(-#x),
                     Unary::Not => quote!(!#x),
                     Unary::NoDiff => x,
@@ -291,9 +295,7 @@ impl<'f> BodyEmitter<'f> {
                     Binary::Rem if int && !lanes => quote!(#xv.checked_rem(#yv).unwrap_or(0)),
                     Binary::Shl if !lanes => quote!(#xv.wrapping_shl(#yv as u32)),
                     Binary::Shr if !lanes => quote!(#xv.wrapping_shr(#yv as u32)),
-                    Binary::Shl => quote!(::core::ops::Shl::shl(#xv, #yv)),
-                    Binary::Shr => quote!(::core::ops::Shr::shr(#xv, #yv)),
-                    _ => match (b.info().lanes, b.info().rust) {
+                    _ => match (b.info().comparison, b.info().rust) {
                         (Some(mask), _) if lanes => {
                             let m = format_ident!("{mask}");
                             quote!(#xv.#m(#yv))

@@ -2,10 +2,10 @@
 //! user's four functions and the runtime's contract.
 
 use super::api::{Kernel, pack, slot_access};
-use crate::check::{Roles, builtin};
+use crate::check::Roles;
 use crate::ir::Scalar;
 use crate::model::{FnDef, Module};
-use crate::types::Ty;
+use crate::types::{Ty, plain_builtin};
 use proc_macro2::{Literal, TokenStream};
 use quote::quote;
 
@@ -82,7 +82,7 @@ pub fn method_impl(m: &Module, roles: &Roles, kernels: &[Kernel]) -> TokenStream
     let (project, evaluate) = (kernel(roles.project), kernel(roles.evaluate));
     let tile_cull = roles.tile_cull.map(kernel);
     let pixel_info = roles.pixel_info.map(kernel);
-    let camera = builtin("Camera");
+    let camera = plain_builtin("Camera");
     let Roles {
         params: params_ty,
         cull: cull_ty,

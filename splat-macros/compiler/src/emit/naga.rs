@@ -515,7 +515,9 @@ impl<'f> FnBuilder<'f> {
             Unary::Signum => self.signum(x),
             Unary::Erf => self.erf(x),
             Unary::Cast(to) => self.cast(x, from, to),
-            _ => unreachable!("{u:?} is a WGSL built-in (`ops::UnaryInfo::wgsl`)"),
+            _ => unreachable!(
+                "no WGSL form for {u:?}: write one here, or name its built-in in `Unary::info`"
+            ),
         }
     }
 
