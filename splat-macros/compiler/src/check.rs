@@ -393,39 +393,48 @@ mod tests {
 
     #[test]
     fn role_functions_are_held_to_the_runtime_contract() {
+        let vec3_pixel = EVALUATE.replace("px: Vec2", "px: Vec3");
         let cases = [
             (
-                "pub fn tile_cull(t: &Tile, c: &f32) -> f32 { 1.0 }",
+                [
+                    EVALUATE,
+                    "pub fn tile_cull(t: &Tile, c: &f32) -> f32 { 1.0 }",
+                ]
+                .concat(),
                 "`tile_cull` must return `bool`",
             ),
             (
-                "pub fn tile_cull(t: &Tile, c: &Vec2) -> bool { true }",
+                [
+                    EVALUATE,
+                    "pub fn tile_cull(t: &Tile, c: &Vec2) -> bool { true }",
+                ]
+                .concat(),
                 "the cull data of `tile_cull` must be `f32`",
             ),
             (
-                "pub fn pixel_info(px: Vec2, cam: &Camera) -> Vec2 { px }",
+                [
+                    &vec3_pixel,
+                    "pub fn pixel_info(px: Vec2, cam: &Camera) -> Vec2 { px }",
+                ]
+                .concat(),
                 "`pixel_info` must return `Vec3`",
             ),
+            (
+                vec3_pixel.clone(),
+                "without `pixel_info`, the pixel data of `evaluate` is the pixel centre",
+            ),
+            (
+                EVALUATE.replace("px: Vec2", "px: u32"),
+                "must be made of f32 only",
+            ),
+            (
+                (EVALUATE.replace("Contribution<Vec3>", "Contribution<u32>"))
+                    .replace("Vec3::ONE", "1"),
+                "the color of `evaluate`",
+            ),
         ];
-        for (role, want) in cases {
-            let evaluate = EVALUATE.replace("px: Vec2", "px: Vec3");
-            let evaluate = match role.contains("pixel_info") {
-                true => evaluate,
-                false => EVALUATE.to_string(),
-            };
-            fails_with(Kind::Method, &method(&format!("{evaluate} {role}")), want);
+        for (items, want) in cases {
+            fails_with(Kind::Method, &method(&items), want);
         }
-        let evaluate = EVALUATE.replace("px: Vec2", "px: Vec3");
-        fails_with(
-            Kind::Method,
-            &method(&evaluate),
-            "without `pixel_info`, the pixel data of `evaluate` is the pixel centre",
-        );
-        let evaluate = EVALUATE.replace("px: Vec2", "px: u32");
-        fails_with(Kind::Method, &method(&evaluate), "must be made of f32 only");
-        let evaluate = EVALUATE
-            .replace("Contribution<Vec3>", "Contribution<u32>")
-            .replace("Vec3::ONE", "1");
-        fails_with(Kind::Method, &method(&evaluate), "the color of `evaluate`");
     }
 }

@@ -19,7 +19,8 @@ use std::collections::{HashMap, HashSet};
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct Var(pub u32);
 
-/// The scalar types of the IR.
+/// The scalar types of the IR. (`Default` is for strum: enumerating `Unary` yields
+/// `Cast(Scalar::default())`.)
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, strum::EnumIter)]
 pub enum Scalar {
     #[default]
