@@ -4,9 +4,9 @@
 //! the f64 reference, finite differences, the reference adjoint on a dense scene, and GPU
 //! parity. The plain method is untouched: its alpha is the opacity itself.
 
-mod common;
-
-use common::{CAMERA_GROUPS, GAUSSIAN_GROUPS, as_method, camera, gaussian_at, spread_gaussians};
+use crate::common::{
+    CAMERA_GROUPS, GAUSSIAN_GROUPS, as_method, camera, gaussian_at, spread_gaussians,
+};
 use splat_methods::{gs3d, gs3d_aa};
 use splat_runtime::checks::forward::{forward_matches_reference, gpu_forward_matches_cpu};
 use splat_runtime::checks::gradients::{

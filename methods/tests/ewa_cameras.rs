@@ -7,9 +7,9 @@
 //! CPU. EWA's own error on the wide cameras, against 3DGEER's exact integral, is measured by
 //! `cargo bench -p splat-methods --bench methods`.
 
-mod common;
-
-use common::{GAUSSIAN_GROUPS, camera_groups, covering_gaussians, spread_gaussians, wide_camera};
+use crate::common::{
+    GAUSSIAN_GROUPS, camera_groups, covering_gaussians, spread_gaussians, wide_camera,
+};
 use splat_methods::gs3d::Method;
 use splat_runtime::CameraModel;
 use splat_runtime::checks::forward::{

@@ -4,9 +4,7 @@
 //! Gaussians, a fisheye past 180 degrees, the camera inside a particle, rays that must not
 //! pick up particles behind the camera).
 
-mod common;
-
-use common::{
+use crate::common::{
     GAUSSIAN_GROUPS, as_method, camera_groups, covering_gaussians, gaussian_toward,
     spread_gaussians, wide_camera,
 };

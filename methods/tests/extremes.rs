@@ -4,9 +4,7 @@
 //! LinPrim on a pinhole camera, for 3DGUT and 3DGEER also on a fisheye seeing past 90 degrees
 //! off axis (Gaussians straddling the image plane's sides), with a Gaussian on the near plane.
 
-mod common;
-
-use common::{as_method, gaussian_toward, spread_gaussians, wide_camera};
+use crate::common::{as_method, gaussian_toward, spread_gaussians, wide_camera};
 use splat_methods::gs3d::Params;
 use splat_methods::{FromStored, geer, gs3d, gut, linprim};
 use splat_runtime::checks::extremes::{EXTREMES, extremes_stay_finite_and_correct};

@@ -4,9 +4,7 @@
 //! held-out views must get much closer to the truth. Bad datasets get errors naming the file
 //! and the field.
 
-mod common;
-
-use common::gaussian_at;
+use crate::common::gaussian_at;
 use splat_methods::gs3d::{Method, Params};
 use splat_runtime::glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
 use splat_runtime::io::dataset::{DatasetError, read_blender};
@@ -106,7 +104,7 @@ fn write_split(dir: &Path, name: &str, scene: &[Params], eyes: &[Vec3]) -> Vec<C
 fn truth() -> Vec<Params> {
     let mut rng = fastrand::Rng::with_seed(8);
     // Placed through a camera at the origin looking down +z, then moved to the origin.
-    let cam = common::camera(SIZE, SIZE);
+    let cam = crate::common::camera(SIZE, SIZE);
     (0..40)
         .map(|_| {
             let px = Vec2::new(8.0 + 24.0 * rng.f32(), 8.0 + 24.0 * rng.f32());
@@ -327,7 +325,7 @@ where
     M::Params: splat_methods::FromStored,
 {
     let dir = tempfile::tempdir().unwrap();
-    let scene: Vec<M::Params> = common::as_method(truth());
+    let scene: Vec<M::Params> = crate::common::as_method(truth());
     fisheye_dataset::<M>(dir.path(), &scene);
     let data = splat_runtime::io::dataset::read(dir.path(), Vec3::ZERO).unwrap();
     fits_views::<M>(&format!("{label} fisheye"), &data);
@@ -355,7 +353,7 @@ fn fits_views<M: Trainable>(label: &str, data: &splat_runtime::io::dataset::Data
 #[test]
 fn three_dgut_fits_a_nerfstudio_fisheye_dataset() {
     let dir = tempfile::tempdir().unwrap();
-    let scene: Vec<splat_methods::gut::Params> = common::as_method(truth());
+    let scene: Vec<splat_methods::gut::Params> = crate::common::as_method(truth());
     let cams = fisheye_dataset::<splat_methods::gut::Method>(dir.path(), &scene);
     let data = splat_runtime::io::dataset::read(dir.path(), Vec3::ZERO).unwrap();
     assert_eq!(
@@ -1104,7 +1102,7 @@ where
         return;
     };
     assert_eq!(screen_source::<M>(), Some(source), "{}", M::NAME);
-    let cam = common::camera(SIZE, SIZE);
+    let cam = crate::common::camera(SIZE, SIZE);
     let mut rng = fastrand::Rng::with_seed(8);
     let mut at = |x: f32, y: f32, z: f32| {
         let g = gaussian_at(&mut rng, &cam, Vec2::new(x, y), z, -3.0);

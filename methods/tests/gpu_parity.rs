@@ -12,9 +12,7 @@
 //! Needs a wgpu adapter (lavapipe is enough); with `SPLAT_REQUIRE_GPU=1` a missing adapter
 //! fails the test, otherwise it skips.
 
-mod common;
-
-use common::{camera, gaussian_at, spread_gaussians};
+use crate::common::{camera, gaussian_at, spread_gaussians};
 use splat_methods::gs3d::{Method, Params};
 use splat_runtime::checks::forward::outputs_close;
 use splat_runtime::checks::{camera_words, group_error, words};

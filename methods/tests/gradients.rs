@@ -4,9 +4,7 @@
 //! and transmittance stays far above 1e-4, so the render is smooth in every parameter); and
 //! against the reference's analytic adjoint on realistic scenes, where they are crossed.
 
-mod common;
-
-use common::{CAMERA_GROUPS, GAUSSIAN_GROUPS, camera, gaussian_at, spread_gaussians};
+use crate::common::{CAMERA_GROUPS, GAUSSIAN_GROUPS, camera, gaussian_at, spread_gaussians};
 use splat_methods::gs3d::{Method, Params};
 use splat_runtime::CameraModel::Pinhole;
 use splat_runtime::checks::gradients::{

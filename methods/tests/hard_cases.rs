@@ -3,11 +3,9 @@
 //! plane, opaque stacks (alpha clamp, transmittance underflow), huge and sub-pixel Gaussians,
 //! empty scenes, NaN / Inf parameters.
 
-mod common;
-
 use splat_runtime::checks;
 
-use common::{camera, gaussian_at};
+use crate::common::{camera, gaussian_at};
 use splat_methods::gs3d::{Method, Params};
 use splat_runtime::glam::{Vec2, Vec3, Vec4};
 use splat_runtime::{FrameGrad, RenderError, RenderOptions, backward, render, render_for_backward};

@@ -6,9 +6,7 @@
 //! Needs a wgpu adapter (lavapipe is enough); with `SPLAT_REQUIRE_GPU=1` a missing adapter
 //! fails the test, otherwise it skips.
 
-mod common;
-
-use common::{as_method, spread_gaussians, wide_camera};
+use crate::common::{as_method, spread_gaussians, wide_camera};
 use splat_methods::{gs3d, gut};
 use splat_runtime::CameraModel;
 use splat_runtime::checks::forward::hardware_forward_matches_tiles;

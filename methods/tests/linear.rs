@@ -2,11 +2,9 @@
 //! (rendering with and without it gives the same image), render gradients against finite
 //! differences, the GPU backend against the CPU backend, and the pinhole-only refusal.
 
-mod common;
-
 use splat_runtime::checks;
 
-use common::{CAMERA_GROUPS, GAUSSIAN_GROUPS, camera, gaussian_at, wide_camera};
+use crate::common::{CAMERA_GROUPS, GAUSSIAN_GROUPS, camera, gaussian_at, wide_camera};
 use splat_methods::linprim::{Method, Params};
 use splat_runtime::checks::forward::{
     boxes_hold_every_contributing_pixel, forward_matches_reference, gpu_forward_matches_cpu,

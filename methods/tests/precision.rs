@@ -7,9 +7,7 @@
 //! preprocess and the blend (each value within its format's step, 2 or 1 bytes each, and
 //! both passes reading exactly what is stored), and the gradient sums held in f16.
 
-mod common;
-
-use common::{camera, gaussian_at};
+use crate::common::{camera, gaussian_at};
 use splat_methods::gs3d::{Method, Params};
 use splat_runtime::checks::forward::outputs_close;
 use splat_runtime::checks::{group_error, words};
@@ -546,7 +544,7 @@ fn the_hardware_path_refuses_reduced_shade_data() {
 /// the CPU's at the same format, within the bound the two backends keep at f32.
 #[test]
 fn every_method_renders_packed_shade_data_on_the_gpu_as_on_the_cpu() {
-    use common::{as_method, spread_gaussians, wide_camera};
+    use crate::common::{as_method, spread_gaussians, wide_camera};
     use splat_methods::{geer, gs3d_aa, gut, linprim};
     use splat_runtime::CameraModel;
     let Some(gpu) = splat_runtime::gpu::adapter_or_skip() else {

@@ -1,9 +1,7 @@
 //! The CPU pipeline's 3DGS renders against the f64 brute-force reference: within
 //! 1e-5 absolute + 1% relative per element, for tile sizes 8 and 16.
 
-mod common;
-
-use common::{camera, gaussian_at};
+use crate::common::{camera, gaussian_at};
 use splat_methods::gs3d::{Method, Params};
 use splat_runtime::checks::forward::forward_matches_reference;
 use splat_runtime::glam::Vec2;

@@ -5,9 +5,7 @@
 //! model (f64 reference, boxes, the tile cull against none, finite differences with the
 //! shutter's own gradient, GPU parity). Methods without a rolling shutter refuse a moving camera.
 
-mod common;
-
-use common::{
+use crate::common::{
     GAUSSIAN_GROUPS, SHUTTER_GROUPS, as_method, camera, camera_groups, covering_gaussians,
     spread_gaussians, wide_camera,
 };
@@ -89,7 +87,7 @@ fn a_vertical_line_leans_by_the_slide() {
         shutter_shift: Vec3::new(slide as f32, 0.0, 0.0),
         ..cam
     };
-    let mut line = common::gaussian_at(
+    let mut line = crate::common::gaussian_at(
         &mut fastrand::Rng::with_seed(1),
         &cam,
         Vec2::new(32.0, 32.0),

@@ -2,9 +2,7 @@
 //! gradients against finite differences (parameters and camera, fisheye coefficients
 //! included), and the GPU backend against the CPU backend.
 
-mod common;
-
-use common::{
+use crate::common::{
     GAUSSIAN_GROUPS, as_method, camera_groups, covering_gaussians, gaussian_toward,
     spread_gaussians, wide_camera,
 };

@@ -4,9 +4,7 @@
 //! in the Rust nor in the WGSL). Likewise the SH degree: a method's instance for a lower degree
 //! renders and differentiates a scene without higher terms as the full instance does.
 
-mod common;
-
-use common::{as_method, spread_gaussians, wide_camera};
+use crate::common::{as_method, spread_gaussians, wide_camera};
 use splat_methods::FromStored;
 use splat_methods::{
     geer, geer_sh0, geer_sh1, geer_sh2, gs3d, gs3d_sh0, gs3d_sh1, gs3d_sh2, gut, gut_sh0, gut_sh1,

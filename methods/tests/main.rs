@@ -1,0 +1,23 @@
+//! The methods' integration tests, one module per subject, built as one test binary: each
+//! binary links the runtime and instantiates its generic pipeline for the methods it tests, so
+//! one binary compiles every (stage, method) pair once where sixteen compiled most of them
+//! again.
+
+mod common;
+
+mod antialiased;
+mod colmap;
+mod ewa_cameras;
+mod exact;
+mod extremes;
+mod fit;
+mod gpu_parity;
+mod gradients;
+mod hard_cases;
+mod hardware;
+mod linear;
+mod precision;
+mod reference;
+mod rolling_shutter;
+mod unscented;
+mod variants;
