@@ -4,7 +4,7 @@
 //! contract (`project`, `tile_cull`, `pixel_info`, `evaluate`), with the types they fix; for
 //! every helper with `#[adjoint(f)]`, `f`'s signature. Errors are about signatures, so they
 //! point at them, and a module that fails here is not lowered (its bodies' errors follow once
-//! its signatures are right). The types inside bodies are checked as they are lowered.
+//! its signatures are right). The bodies are checked next, by `typeck`.
 
 use crate::Kind;
 use crate::diag::{Diag, edit_distance};

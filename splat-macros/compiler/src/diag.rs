@@ -1,10 +1,15 @@
 //! Error collection: every error found while compiling a module is gathered with its span, and
 //! all of them are reported together. As serde_derive's `Ctxt`, a collector must be consumed
 //! ([`Diag::check`] or one of its forms) or explicitly [`Diag::discard`]ed: dropping one
-//! unchecked panics, so no path can lose the errors it gathered.
+//! unchecked panics, so no path can lose the errors it gathered. Errors come out in source
+//! order, whichever stage found them.
 
 use proc_macro2::{Span, TokenStream};
 use std::cell::RefCell;
+
+/// Failure of a step whose error is already recorded in a [`Diag`].
+pub struct Failed;
+pub type R<T> = Result<T, Failed>;
 
 pub struct Diag {
     /// `None` once consumed.
@@ -46,9 +51,13 @@ impl Diag {
         self.count() > 0
     }
 
-    /// Consumes the collector: its errors, if any.
+    /// Consumes the collector: its errors, if any, in source order.
     pub fn check(self) -> Result<(), Vec<syn::Error>> {
-        let errors = self.errors.borrow_mut().take().unwrap_or_default();
+        let mut errors = self.errors.borrow_mut().take().unwrap_or_default();
+        errors.sort_by_key(|e| {
+            let at = e.span().start();
+            (at.line, at.column)
+        });
         match errors.is_empty() {
             true => Ok(()),
             false => Err(errors),
@@ -119,6 +128,22 @@ mod tests {
         assert_eq!(diag.count(), 2);
         assert_eq!(diag.into_messages(), ["first", "second"]);
         Diag::default().check().unwrap();
+    }
+
+    #[test]
+    fn errors_come_out_in_source_order_whichever_stage_found_them() {
+        // The value error (a dynamic index, found by lowering) comes before the type error
+        // (found by type checking, which runs first) because its function comes first.
+        let item: syn::ItemMod = syn::parse_str(
+            "mod m { fn f(a: [f32; 2], i: u32) -> f32 { a[i] } fn g(x: f32) -> f32 { x.frobnicate() } }",
+        )
+        .unwrap();
+        let errors = crate::compile_ir(crate::Kind::Functions, item)
+            .err()
+            .unwrap();
+        assert_eq!(errors.len(), 2, "{errors:?}");
+        assert!(errors[0].contains("known at compile time"), "{errors:?}");
+        assert!(errors[1].contains("frobnicate"), "{errors:?}");
     }
 
     #[test]

@@ -6,6 +6,7 @@
 //! syn::ItemMod --model--> Module (structs, consts, fns, their resolved signatures)
 //!              --check--> Checked (a method's roles against the runtime's contract, custom
 //!                         adjoints' signatures)
+//!              --typeck-> Typed (every body's expressions typed; the bodies that failed)
 //!              --lower--> ir::Function per kernel (typed, scalar SSA, structured ifs,
 //!                         loops unrolled, helpers inlined)
 //!              --ad-----> adjoint ir::Function (recompute primal + reverse sweep)
@@ -28,12 +29,14 @@ pub mod lower;
 pub mod model;
 pub mod ops;
 pub mod opt;
+pub mod typeck;
 pub mod types;
 
 use check::Checked;
 use diag::Diag;
 use emit::api::Kernel;
 use emit::body::Flavor;
+use lower::Source;
 use model::Module;
 use proc_macro2::TokenStream;
 use quote::quote;
@@ -76,8 +79,13 @@ pub fn compile_ir(kind: Kind, item: syn::ItemMod) -> Result<Compiled, Vec<String
     let diag = Diag::default();
     let r = Module::parse(item, &diag).and_then(|m| {
         let checked = check::check(kind, &m, &diag)?;
-        let custom = custom_adjoints(&checked, &diag)?;
-        let kernels = build_kernels(&checked, &custom, &diag)?;
+        let typed = typeck::typeck(&m, &diag);
+        let src = Source {
+            module: &m,
+            typed: &typed,
+        };
+        let custom = custom_adjoints(&checked, src, &diag)?;
+        let kernels = build_kernels(&checked, src, &custom, &diag)?;
         Some(Compiled {
             kernels: kernels.into_iter().map(|k| (k.primal, k.adjoint)).collect(),
         })
@@ -95,7 +103,7 @@ struct Custom {
     adjoints: Vec<ir::Function>,
 }
 
-fn custom_adjoints(c: &Checked, diag: &Diag) -> Option<Custom> {
+fn custom_adjoints(c: &Checked, src: Source, diag: &Diag) -> Option<Custom> {
     let mut custom = Custom {
         names: vec![],
         adjoints: vec![],
@@ -104,12 +112,17 @@ fn custom_adjoints(c: &Checked, diag: &Diag) -> Option<Custom> {
         custom.names.push(helper.name.clone());
         custom
             .adjoints
-            .push(lower::lower_fn(c.module, diag, adjoint, &[])?.func);
+            .push(lower::lower_fn(src, diag, adjoint, &[])?.func);
     }
     Some(custom)
 }
 
-fn build_kernels<'m>(c: &Checked<'m>, custom: &Custom, diag: &Diag) -> Option<Vec<Kernel<'m>>> {
+fn build_kernels<'m>(
+    c: &Checked<'m>,
+    src: Source,
+    custom: &Custom,
+    diag: &Diag,
+) -> Option<Vec<Kernel<'m>>> {
     let m = c.module;
     let defs: Vec<&model::FnDef> = match &c.roles {
         Some(r) => m.fns.iter().filter(|f| r.has(f)).collect(),
@@ -124,7 +137,8 @@ fn build_kernels<'m>(c: &Checked<'m>, custom: &Custom, diag: &Diag) -> Option<Ve
         // A method's `project` and `evaluate` adjoints compute only the groups asked for.
         let gated = (c.roles.as_ref())
             .is_some_and(|r| std::ptr::eq(def, r.project) || std::ptr::eq(def, r.evaluate));
-        let Some((mut kernel, model_slot)) = build_kernel(m, def, custom, diag, None, gated) else {
+        let Some((mut kernel, model_slot)) = build_kernel(src, def, custom, diag, None, gated)
+        else {
             continue;
         };
         let reads_model = model_slot.is_some_and(|v| {
@@ -135,7 +149,8 @@ fn build_kernels<'m>(c: &Checked<'m>, custom: &Custom, diag: &Diag) -> Option<Ve
                 name: model, code, ..
             } in builtins::camera_models()
             {
-                let Some((mut variant, _)) = build_kernel(m, def, custom, diag, Some(code), gated)
+                let Some((mut variant, _)) =
+                    build_kernel(src, def, custom, diag, Some(code), gated)
                 else {
                     continue;
                 };
@@ -155,14 +170,14 @@ fn build_kernels<'m>(c: &Checked<'m>, custom: &Custom, diag: &Diag) -> Option<Ve
 /// code `model` (and with `gated`, gates its adjoint by gradient group: `Kernel::gated`); also
 /// returns the parameter slot of the camera's model code.
 fn build_kernel<'m>(
-    m: &'m Module,
+    src: Source,
     def: &'m model::FnDef,
     custom: &Custom,
     diag: &Diag,
     model: Option<u32>,
     gated: bool,
 ) -> Option<(Kernel<'m>, Option<ir::Var>)> {
-    let l = lower::lower_for_model(m, diag, def, &custom.names, model)?;
+    let l = lower::lower_for_model(src, diag, def, &custom.names, model)?;
     let mut primal = l.func;
     let has_float_in = primal
         .params
@@ -208,8 +223,13 @@ fn build_kernel<'m>(
 fn expand_module(kind: Kind, item: syn::ItemMod, diag: &Diag) -> Option<TokenStream> {
     let m = Module::parse(item, diag)?;
     let checked = check::check(kind, &m, diag)?;
-    let custom = custom_adjoints(&checked, diag)?;
-    let kernels = build_kernels(&checked, &custom, diag)?;
+    let typed = typeck::typeck(&m, diag);
+    let src = Source {
+        module: &m,
+        typed: &typed,
+    };
+    let custom = custom_adjoints(&checked, src, diag)?;
+    let kernels = build_kernels(&checked, src, &custom, diag)?;
     let lanes_for =
         |k: &Kernel| (checked.roles.as_ref()).is_none_or(|r| std::ptr::eq(k.def, r.evaluate));
     let mut items = TokenStream::new();

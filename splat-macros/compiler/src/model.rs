@@ -65,6 +65,16 @@ impl Module {
         resolver.resolve(t)
     }
 
+    /// The value of an array length written inside a function body (`[x; N]`).
+    pub fn array_len(&self, e: &syn::Expr) -> Result<usize, String> {
+        let resolver = Resolver {
+            items: &[],
+            done: HashMap::new(),
+            consts: &self.const_items,
+        };
+        resolver.const_len(e)
+    }
+
     pub fn find_struct(&self, name: &str) -> Option<&Rc<StructTy>> {
         self.structs
             .iter()

@@ -10,7 +10,7 @@
 //! no built-in, its form in `emit::naga` (this module's test emits every operation on every
 //! operand type, and fails until it has one); where std has none, `splat_runtime::math`
 //! functions; and for a free function, its place in the error message's
-//! `lower::intrinsics::INTRINSIC_LIST`.
+//! `typeck::rules::INTRINSIC_LIST`.
 
 use crate::ir::{Binary, Const, Op, Unary, Var};
 use naga::{BinaryOperator, MathFunction};

@@ -124,7 +124,7 @@ fn helpers_are_inlined_and_custom_adjoints_kept_as_calls() {
 /// other libraries' spellings get a suggestion.
 #[test]
 fn suggested_methods_exist_and_near_misses_get_one() {
-    use crate::lower::intrinsics::method_names;
+    use crate::typeck::rules::method_names;
     use crate::types::Ty;
     let types = [
         ("f32", Ty::F32),
@@ -185,4 +185,99 @@ fn gating_puts_each_groups_own_work_behind_its_bit() {
     );
     assert_eq!(count(&adj, &is_unary(Unary::Cos)), 6, "{adj}");
     assert_eq!(count(&adj, &|s| matches!(s, Stmt::If { .. })), 1, "{adj}");
+}
+
+/// Every method, constructor and operator the type rules accept lowers: a rule without its
+/// lowering would panic there.
+#[test]
+fn everything_the_type_rules_accept_lowers() {
+    use crate::typeck::rules::{self, Arg};
+    use crate::types::Ty;
+    let types = [
+        Ty::F32,
+        Ty::Bool,
+        Ty::U32,
+        Ty::I32,
+        Ty::Vec(2),
+        Ty::Vec(3),
+        Ty::Vec(4),
+        Ty::Mat(2),
+        Ty::Mat(3),
+        Ty::Quat,
+    ];
+    let lowers = |params: &[Ty], call: &str| {
+        let params: Vec<String> = params
+            .iter()
+            .enumerate()
+            .map(|(i, t)| format!("a{i}: {t}"))
+            .collect();
+        compile(&format!(
+            "mod m {{ fn f({}) -> f32 {{ let _y = {call}; 0.0 }} }}",
+            params.join(", ")
+        ));
+    };
+    let with_args = |recv: Option<&Ty>, sig: &rules::Sig| {
+        let mut params: Vec<Ty> = recv.into_iter().cloned().collect();
+        let mut args = vec![];
+        for a in &sig.args {
+            match a {
+                Arg::Is(t, _) => {
+                    args.push(format!("a{}", params.len()));
+                    params.push(t.clone());
+                }
+                Arg::Integer(_) => args.push("1".into()),
+            }
+        }
+        (params, args.join(", "))
+    };
+    for t in &types {
+        let swizzles = matches!(t, Ty::Vec(_)).then_some(["xy", "yx", "xyz", "zyx"]);
+        let names = rules::method_names(t)
+            .into_iter()
+            .chain(swizzles.into_iter().flatten());
+        for name in names {
+            let Some(sig) = rules::method(t, name) else {
+                continue;
+            };
+            let (params, args) = with_args(Some(t), &sig);
+            lowers(&params, &format!("a0.{name}({args})"));
+        }
+    }
+    let constructors = [
+        ("Vec2", "new"),
+        ("Vec3", "new"),
+        ("Vec4", "new"),
+        ("Vec3", "splat"),
+        ("Mat2", "from_cols"),
+        ("Mat3", "from_cols"),
+        ("Mat2", "from_diagonal"),
+        ("Mat3", "from_diagonal"),
+        ("Mat3", "from_quat"),
+        ("Quat", "from_xyzw"),
+    ];
+    for (owner, item) in constructors {
+        let Some(rules::Path::Constructor(sig)) = rules::path_call(owner, item) else {
+            panic!("{owner}::{item} is a constructor");
+        };
+        let (params, args) = with_args(None, &sig);
+        lowers(&params, &format!("{owner}::{item}({args})"));
+    }
+    let ops = [
+        "+", "-", "*", "/", "%", "&", "|", "^", "<<", ">>", "==", "!=", "<", "<=", ">", ">=", "&&",
+        "||",
+    ];
+    let mut pairs = 0;
+    for sym in ops {
+        let op: syn::BinOp = syn::parse_str(sym).unwrap();
+        let (op, _, _) = rules::binary_op(&op).unwrap();
+        for l in &types {
+            for r in &types {
+                if rules::binary(op, l, r).is_some() {
+                    lowers(&[l.clone(), r.clone()], &format!("a0 {sym} a1"));
+                    pairs += 1;
+                }
+            }
+        }
+    }
+    assert!(pairs > 60, "{pairs}");
 }

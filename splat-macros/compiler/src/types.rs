@@ -47,6 +47,16 @@ impl PartialEq for TokenStreamEq {
 }
 
 impl Ty {
+    /// The source type of an IR scalar.
+    pub fn scalar(s: Scalar) -> Ty {
+        match s {
+            Scalar::F32 => Ty::F32,
+            Scalar::U32 => Ty::U32,
+            Scalar::I32 => Ty::I32,
+            Scalar::Bool => Ty::Bool,
+        }
+    }
+
     /// The IR scalars this type flattens to, in order.
     pub fn slots(&self) -> Vec<Scalar> {
         let mut out = vec![];

@@ -1,4 +1,5 @@
-//! Method calls on the supported types and the free intrinsic functions, lowered to scalar IR.
+//! Method calls on the supported types and the free intrinsic functions, lowered to scalar IR
+//! (their signatures are `typeck::rules`').
 //!
 //! The rules at kinks and singular points (the "Derivative rules" table of
 //! `splat-macros/README.md`): `normalize(0) = 0` with zero gradient; `length` and `sqrt` have
@@ -6,159 +7,16 @@
 //! division, `recip`, `ln`, `rsqrt`, `asin`, `acos`, `atan2` and `powf` have zero gradient
 //! where the derivative is infinite; `select` and `if` differentiate only the side taken.
 
+use super::expr::unchecked;
 use super::{Failed, Lowerer, R, Val};
-use crate::builtins::{SH_COEFFICIENTS, camera_helper, model_aware, sh_helper, shutter_aware};
+use crate::builtins::{camera_helper, model_aware, sh_helper, shutter_aware};
 use crate::ir::{Binary, Const, Unary, Var};
+use crate::typeck::rules;
 use crate::types::Ty;
 use proc_macro2::Span;
 use syn::spanned::Spanned;
 
-/// The methods [`Lowerer::method`] accepts on a receiver of type `t` (for suggestions; a
-/// unit test checks that each is accepted).
-pub(crate) fn method_names(t: &Ty) -> Vec<&'static str> {
-    let vector_and_quat = [
-        "dot",
-        "length",
-        "length_squared",
-        "normalize",
-        "normalize_or_zero",
-    ];
-    let mut names: Vec<&'static str> = match t {
-        Ty::F32 => {
-            let own = [
-                "log2",
-                "log10",
-                "to_radians",
-                "to_degrees",
-                "min",
-                "max",
-                "clamp",
-            ];
-            let more = ["atan2", "powf", "powi", "mul_add", "sin_cos", "hypot"];
-            let unary = Unary::method_names(false);
-            own.into_iter().chain(more).chain(unary).collect()
-        }
-        Ty::U32 => vec!["min", "max"],
-        Ty::I32 => vec!["min", "max", "abs"],
-        Ty::Vec(n) => {
-            let own = [
-                "min",
-                "max",
-                "clamp",
-                "distance",
-                "distance_squared",
-                "powf",
-                "lerp",
-            ];
-            let reductions = [
-                "min_element",
-                "max_element",
-                "element_sum",
-                "element_product",
-            ];
-            let sized = [(*n == 3, "cross"), (*n < 4, "extend"), (*n > 2, "truncate")];
-            let unary = Unary::method_names(true);
-            (own.into_iter()
-                .chain(reductions)
-                .chain(vector_and_quat)
-                .chain(unary))
-            .chain(sized.into_iter().filter(|(on, _)| *on).map(|(_, n)| n))
-            .collect()
-        }
-        Ty::Mat(n) => {
-            let own = [
-                "transpose",
-                "determinant",
-                "inverse",
-                "col",
-                "row",
-                "mul_scalar",
-            ];
-            let sized = if *n == 2 {
-                ["mul_vec2", "mul_mat2"]
-            } else {
-                ["mul_vec3", "mul_mat3"]
-            };
-            own.into_iter().chain(sized).collect()
-        }
-        Ty::Quat => {
-            let own = ["conjugate", "inverse", "mul_vec3"];
-            vector_and_quat.into_iter().chain(own).collect()
-        }
-        _ => vec![],
-    };
-    names.sort_unstable();
-    names.dedup();
-    names
-}
-
-/// What was probably meant by an unknown method `name` on `t`: a method of `t` that other
-/// libraries spell `name`, or one within two edits of it.
-fn suggestion(t: &Ty, name: &str) -> Option<&'static str> {
-    const OTHER_SPELLINGS: &[(&str, &str)] = &[
-        ("magnitude", "length"),
-        ("norm", "length"),
-        ("len", "length"),
-        ("mag", "length"),
-        ("squared_length", "length_squared"),
-        ("magnitude_squared", "length_squared"),
-        ("norm_squared", "length_squared"),
-        ("normalise", "normalize"),
-        ("normalized", "normalize"),
-        ("unit", "normalize"),
-        ("cross_product", "cross"),
-        ("dot_product", "dot"),
-        ("det", "determinant"),
-        ("transposed", "transpose"),
-        ("inverted", "inverse"),
-        ("pow", "powf"),
-        ("log", "ln"),
-        ("conj", "conjugate"),
-    ];
-    let names = method_names(t);
-    let spelled = OTHER_SPELLINGS.iter().find(|(other, _)| *other == name);
-    if let Some(&(_, ours)) = spelled.filter(|(_, ours)| names.contains(ours)) {
-        return Some(ours);
-    }
-    let nearest = names
-        .into_iter()
-        .map(|n| (crate::diag::edit_distance(n, name), n));
-    nearest.min().filter(|(d, _)| *d <= 2).map(|(_, n)| n)
-}
-
-/// Free functions and the method they stand for (receiver = first argument).
-const FREE_AS_METHOD: &[(&str, &str)] = &[
-    ("exp", "exp"),
-    ("log", "ln"),
-    ("ln", "ln"),
-    ("log1p", "ln_1p"),
-    ("sqrt", "sqrt"),
-    ("abs", "abs"),
-    ("min", "min"),
-    ("max", "max"),
-    ("clamp", "clamp"),
-    ("sin", "sin"),
-    ("cos", "cos"),
-    ("tan", "tan"),
-    ("atan2", "atan2"),
-    ("dot", "dot"),
-    ("cross", "cross"),
-    ("length", "length"),
-    ("normalize", "normalize"),
-    ("transpose", "transpose"),
-    ("inverse", "inverse"),
-    ("determinant", "determinant"),
-];
-
-pub const INTRINSIC_LIST: &str = "exp, log/ln, log1p, sqrt, rsqrt, erf, abs, min, max, clamp, select, sin, \
-    cos, tan, atan2, dot, cross, length, normalize, transpose, inverse, determinant, sigmoid, no_diff, \
-    spherical_harmonics, jacobian, and the camera methods project_point, pixel_ray, can_project, center";
-
 impl Lowerer<'_> {
-    fn f(&self, v: &Val) -> Var {
-        v.comps[0]
-    }
-
     fn scalar(v: Var) -> Val {
         Val {
             ty: Ty::F32,
@@ -175,280 +33,156 @@ impl Lowerer<'_> {
     }
 
     pub(super) fn method_call(&mut self, m: &syn::ExprMethodCall) -> R<Val> {
-        if m.turbofish.is_some() {
-            return self.err(m.span(), "turbofish arguments are not supported");
-        }
         let recv = self.expr(&m.receiver)?;
         let args = self.args_of(&m.args)?;
+        let spans: Vec<Span> = m.args.iter().map(|a| a.span()).collect();
         let name = m.method.to_string();
-        self.method(&name, recv, args, m.method.span(), &m.args)
+        self.method(&name, recv, args, &spans, m.method.span())
     }
 
+    /// The method `name` on `recv`; `spans` are the arguments'.
     fn method(
         &mut self,
         name: &str,
         recv: Val,
         args: Vec<Val>,
+        spans: &[Span],
         span: Span,
-        arg_exprs: &syn::punctuated::Punctuated<syn::Expr, syn::Token![,]>,
     ) -> R<Val> {
-        let want = |s: &Self, n: usize| -> R<()> {
-            if args.len() == n {
-                Ok(())
-            } else {
-                s.err(
-                    span,
-                    format!("`{name}` takes {n} argument(s), found {}", args.len()),
-                )
-            }
+        if crate::types::is_camera(&recv.ty)
+            && let Some(helper) = camera_helper(name)
+        {
+            let def = self
+                .module
+                .find_fn(&helper)
+                .expect("builtin camera helpers are in every module");
+            self.camera_model |= model_aware(name);
+            self.rolling_shutter |= shutter_aware(name);
+            let mut all = vec![recv];
+            all.extend(args);
+            return self.call_helper(def, all, span);
+        }
+        let ty = match rules::method(&recv.ty, name) {
+            Some(sig) => sig.ret,
+            None => unchecked("an unknown method"),
         };
-        let same =
-            |s: &Self, a: &Val| s.check_ty(a, &recv.ty, span, &format!("the argument of `{name}`"));
-        match (&recv.ty, name) {
-            (Ty::Error, _) => Err(Failed),
-            (Ty::Struct(s), _) if s.display == "Camera" && camera_helper(name).is_some() => {
-                let helper = camera_helper(name).unwrap();
-                let def = self
-                    .module
-                    .find_fn(&helper)
-                    .expect("builtin camera helpers are in every module");
-                self.camera_model |= model_aware(name);
-                self.rolling_shutter |= shutter_aware(name);
-                let mut all = vec![recv];
-                all.extend(args);
-                self.call_helper(def, all, span)
-            }
-            (Ty::F32, _) if let Some(op) = Unary::method(name, false) => {
-                want(self, 0)?;
-                Ok(self.map(&recv, op))
-            }
-            (Ty::F32, "log2" | "log10") => {
-                want(self, 0)?;
-                let l = self.un(Unary::Ln, self.f(&recv));
-                let k = if name == "log2" {
-                    std::f64::consts::LOG2_E
-                } else {
-                    std::f64::consts::LOG10_E
+        let r = &recv.comps;
+        let x = r[0];
+        let arg = |i: usize| &args[i].comps;
+        let comps = match (&recv.ty, name) {
+            (Ty::F32, _) if let Some(op) = Unary::method(name, false) => vec![self.un(op, x)],
+            (Ty::F32, "log2" | "log10" | "to_radians" | "to_degrees") => {
+                let k = match name {
+                    "log2" => std::f64::consts::LOG2_E,
+                    "log10" => std::f64::consts::LOG10_E,
+                    "to_radians" => std::f64::consts::PI / 180.0,
+                    _ => 180.0 / std::f64::consts::PI,
+                };
+                let a = match name {
+                    "log2" | "log10" => self.un(Unary::Ln, x),
+                    _ => x,
                 };
                 let k = self.fconst(k);
-                Ok(Self::scalar(self.bin(Binary::Mul, l, k)))
+                vec![self.bin(Binary::Mul, a, k)]
             }
-            (Ty::F32, "to_radians" | "to_degrees") => {
-                want(self, 0)?;
-                let k = if name == "to_radians" {
-                    std::f64::consts::PI / 180.0
-                } else {
-                    180.0 / std::f64::consts::PI
-                };
-                let k = self.fconst(k);
-                Ok(Self::scalar(self.bin(Binary::Mul, self.f(&recv), k)))
-            }
-            (Ty::F32 | Ty::U32 | Ty::I32 | Ty::Vec(_), "min" | "max") => {
-                want(self, 1)?;
-                same(self, &args[0])?;
+            (_, "min" | "max") => {
                 let op = if name == "min" {
                     Binary::Min
                 } else {
                     Binary::Max
                 };
-                let comps = recv
-                    .comps
-                    .iter()
-                    .zip(&args[0].comps)
+                r.iter()
+                    .zip(arg(0))
                     .map(|(&a, &b)| self.bin(op, a, b))
-                    .collect();
-                Ok(Val {
-                    ty: recv.ty.clone(),
-                    comps,
-                })
+                    .collect()
             }
-            (Ty::F32 | Ty::Vec(_), "clamp") => {
-                want(self, 2)?;
-                same(self, &args[0])?;
-                same(self, &args[1])?;
-                let comps = (0..recv.comps.len())
-                    .map(|i| {
-                        let lo = self.bin(Binary::Max, recv.comps[i], args[0].comps[i]);
-                        self.bin(Binary::Min, lo, args[1].comps[i])
-                    })
-                    .collect();
-                Ok(Val {
-                    ty: recv.ty.clone(),
-                    comps,
+            (_, "clamp") => (0..r.len())
+                .map(|i| {
+                    let lo = self.bin(Binary::Max, r[i], arg(0)[i]);
+                    self.bin(Binary::Min, lo, arg(1)[i])
                 })
-            }
+                .collect(),
             (Ty::F32, "atan2" | "powf") => {
-                want(self, 1)?;
-                same(self, &args[0])?;
                 let op = if name == "atan2" {
                     Binary::Atan2
                 } else {
                     Binary::Powf
                 };
-                Ok(Self::scalar(self.bin(op, self.f(&recv), self.f(&args[0]))))
+                vec![self.bin(op, x, arg(0)[0])]
             }
             (Ty::F32, "powi") => {
-                want(self, 1)?;
                 let Some(n) = self.int_const(&args[0]) else {
                     return self.err(
-                        arg_exprs[0].span(),
+                        spans[0],
                         "the exponent of `powi` must be a compile-time integer",
                     );
                 };
-                Ok(Self::scalar(self.powi(self.f(&recv), n)))
+                vec![self.powi(x, n)]
             }
             (Ty::F32, "mul_add") => {
-                want(self, 2)?;
-                same(self, &args[0])?;
-                same(self, &args[1])?;
-                let p = self.bin(Binary::Mul, self.f(&recv), self.f(&args[0]));
-                Ok(Self::scalar(self.bin(Binary::Add, p, self.f(&args[1]))))
+                let p = self.bin(Binary::Mul, x, arg(0)[0]);
+                vec![self.bin(Binary::Add, p, arg(1)[0])]
             }
-            (Ty::F32, "sin_cos") => {
-                want(self, 0)?;
-                let s = self.un(Unary::Sin, self.f(&recv));
-                let c = self.un(Unary::Cos, self.f(&recv));
-                Ok(Val {
-                    ty: Ty::Tuple(vec![Ty::F32, Ty::F32]),
-                    comps: vec![s, c],
-                })
-            }
+            (Ty::F32, "sin_cos") => vec![self.un(Unary::Sin, x), self.un(Unary::Cos, x)],
             (Ty::F32, "hypot") => {
-                want(self, 1)?;
                 let v = Val {
                     ty: Ty::Vec(2),
-                    comps: vec![self.f(&recv), self.f(&args[0])],
+                    comps: vec![x, arg(0)[0]],
                 };
-                Ok(self.length(&v))
+                self.length(&v).comps
             }
-            (Ty::Vec(_) | Ty::Quat, "dot") => {
-                want(self, 1)?;
-                same(self, &args[0])?;
-                Ok(Self::scalar(self.dot(&recv.comps, &args[0].comps)))
-            }
-            (Ty::Vec(3), "cross") => {
-                want(self, 1)?;
-                same(self, &args[0])?;
-                Ok(self.cross(&recv, &args[0]))
-            }
-            (Ty::Vec(_) | Ty::Quat, "length") => {
-                want(self, 0)?;
-                Ok(self.length(&recv))
-            }
-            (Ty::Vec(_) | Ty::Quat, "length_squared") => {
-                want(self, 0)?;
-                Ok(Self::scalar(self.dot(&recv.comps, &recv.comps)))
-            }
-            (Ty::Vec(_) | Ty::Quat, "normalize" | "normalize_or_zero") => {
-                want(self, 0)?;
-                Ok(self.normalize(&recv))
-            }
-            (Ty::Vec(_), "distance" | "distance_squared") => {
-                want(self, 1)?;
-                same(self, &args[0])?;
-                let d = self.binary(Binary::Sub, "-", recv.clone(), args[0].clone(), span)?;
-                if name == "distance" {
-                    Ok(self.length(&d))
-                } else {
-                    Ok(Self::scalar(self.dot(&d.comps, &d.comps)))
+            (_, "dot") => vec![self.dot(r, arg(0))],
+            (_, "cross") => self.cross(&recv, &args[0]).comps,
+            (_, "length") => self.length(&recv).comps,
+            (_, "length_squared") => vec![self.dot(r, r)],
+            (_, "normalize" | "normalize_or_zero") => self.normalize(&recv).comps,
+            (_, "distance" | "distance_squared") => {
+                let d = self.binary(Binary::Sub, recv.clone(), args[0].clone());
+                match name {
+                    "distance" => self.length(&d).comps,
+                    _ => vec![self.dot(&d.comps, &d.comps)],
                 }
             }
             (Ty::Vec(_), _) if let Some(op) = Unary::method(name, true) => {
-                want(self, 0)?;
-                Ok(self.map(&recv, op))
+                self.map(&recv, op).comps
             }
             (Ty::Vec(_), "powf") => {
-                want(self, 1)?;
-                self.check_ty(&args[0], &Ty::F32, span, "the exponent")?;
-                let e = self.f(&args[0]);
-                let comps = recv
-                    .comps
-                    .iter()
-                    .map(|&c| self.bin(Binary::Powf, c, e))
-                    .collect();
-                Ok(Val {
-                    ty: recv.ty.clone(),
-                    comps,
-                })
+                let e = arg(0)[0];
+                r.iter().map(|&c| self.bin(Binary::Powf, c, e)).collect()
             }
             (Ty::Vec(_), "lerp") => {
-                want(self, 2)?;
-                same(self, &args[0])?;
-                self.check_ty(&args[1], &Ty::F32, span, "the interpolation factor")?;
-                let t = self.f(&args[1]);
-                let comps = recv
-                    .comps
-                    .iter()
-                    .zip(&args[0].comps)
+                let t = arg(1)[0];
+                r.iter()
+                    .zip(arg(0))
                     .map(|(&a, &b)| {
                         let d = self.bin(Binary::Sub, b, a);
                         let s = self.bin(Binary::Mul, d, t);
                         self.bin(Binary::Add, a, s)
                     })
-                    .collect();
-                Ok(Val {
-                    ty: recv.ty.clone(),
-                    comps,
-                })
+                    .collect()
             }
             (Ty::Vec(_), "min_element" | "max_element" | "element_sum" | "element_product") => {
-                want(self, 0)?;
                 let op = match name {
                     "min_element" => Binary::Min,
                     "max_element" => Binary::Max,
                     "element_sum" => Binary::Add,
                     _ => Binary::Mul,
                 };
-                let mut acc = recv.comps[0];
-                for &c in &recv.comps[1..] {
+                let mut acc = x;
+                for &c in &r[1..] {
                     acc = self.bin(op, acc, c);
                 }
-                Ok(Self::scalar(acc))
+                vec![acc]
             }
-            (Ty::Vec(n), "extend") if *n < 4 => {
-                want(self, 1)?;
-                self.check_ty(&args[0], &Ty::F32, span, "the new component")?;
-                let mut comps = recv.comps.clone();
-                comps.push(self.f(&args[0]));
-                Ok(Val {
-                    ty: Ty::Vec(n + 1),
-                    comps,
-                })
+            (Ty::Vec(_), "extend") => [r.as_slice(), arg(0)].concat(),
+            (Ty::Vec(n), "truncate") => r[..n - 1].to_vec(),
+            (Ty::Vec(n), s) if rules::is_swizzle(*n, s) => {
+                s.chars().map(|c| r["xyzw".find(c).unwrap()]).collect()
             }
-            (Ty::Vec(n), "truncate") if *n > 2 => {
-                want(self, 0)?;
-                Ok(Val {
-                    ty: Ty::Vec(n - 1),
-                    comps: recv.comps[..n - 1].to_vec(),
-                })
-            }
-            (Ty::Vec(n), s)
-                if (2..=4).contains(&s.len()) && s.chars().all(|c| "xyzw"[..*n].contains(c)) =>
-            {
-                want(self, 0)?;
-                let comps = s
-                    .chars()
-                    .map(|c| recv.comps["xyzw".find(c).unwrap()])
-                    .collect();
-                Ok(Val {
-                    ty: Ty::Vec(s.len()),
-                    comps,
-                })
-            }
-            (Ty::Mat(_), "transpose") => {
-                want(self, 0)?;
-                Ok(self.transpose(&recv))
-            }
-            (Ty::Mat(_), "determinant") => {
-                want(self, 0)?;
-                Ok(Self::scalar(self.determinant(&recv)))
-            }
-            (Ty::Mat(_), "inverse") => {
-                want(self, 0)?;
-                Ok(self.inverse(&recv))
-            }
+            (Ty::Mat(_), "transpose") => self.transpose(&recv).comps,
+            (Ty::Mat(_), "determinant") => vec![self.determinant(&recv)],
+            (Ty::Mat(_), "inverse") => self.inverse(&recv).comps,
             (Ty::Mat(n), "col" | "row") => {
-                want(self, 1)?;
                 let Some(i) = self.int_const(&args[0]).filter(|i| (*i as usize) < *n) else {
                     return self.err(
                         span,
@@ -456,71 +190,39 @@ impl Lowerer<'_> {
                     );
                 };
                 let i = i as usize;
-                let comps = (0..*n)
+                (0..*n)
                     .map(|k| {
                         if name == "col" {
-                            recv.comps[i * n + k]
+                            r[i * n + k]
                         } else {
-                            recv.comps[k * n + i]
+                            r[k * n + i]
                         }
                     })
-                    .collect();
-                Ok(Val {
-                    ty: Ty::Vec(*n),
-                    comps,
-                })
+                    .collect()
             }
-            (Ty::Mat(n), "mul_vec2" | "mul_vec3") => {
-                want(self, 1)?;
-                self.check_ty(&args[0], &Ty::Vec(*n), span, "the vector")?;
-                Ok(self.mat_vec(&recv, &args[0]))
-            }
-            (Ty::Mat(_), "mul_mat2" | "mul_mat3") => {
-                want(self, 1)?;
-                same(self, &args[0])?;
-                Ok(self.mat_mul(&recv, &args[0]))
-            }
+            (Ty::Mat(_), "mul_vec2" | "mul_vec3") => self.mat_vec(&recv, &args[0]).comps,
+            (Ty::Mat(_), "mul_mat2" | "mul_mat3") => self.mat_mul(&recv, &args[0]).comps,
             (Ty::Mat(_), "mul_scalar") => {
-                want(self, 1)?;
-                self.binary(Binary::Mul, "*", recv.clone(), args[0].clone(), span)
+                self.binary(Binary::Mul, recv.clone(), args[0].clone())
+                    .comps
             }
             (Ty::Quat, "conjugate" | "inverse") => {
-                want(self, 0)?;
-                let mut comps = recv.comps.clone();
+                let mut comps = r.clone();
                 for c in comps.iter_mut().take(3) {
                     *c = self.un(Unary::Neg, *c);
                 }
-                Ok(Val {
-                    ty: Ty::Quat,
-                    comps,
-                })
+                comps
             }
-            (Ty::Quat, "mul_vec3") => {
-                want(self, 1)?;
-                self.check_ty(&args[0], &Ty::Vec(3), span, "the vector")?;
-                Ok(self.quat_rotate(&recv, &args[0]))
-            }
+            (Ty::Quat, "mul_vec3") => self.quat_rotate(&recv, &args[0]).comps,
             (Ty::I32, "abs") => {
-                want(self, 0)?;
                 let z = self.konst(Const::I(0));
-                let neg = self.bin(Binary::Lt, recv.comps[0], z);
-                let n = self.un(Unary::Neg, recv.comps[0]);
-                Ok(Val {
-                    ty: Ty::I32,
-                    comps: vec![self.select(neg, n, recv.comps[0])],
-                })
+                let neg = self.bin(Binary::Lt, x, z);
+                let n = self.un(Unary::Neg, x);
+                vec![self.select(neg, n, x)]
             }
-            (t, _) => {
-                let hint = match suggestion(t, name) {
-                    Some(s) => format!(": did you mean `{s}`?"),
-                    None => " (see the intrinsic list in the splat-macros docs)".to_string(),
-                };
-                self.err(
-                    span,
-                    format!("no method `{name}` on `{t}` in the supported subset{hint}"),
-                )
-            }
-        }
+            _ => unchecked("a method without a lowering"),
+        };
+        Ok(Val { ty, comps })
     }
 
     fn int_const(&self, v: &Val) -> Option<i64> {
@@ -533,7 +235,7 @@ impl Lowerer<'_> {
 
     pub(super) fn call(&mut self, c: &syn::ExprCall) -> R<Val> {
         let syn::Expr::Path(p) = &*c.func else {
-            return self.err(c.func.span(), "only calls of named functions are supported");
+            unchecked("a call of an expression")
         };
         let segs: Vec<String> = p
             .path
@@ -542,66 +244,59 @@ impl Lowerer<'_> {
             .map(|s| s.ident.to_string())
             .collect();
         let span = p.span();
-        if segs.len() == 1 {
-            let name = segs[0].as_str();
-            if let Some(b) = self.lookup(name) {
-                if b.val.ty == Ty::Error {
-                    return Err(Failed);
-                }
-                return self.err(span, format!("`{name}` is a value, not a function"));
+        let spans: Vec<Span> = c.args.iter().map(|a| a.span()).collect();
+        if let [name] = segs.as_slice() {
+            if self.lookup(name).is_some() {
+                // A name bound to a value is called only where its `let` failed.
+                return Err(Failed);
             }
             if let Some(def) = self.module.find_fn(name) {
                 let args = self.args_of(&c.args)?;
                 return self.call_helper(def, args, span);
             }
-            return self.free_intrinsic(name, c, span);
+            return self.free_intrinsic(name, c, &spans, span);
         }
-        let (owner, item) = (segs[segs.len() - 2].as_str(), segs[segs.len() - 1].as_str());
-        let args = self.args_of(&c.args)?;
-        self.constructor(owner, item, args, span, c)
+        let (owner, item) = (&segs[segs.len() - 2], &segs[segs.len() - 1]);
+        let mut args = self.args_of(&c.args)?;
+        match rules::path_call(owner, item) {
+            Some(rules::Path::Constructor(sig)) => Ok(self.constructor(owner, item, sig.ret, args)),
+            Some(rules::Path::Method) => {
+                let recv = args.remove(0);
+                self.method(item, recv, args, &spans[1..], span)
+            }
+            None => unchecked("an unknown function"),
+        }
     }
 
-    fn free_intrinsic(&mut self, name: &str, c: &syn::ExprCall, span: Span) -> R<Val> {
+    fn free_intrinsic(
+        &mut self,
+        name: &str,
+        c: &syn::ExprCall,
+        spans: &[Span],
+        span: Span,
+    ) -> R<Val> {
         match name {
             "select" => {
-                if c.args.len() != 3 {
-                    return self.err(span, "`select(cond, a, b)` takes 3 arguments");
-                }
                 let cond = self.expr(&c.args[0])?;
-                self.check_ty(
-                    &cond,
-                    &Ty::Bool,
-                    c.args[0].span(),
-                    "the condition of `select`",
-                )?;
-                self.lazy_select(cond.comps[0], &c.args[1], &c.args[2], span)
+                self.lazy_select(cond.comps[0], &c.args[1], &c.args[2])
             }
-            _ if matches!(name, "no_diff" | "sigmoid") || Unary::function(name).is_some() => {
-                let args = self.args_of(&c.args)?;
-                if args.len() != 1 {
-                    return self.err(span, format!("`{name}` takes 1 argument"));
-                }
-                let v = &args[0];
-                match name {
-                    "no_diff" => Ok(self.map(v, Unary::NoDiff)),
-                    _ if v.ty != Ty::F32 => {
-                        self.err(span, format!("`{name}` takes an `f32`, found `{}`", v.ty))
-                    }
-                    "sigmoid" => Ok(Self::scalar(self.sigmoid(v.comps[0]))),
-                    _ => Ok(self.map(v, Unary::function(name).expect("a function"))),
-                }
+            "no_diff" => {
+                let v = self.expr(&c.args[0])?;
+                Ok(self.map(&v, Unary::NoDiff))
             }
-            "jacobian" => self.jacobian(c, span),
+            "sigmoid" => {
+                let v = self.expr(&c.args[0])?;
+                Ok(Self::scalar(self.sigmoid(v.comps[0])))
+            }
+            _ if let Some(op) = Unary::function(name) => {
+                let v = self.expr(&c.args[0])?;
+                Ok(self.map(&v, op))
+            }
+            "jacobian" => self.jacobian(c),
             "spherical_harmonics" => {
                 let args = self.args_of(&c.args)?;
-                let n = match args.first().map(|a| &a.ty) {
-                    Some(Ty::Array(t, n)) if **t == Ty::Vec(3) && SH_COEFFICIENTS.contains(n) => *n,
-                    _ => {
-                        return self.err(
-                            span,
-                            "`spherical_harmonics(sh, dir)` takes `[Vec3; N]` with N = 1, 4, 9 or 16 (degree 0 to 3) and a `Vec3`",
-                        );
-                    }
+                let Ty::Array(_, n) = args[0].ty else {
+                    unchecked("spherical harmonics of a non-array")
                 };
                 let def = self
                     .module
@@ -610,132 +305,47 @@ impl Lowerer<'_> {
                 self.call_helper(def, args, span)
             }
             _ => {
-                if let Some((_, m)) = FREE_AS_METHOD.iter().find(|(f, _)| *f == name) {
-                    let mut args = self.args_of(&c.args)?;
-                    if args.is_empty() {
-                        return self.err(span, format!("`{name}` needs an argument"));
-                    }
-                    let recv = args.remove(0);
-                    return self.method(m, recv, args, span, &c.args);
-                }
-                self.err(
-                    span,
-                    format!(
-                        "cannot find function `{name}`: a kernel may call helpers of the same module and the \
-                         intrinsics {INTRINSIC_LIST}"
-                    ),
-                )
+                let m =
+                    rules::free_as_method(name).unwrap_or_else(|| unchecked("an unknown function"));
+                let mut args = self.args_of(&c.args)?;
+                let recv = args.remove(0);
+                self.method(m, recv, args, &spans[1..], span)
             }
         }
     }
 
     /// `select(c, a, b)`: the operands are lowered inside the two sides of a branch, so only
     /// the chosen one is differentiated (no NaN leaks from the other side).
-    fn lazy_select(&mut self, cond: Var, a: &syn::Expr, b: &syn::Expr, span: Span) -> R<Val> {
+    fn lazy_select(&mut self, cond: Var, a: &syn::Expr, b: &syn::Expr) -> R<Val> {
         if let Some(Const::B(k)) = self.const_of(cond) {
             return self.expr(if k { a } else { b });
         }
-        self.branch(cond, |s| s.expr(a), |s| s.expr(b), span)
+        self.branch(cond, |s| s.expr(a), |s| s.expr(b))
     }
 
-    fn constructor(
-        &mut self,
-        owner: &str,
-        item: &str,
-        args: Vec<Val>,
-        span: Span,
-        c: &syn::ExprCall,
-    ) -> R<Val> {
-        let all = |s: &Self, t: &Ty| -> R<()> {
-            for a in &args {
-                s.check_ty(a, t, span, &format!("an argument of `{owner}::{item}`"))?;
-            }
-            Ok(())
-        };
-        let count = |s: &Self, n: usize| -> R<()> {
-            if args.len() == n {
-                Ok(())
-            } else {
-                s.err(
-                    span,
-                    format!(
-                        "`{owner}::{item}` takes {n} argument(s), found {}",
-                        args.len()
-                    ),
-                )
-            }
-        };
+    /// `owner::item(args)`, a constructor whose type is `ty`.
+    fn constructor(&mut self, owner: &str, item: &str, ty: Ty, args: Vec<Val>) -> Val {
         let flat = |args: &[Val]| {
             args.iter()
                 .flat_map(|a| a.comps.iter().copied())
                 .collect::<Vec<_>>()
         };
-        match (owner, item) {
-            ("Vec2" | "Vec3" | "Vec4", "new") => {
-                let n = owner[3..].parse().unwrap();
-                count(self, n)?;
-                all(self, &Ty::F32)?;
-                Ok(Val {
-                    ty: Ty::Vec(n),
-                    comps: flat(&args),
-                })
-            }
-            ("Vec2" | "Vec3" | "Vec4", "splat") => {
-                let n = owner[3..].parse().unwrap();
-                count(self, 1)?;
-                all(self, &Ty::F32)?;
-                Ok(Val {
-                    ty: Ty::Vec(n),
-                    comps: vec![args[0].comps[0]; n],
-                })
-            }
-            ("Mat2" | "Mat3", "from_cols") => {
-                let n = if owner == "Mat2" { 2 } else { 3 };
-                count(self, n)?;
-                all(self, &Ty::Vec(n))?;
-                Ok(Val {
-                    ty: Ty::Mat(n),
-                    comps: flat(&args),
-                })
-            }
-            ("Mat2" | "Mat3", "from_diagonal") => {
-                let n = if owner == "Mat2" { 2 } else { 3 };
-                count(self, 1)?;
-                all(self, &Ty::Vec(n))?;
+        let comps = match (owner, item) {
+            (_, "new" | "from_cols" | "from_xyzw") => flat(&args),
+            (_, "splat") => vec![args[0].comps[0]; ty.slot_count()],
+            (_, "from_diagonal") => {
+                let n = args[0].comps.len();
                 let z = self.fconst(0.0);
                 let mut comps = vec![z; n * n];
                 for i in 0..n {
                     comps[i * n + i] = args[0].comps[i];
                 }
-                Ok(Val {
-                    ty: Ty::Mat(n),
-                    comps,
-                })
+                comps
             }
-            ("Mat3", "from_quat") => {
-                count(self, 1)?;
-                all(self, &Ty::Quat)?;
-                Ok(self.mat3_from_quat(&args[0]))
-            }
-            ("Quat", "from_xyzw") => {
-                count(self, 4)?;
-                all(self, &Ty::F32)?;
-                Ok(Val {
-                    ty: Ty::Quat,
-                    comps: flat(&args),
-                })
-            }
-            ("f32" | "u32" | "i32" | "Vec2" | "Vec3" | "Vec4" | "Mat2" | "Mat3" | "Quat", m) => {
-                // Method called as a path: `f32::max(a, b)`.
-                let mut args = args;
-                if args.is_empty() {
-                    return self.err(span, format!("`{owner}::{m}` needs an argument"));
-                }
-                let recv = args.remove(0);
-                self.method(m, recv, args, span, &c.args)
-            }
-            _ => self.err(span, format!("unknown function `{owner}::{item}`")),
-        }
+            (_, "from_quat") => self.mat3_from_quat(&args[0]).comps,
+            _ => unchecked("a constructor without a lowering"),
+        };
+        Val { ty, comps }
     }
 
     // ---- linear algebra on flattened components ----------------------------------------------
@@ -1034,7 +644,6 @@ impl Lowerer<'_> {
                 let d = s.bin(Binary::Add, o, e);
                 Ok(Self::scalar(s.bin(Binary::Div, e, d)))
             },
-            Span::call_site(),
         );
         v.map(|v| v.comps[0]).unwrap_or(x)
     }

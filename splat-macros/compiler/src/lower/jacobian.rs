@@ -20,8 +20,7 @@
 use super::{Lowerer, R, Val};
 use crate::ir::{Binary, Block, Op, Scalar, Stmt, Unary, Var};
 use crate::ops;
-use crate::types::Ty;
-use proc_macro2::Span;
+use crate::typeck::rules;
 use std::collections::HashMap;
 use syn::spanned::Spanned;
 
@@ -30,27 +29,12 @@ type Tangent = Vec<Option<Var>>;
 
 impl Lowerer<'_> {
     /// `jacobian(|p| body, x)`.
-    pub(super) fn jacobian(&mut self, c: &syn::ExprCall, span: Span) -> R<Val> {
-        let usage = "`jacobian(|p| body, x)` takes a closure of one argument and the point to differentiate it at";
-        let (Some(syn::Expr::Closure(closure)), Some(point), 2) =
-            (c.args.first(), c.args.get(1), c.args.len())
+    pub(super) fn jacobian(&mut self, c: &syn::ExprCall) -> R<Val> {
+        let (Some(syn::Expr::Closure(closure)), Some(point)) = (c.args.first(), c.args.get(1))
         else {
-            return self.err(span, usage);
+            super::expr::unchecked("a `jacobian` without a closure and a point")
         };
-        if closure.inputs.len() != 1 {
-            return self.err(closure.span(), usage);
-        }
         let x = self.expr(point)?;
-        let differentiable = |t: &Ty| matches!(t, Ty::F32 | Ty::Vec(2..=4));
-        if !differentiable(&x.ty) {
-            return self.err(
-                point.span(),
-                format!(
-                    "`jacobian` differentiates at an `f32`, `Vec2`, `Vec3` or `Vec4`, found `{}`",
-                    x.ty
-                ),
-            );
-        }
         // Fresh copies (x * 1, exact), so each direction seeds one value even where `x`'s
         // components share one (`Vec3::splat(a)`).
         let one = self.fconst(1.0);
@@ -64,35 +48,16 @@ impl Lowerer<'_> {
             comps: inputs.clone(),
         };
         let pattern = match &closure.inputs[0] {
-            syn::Pat::Type(typed) => {
-                let written = self.resolve_type(&typed.ty)?;
-                self.check_ty(&p, &written, typed.ty.span(), "the closure's argument")?;
-                &*typed.pat
-            }
+            syn::Pat::Type(typed) => &*typed.pat,
             pattern => pattern,
         };
         let outer = std::mem::take(&mut self.stmts);
         self.scopes.push(HashMap::new());
-        let enclosing = self.closure_scope.replace(self.scopes.len() - 1);
-        let bound = self.bind_pattern(pattern, p);
-        let value = bound.and_then(|_| self.expr(&closure.body));
-        self.closure_scope = enclosing;
+        self.bind_pattern(pattern, p);
+        let value = self.expr(&closure.body);
         self.scopes.pop();
         let body = std::mem::replace(&mut self.stmts, outer);
         let value = value?;
-        if let syn::ReturnType::Type(_, written) = &closure.output {
-            let want = self.resolve_type(written)?;
-            self.check_ty(&value, &want, written.span(), "the closure's result")?;
-        }
-        if !differentiable(&value.ty) {
-            return self.err(
-                closure.body.span(),
-                format!(
-                    "`jacobian` differentiates a map to an `f32`, `Vec2`, `Vec3` or `Vec4`, found `{}`",
-                    value.ty
-                ),
-            );
-        }
         let n = inputs.len();
         let mut tangents: HashMap<Var, Tangent> = HashMap::new();
         for (k, v) in inputs.iter().enumerate() {
@@ -115,10 +80,7 @@ impl Lowerer<'_> {
             }
         }
         Ok(Val {
-            ty: Ty::Tuple(vec![
-                value.ty.clone(),
-                Ty::Array(Box::new(x.ty), value.comps.len()),
-            ]),
+            ty: rules::jacobian(&x.ty, &value.ty),
             comps,
         })
     }

@@ -1,6 +1,7 @@
-//! Lowering: type-checks one function of the accepted subset and translates it into the scalar
-//! SSA IR, flattening every vector, matrix, array and struct into scalars, inlining helpers and
-//! unrolling constant loops. Errors go to [`Diag`] with the span of the offending code.
+//! Lowering: translates one type-checked function (`crate::typeck`) into the scalar SSA IR,
+//! flattening every vector, matrix, array and struct into scalars, inlining helpers and
+//! unrolling constant loops. The errors it reports are those that depend on values (see
+//! `typeck`'s docs), with the span of the offending code.
 //!
 //! - `mod.rs`: the lowerer's state, the IR builder (with integer constant folding and activity
 //!   tracking), statements, places and control flow.
@@ -12,9 +13,10 @@ mod expr;
 pub(crate) mod intrinsics;
 mod jacobian;
 
-use crate::diag::Diag;
+use crate::diag::{Diag, Failed, R};
 use crate::ir::{Binary, Block, Const, Function, Op, Scalar, Stmt, Unary, Var};
 use crate::model::{FnDef, Module};
+use crate::typeck::Typed;
 use crate::types::Ty;
 use proc_macro2::Span;
 use std::collections::{HashMap, HashSet};
@@ -42,16 +44,6 @@ impl Val {
     }
 }
 
-/// Failure of a lowering step; the error is already recorded in [`Diag`].
-pub struct Failed;
-pub type R<T> = Result<T, Failed>;
-
-#[derive(Clone)]
-struct Binding {
-    val: Val,
-    mutable: bool,
-}
-
 /// A lowered function with its source-level signature.
 pub struct Lowered {
     pub func: Function,
@@ -70,14 +62,12 @@ const UNROLL_LIMIT: usize = 4096;
 
 pub struct Lowerer<'m> {
     module: &'m Module,
+    typed: &'m Typed,
     diag: &'m Diag,
     f: Function,
     consts: HashMap<Var, Const>,
     active: HashSet<Var>,
-    scopes: Vec<HashMap<String, Binding>>,
-    /// Inside a `jacobian` closure, the index of its scope: names bound below it are read-only
-    /// there (the closure is a map of its argument alone).
-    closure_scope: Option<usize>,
+    scopes: Vec<HashMap<String, Val>>,
     stmts: Vec<Stmt>,
     call_stack: Vec<String>,
     unrolled: usize,
@@ -89,29 +79,39 @@ pub struct Lowerer<'m> {
     rolling_shutter: bool,
 }
 
-/// Lowers one function of `module`. Returns `None` if it had errors (recorded in `diag`).
-pub fn lower_fn(module: &Module, diag: &Diag, def: &FnDef, custom: &[String]) -> Option<Lowered> {
-    lower_for_model(module, diag, def, custom, None)
+/// The module being lowered, with what type checking found in it.
+#[derive(Clone, Copy)]
+pub struct Source<'m> {
+    pub module: &'m Module,
+    pub typed: &'m Typed,
+}
+
+/// Lowers one function of `src`. Returns `None` if it had errors (recorded in `diag`).
+pub fn lower_fn(src: Source, diag: &Diag, def: &FnDef, custom: &[String]) -> Option<Lowered> {
+    lower_for_model(src, diag, def, custom, None)
 }
 
 /// Lowers one function with the camera's model code known to be `model` (when given): every
 /// comparison with it folds, so only that model's branches are lowered (the specialized
 /// variant of a model-aware kernel; the model slot stays a parameter).
 pub fn lower_for_model(
-    module: &Module,
+    src: Source,
     diag: &Diag,
     def: &FnDef,
     custom: &[String],
     model: Option<u32>,
 ) -> Option<Lowered> {
+    if src.typed.fn_failed(&def.name) {
+        return None;
+    }
     let mut l = Lowerer {
-        module,
+        module: src.module,
+        typed: src.typed,
         diag,
         f: Function::new(def.name.clone()),
         consts: HashMap::new(),
         active: HashSet::new(),
         scopes: vec![HashMap::new()],
-        closure_scope: None,
         stmts: vec![],
         call_stack: vec![def.name.clone()],
         unrolled: 0,
@@ -150,40 +150,28 @@ pub fn lower_for_model(
                 ty: p.ty.clone(),
                 comps,
             },
-            false,
         );
         params.push((p.name.clone(), p.ty.clone()));
     }
-    let errors_before = diag.has_errors();
+    let errors_before = diag.count();
     let body = l.block(&def.item.block);
-    if let Ok(v) = body {
-        let span = def
-            .item
-            .block
-            .stmts
-            .last()
-            .map(|s| s.span())
-            .unwrap_or(def.item.sig.ident.span());
-        if l.check_ty(&v, &def.ret, span, "the function's result")
-            .is_ok()
-        {
+    match body {
+        Ok(v) if diag.count() == errors_before => {
             l.f.body = Block {
                 stmts: std::mem::take(&mut l.stmts),
                 yields: v.comps,
             };
-            if !diag.has_errors() || errors_before {
-                return (!diag.has_errors()).then(|| Lowered {
-                    func: l.f,
-                    params,
-                    ret: def.ret.clone(),
-                    camera_model: l.camera_model,
-                    rolling_shutter: l.rolling_shutter,
-                    model_slot,
-                });
-            }
+            Some(Lowered {
+                func: l.f,
+                params,
+                ret: def.ret.clone(),
+                camera_model: l.camera_model,
+                rolling_shutter: l.rolling_shutter,
+                model_slot,
+            })
         }
+        _ => None,
     }
-    None
 }
 
 impl<'m> Lowerer<'m> {
@@ -343,7 +331,6 @@ impl<'m> Lowerer<'m> {
         cond: Var,
         then: impl FnOnce(&mut Self) -> R<Val>,
         els: impl FnOnce(&mut Self) -> R<Val>,
-        span: Span,
     ) -> R<Val> {
         let outer = std::mem::take(&mut self.stmts);
         let a = then(self);
@@ -351,15 +338,6 @@ impl<'m> Lowerer<'m> {
         let b = els(self);
         let else_stmts = std::mem::replace(&mut self.stmts, outer);
         let (a, b) = (a?, b?);
-        if a.ty != b.ty {
-            return self.err(
-                span,
-                format!(
-                    "the two values have different types: `{}` and `{}`",
-                    a.ty, b.ty
-                ),
-            );
-        }
         let outs = self.join_branches(
             cond,
             Block {
@@ -401,7 +379,7 @@ impl<'m> Lowerer<'m> {
 
     // ---- scopes ------------------------------------------------------------------------------
 
-    fn bind(&mut self, name: &str, val: Val, mutable: bool) {
+    fn bind(&mut self, name: &str, val: Val) {
         // Give temporaries the readable name of the binding they end up in.
         let names = val.ty.slot_names(name);
         for (v, n) in val.comps.iter().zip(names) {
@@ -413,28 +391,15 @@ impl<'m> Lowerer<'m> {
         self.scopes
             .last_mut()
             .expect("a scope")
-            .insert(name.to_string(), Binding { val, mutable });
+            .insert(name.to_string(), val);
     }
 
-    fn lookup(&self, name: &str) -> Option<&Binding> {
+    fn lookup(&self, name: &str) -> Option<&Val> {
         self.scopes.iter().rev().find_map(|s| s.get(name))
     }
 
-    fn lookup_mut(&mut self, name: &str) -> Option<&mut Binding> {
+    fn lookup_mut(&mut self, name: &str) -> Option<&mut Val> {
         self.scopes.iter_mut().rev().find_map(|s| s.get_mut(name))
-    }
-
-    pub(crate) fn check_ty(&self, v: &Val, want: &Ty, span: Span, what: &str) -> R<()> {
-        if v.ty == *want || v.ty == Ty::Error || *want == Ty::Error {
-            return Ok(());
-        }
-        self.err(
-            span,
-            format!(
-                "mismatched types: {what} is expected to be `{want}`, found `{}`",
-                v.ty
-            ),
-        )
     }
 
     // ---- blocks and statements ---------------------------------------------------------------
@@ -453,29 +418,11 @@ impl<'m> Lowerer<'m> {
             let is_last = i + 1 == stmts.len();
             let r = match s {
                 syn::Stmt::Local(local) => self.local(local).map(|_| Val::unit()),
-                syn::Stmt::Expr(e, semi) => {
-                    let r = self.expr(e);
-                    match (r, semi) {
-                        (Ok(v), None) if is_last => Ok(v),
-                        (Ok(v), None) if v.ty != Ty::Tuple(vec![]) && v.ty != Ty::Error => self.err(
-                            e.span(),
-                            "a value in the middle of a block is discarded: add `;` or bind it with `let`",
-                        ),
-                        (Ok(_), _) => Ok(Val::unit()),
-                        (Err(f), _) => Err(f),
-                    }
-                }
-                syn::Stmt::Item(it) => {
-                    self.err(it.span(), "items inside functions are not supported: declare them in the module")
-                }
-                syn::Stmt::Macro(m) => self.err(
-                    m.span(),
-                    format!(
-                        "macro `{}!` is not supported inside a kernel: kernels compile to GPU code and \
-                         SIMD lanes; debug with the generated f64 twin instead",
-                        m.mac.path.segments.last().map(|s| s.ident.to_string()).unwrap_or_default()
-                    ),
-                ),
+                syn::Stmt::Expr(e, semi) => match (self.expr(e), semi) {
+                    (Ok(v), None) if is_last => Ok(v),
+                    (r, _) => r.map(|_| Val::unit()),
+                },
+                _ => expr::unchecked("an item or macro statement"),
             };
             match r {
                 Ok(v) if is_last => last = v,
@@ -487,86 +434,54 @@ impl<'m> Lowerer<'m> {
     }
 
     fn local(&mut self, local: &syn::Local) -> R<()> {
-        let Some(init) = &local.init else {
-            return self.err(
-                local.span(),
-                "`let` without a value is not supported: give it a value, or use if/else as an expression",
-            );
+        let init = local
+            .init
+            .as_ref()
+            .expect("type-checked: `let` has a value");
+        let pat = match &local.pat {
+            syn::Pat::Type(pt) => &*pt.pat,
+            p => p,
         };
-        if let Some((_, e)) = &init.diverge {
-            return self.err(e.span(), "`let ... else` is not supported");
-        }
-        let (pat, ty) = match &local.pat {
-            syn::Pat::Type(pt) => (&*pt.pat, Some(&*pt.ty)),
-            p => (p, None),
-        };
-        let val = match self.expr(&init.expr) {
-            Ok(v) => v,
-            Err(f) => {
-                self.bind_pattern_poisoned(pat);
-                return Err(f);
-            }
-        };
-        if let Some(t) = ty {
-            let want = self.resolve_type(t)?;
-            self.check_ty(&val, &want, init.expr.span(), "the value")?;
-        }
-        self.bind_pattern(pat, val)
-    }
-
-    fn bind_pattern(&mut self, pat: &syn::Pat, val: Val) -> R<()> {
-        match pat {
-            syn::Pat::Ident(pi) if pi.by_ref.is_none() && pi.subpat.is_none() => {
-                self.bind(&pi.ident.to_string(), val, pi.mutability.is_some());
+        match self.expr(&init.expr) {
+            Ok(v) => {
+                self.bind_pattern(pat, v);
                 Ok(())
             }
-            syn::Pat::Wild(_) => Ok(()),
+            Err(f) => {
+                self.bind_pattern_poisoned(pat);
+                Err(f)
+            }
+        }
+    }
+
+    fn bind_pattern(&mut self, pat: &syn::Pat, val: Val) {
+        match pat {
+            syn::Pat::Ident(pi) => self.bind(&pi.ident.to_string(), val),
+            syn::Pat::Wild(_) => {}
             syn::Pat::Tuple(pt) => {
                 let Ty::Tuple(tys) = &val.ty else {
-                    return self.err(
-                        pat.span(),
-                        format!("expected a tuple to destructure, found `{}`", val.ty),
-                    );
+                    expr::unchecked("a tuple pattern on a non-tuple")
                 };
-                if tys.len() != pt.elems.len() {
-                    return self.err(pat.span(), format!("the tuple has {} elements", tys.len()));
-                }
                 let mut at = 0;
                 for (p, t) in pt.elems.iter().zip(tys.clone()) {
                     let n = t.slot_count();
-                    self.bind_pattern(
-                        p,
-                        Val {
-                            ty: t,
-                            comps: val.comps[at..at + n].to_vec(),
-                        },
-                    )?;
+                    let comps = val.comps[at..at + n].to_vec();
+                    self.bind_pattern(p, Val { ty: t, comps });
                     at += n;
                 }
-                Ok(())
             }
-            _ => self.err(
-                pat.span(),
-                "only names, `_` and tuples of them are supported in `let`",
-            ),
+            _ => expr::unchecked("an unsupported pattern"),
         }
     }
 
     /// Binds every name of `pat` to an error value, so its uses report nothing more.
     fn bind_pattern_poisoned(&mut self, pat: &syn::Pat) {
         match pat {
-            syn::Pat::Ident(pi) => self.bind(&pi.ident.to_string(), Val::error(), true),
+            syn::Pat::Ident(pi) => self.bind(&pi.ident.to_string(), Val::error()),
             syn::Pat::Tuple(t) => t.elems.iter().for_each(|p| self.bind_pattern_poisoned(p)),
             syn::Pat::Paren(p) => self.bind_pattern_poisoned(&p.pat),
             syn::Pat::Type(t) => self.bind_pattern_poisoned(&t.pat),
             _ => {}
-        }
-    }
-
-    pub(crate) fn resolve_type(&self, t: &syn::Type) -> R<Ty> {
-        match self.module.resolve_type(t) {
-            Ok(t) => Ok(t),
-            Err(msg) => self.err(t.span(), msg),
         }
     }
 
@@ -575,64 +490,34 @@ impl<'m> Lowerer<'m> {
     /// The root variable of a place and the range of its components the place covers.
     fn place(&mut self, e: &syn::Expr) -> R<(String, Ty, std::ops::Range<usize>)> {
         match e {
-            syn::Expr::Path(p) if p.path.get_ident().is_some() => {
-                let name = p.path.get_ident().unwrap().to_string();
-                let Some(b) = self.lookup(&name) else {
-                    return self.err(e.span(), format!("cannot find variable `{name}`"));
-                };
-                if !b.mutable {
-                    return self.err(
-                        e.span(),
-                        format!("cannot assign to immutable variable `{name}`: declare it with `let mut {name}`"),
-                    );
-                }
-                let n = b.val.comps.len();
-                Ok((name, b.val.ty.clone(), 0..n))
+            syn::Expr::Path(p) => {
+                let name = p.path.get_ident().expect("type-checked place").to_string();
+                let b = self.lookup(&name).expect("type-checked place");
+                Ok((name, b.ty.clone(), 0..b.comps.len()))
             }
             syn::Expr::Paren(p) => self.place(&p.expr),
             syn::Expr::Field(f) => {
                 let (root, ty, range) = self.place(&f.base)?;
-                let member = match &f.member {
-                    syn::Member::Named(id) => id.to_string(),
-                    syn::Member::Unnamed(i) => i.index.to_string(),
-                };
-                match expr::member_range(&ty, &member) {
-                    Some((t, r)) => Ok((root, t, range.start + r.start..range.start + r.end)),
-                    None => self.err(
-                        f.member.span(),
-                        format!("no field `{member}` on type `{ty}`"),
-                    ),
-                }
+                let (t, r) = expr::member_of(&ty, &f.member);
+                Ok((root, t, range.start + r.start..range.start + r.end))
             }
             syn::Expr::Index(ix) => {
                 let (root, ty, range) = self.place(&ix.expr)?;
                 let i = self.const_index(&ix.index)?;
-                match expr::index_range(&ty, i) {
-                    Some((t, r)) => Ok((root, t, range.start + r.start..range.start + r.end)),
+                match crate::typeck::rules::index_range(&ty, i) {
+                    Some(r) => {
+                        let t = crate::typeck::rules::element(&ty).expect("indexable");
+                        Ok((root, t, range.start + r.start..range.start + r.end))
+                    }
                     None => self.err(ix.span(), format!("index {i} out of bounds for `{ty}`")),
                 }
             }
-            _ => self.err(
-                e.span(),
-                "this is not assignable: assign to a variable, its fields or elements",
-            ),
+            _ => expr::unchecked("an unassignable place"),
         }
     }
 
     fn assign(&mut self, target: &syn::Expr, val: Val) -> R<()> {
         let (root, ty, range) = self.place(target)?;
-        let depth = self.scopes.iter().rposition(|s| s.contains_key(&root));
-        if let (Some(floor), Some(depth)) = (self.closure_scope, depth)
-            && depth < floor
-        {
-            return self.err(
-                target.span(),
-                format!(
-                    "`jacobian`'s closure cannot assign to `{root}`, declared outside it: the closure is a map of its argument alone"
-                ),
-            );
-        }
-        self.check_ty(&val, &ty, target.span(), "the assigned value")?;
         let names = ty.slot_names(&root);
         for (v, n) in val.comps.iter().zip(names) {
             let info = &mut self.f.vars[v.0 as usize];
@@ -641,7 +526,7 @@ impl<'m> Lowerer<'m> {
             }
         }
         let b = self.lookup_mut(&root).expect("place resolved");
-        b.val.comps.splice(range, val.comps);
+        b.comps.splice(range, val.comps);
         Ok(())
     }
 
@@ -666,9 +551,7 @@ impl<'m> Lowerer<'m> {
     // ---- control flow ------------------------------------------------------------------------
 
     fn if_expr(&mut self, e: &syn::ExprIf) -> R<Val> {
-        let c = self.expr(&e.cond)?;
-        self.check_ty(&c, &Ty::Bool, e.cond.span(), "an `if` condition")?;
-        let cond = c.comps[0];
+        let cond = self.expr(&e.cond)?.comps[0];
         // A condition known at compile time (e.g. on a loop counter) keeps only one side.
         if let Some(Const::B(k)) = self.const_of(cond) {
             return match (k, &e.else_branch) {
@@ -689,28 +572,13 @@ impl<'m> Lowerer<'m> {
         let else_stmts = std::mem::replace(&mut self.stmts, outer);
         let else_scopes = std::mem::replace(&mut self.scopes, snapshot.clone());
         let (then_val, else_val) = (then_val?, else_val?);
-        if e.else_branch.is_none() && then_val.ty != Ty::Tuple(vec![]) {
-            return self.err(
-                e.then_branch.span(),
-                "an `if` without `else` cannot produce a value: add an `else` branch",
-            );
-        }
-        if then_val.ty != else_val.ty && then_val.ty != Ty::Error && else_val.ty != Ty::Error {
-            return self.err(
-                e.span(),
-                format!(
-                    "`if` and `else` have different types: `{}` and `{}`",
-                    then_val.ty, else_val.ty
-                ),
-            );
-        }
         // Variables assigned in either branch leave it as outputs of the branch.
         let mut changed = vec![];
         for (depth, scope) in snapshot.iter().enumerate() {
             for (name, b) in scope {
-                let t = &then_scopes[depth][name].val;
-                let el = &else_scopes[depth][name].val;
-                if t.comps != b.val.comps || el.comps != b.val.comps {
+                let t = &then_scopes[depth][name];
+                let el = &else_scopes[depth][name];
+                if t.comps != b.comps || el.comps != b.comps {
                     changed.push((depth, name.clone(), t.comps.clone(), el.comps.clone()));
                 }
             }
@@ -740,7 +608,6 @@ impl<'m> Lowerer<'m> {
             self.scopes[*depth]
                 .get_mut(name)
                 .expect("snapshot binding")
-                .val
                 .comps = outs[at..at + k].to_vec();
             at += k;
         }
@@ -751,28 +618,23 @@ impl<'m> Lowerer<'m> {
     }
 
     fn for_loop(&mut self, f: &syn::ExprForLoop) -> R<Val> {
-        let (lo, hi) = match &*f.expr {
-            syn::Expr::Range(r) => {
-                const BOUNDS: &str = "loop bounds must be compile-time constants (`for i in 0..N`): loops are unrolled";
-                let lo = match &r.start {
-                    Some(s) => self.const_int(s, BOUNDS)?,
-                    None => 0,
-                };
-                let Some(end) = &r.end else {
-                    return self.err(r.span(), "loops need an upper bound: `for i in 0..N`");
-                };
-                let hi = self.const_int(end, BOUNDS)?;
-                match r.limits {
-                    syn::RangeLimits::HalfOpen(_) => (lo, hi),
-                    syn::RangeLimits::Closed(_) => (lo, hi + 1),
-                }
-            }
-            other => {
-                return self.err(
-                    other.span(),
-                    "only `for i in A..B` with constant A and B is supported",
-                );
-            }
+        const BOUNDS: &str =
+            "loop bounds must be compile-time constants (`for i in 0..N`): loops are unrolled";
+        let syn::Expr::Range(r) = &*f.expr else {
+            expr::unchecked("a loop over a non-range")
+        };
+        let lo = match &r.start {
+            Some(s) => self.const_int(s, BOUNDS)?,
+            None => 0,
+        };
+        let end = r
+            .end
+            .as_ref()
+            .expect("type-checked: the loop has an upper bound");
+        let hi = self.const_int(end, BOUNDS)?;
+        let hi = match r.limits {
+            syn::RangeLimits::HalfOpen(_) => hi,
+            syn::RangeLimits::Closed(_) => hi + 1,
         };
         self.unrolled += hi.saturating_sub(lo);
         if self.unrolled > UNROLL_LIMIT {
@@ -788,16 +650,10 @@ impl<'m> Lowerer<'m> {
                 ty: Ty::Index,
                 comps: vec![k],
             };
-            self.bind_pattern(&f.pat, iv)?;
+            self.bind_pattern(&f.pat, iv);
             let body = self.block(&f.body);
             self.scopes.pop();
-            let body = body?;
-            if body.ty != Ty::Tuple(vec![]) {
-                return self.err(
-                    f.body.span(),
-                    "a loop body cannot produce a value: end it with `;`",
-                );
-            }
+            body?;
         }
         Ok(Val::unit())
     }
@@ -811,30 +667,12 @@ impl<'m> Lowerer<'m> {
                 format!("recursive call to `{}` is not supported", def.name),
             );
         }
-        if args.len() != def.params.len() {
-            return self.err(
-                span,
-                format!(
-                    "`{}` takes {} argument(s), found {}",
-                    def.name,
-                    def.params.len(),
-                    args.len()
-                ),
-            );
-        }
-        for (a, p) in args.iter().zip(&def.params) {
-            self.check_ty(a, &p.ty, span, &format!("argument `{}`", p.name))?;
+        if self.typed.fn_failed(&def.name) {
+            return Err(Failed);
         }
         let saved_scopes = std::mem::replace(&mut self.scopes, vec![HashMap::new()]);
-        let saved_closure = self.closure_scope.take();
         for (a, p) in args.iter().zip(&def.params) {
-            self.scopes[0].insert(
-                p.name.clone(),
-                Binding {
-                    val: a.clone(),
-                    mutable: false,
-                },
-            );
+            self.scopes[0].insert(p.name.clone(), a.clone());
         }
         self.call_stack.push(def.name.clone());
         let custom = self.custom.iter().position(|c| *c == def.name);
@@ -842,9 +680,7 @@ impl<'m> Lowerer<'m> {
         let r = self.block(&def.item.block);
         self.call_stack.pop();
         self.scopes = saved_scopes;
-        self.closure_scope = saved_closure;
         let v = r?;
-        self.check_ty(&v, &def.ret, span, &format!("the result of `{}`", def.name))?;
         let (Some(callee), Some(outer)) = (custom, outer) else {
             return Ok(v);
         };
