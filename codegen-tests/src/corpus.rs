@@ -1,8 +1,8 @@
 //! The compiler-test corpus: annotated functions that together use every operator, every
 //! intrinsic, branches (nested, as statements and as expressions), constant loops (carrying
 //! scalar, vector and array state, nested, followed by more code), helper calls, custom
-//! adjoints, structs, tuples, matrices and quaternions. `tests/gradients.rs` checks each
-//! against finite differences and `tests/lanes.rs` compares its lane and scalar forms.
+//! adjoints, structs, tuples, matrices and quaternions. `tests/corpus.rs` checks each against
+//! finite differences and compares its lane and scalar forms.
 
 use splat_macros::splat_functions;
 

@@ -1,9 +1,10 @@
-//! The compiler's builtins as kernels see them (compiled from `splat-compiler/src/builtins.rs`):
-//! the camera models (`cam.project_point`, `cam.pixel_ray`) equal to the runtime's plain-Rust
-//! `Camera` methods, inverse to each other (also past 90° off axis for the fisheye), and
-//! differentiated correctly (f64 finite differences) for every model, their Jacobians by
-//! `jacobian` too (and those Jacobians' own gradients: second derivatives); the rolling
-//! shutter's pose per row likewise; `spherical_harmonics` equal to the runtime prelude's.
+//! The compiler's builtins as kernels see them (compiled from
+//! `splat-macros/compiler/src/builtins.rs`): the camera models (`cam.project_point`,
+//! `cam.pixel_ray`) equal to the runtime's plain-Rust `Camera` methods, inverse to each other
+//! (also past 90° off axis for the fisheye), and differentiated correctly (f64 finite
+//! differences) for every model, their Jacobians by `jacobian` too (and those Jacobians' own
+//! gradients: second derivatives); the rolling shutter's pose per row likewise;
+//! `spherical_harmonics` equal to the runtime prelude's.
 
 use codegen_tests::check::{gradient, jacobian_vs_differences, uniform};
 use splat_macros::splat_functions;

@@ -1,7 +1,7 @@
 //! The built-in values that cross the boundary between a method's single-element functions and
 //! the runtime. The `#[splat_method]` compiler knows these layouts by name (see
-//! `splat-compiler/src/types.rs`, `builtin_struct`); the generated code builds and reads them
-//! by field name, so a change here that the compiler does not mirror fails to compile.
+//! `splat-macros/compiler/src/types.rs`, `builtin_struct`); the generated code builds and reads
+//! them by field name, so a change here that the compiler does not mirror fails to compile.
 
 use crate::cameras;
 use crate::lanes::{F32x8, M32x8};

@@ -134,9 +134,8 @@ fn build_kernels<'m>(
     };
     let mut kernels = vec![];
     for def in defs {
-        // A method's `project` and `evaluate` adjoints compute only the groups asked for.
-        let gated = (c.roles.as_ref())
-            .is_some_and(|r| std::ptr::eq(def, r.project) || std::ptr::eq(def, r.evaluate));
+        let groups = c.roles.as_ref().and_then(|r| gradient_groups(r, def));
+        let gated = groups.as_deref();
         let Some((mut kernel, model_slot)) = build_kernel(src, def, custom, diag, None, gated)
         else {
             continue;
@@ -166,16 +165,30 @@ fn build_kernels<'m>(
     (!diag.has_errors()).then_some(kernels)
 }
 
+/// A method's `project` and `evaluate` adjoints compute only the gradient groups asked for:
+/// the group of each of their results.
+fn gradient_groups(r: &check::Roles, def: &model::FnDef) -> Option<Vec<u32>> {
+    let (a, b) = (&def.params[0].ty, &def.params[1].ty);
+    if std::ptr::eq(def, r.project) {
+        Some(gate::project_groups(a, b))
+    } else if std::ptr::eq(def, r.evaluate) {
+        Some(gate::evaluate_groups(a, b))
+    } else {
+        None
+    }
+}
+
 /// Lowers, differentiates and cleans one kernel, for every camera model or for the one with
-/// code `model` (and with `gated`, gates its adjoint by gradient group: `Kernel::gated`); also
-/// returns the parameter slot of the camera's model code.
+/// code `model` (and with `gated`, the group of each adjoint result, gates its adjoint by
+/// gradient group: `Kernel::gated`); also returns the parameter slot of the camera's model
+/// code.
 fn build_kernel<'m>(
     src: Source,
     def: &'m model::FnDef,
     custom: &Custom,
     diag: &Diag,
     model: Option<u32>,
-    gated: bool,
+    gated: Option<&[u32]>,
 ) -> Option<(Kernel<'m>, Option<ir::Var>)> {
     let l = lower::lower_for_model(src, diag, def, &custom.names, model)?;
     let mut primal = l.func;
@@ -197,14 +210,9 @@ fn build_kernel<'m>(
         g
     });
     opt::dce(&mut primal);
-    let gated = adjoint.as_ref().filter(|_| gated).map(|g| {
+    let gated = adjoint.as_ref().zip(gated).map(|(g, groups)| {
         let mut g = g.clone();
-        let (a, b) = (&def.params[0].ty, &def.params[1].ty);
-        let groups = match def.name.as_str() {
-            "project" => gate::project_groups(a, b),
-            _ => gate::evaluate_groups(a, b),
-        };
-        gate::gate(&mut g, &groups);
+        gate::gate(&mut g, groups);
         g
     });
     let kernel = Kernel {
