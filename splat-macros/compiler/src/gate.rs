@@ -14,6 +14,7 @@
 //! placeholder, and so may a result: results are zeroed by their own group's bit. Branches of
 //! the source are gated inside too, against their own groups.
 
+use crate::flow::{self, Calls, Masks};
 use crate::ir::{Binary, Block, Const, Function, Op, Scalar, Stmt, Var};
 use crate::types::{Ty, is_camera};
 use std::collections::{HashMap, HashSet};
@@ -110,54 +111,14 @@ fn float_slots(t: &Ty) -> usize {
 /// For each result of `f`, the union of `inputs[i]` over the parameters `i` it depends on
 /// (through its operands, and through the conditions of the branches it is chosen by).
 pub fn dependencies(f: &Function, inputs: &[u32]) -> Vec<u32> {
-    let mut on: HashMap<Var, u32> = f
+    let mut on: Masks = f
         .params
         .iter()
         .copied()
         .zip(inputs.iter().copied())
         .collect();
-    depend(&f.body, 0, &mut on);
-    let get = |v: &Var| on.get(v).copied().unwrap_or(0);
-    f.body.yields.iter().map(get).collect()
-}
-
-/// Adds to `on` what each variable `b` defines depends on; `under` is what the enclosing
-/// branches' conditions depend on.
-fn depend(b: &Block, under: u32, on: &mut HashMap<Var, u32>) {
-    let get = |on: &HashMap<Var, u32>, v: &Var| on.get(v).copied().unwrap_or(0);
-    for s in &b.stmts {
-        match s {
-            Stmt::Let { var, op } => {
-                let d = op.operands().iter().fold(under, |a, o| a | get(on, o));
-                on.insert(*var, d);
-            }
-            Stmt::If {
-                cond,
-                then_block,
-                else_block,
-                outs,
-            } => {
-                let inner = under | get(on, cond);
-                depend(then_block, inner, on);
-                depend(else_block, inner, on);
-                for (k, o) in outs.iter().enumerate() {
-                    let d = inner | get(on, &then_block.yields[k]) | get(on, &else_block.yields[k]);
-                    on.insert(*o, d);
-                }
-            }
-            Stmt::Call {
-                args, body, outs, ..
-            } => {
-                let mut read = HashSet::new();
-                body.reads(&mut read);
-                depend(body, under, on);
-                let d = args.iter().chain(&read).fold(under, |a, v| a | get(on, v));
-                for o in outs {
-                    on.insert(*o, d);
-                }
-            }
-        }
-    }
+    flow::depends(&f.body, 0, &mut on);
+    f.body.yields.iter().map(|y| flow::mask(&on, y)).collect()
 }
 
 /// Gates `f`'s results: `groups[i]` is the group bits of result `i`. Returns the mask
@@ -170,7 +131,8 @@ pub fn gate(f: &mut Function, groups: &[u32]) -> Var {
     for (y, g) in f.body.yields.iter().zip(groups) {
         *of.entry(*y).or_insert(0) |= *g;
     }
-    propagate(&f.body, &mut of);
+    // A helper's adjoint runs whole, for every group it serves.
+    flow::needs(&f.body, &mut of, Calls::Whole);
     let all = groups.iter().fold(0, |a, g| a | g);
     let mut gates = Gates {
         mask,
@@ -201,59 +163,6 @@ pub fn gate(f: &mut Function, groups: &[u32]) -> Var {
     mask
 }
 
-/// Adds to `of` the groups of every variable that a statement of `b` (or nested in it) reads,
-/// from the groups of what the statement defines; `of` holds the groups of `b`'s yields.
-fn propagate(b: &Block, of: &mut HashMap<Var, u32>) {
-    for s in b.stmts.iter().rev() {
-        let groups = stmt_groups(s, of);
-        if groups == 0 {
-            continue;
-        }
-        match s {
-            Stmt::Let { op, .. } => {
-                for o in op.operands() {
-                    *of.entry(o).or_insert(0) |= groups;
-                }
-            }
-            Stmt::If {
-                cond,
-                then_block,
-                else_block,
-                outs,
-            } => {
-                for inner in [then_block, else_block] {
-                    for (y, o) in inner.yields.iter().zip(outs) {
-                        let g = of.get(o).copied().unwrap_or(0);
-                        *of.entry(*y).or_insert(0) |= g;
-                    }
-                    propagate(inner, of);
-                }
-                *of.entry(*cond).or_insert(0) |= groups;
-            }
-            Stmt::Call { args, body, .. } => {
-                // A helper with its own adjoint runs whole: everything it reads gets its groups.
-                for a in args {
-                    *of.entry(*a).or_insert(0) |= groups;
-                }
-                let mut read = HashSet::new();
-                body.reads(&mut read);
-                for v in read {
-                    *of.entry(v).or_insert(0) |= groups;
-                }
-            }
-        }
-    }
-}
-
-/// The groups of what `s` defines.
-fn stmt_groups(s: &Stmt, of: &HashMap<Var, u32>) -> u32 {
-    let g = |v: &Var| of.get(v).copied().unwrap_or(0);
-    match s {
-        Stmt::Let { var, .. } => g(var),
-        Stmt::If { outs, .. } | Stmt::Call { outs, .. } => outs.iter().fold(0, |a, o| a | g(o)),
-    }
-}
-
 fn constant(f: &mut Function, ty: Scalar, out: &mut Vec<Stmt>) -> Var {
     let c = match ty {
         Scalar::F32 => Const::F(0.0),
@@ -272,7 +181,7 @@ fn constant(f: &mut Function, ty: Scalar, out: &mut Vec<Stmt>) -> Var {
 struct Gates {
     mask: Var,
     /// The groups of every variable.
-    of: HashMap<Var, u32>,
+    of: Masks,
     /// `mask & groups != 0`, computed once per set of groups...
     conds: HashMap<u32, Var>,
     /// ...in statements that go at the top of the body, so they dominate every use.
@@ -319,7 +228,7 @@ impl Gates {
     fn rewrite(&mut self, f: &mut Function, b: &mut Block, enclosing: u32) {
         let mut runs: Vec<(u32, Vec<Stmt>)> = vec![];
         for mut s in std::mem::take(&mut b.stmts) {
-            let g = stmt_groups(&s, &self.of) & enclosing;
+            let g = flow::defined_mask(&s, &self.of) & enclosing;
             if let Stmt::If {
                 then_block,
                 else_block,

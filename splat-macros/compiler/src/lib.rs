@@ -23,6 +23,7 @@ pub mod builtins;
 pub mod check;
 pub mod diag;
 pub mod emit;
+pub mod flow;
 pub mod gate;
 pub mod ir;
 pub mod lower;

@@ -1,66 +1,45 @@
 //! Dead-code elimination: drops every statement whose value no result depends on (after AD
 //! this removes the parts of the recomputed primal that the reverse sweep does not need), and
-//! the unused outputs of branches.
+//! the unused outputs of branches and calls.
 
+use crate::flow::{self, Calls, Masks};
 use crate::ir::{Block, Function, Stmt, Var};
-use std::collections::HashSet;
 
 pub fn dce(f: &mut Function) {
-    let mut live = HashSet::new();
-    dce_block(&mut f.body, &mut live);
+    let mut live: Masks = f.body.yields.iter().map(|y| (*y, 1)).collect();
+    flow::needs(&f.body, &mut live, Calls::Inside);
+    prune(&mut f.body, &|v| flow::mask(&live, v) != 0);
 }
 
-fn dce_block(b: &mut Block, live: &mut HashSet<Var>) {
-    live.extend(b.yields.iter().copied());
-    let mut kept = vec![];
-    for mut s in std::mem::take(&mut b.stmts).into_iter().rev() {
-        let keep = match &mut s {
-            Stmt::Let { var, op } => {
-                let k = live.contains(var);
-                if k {
-                    live.extend(op.operands());
-                }
-                k
-            }
-            Stmt::If {
-                cond,
-                then_block,
-                else_block,
-                outs,
-            } => {
-                let used: Vec<usize> = (0..outs.len())
-                    .filter(|&i| live.contains(&outs[i]))
-                    .collect();
-                if used.is_empty() {
-                    false
-                } else {
-                    *outs = used.iter().map(|&i| outs[i]).collect();
-                    then_block.yields = used.iter().map(|&i| then_block.yields[i]).collect();
-                    else_block.yields = used.iter().map(|&i| else_block.yields[i]).collect();
-                    dce_block(then_block, live);
-                    dce_block(else_block, live);
-                    live.insert(*cond);
-                    true
-                }
-            }
-            Stmt::Call { outs, body, .. } => {
-                let used: Vec<usize> = (0..outs.len())
-                    .filter(|&i| live.contains(&outs[i]))
-                    .collect();
-                if used.is_empty() {
-                    false
-                } else {
-                    *outs = used.iter().map(|&i| outs[i]).collect();
-                    body.yields = used.iter().map(|&i| body.yields[i]).collect();
-                    dce_block(body, live);
-                    true
-                }
-            }
-        };
-        if keep {
-            kept.push(s);
-        }
+/// Removes from `b` what defines nothing `live`.
+fn prune(b: &mut Block, live: &impl Fn(&Var) -> bool) {
+    b.stmts.retain_mut(|s| match s {
+        Stmt::Let { var, .. } => live(var),
+        Stmt::If {
+            then_block,
+            else_block,
+            outs,
+            ..
+        } => narrow(outs, [then_block, else_block], live),
+        Stmt::Call { outs, body, .. } => narrow(outs, [body], live),
+    });
+}
+
+/// Keeps the outputs that are `live` of a statement with nested `blocks` (and the yields that
+/// give them) and prunes the blocks; false when none is live.
+fn narrow<const N: usize>(
+    outs: &mut Vec<Var>,
+    blocks: [&mut Block; N],
+    live: &impl Fn(&Var) -> bool,
+) -> bool {
+    let kept: Vec<usize> = (0..outs.len()).filter(|&i| live(&outs[i])).collect();
+    if kept.is_empty() {
+        return false;
     }
-    kept.reverse();
-    b.stmts = kept;
+    *outs = kept.iter().map(|&i| outs[i]).collect();
+    for b in blocks {
+        b.yields = kept.iter().map(|&i| b.yields[i]).collect();
+        prune(b, live);
+    }
+    true
 }
