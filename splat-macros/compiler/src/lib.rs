@@ -244,9 +244,9 @@ fn expand_module(kind: Kind, item: syn::ItemMod, diag: &Diag) -> Option<TokenStr
     let mut items = TokenStream::new();
     items.extend(m.uses.iter().map(|u| quote!(#[allow(unused_imports)] #u)));
     items.extend(emit::structs(&m));
-    for c in m.consts.keys() {
+    for c in m.const_names() {
         // Re-emit constants as written: users may refer to them outside the kernels.
-        if let Some(item) = const_item(&m, c) {
+        if let Some(item) = const_item(&m, &c) {
             items.extend(item);
         }
     }

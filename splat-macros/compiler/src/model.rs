@@ -75,6 +75,14 @@ impl Module {
         resolver.const_len(e)
     }
 
+    /// The names of the constants that resolved, in source order (`consts` is for lookup; its
+    /// order changes from one compilation to the next).
+    pub fn const_names(&self) -> impl Iterator<Item = String> + '_ {
+        (self.const_items.iter())
+            .map(|c| c.ident.to_string())
+            .filter(|name| self.consts.contains_key(name))
+    }
+
     pub fn find_struct(&self, name: &str) -> Option<&Rc<StructTy>> {
         self.structs
             .iter()

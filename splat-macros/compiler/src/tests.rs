@@ -281,3 +281,28 @@ fn everything_the_type_rules_accept_lowers() {
     }
     assert!(pairs > 60, "{pairs}");
 }
+
+#[test]
+fn expansion_is_the_same_every_time_with_constants_in_source_order() {
+    let src = quote::quote!(
+        mod m {
+            const E: f32 = 5.0;
+            const B: f32 = 2.0;
+            const D: f32 = 4.0;
+            const A: f32 = 1.0;
+            const C: f32 = 3.0;
+            fn f(x: f32) -> f32 {
+                x * (A + B + C + D + E)
+            }
+        }
+    );
+    let expand = || crate::expand(Kind::Functions, quote::quote!(), src.clone()).to_string();
+    let out = expand();
+    let at = |name: &str| out.find(&format!("pub const {name} :")).expect(name);
+    let order = ["E", "B", "D", "A", "C"].map(at);
+    assert!(
+        order.is_sorted(),
+        "constants out of source order: {order:?}\n{out}"
+    );
+    assert_eq!(out, expand());
+}

@@ -41,16 +41,15 @@ impl Typed {
 /// Checks the body of every function and the value of every constant of `m`.
 pub fn typeck(m: &Module, diag: &Diag) -> Typed {
     let mut typed = Typed::default();
-    let mut consts: Vec<_> = m.consts.iter().collect();
-    consts.sort_by_key(|(name, _)| name.as_str());
-    for (name, c) in consts {
+    for name in m.const_names() {
+        let c = &m.consts[&name];
         let before = diag.count();
         let mut t = Checker::new(m, diag);
         if let Ok(ty) = t.expr(&c.expr) {
             let _ = t.coerce(&ty, &c.ty, c.expr.span(), &format!("constant `{name}`"));
         }
         if diag.count() > before {
-            typed.failed_consts.insert(name.clone());
+            typed.failed_consts.insert(name);
         }
     }
     for def in &m.fns {
