@@ -7,6 +7,9 @@
 //!   through each shade field and through alpha, `gate::dependencies`);
 //! - [`needs`], backward: what each variable is needed for (dead-code elimination, with one bit;
 //!   gating by gradient group, with one bit per group).
+//!
+//! Both are one walk, with no fixed point, because of the IR's invariants (`ir.rs`): each
+//! variable is defined once, before every use.
 
 use crate::ir::{Block, Stmt, Var};
 use std::collections::{HashMap, HashSet};
@@ -35,11 +38,12 @@ pub enum Calls {
     /// needed by each of its outputs (gating).
     Whole,
     /// Through its body, the inlined helper the forward pass computes: only the parts of the
-    /// body that an output needs are needed (dead-code elimination).
+    /// body that an output needs are needed (dead-code elimination). The call's `args` are
+    /// not marked: the body reads what it needs.
     Inside,
 }
 
-/// Adds to `on` the mask of every variable `b` defines, nested ones too: the union of its
+/// Sets in `on` the mask of every variable `b` defines, nested ones too: the union of its
 /// operands' masks and `under`, the masks of the conditions of the branches enclosing `b`.
 /// `on` holds the masks of what `b` reads from outside. A call's outputs depend on everything
 /// it reads (its adjoint is a user's, opaque to the analysis).
@@ -141,42 +145,43 @@ mod tests {
         (var, Stmt::Let { var, op })
     }
 
-    /// `f(x, y, z)`: `p = x + y`; `r = if x < z { p } else { z + z }`; results `(r, y + y)`.
-    fn branchy() -> (Function, [Var; 3]) {
+    /// `f(x, y, z)`: `c = x < z`; `(r, s) = if c { (y, y + y) } else { (z, z + z) }`; returns
+    /// `(r, s)`, or only `r` when `both` is false. Also returns `[t, zz, c]`, the two sums
+    /// and the condition.
+    fn branchy(both: bool) -> (Function, [Var; 3]) {
         let mut f = Function::new("f");
         let [x, y, z] = ["x", "y", "z"].map(|n| f.new_var(Scalar::F32, n));
         f.params = vec![x, y, z];
-        let (p, let_p) = add(&mut f, x, y);
-        let cond = f.new_var(Scalar::Bool, "c");
+        let c = f.new_var(Scalar::Bool, "c");
         let let_c = Stmt::Let {
-            var: cond,
+            var: c,
             op: Op::Binary(Binary::Lt, x, z),
         };
+        let (t, let_t) = add(&mut f, y, y);
         let (zz, let_zz) = add(&mut f, z, z);
-        let r = f.new_var(Scalar::F32, "r");
+        let outs = vec![f.new_var(Scalar::F32, "r"), f.new_var(Scalar::F32, "s")];
         let branch = Stmt::If {
-            cond,
+            cond: c,
             then_block: Block {
-                stmts: vec![],
-                yields: vec![p],
+                stmts: vec![let_t],
+                yields: vec![y, t],
             },
             else_block: Block {
                 stmts: vec![let_zz],
-                yields: vec![zz],
+                yields: vec![z, zz],
             },
-            outs: vec![r],
+            outs: outs.clone(),
         };
-        let (yy, let_yy) = add(&mut f, y, y);
         f.body = Block {
-            stmts: vec![let_p, let_c, branch, let_yy],
-            yields: vec![r, yy],
+            stmts: vec![let_c, branch],
+            yields: if both { outs } else { vec![outs[0]] },
         };
-        (f, [p, zz, cond])
+        (f, [t, zz, c])
     }
 
     #[test]
     fn a_value_depends_on_its_operands_and_on_the_conditions_that_choose_it() {
-        let (f, [p, zz, _]) = branchy();
+        let (f, [t, zz, c]) = branchy(true);
         let mut on: Masks = f
             .params
             .iter()
@@ -184,17 +189,18 @@ mod tests {
             .map(|(v, m)| (*v, m))
             .collect();
         depends(&f.body, 0, &mut on);
-        let [r, yy] = [f.body.yields[0], f.body.yields[1]];
-        assert_eq!(mask(&on, &p), 1 | 2);
-        // Inside the branch `z + z` also depends on `x`, through the condition.
-        assert_eq!(mask(&on, &zz), 1 | 4);
-        assert_eq!(mask(&on, &r), 1 | 2 | 4);
-        assert_eq!(mask(&on, &yy), 2);
+        let [r, s] = [f.body.yields[0], f.body.yields[1]];
+        assert_eq!(mask(&on, &c), 1 | 4);
+        // Computed inside the branch: on the condition too.
+        assert_eq!([t, zz].map(|v| mask(&on, &v)), [1 | 2 | 4, 1 | 4]);
+        // `r` is `y` or `z`: it reaches `x` only through the condition.
+        assert_eq!([r, s].map(|v| mask(&on, &v)), [1 | 2 | 4, 1 | 2 | 4]);
     }
 
     #[test]
     fn a_value_is_needed_by_what_reads_it_and_a_condition_by_what_its_branch_chooses() {
-        let (f, [p, zz, cond]) = branchy();
+        let (f, [t, zz, c]) = branchy(true);
+        let [x, y, z] = [f.params[0], f.params[1], f.params[2]];
         let mut of: Masks = f
             .body
             .yields
@@ -203,13 +209,36 @@ mod tests {
             .map(|(v, m)| (*v, m))
             .collect();
         needs(&f.body, &mut of, Calls::Inside);
-        let [x, y, z] = [f.params[0], f.params[1], f.params[2]];
-        assert_eq!([p, zz, cond].map(|v| mask(&of, &v)), [1, 1, 1]);
-        assert_eq!([x, y, z].map(|v| mask(&of, &v)), [1, 1 | 2, 1]);
-        // With only the second result asked for, the branch and all it reads are unneeded.
-        let mut of: Masks = [(f.body.yields[1], 2)].into();
+        assert_eq!([t, zz, c].map(|v| mask(&of, &v)), [2, 2, 1 | 2]);
+        assert_eq!([x, y, z].map(|v| mask(&of, &v)), [1 | 2, 1 | 2, 1 | 2]);
+        // With `s` gone, what only it chose is not needed.
+        let (f, [t, zz, c]) = branchy(false);
+        let mut of: Masks = [(f.body.yields[0], 1)].into();
         needs(&f.body, &mut of, Calls::Inside);
-        assert_eq!([x, y, z, p, cond].map(|v| mask(&of, &v)), [0, 2, 0, 0, 0]);
+        assert_eq!([t, zz, c].map(|v| mask(&of, &v)), [0, 0, 1]);
+    }
+
+    #[test]
+    fn dead_code_elimination_narrows_a_branch_to_the_outputs_needed() {
+        let (mut f, [t, zz, _]) = branchy(false);
+        crate::opt::dce(&mut f);
+        let Stmt::If {
+            then_block,
+            else_block,
+            outs,
+            ..
+        } = &f.body.stmts[1]
+        else {
+            panic!("the branch is kept: {f}");
+        };
+        assert_eq!(
+            (outs.len(), then_block.yields.len(), else_block.yields.len()),
+            (1, 1, 1)
+        );
+        assert!(
+            !f.body.defined().contains(&t) && !f.body.defined().contains(&zz),
+            "{f}"
+        );
     }
 
     #[test]
@@ -217,6 +246,7 @@ mod tests {
         // `[o1, o2] = call(x, y)` whose body yields `(x + x, y + y)`; only `o1` is needed.
         let mut f = Function::new("f");
         let [x, y] = ["x", "y"].map(|n| f.new_var(Scalar::F32, n));
+        f.params = vec![x, y];
         let (xx, let_xx) = add(&mut f, x, x);
         let (yy, let_yy) = add(&mut f, y, y);
         let outs = vec![f.new_var(Scalar::F32, "o1"), f.new_var(Scalar::F32, "o2")];
@@ -245,5 +275,9 @@ mod tests {
         };
         assert_eq!(needed(Calls::Whole), [1, 1, 1, 1, 0]);
         assert_eq!(needed(Calls::Inside), [1, 0, 1, 0, 0]);
+        // Seen from outside, each output depends on all the call reads.
+        let mut on: Masks = [(x, 1), (y, 2)].into();
+        depends(&f.body, 0, &mut on);
+        assert_eq!([outs[0], outs[1]].map(|o| mask(&on, &o)), [1 | 2, 1 | 2]);
     }
 }

@@ -115,6 +115,10 @@ impl Module {
                 ),
             }
         }
+        // Rust's namespaces: types, and values (constants and functions).
+        unique_names(struct_items.iter().map(|s| &s.ident), diag);
+        let values = const_items.iter().map(|c| &c.ident);
+        unique_names(values.chain(fn_items.iter().map(|f| &f.sig.ident)), diag);
         let mut resolver = Resolver {
             items: &struct_items,
             done: HashMap::new(),
@@ -165,6 +169,20 @@ impl Module {
             const_items,
             fns,
         })
+    }
+}
+
+/// Reports each name met a second time (rustc would, at a span the user cannot see once the
+/// module is expanded; the model would keep only one of them).
+fn unique_names<'a>(names: impl Iterator<Item = &'a syn::Ident>, diag: &Diag) {
+    let mut seen = std::collections::HashSet::new();
+    for name in names {
+        if !seen.insert(name) {
+            diag.error_at(
+                name,
+                format!("`{name}` is defined more than once in this module"),
+            );
+        }
     }
 }
 

@@ -306,3 +306,14 @@ fn expansion_is_the_same_every_time_with_constants_in_source_order() {
     );
     assert_eq!(out, expand());
 }
+
+#[test]
+fn a_name_defined_twice_is_an_error_at_the_second() {
+    let e = errors(
+        "mod m { const A: f32 = 1.0; fn f(x: f32) -> f32 { x * A } const A: f32 = 2.0; fn f() {} struct S { a: f32 } struct S { b: f32 } }",
+    );
+    let twice = |name: &str| format!("`{name}` is defined more than once in this module");
+    for name in ["A", "f", "S"] {
+        assert_eq!(e.iter().filter(|m| **m == twice(name)).count(), 1, "{e:?}");
+    }
+}
