@@ -13,9 +13,10 @@ use splat_runtime::io::dataset::{self, Dataset};
 use splat_runtime::io::image::write_image;
 use splat_runtime::io::ply::{self, GaussianCloud, ToStored};
 use splat_runtime::io::write_atomic;
+use splat_runtime::pipeline::MAX_SIDE;
 use splat_runtime::train::fit::{Evaluation, FitOptions, StepReport, fit_from, render_views};
 use splat_runtime::train::gpu_fit::{fit_gpu_from, render_views_gpu};
-use splat_runtime::train::loss::LossValue;
+use splat_runtime::train::loss::{LossValue, WINDOW};
 use splat_runtime::train::{Checkpoint, DensifyOptions, McmcOptions, Strategy, Trainable, init};
 use splat_runtime::{Effects, GradientSet, RenderOptions, param_groups};
 use std::collections::BTreeMap;
@@ -171,6 +172,7 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
             method.name
         );
     };
+    crate::check_out_folder(&args.out)?;
     let background = if args.white { Vec3::ONE } else { Vec3::ZERO };
     let t = Instant::now();
     let (data, name, defaults) = match &args.dataset {
@@ -237,6 +239,17 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
     }
     if data.train.is_empty() {
         bail!("{name}: no training views");
+    }
+    // Refused here, by file, rather than at the first step or evaluation that meets them.
+    for view in data.train.iter().chain(&data.test) {
+        let (w, h) = (view.image.width, view.image.height);
+        let side = WINDOW as u32..=MAX_SIDE;
+        if !(side.contains(&w) && side.contains(&h)) {
+            bail!(
+                "{} is {w}x{h} pixels: training takes views of {WINDOW} (the loss's SSIM window) to {MAX_SIDE} pixels a side",
+                view.name
+            );
+        }
     }
     let first = &data.train[0];
     methods::check_camera(method, methods, &first.camera)?;

@@ -30,7 +30,7 @@ use clap::{CommandFactory, FromArgMatches, Parser, Subcommand, ValueEnum};
 use splat_runtime::CameraModel;
 use splat_runtime::glam::Vec3;
 use splat_runtime::gpu::Gpu;
-use splat_runtime::io::{camera as camera_io, dataset, ply};
+use splat_runtime::io::{Outputs, camera as camera_io, dataset, ply};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -139,6 +139,7 @@ pub enum Lang {
 /// what a `main` returns.
 pub fn run(methods: &[Method]) -> ExitCode {
     quiet_device_select_layer();
+    end_quietly_on_a_closed_pipe();
     match run_with_args(methods, std::env::args_os()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => match e.downcast::<clap::Error>() {
@@ -149,6 +150,16 @@ pub fn run(methods: &[Method]) -> ExitCode {
                 ExitCode::FAILURE
             }
         },
+    }
+}
+
+/// A reader that stops early (`splat bench | head -1`) ends the program quietly, as it ends
+/// other Unix tools: Rust ignores SIGPIPE, so the next `println!` would panic instead.
+fn end_quietly_on_a_closed_pipe() {
+    #[cfg(unix)]
+    // SAFETY: restores the default action of one signal before any thread is started.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
 }
 
@@ -187,14 +198,19 @@ fn dispatch(cli: Cli, methods: &[Method]) -> Result<()> {
         Command::Bench(args) => bench::bench_cmd(&args, methods),
         Command::Tradeoff(args) => tradeoff::tradeoff_cmd(&args, methods),
         Command::Scene { out, camera_out } => {
-            ply::write(&out, &scene::planet())
+            // The scene and its camera appear together or not at all.
+            let mut outputs = Outputs::default();
+            let cloud = scene::planet();
+            (outputs.stage(&out, |w| ply::write_to(w, &cloud)))
                 .with_context(|| format!("writing {}", out.display()))?;
-            crate::wrote(&out);
-            if let Some(c) = camera_out {
-                camera_io::write(&c, &scene::camera(800, 600, CameraModel::Pinhole))
+            if let Some(c) = &camera_out {
+                let camera = scene::camera(800, 600, CameraModel::Pinhole);
+                (outputs.stage(c, |w| camera_io::write_to(w, &camera)))
                     .with_context(|| format!("writing {}", c.display()))?;
-                crate::wrote(&c);
             }
+            outputs.commit()?;
+            crate::wrote(&out);
+            camera_out.iter().for_each(|c| crate::wrote(c));
             Ok(())
         }
         Command::Dataset {
@@ -207,6 +223,12 @@ fn dispatch(cli: Cli, methods: &[Method]) -> Result<()> {
             if views < 2 {
                 anyhow::bail!(
                     "--views must be at least 2 (every 8th view, from the first, is a test view)"
+                );
+            }
+            let window = splat_runtime::train::loss::WINDOW as u32;
+            if width.min(height) < window {
+                anyhow::bail!(
+                    "--width and --height must be at least {window}: `splat fit` compares views by SSIM over {window}x{window} windows"
                 );
             }
             let background = if white { Vec3::ONE } else { Vec3::ZERO };
@@ -234,6 +256,17 @@ fn dispatch(cli: Cli, methods: &[Method]) -> Result<()> {
             }
         }
     }
+}
+
+/// Refuses, before any work, an output folder that is a file.
+pub(crate) fn check_out_folder(dir: &std::path::Path) -> Result<()> {
+    if dir.exists() && !dir.is_dir() {
+        anyhow::bail!(
+            "--out {}: it is a file, and the outputs go into a folder",
+            dir.display()
+        );
+    }
+    Ok(())
 }
 
 /// Says where an output went, as a full path (the default names land where `splat` runs).

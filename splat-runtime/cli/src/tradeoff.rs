@@ -176,6 +176,7 @@ pub fn tradeoff_cmd(args: &TradeoffArgs, methods: &[Method]) -> Result<()> {
     if args.iters == 0 {
         bail!("--iters must be at least 1");
     }
+    crate::check_out_folder(&args.out)?;
     // The evaluation-model rows compare every method's render of the same Gaussians with the
     // exact method's most accurate one (or this method's, where none is marked exact).
     let exact = methods.iter().find(|m| m.exact);

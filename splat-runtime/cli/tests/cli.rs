@@ -318,7 +318,7 @@ fn bad_scenes_are_refused_clearly() {
     };
 
     write(dir.path(), "truncated.ply", &good[..good.len() - 100]);
-    fails(&render("truncated.ply"), "truncated", &out);
+    fails(&render("truncated.ply"), "truncated.ply: truncated", &out);
 
     let text = String::from_utf8_lossy(&good).replacen(
         "property float scale_1\n",
@@ -329,7 +329,9 @@ fn bad_scenes_are_refused_clearly() {
     fails(&render("missing.ply"), "missing property `scale_1`", &out);
 
     write(dir.path(), "garbage.ply", b"not a ply at all");
-    fails(&render("garbage.ply"), "not a PLY", &out);
+    fails(&render("garbage.ply"), "garbage.ply: not a PLY", &out);
+    std::fs::create_dir(dir.path().join("folder.ply")).unwrap();
+    fails(&render("folder.ply"), "folder.ply: it is a folder", &out);
 
     let header_end = good.windows(11).position(|w| w == b"end_header\n").unwrap() + 11;
     let mut nan = good.clone();
@@ -362,7 +364,7 @@ fn bad_cameras_and_options_are_refused_clearly() {
     );
     fails(
         &render(&["--camera", "zero.json"]),
-        "image size 0x600",
+        "zero.json: camera image size 0x600",
         &out,
     );
     write(
@@ -410,7 +412,11 @@ fn bad_cameras_and_options_are_refused_clearly() {
         cam,
         std::fs::read_to_string(dir.path().join("scaled.json")).unwrap()
     );
-    fails(&render(&["--camera", "scaled.json"]), "not rigid", &out);
+    fails(
+        &render(&["--camera", "scaled.json"]),
+        "scaled.json: camera world_to_camera is not rigid",
+        &out,
+    );
     write(
         dir.path(),
         "kb.json",
@@ -922,6 +928,11 @@ fn dataset_writes_the_built_in_views_for_fit() {
         "--views must be at least 2",
         &dir.path().join("one"),
     );
+    fails(
+        &splat(&["dataset", "--out", "tiny", "--width", "8"], dir.path()),
+        "--width and --height must be at least 11",
+        &dir.path().join("tiny"),
+    );
 }
 
 #[test]
@@ -946,7 +957,41 @@ fn fit_refuses_a_missing_or_broken_dataset_by_name() {
         "transforms_test.json is not valid JSON",
         &out,
     );
+    write(dir.path(), "file", b"");
+    fails(
+        &splat(&["fit", "file"], dir.path()),
+        "cannot read file: a dataset is a folder, this is a file",
+        &out,
+    );
+    tiny_dataset(&dir.path().join("bent"), 2);
+    let json = dir.path().join("bent/transforms_train.json");
+    let text = std::fs::read_to_string(&json).unwrap();
+    std::fs::write(&json, text.replacen("[0, 1, 0, 0]", "[0, 2, 0, 0]", 1)).unwrap();
+    fails(
+        &splat(&["fit", "bent", "--steps", "2"], dir.path()),
+        "transforms_train.json: frames[0].transform_matrix is not a rigid pose",
+        &out,
+    );
+    tiny_dataset(&dir.path().join("small"), 2);
+    let eight = image::RgbaImage::from_pixel(8, 8, image::Rgba([90, 120, 150, 255]));
+    for split in ["train", "test"] {
+        for k in 0..2 {
+            eight
+                .save(dir.path().join(format!("small/{split}/r_{k}.png")))
+                .unwrap();
+        }
+    }
+    fails(
+        &splat(&["fit", "small", "--steps", "2"], dir.path()),
+        "r_0.png is 8x8 pixels: training takes views of 11",
+        &out,
+    );
     tiny_dataset(&dir.path().join("good"), 2);
+    fails(
+        &splat(&["fit", "good", "--out", "file"], dir.path()),
+        "--out file: it is a file",
+        &out,
+    );
     for (flag, value) in [
         ("--global-scale", "0"),
         ("--init-extent", "nan"),
@@ -1090,22 +1135,98 @@ fn fit_starts_from_a_colmap_datasets_points() {
 }
 
 /// `splat inspect | head` stops reading early: the command ends quietly, no panic.
+/// A reader that stops early (`| head`) ends a command quietly, as other Unix tools end: done,
+/// or stopped by SIGPIPE, never a panic.
 #[test]
-fn inspect_into_a_closed_pipe_exits_quietly() {
+fn a_closed_pipe_ends_a_command_quietly() {
     use std::io::Read;
-    let mut child = Command::new(env!("CARGO_BIN_EXE_splat"))
-        .args(["inspect", "--method", "3dgeer"])
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut first = [0u8; 16];
-    child.stdout.take().unwrap().read_exact(&mut first).unwrap();
-    // The pipe's reading end is closed here (dropped), as `head` does.
-    let out = child.wait_with_output().unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{stderr}");
-    assert!(!stderr.contains("panicked"), "{stderr}");
+    let dir = temp();
+    let commands: [&[&str]; 2] = [
+        &["inspect", "--method", "3dgeer"],
+        &[
+            "bench",
+            "--backend",
+            "cpu",
+            "--width",
+            "32",
+            "--height",
+            "24",
+            "--iters",
+            "1",
+        ],
+    ];
+    for args in commands {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_splat"))
+            .args(args)
+            .current_dir(dir.path())
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let mut first = [0u8; 16];
+        child.stdout.take().unwrap().read_exact(&mut first).unwrap();
+        // The pipe's reading end is closed here (dropped), as `head` does.
+        let out = child.wait_with_output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        #[cfg(unix)]
+        let quiet =
+            std::os::unix::process::ExitStatusExt::signal(&out.status) == Some(libc::SIGPIPE);
+        #[cfg(not(unix))]
+        let quiet = false;
+        assert!(
+            out.status.success() || quiet,
+            "{args:?}: {:?} {stderr}",
+            out.status
+        );
+        assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
+    }
+}
+
+/// A command's outputs that belong together (a picture and its depth, a scene and its camera)
+/// appear together or not at all: a failure leaves what was there.
+#[test]
+fn outputs_that_belong_together_appear_together_or_not_at_all() {
+    let dir = temp();
+    let small = ["--width", "32", "--height", "24", "--backend", "cpu"];
+    let render = |extra: &[&str]| {
+        let mut args = vec!["render", "--out", "o.png"];
+        args.extend_from_slice(&small);
+        args.extend_from_slice(extra);
+        splat(&args, dir.path())
+    };
+    ok(&render(&[]));
+    let kept = |name: &str| std::fs::read(dir.path().join(name)).unwrap();
+    let (picture, scene) = (kept("o.png"), {
+        ok(&splat(&["scene", "--out", "keep.ply"], dir.path()));
+        kept("keep.ply")
+    });
+    let refused = |out: Output, needle: &str| {
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && stderr.contains(needle), "{stderr}");
+        assert!(!stderr.contains("panicked"), "{stderr}");
+    };
+    std::fs::create_dir(dir.path().join("o.depth.png")).unwrap();
+    refused(
+        render(&["--depth", "--method", "3dgut"]),
+        "o.depth.png: it is a folder",
+    );
+    assert_eq!(kept("o.png"), picture, "the picture was replaced");
+    let scene_args = |camera: &'static str| ["scene", "--out", "keep.ply", "--camera-out", camera];
+    refused(
+        splat(&scene_args("nowhere/c.json"), dir.path()),
+        "nowhere/c.json",
+    );
+    refused(
+        splat(&scene_args("keep.ply"), dir.path()),
+        "another output of the same command goes there",
+    );
+    assert_eq!(kept("keep.ply"), scene, "the scene was replaced");
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|name| name.starts_with(".tmp"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
 }
 
 /// The depth PNG says how it maps depth, with the range, in its text metadata; outputs are

@@ -50,6 +50,11 @@ fn pinhole() -> String {
 pub enum CameraError {
     #[error("cannot read camera {path}: {error}")]
     Io { path: String, error: std::io::Error },
+    #[error("{path}: {error}")]
+    In {
+        path: String,
+        error: Box<CameraError>,
+    },
     #[error("camera {path} is not valid JSON for a camera: {error}")]
     Json {
         path: String,
@@ -77,9 +82,13 @@ pub enum CameraError {
     )]
     ShutterTurn(f32),
     #[error(
-        "camera world_to_camera is not rigid: its 3x3 part is off a rotation by {0:.2e} (R^T R - I, or a reflection); scale or shear would distort the render"
+        "camera {0} is not rigid: its 3x3 part is off a rotation by {1:.2e} (the largest entry of R^T R - I); scale or shear would distort the render"
     )]
-    NotRigid(f32),
+    NotRigid(&'static str, f32),
+    #[error(
+        "camera {0} mirrors the world (its 3x3 part has a negative determinant): a pose is a rotation"
+    )]
+    Mirrored(&'static str),
     #[error(
         "camera model {0} needs its coefficients `k`: [k1, k2, k3, k4] (for kannala_brandt, [0, 0, 0, 0] is the equidistant fisheye)"
     )]
@@ -178,8 +187,11 @@ fn rigid(m: &[[f32; 4]; 4], name: &'static str) -> Result<(Mat3, Vec3), CameraEr
         .to_cols_array()
         .iter()
         .fold(0.0f32, |a, v| a.max(v.abs()));
-    if off > 1e-3 || rotation.determinant() < 0.0 {
-        return Err(CameraError::NotRigid(off));
+    if off > 1e-3 {
+        return Err(CameraError::NotRigid(name, off));
+    }
+    if rotation.determinant() < 0.0 {
+        return Err(CameraError::Mirrored(name));
     }
     Ok((rotation, col(3)))
 }
@@ -217,13 +229,20 @@ pub fn read(path: &Path) -> Result<Camera, CameraError> {
         path: path.display().to_string(),
         error,
     })?;
-    file.to_camera()
+    file.to_camera().map_err(|error| CameraError::In {
+        path: path.display().to_string(),
+        error: Box::new(error),
+    })
 }
 
 pub fn write(path: &Path, camera: &Camera) -> std::io::Result<()> {
+    super::write_atomic(path, |w| write_to(w, camera))
+}
+
+pub fn write_to(w: &mut dyn std::io::Write, camera: &Camera) -> std::io::Result<()> {
     let json =
         serde_json::to_string_pretty(&CameraFile::from_camera(camera)).expect("serializable");
-    super::write_atomic(path, |w| w.write_all(json.as_bytes()))
+    w.write_all(json.as_bytes())
 }
 
 #[cfg(test)]

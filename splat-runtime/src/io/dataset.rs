@@ -15,7 +15,7 @@
 //! RGBA images are composited on the chosen background. Every error names the file and the
 //! field.
 
-use super::colmap;
+use super::{Outputs, colmap};
 use crate::pipeline::Image;
 use crate::types::{Camera, CameraModel};
 use glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
@@ -83,6 +83,8 @@ pub enum DatasetError {
     },
     #[error("cannot write {path}: {error}")]
     Write { path: PathBuf, error: String },
+    #[error(transparent)]
+    Output(super::image::ImageError),
     #[error("{path} is not valid JSON: {error}")]
     Json {
         path: PathBuf,
@@ -131,9 +133,13 @@ pub(super) fn field(
 /// RGBA images on `background`.
 pub fn read(dir: &Path, background: Vec3) -> Result<Dataset, DatasetError> {
     if !dir.is_dir() {
+        let why = match dir.exists() {
+            true => "a dataset is a folder, this is a file",
+            false => "no such folder",
+        };
         return Err(DatasetError::Io {
             path: dir.to_path_buf(),
-            error: std::io::Error::new(std::io::ErrorKind::NotFound, "no such folder"),
+            error: std::io::Error::new(std::io::ErrorKind::NotFound, why),
         });
     }
     if dir.join("transforms_train.json").exists() {
@@ -161,7 +167,7 @@ pub fn read_blender(dir: &Path, background: Vec3) -> Result<Dataset, DatasetErro
 /// coverage, and `transforms_train.json`, `transforms_test.json` with OpenGL camera-to-world
 /// matrices. The format says only a horizontal field of view per split, so every view must be
 /// a pinhole camera with square pixels, the principal point at the centre, and the split's
-/// first view's field of view. Every file is written atomically.
+/// first view's field of view. The files appear together or not at all.
 pub fn write_blender(dir: &Path, data: &Dataset) -> Result<(), DatasetError> {
     let splits = [("train", &data.train), ("test", &data.test)];
     // Everything is checked before anything is written.
@@ -172,20 +178,23 @@ pub fn write_blender(dir: &Path, data: &Dataset) -> Result<(), DatasetError> {
             views,
         )?);
     }
+    let mut outputs = Outputs::default();
     for ((name, views), angle) in splits.into_iter().zip(angles) {
         let mut frames = Vec::with_capacity(views.len());
         for (k, view) in views.iter().enumerate() {
             let file = format!("{name}/r_{k}");
-            write_rgba(&dir.join(format!("{file}.png")), view)?;
+            stage_rgba(&mut outputs, &dir.join(format!("{file}.png")), view)?;
             let c = &view.camera;
-            let w2c = Mat4::from_cols(
-                c.rotation.x_axis.extend(0.0),
-                c.rotation.y_axis.extend(0.0),
-                c.rotation.z_axis.extend(0.0),
-                c.translation.extend(1.0),
+            // The inverse of the rigid world-to-camera pose, exactly rigid in its last row.
+            let turn = c.rotation.transpose();
+            let c2w = Mat4::from_cols(
+                turn.x_axis.extend(0.0),
+                turn.y_axis.extend(0.0),
+                turn.z_axis.extend(0.0),
+                (-(turn * c.translation)).extend(1.0),
             );
             // OpenCV camera axes to OpenGL ones: y and z flip.
-            let c2w = w2c.inverse() * Mat4::from_diagonal(Vec4::new(1.0, -1.0, -1.0, 1.0));
+            let c2w = c2w * Mat4::from_diagonal(Vec4::new(1.0, -1.0, -1.0, 1.0));
             let rows: Vec<[f32; 4]> = (0..4).map(|i| c2w.row(i).to_array()).collect();
             frames.push(serde_json::json!({
                 "file_path": format!("./{file}"),
@@ -195,14 +204,17 @@ pub fn write_blender(dir: &Path, data: &Dataset) -> Result<(), DatasetError> {
         let json_path = dir.join(format!("transforms_{name}.json"));
         let json = serde_json::json!({ "camera_angle_x": angle, "frames": frames });
         let text = serde_json::to_string_pretty(&json).expect("JSON of numbers and strings");
-        super::write_atomic(&json_path, |w| w.write_all(text.as_bytes())).map_err(|error| {
+        (outputs.stage(&json_path, |w| w.write_all(text.as_bytes()))).map_err(|error| {
             DatasetError::Write {
                 path: json_path.clone(),
                 error: error.to_string(),
             }
         })?;
     }
-    Ok(())
+    outputs.commit().map_err(|e| DatasetError::Write {
+        path: e.path,
+        error: e.error.to_string(),
+    })
 }
 
 /// The horizontal field of view of a split's views, if the Blender format can hold them
@@ -232,13 +244,12 @@ fn blender_angle(json_path: &Path, views: &[View]) -> Result<f32, DatasetError> 
 
 /// A view as an 8-bit RGBA PNG: its coverage as alpha, its color taken off its background
 /// (straight alpha, as Blender writes it).
-fn write_rgba(path: &Path, view: &View) -> Result<(), DatasetError> {
-    let failed = |error: String| DatasetError::Write {
-        path: path.to_path_buf(),
-        error,
-    };
+fn stage_rgba(outputs: &mut Outputs, path: &Path, view: &View) -> Result<(), DatasetError> {
     if let Some(dir) = path.parent() {
-        std::fs::create_dir_all(dir).map_err(|e| failed(e.to_string()))?;
+        std::fs::create_dir_all(dir).map_err(|e| DatasetError::Write {
+            path: dir.to_path_buf(),
+            error: e.to_string(),
+        })?;
     }
     let b = view.background.to_array();
     let mut rgba = Vec::with_capacity(view.image.data.len() / 3 * 4);
@@ -257,7 +268,8 @@ fn write_rgba(path: &Path, view: &View) -> Result<(), DatasetError> {
         data: rgba,
         ..view.image
     };
-    super::image::write_image(path, &image).map_err(|e| failed(e.to_string()))
+    // The image writer's error names the file.
+    super::image::stage_image(outputs, path, &image).map_err(DatasetError::Output)
 }
 
 fn read_json(path: &Path) -> Result<serde_json::Value, DatasetError> {
@@ -290,6 +302,11 @@ pub fn read_nerfstudio(dir: &Path, background: Vec3) -> Result<Dataset, DatasetE
     for (k, frame) in frames.iter().enumerate() {
         let at = |f: &str| format!("frames[{k}].{f}");
         // A per-frame value overrides the global one.
+        // Where a value comes from, for errors.
+        let named = |name: &str| match frame.get(name) {
+            Some(_) => at(name),
+            None => name.to_string(),
+        };
         let number = |name: &str| -> Result<Option<f64>, DatasetError> {
             match frame.get(name).or_else(|| json.get(name)) {
                 None => Ok(None),
@@ -297,12 +314,28 @@ pub fn read_nerfstudio(dir: &Path, background: Vec3) -> Result<Dataset, DatasetE
                     .as_f64()
                     .filter(|x| x.is_finite())
                     .map(Some)
-                    .ok_or_else(|| field(&path, name, "must be a finite number")),
+                    .ok_or_else(|| field(&path, named(name), "must be a finite number")),
             }
         };
         let required = |name: &str| {
             number(name)?
                 .ok_or_else(|| field(&path, name, "is missing (globally and in the frame)"))
+        };
+        let positive = |name: &str| match required(name)? {
+            v if v > 0.0 => Ok(v),
+            v => Err(field(
+                &path,
+                named(name),
+                format!("must be positive, not {v}"),
+            )),
+        };
+        let side = |name: &str| match required(name)? {
+            v if v >= 1.0 && v.fract() == 0.0 && v <= u32::MAX as f64 => Ok(v as u32),
+            v => Err(field(
+                &path,
+                named(name),
+                format!("must be a whole number of pixels, not {v}"),
+            )),
         };
         let file = frame["file_path"]
             .as_str()
@@ -315,15 +348,19 @@ pub fn read_nerfstudio(dir: &Path, background: Vec3) -> Result<Dataset, DatasetE
             )
         })?;
         let image_path = dir.join(file);
+        let (w, h) = (side("w")?, side("h")?);
         let (image, coverage) = read_image(&image_path, background)?;
-        let (w, h) = (required("w")?, required("h")?);
-        if (w as u32, h as u32) != (image.width, image.height) {
-            return Err(DatasetError::Size {
-                path: image_path,
-                file: path.clone(),
-                got: (image.width, image.height),
-                want: (w as u32, h as u32),
-            });
+        if (w, h) != (image.width, image.height) {
+            return Err(field(
+                &path,
+                format!("{} and {}", named("w"), named("h")),
+                format!(
+                    "say {w}x{h} pixels, but {} is {}x{}",
+                    image_path.display(),
+                    image.width,
+                    image.height
+                ),
+            ));
         }
         let model = frame
             .get("camera_model")
@@ -362,13 +399,13 @@ pub fn read_nerfstudio(dir: &Path, background: Vec3) -> Result<Dataset, DatasetE
                 ));
             }
         };
-        let focal = Vec2::new(required("fl_x")? as f32, required("fl_y")? as f32);
+        let focal = Vec2::new(positive("fl_x")? as f32, positive("fl_y")? as f32);
         let camera = Camera {
             principal: Vec2::new(required("cx")? as f32, required("cy")? as f32),
             model: camera_model,
             distortion,
             ..posed_camera(&c2w, focal, &image)
-                .ok_or_else(|| field(&path, at("transform_matrix"), "has no inverse"))?
+                .map_err(|problem| field(&path, at("transform_matrix"), problem))?
         };
         let view = View {
             name: image_path.display().to_string(),
@@ -436,7 +473,7 @@ fn read_split(path: &Path, background: Vec3) -> Result<Vec<View>, DatasetError> 
         size = Some(dims);
         let focal = 0.5 * image.width as f32 / (0.5 * angle as f32).tan();
         let camera = posed_camera(&c2w, Vec2::splat(focal), &image)
-            .ok_or_else(|| field(path, at("transform_matrix"), "has no inverse"))?;
+            .map_err(|problem| field(path, at("transform_matrix"), problem))?;
         views.push(View {
             name: image_path.display().to_string(),
             camera,
@@ -462,16 +499,34 @@ fn matrix(v: &serde_json::Value) -> Option<Mat4> {
 }
 
 /// The OpenCV world-to-camera pose of an OpenGL camera-to-world matrix, in a pinhole camera
-/// with the principal point at the centre of `image` (its size).
-fn posed_camera(c2w_gl: &Mat4, focal: Vec2, image: &Image) -> Option<Camera> {
+/// with the principal point at the centre of `image` (its size); what is wrong with the matrix
+/// if it is not a rigid pose (scale or shear would distort every render against its image).
+fn posed_camera(c2w_gl: &Mat4, focal: Vec2, image: &Image) -> Result<Camera, String> {
+    // Written by other programs as the inverse of a pose: within rounding of the unit row.
+    if !c2w_gl.row(3).abs_diff_eq(Vec4::W, 1e-4) {
+        return Err(format!(
+            "must end with the row [0, 0, 0, 1], not {:?}",
+            c2w_gl.row(3).to_array()
+        ));
+    }
+    let rotation = Mat3::from_mat4(*c2w_gl);
+    let off = (rotation.transpose() * rotation - Mat3::IDENTITY)
+        .to_cols_array()
+        .iter()
+        .fold(0.0f32, |a, v| a.max(v.abs()));
+    if off > 1e-3 {
+        return Err(format!(
+            "is not a rigid pose: its 3x3 part is off a rotation by {off:.2e} (the largest entry of R^T R - I)"
+        ));
+    }
+    if rotation.determinant() < 0.0 {
+        return Err("mirrors the world (its 3x3 part has a negative determinant)".into());
+    }
     // OpenGL to OpenCV camera axes: y and z flip.
     let c2w = *c2w_gl * Mat4::from_diagonal(Vec4::new(1.0, -1.0, -1.0, 1.0));
-    if c2w.determinant().abs() < 1e-12 {
-        return None;
-    }
     let w2c = c2w.inverse();
     let size = Vec2::new(image.width as f32, image.height as f32);
-    Some(Camera {
+    Ok(Camera {
         rotation: Mat3::from_mat4(w2c),
         translation: w2c.w_axis.truncate(),
         focal,
@@ -616,5 +671,108 @@ mod tests {
         );
         let written = std::fs::read_dir(dir.path()).unwrap().count();
         assert_eq!(written, 0, "nothing is written");
+    }
+
+    /// A failed write leaves no view and no transforms behind.
+    #[test]
+    fn a_dataset_is_written_whole_or_not_at_all() {
+        let dir = tempfile::tempdir().unwrap();
+        let eyes = [Vec3::new(3.0, 1.0, -2.0), Vec3::new(-2.5, -0.5, 2.0)];
+        let data = Dataset {
+            train: eyes.iter().map(|e| view(*e, Vec3::ZERO)).collect(),
+            test: vec![view(Vec3::new(0.5, 2.0, 3.0), Vec3::ZERO)],
+            points: vec![],
+        };
+        std::fs::create_dir_all(dir.path().join("test/r_0.png")).unwrap();
+        let err = write_blender(dir.path(), &data).unwrap_err().to_string();
+        assert!(err.contains("r_0.png: it is a folder"), "{err}");
+        for written in [
+            "train/r_0.png",
+            "transforms_train.json",
+            "transforms_test.json",
+        ] {
+            assert!(!dir.path().join(written).exists(), "{written} was written");
+        }
+    }
+
+    /// A one-view nerfstudio dataset (a 30 x 20 picture) whose `transforms.json` has `fields`
+    /// over good ones (a `frame` field overrides its frame's), read back.
+    fn nerfstudio(fields: serde_json::Value, frame: serde_json::Value) -> String {
+        let dir = tempfile::tempdir().unwrap();
+        let picture = view(Vec3::new(3.0, 1.0, -2.0), Vec3::ZERO).image;
+        super::super::image::write_image(&dir.path().join("a.png"), &picture).unwrap();
+        let mut json = serde_json::json!({
+            "fl_x": 24.0, "fl_y": 24.0, "cx": 15.0, "cy": 10.0, "w": 30, "h": 20,
+            "frames": [{
+                "file_path": "a.png",
+                "transform_matrix": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 3], [0, 0, 0, 1]],
+            }],
+        });
+        json.as_object_mut()
+            .unwrap()
+            .extend(fields.as_object().unwrap().clone());
+        let first = json["frames"][0].as_object_mut().unwrap();
+        first.extend(frame.as_object().unwrap().clone());
+        std::fs::write(dir.path().join("transforms.json"), json.to_string()).unwrap();
+        match read_nerfstudio(dir.path(), Vec3::ZERO) {
+            Ok(data) => format!("read {} view", data.test.len()),
+            Err(e) => e.to_string(),
+        }
+    }
+
+    /// Intrinsics and poses that would render something else than the picture are refused by
+    /// field (the frame's where it has one).
+    #[test]
+    fn nerfstudio_values_are_checked_by_field() {
+        use serde_json::json;
+        let none = json!({});
+        assert_eq!(nerfstudio(none.clone(), none.clone()), "read 1 view");
+        let cases = [
+            (
+                json!({"fl_x": 0.0}),
+                none.clone(),
+                "fl_x must be positive, not 0",
+            ),
+            (
+                none.clone(),
+                json!({"fl_y": -5.0}),
+                "frames[0].fl_y must be positive",
+            ),
+            (
+                json!({"w": 30.5}),
+                none.clone(),
+                "w must be a whole number of pixels",
+            ),
+            (
+                json!({"h": -1}),
+                none.clone(),
+                "h must be a whole number of pixels",
+            ),
+            (
+                json!({"w": 31}),
+                none.clone(),
+                "w and h say 31x20 pixels, but",
+            ),
+            (
+                none.clone(),
+                json!({"transform_matrix": [[2, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 3], [0, 0, 0, 1]]}),
+                "frames[0].transform_matrix is not a rigid pose",
+            ),
+            (
+                none.clone(),
+                json!({"transform_matrix": [[-1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 3], [0, 0, 0, 1]]}),
+                "frames[0].transform_matrix mirrors the world",
+            ),
+            (
+                none.clone(),
+                json!({"transform_matrix": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 3], [0.1, 0, 0, 1]]}),
+                "frames[0].transform_matrix must end with the row [0, 0, 0, 1]",
+            ),
+        ];
+        for (fields, frame, want) in cases {
+            let got = nerfstudio(fields, frame);
+            assert!(got.contains("transforms.json: "), "{got}");
+            assert!(got.contains(want), "{want}: {got}");
+        }
     }
 }

@@ -3,6 +3,7 @@
 //! PNG and EXR hold color (and alpha as a fourth channel when rendered); the depth goes to a
 //! sibling file `<stem>.depth.<ext>`. Every file is written atomically.
 
+use super::{CommitError, Outputs};
 use crate::pipeline::{Frame, Image};
 use std::path::{Path, PathBuf};
 
@@ -14,6 +15,12 @@ pub enum ImageError {
     Channels(usize),
     #[error("cannot write {path}: {error}")]
     Io { path: String, error: std::io::Error },
+}
+
+impl From<CommitError> for ImageError {
+    fn from(e: CommitError) -> Self {
+        io(&e.path)(e.error)
+    }
 }
 
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> ImageError + '_ {
@@ -48,14 +55,17 @@ pub fn write_frame(path: &Path, frame: &Frame) -> Result<Vec<PathBuf>, ImageErro
                 (Some(a), 3) => stack(&[&frame.color, a]),
                 _ => frame.color.clone(),
             };
-            write_picture(path, &ext, &color, false)?;
+            // The picture and its depth appear together or not at all.
+            let mut outputs = Outputs::default();
+            stage_picture(&mut outputs, path, &ext, &color, false)?;
             let mut written = vec![path.to_path_buf()];
             if let Some(d) = &frame.depth {
                 let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("out");
                 let depth_path = path.with_file_name(format!("{stem}.depth.{ext}"));
-                write_picture(&depth_path, &ext, d, true)?;
+                stage_picture(&mut outputs, &depth_path, &ext, d, true)?;
                 written.push(depth_path);
             }
+            outputs.commit()?;
             Ok(written)
         }
         _ => Err(ImageError::Extension(path.display().to_string())),
@@ -65,7 +75,7 @@ pub fn write_frame(path: &Path, frame: &Frame) -> Result<Vec<PathBuf>, ImageErro
 /// Depth as an 8-bit PNG over its visible range: nearest 255, farthest 26, no hit 0, with the
 /// mapping and the range in a `Description` text chunk (a viewer shows shape, not metres; the
 /// EXR and NPY outputs keep the values).
-fn write_depth_png(path: &Path, im: &Image) -> Result<(), ImageError> {
+fn stage_depth_png(outputs: &mut Outputs, path: &Path, im: &Image) -> Result<(), ImageError> {
     let (lo, hi) = im
         .data
         .iter()
@@ -88,20 +98,21 @@ fn write_depth_png(path: &Path, im: &Image) -> Result<(), ImageError> {
         ),
         false => "expected depth: nothing hit (every pixel 0)".to_string(),
     };
-    super::write_atomic(path, |w| {
-        let mut encoder = png::Encoder::new(w, im.width, im.height);
-        encoder.set_color(png::ColorType::Grayscale);
-        encoder.set_depth(png::BitDepth::Eight);
-        encoder
-            .add_text_chunk("Description".into(), description)
-            .map_err(std::io::Error::other)?;
-        let mut writer = encoder.write_header().map_err(std::io::Error::other)?;
-        writer
-            .write_image_data(&bytes)
-            .map_err(std::io::Error::other)?;
-        writer.finish().map_err(std::io::Error::other)
-    })
-    .map_err(io(path))
+    outputs
+        .stage(path, |w| {
+            let mut encoder = png::Encoder::new(w, im.width, im.height);
+            encoder.set_color(png::ColorType::Grayscale);
+            encoder.set_depth(png::BitDepth::Eight);
+            encoder
+                .add_text_chunk("Description".into(), description)
+                .map_err(std::io::Error::other)?;
+            let mut writer = encoder.write_header().map_err(std::io::Error::other)?;
+            writer
+                .write_image_data(&bytes)
+                .map_err(std::io::Error::other)?;
+            writer.finish().map_err(std::io::Error::other)
+        })
+        .map_err(io(path))
 }
 
 /// Interleaves images of the same size channel-wise.
@@ -125,19 +136,32 @@ pub fn stack(images: &[&Image]) -> Image {
 /// Writes one image (1, 3 or 4 channels) as PNG (8 bits, clamped to [0, 1]) or EXR, by the
 /// extension of `path`.
 pub fn write_image(path: &Path, im: &Image) -> Result<(), ImageError> {
+    let mut outputs = Outputs::default();
+    stage_image(&mut outputs, path, im)?;
+    Ok(outputs.commit()?)
+}
+
+/// [`write_image`] as one of several outputs that appear together.
+pub fn stage_image(outputs: &mut Outputs, path: &Path, im: &Image) -> Result<(), ImageError> {
     let ext = extension(path);
     match ext.as_str() {
-        "png" | "exr" => write_picture(path, &ext, im, false),
+        "png" | "exr" => stage_picture(outputs, path, &ext, im, false),
         _ => Err(ImageError::Extension(path.display().to_string())),
     }
 }
 
-fn write_picture(path: &Path, ext: &str, im: &Image, depth: bool) -> Result<(), ImageError> {
+fn stage_picture(
+    outputs: &mut Outputs,
+    path: &Path,
+    ext: &str,
+    im: &Image,
+    depth: bool,
+) -> Result<(), ImageError> {
     if ![1, 3, 4].contains(&im.channels) {
         return Err(ImageError::Channels(im.channels));
     }
     if depth && ext == "png" {
-        return write_depth_png(path, im);
+        return stage_depth_png(outputs, path, im);
     }
     let data = im.data.clone();
     let (w, h) = (im.width, im.height);
@@ -172,14 +196,15 @@ fn write_picture(path: &Path, ext: &str, im: &Image, depth: bool) -> Result<(), 
     } else {
         image::ImageFormat::OpenExr
     };
-    super::write_atomic(path, |w| {
-        let mut buf = std::io::Cursor::new(Vec::new());
-        dynamic
-            .write_to(&mut buf, format)
-            .map_err(std::io::Error::other)?;
-        w.write_all(buf.get_ref())
-    })
-    .map_err(io(path))
+    outputs
+        .stage(path, |w| {
+            let mut buf = std::io::Cursor::new(Vec::new());
+            dynamic
+                .write_to(&mut buf, format)
+                .map_err(std::io::Error::other)?;
+            w.write_all(buf.get_ref())
+        })
+        .map_err(io(path))
 }
 
 /// NumPy `.npy` v1.0, little-endian float32, shape (H, W, C).

@@ -9,7 +9,7 @@ pub mod image;
 pub mod ply;
 
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Writes `path` through a temporary file in the same folder and a rename, so a failed or
 /// interrupted write never leaves a partial file behind.
@@ -17,24 +17,81 @@ pub fn write_atomic(
     path: &Path,
     write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
 ) -> std::io::Result<()> {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    let mut tmp = tempfile::NamedTempFile::new_in(dir)?;
-    {
-        let mut buf = std::io::BufWriter::new(tmp.as_file_mut());
-        write(&mut buf)?;
-        buf.flush()?;
+    let mut outputs = Outputs::default();
+    outputs.stage(path, write)?;
+    outputs.commit().map_err(|e| e.error)
+}
+
+/// Files that appear together or not at all (a picture and its depth, a scene and its camera,
+/// a dataset's views and transforms): each is written to a temporary file beside its target,
+/// and none is moved into place until every one is written. Dropped uncommitted, the staged
+/// files are deleted and the targets left as they were.
+#[derive(Default)]
+pub struct Outputs {
+    staged: Vec<(tempfile::TempPath, PathBuf)>,
+}
+
+impl Outputs {
+    /// Writes what `write` writes to a temporary file that [`Outputs::commit`] moves to `path`.
+    pub fn stage(
+        &mut self,
+        path: &Path,
+        write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
+    ) -> std::io::Result<()> {
+        let dir = match path.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d,
+            _ => Path::new("."),
+        };
+        let mut tmp = tempfile::NamedTempFile::new_in(dir)?;
+        {
+            let mut buf = std::io::BufWriter::new(tmp.as_file_mut());
+            write(&mut buf)?;
+            buf.flush()?;
+        }
+        tmp.as_file().sync_all()?;
+        // Temporary files are private (0600); an output should get the usual permissions.
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            tmp.as_file()
+                .set_permissions(std::fs::Permissions::from_mode(0o644))?;
+        }
+        // Closed now: a dataset stages hundreds of files.
+        self.staged.push((tmp.into_temp_path(), path.to_path_buf()));
+        Ok(())
     }
-    tmp.as_file().sync_all()?;
-    // Temporary files are private (0600); an output should get the usual permissions.
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        tmp.as_file()
-            .set_permissions(std::fs::Permissions::from_mode(0o644))?;
+
+    /// Moves every staged file into place, after checking that none would land on a folder
+    /// or on a path another one takes (the renames themselves, within one folder, do not fail
+    /// for other reasons short of the disk going away).
+    pub fn commit(self) -> Result<(), CommitError> {
+        let mut targets = std::collections::HashSet::new();
+        for (_, path) in &self.staged {
+            let refused = |why: &str| CommitError {
+                path: path.clone(),
+                error: std::io::Error::new(std::io::ErrorKind::InvalidInput, why),
+            };
+            if path.is_dir() {
+                return Err(refused("it is a folder"));
+            }
+            if !targets.insert(path.clone()) {
+                return Err(refused("another output of the same command goes there"));
+            }
+        }
+        for (tmp, path) in self.staged {
+            tmp.persist(&path).map_err(|e| CommitError {
+                path,
+                error: e.error,
+            })?;
+        }
+        Ok(())
     }
-    tmp.persist(path).map_err(|e| e.error)?;
-    Ok(())
+}
+
+/// A staged output that could not be put in place.
+#[derive(Debug, thiserror::Error)]
+#[error("cannot write {}: {error}", path.display())]
+pub struct CommitError {
+    pub path: PathBuf,
+    pub error: std::io::Error,
 }

@@ -32,6 +32,8 @@ pub struct GaussianCloud {
 pub enum PlyError {
     #[error("cannot read {path}: {error}")]
     Io { path: String, error: std::io::Error },
+    #[error("{path}: {error}")]
+    In { path: String, error: Box<PlyError> },
     #[error("not a PLY file (it must start with `ply`)")]
     NotPly,
     #[error("unsupported PLY format `{0}`: only binary_little_endian 1.0 is supported")]
@@ -87,8 +89,14 @@ pub fn read(path: &Path) -> Result<GaussianCloud, PlyError> {
         path: path.display().to_string(),
         error,
     };
+    if path.is_dir() {
+        return Err(io(std::io::Error::other("it is a folder")));
+    }
     let file = std::fs::File::open(path).map_err(io)?;
-    parse(&mut std::io::BufReader::new(file))
+    parse(&mut std::io::BufReader::new(file)).map_err(|error| PlyError::In {
+        path: path.display().to_string(),
+        error: Box::new(error),
+    })
 }
 
 /// Parses a PLY stream (header, then the vertex data).
