@@ -118,6 +118,7 @@ pub fn parse(r: &mut impl BufRead) -> Result<GaussianCloud, PlyError> {
         return Err(PlyError::NotPly);
     }
     let mut count = None;
+    let mut format = false;
     let mut props: Vec<(String, Kind)> = vec![];
     let mut in_vertex = false;
     loop {
@@ -129,6 +130,7 @@ pub fn parse(r: &mut impl BufRead) -> Result<GaussianCloud, PlyError> {
                 if *f != "binary_little_endian" || *v != "1.0" {
                     return Err(PlyError::Format(format!("{f} {v}")));
                 }
+                format = true;
             }
             ["comment", ..] | ["obj_info", ..] | [] => {}
             ["element", name, n] => {
@@ -160,21 +162,37 @@ pub fn parse(r: &mut impl BufRead) -> Result<GaussianCloud, PlyError> {
             _ => return Err(PlyError::Header(format!("unexpected line `{l}`"))),
         }
     }
+    if !format {
+        return Err(PlyError::Header(
+            "no `format` line (binary_little_endian 1.0 expected)".into(),
+        ));
+    }
     let count = count.ok_or_else(|| PlyError::Header("no `element vertex`".into()))?;
     let index: HashMap<&str, usize> = props
         .iter()
         .enumerate()
         .map(|(i, (n, _))| (n.as_str(), i))
         .collect();
-    let find = |n: &str| {
-        index
-            .get(n)
-            .copied()
-            .ok_or_else(|| PlyError::Missing(n.into()))
+    // A Gaussian's properties are real numbers: a byte would be read as 0..255.
+    let find = |n: &str| match index.get(n) {
+        None => Err(PlyError::Missing(n.into())),
+        Some(&i) if matches!(props[i].1, Kind::U8) => Err(PlyError::Header(format!(
+            "property `{n}` is a byte: a Gaussian's properties are float or double"
+        ))),
+        Some(&i) => Ok(i),
     };
     let rest = (0..)
         .take_while(|k| index.contains_key(format!("f_rest_{k}").as_str()))
         .count();
+    let named_rest = props
+        .iter()
+        .filter(|(n, _)| n.starts_with("f_rest_"))
+        .count();
+    if named_rest != rest {
+        return Err(PlyError::Header(format!(
+            "{named_rest} f_rest properties, but f_rest_{rest} is missing (they are numbered from 0)"
+        )));
+    }
     let sh_degree = match rest {
         0 => 0,
         9 => 1,
@@ -406,6 +424,17 @@ mod tests {
                 .to_string()
                 .contains("ascii")
         );
+
+        let text = String::from_utf8_lossy(&bytes);
+        let gap = text.replace("property float f_rest_3\n", "property float f_rest_99\n");
+        let e = parse(&mut gap.as_bytes()).unwrap_err().to_string();
+        assert!(e.contains("but f_rest_3 is missing"), "{e}");
+        let formatless = text.replace("format binary_little_endian 1.0\n", "");
+        let e = parse(&mut formatless.as_bytes()).unwrap_err().to_string();
+        assert!(e.contains("no `format` line"), "{e}");
+        let byte = text.replace("property float opacity\n", "property uchar opacity\n");
+        let e = parse(&mut byte.as_bytes()).unwrap_err().to_string();
+        assert!(e.contains("property `opacity` is a byte"), "{e}");
 
         let mut nan = c.clone();
         nan.gaussians[2].mean.y = f32::NAN;
