@@ -258,12 +258,19 @@ fn dispatch(cli: Cli, methods: &[Method]) -> Result<()> {
     }
 }
 
-/// Refuses, before any work, an output folder that is a file.
+/// Refuses, before any work, an output folder that is a file or would be made inside one.
 pub(crate) fn check_out_folder(dir: &std::path::Path) -> Result<()> {
-    if dir.exists() && !dir.is_dir() {
+    let Some(existing) = dir.ancestors().find(|a| a.exists()) else {
+        return Ok(());
+    };
+    if !existing.is_dir() {
         anyhow::bail!(
-            "--out {}: it is a file, and the outputs go into a folder",
-            dir.display()
+            "--out {}: {} is a file, and the outputs go into a folder",
+            dir.display(),
+            match existing == dir {
+                true => "it".to_string(),
+                false => existing.display().to_string(),
+            }
         );
     }
     Ok(())

@@ -992,6 +992,11 @@ fn fit_refuses_a_missing_or_broken_dataset_by_name() {
         "--out file: it is a file",
         &out,
     );
+    fails(
+        &splat(&["fit", "good", "--out", "file/run"], dir.path()),
+        "--out file/run: file is a file",
+        &out,
+    );
     for (flag, value) in [
         ("--global-scale", "0"),
         ("--init-extent", "nan"),
@@ -1135,11 +1140,13 @@ fn fit_starts_from_a_colmap_datasets_points() {
 }
 
 /// `splat inspect | head` stops reading early: the command ends quietly, no panic.
-/// A reader that stops early (`| head`) ends a command quietly, as other Unix tools end: done,
-/// or stopped by SIGPIPE, never a panic.
+/// A reader that stops early (`| head`) ends a command quietly, as other Unix tools end:
+/// stopped by SIGPIPE, never a panic. The pipe is closed before the command starts, so its
+/// first line meets it.
+#[cfg(unix)]
 #[test]
 fn a_closed_pipe_ends_a_command_quietly() {
-    use std::io::Read;
+    use std::os::unix::process::ExitStatusExt;
     let dir = temp();
     let commands: [&[&str]; 2] = [
         &["inspect", "--method", "3dgeer"],
@@ -1156,27 +1163,19 @@ fn a_closed_pipe_ends_a_command_quietly() {
         ],
     ];
     for args in commands {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_splat"))
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        let out = Command::new(env!("CARGO_BIN_EXE_splat"))
             .args(args)
             .current_dir(dir.path())
-            .stdout(std::process::Stdio::piped())
-            .stderr(std::process::Stdio::piped())
-            .spawn()
+            .stdout(writer)
+            .output()
             .unwrap();
-        let mut first = [0u8; 16];
-        child.stdout.take().unwrap().read_exact(&mut first).unwrap();
-        // The pipe's reading end is closed here (dropped), as `head` does.
-        let out = child.wait_with_output().unwrap();
         let stderr = String::from_utf8_lossy(&out.stderr);
-        #[cfg(unix)]
-        let quiet =
-            std::os::unix::process::ExitStatusExt::signal(&out.status) == Some(libc::SIGPIPE);
-        #[cfg(not(unix))]
-        let quiet = false;
-        assert!(
-            out.status.success() || quiet,
-            "{args:?}: {:?} {stderr}",
-            out.status
+        assert_eq!(
+            out.status.signal(),
+            Some(libc::SIGPIPE),
+            "{args:?}: {stderr}"
         );
         assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
     }
@@ -1196,10 +1195,10 @@ fn outputs_that_belong_together_appear_together_or_not_at_all() {
     };
     ok(&render(&[]));
     let kept = |name: &str| std::fs::read(dir.path().join(name)).unwrap();
-    let (picture, scene) = (kept("o.png"), {
-        ok(&splat(&["scene", "--out", "keep.ply"], dir.path()));
-        kept("keep.ply")
-    });
+    let picture = kept("o.png");
+    // What a failed `scene` would write over it is not this.
+    let scene = write(dir.path(), "keep.ply", b"what was there");
+    let scene = std::fs::read(scene).unwrap();
     let refused = |out: Output, needle: &str| {
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert!(!out.status.success() && stderr.contains(needle), "{stderr}");
@@ -1216,10 +1215,12 @@ fn outputs_that_belong_together_appear_together_or_not_at_all() {
         splat(&scene_args("nowhere/c.json"), dir.path()),
         "nowhere/c.json",
     );
-    refused(
-        splat(&scene_args("keep.ply"), dir.path()),
-        "another output of the same command goes there",
-    );
+    for same in ["keep.ply", "./keep.ply"] {
+        refused(
+            splat(&scene_args(same), dir.path()),
+            "another output of the same command goes there",
+        );
+    }
     assert_eq!(kept("keep.ply"), scene, "the scene was replaced");
     let leftovers: Vec<_> = std::fs::read_dir(dir.path())
         .unwrap()

@@ -134,12 +134,15 @@ pub(super) fn field(
 pub fn read(dir: &Path, background: Vec3) -> Result<Dataset, DatasetError> {
     if !dir.is_dir() {
         let why = match dir.exists() {
-            true => "a dataset is a folder, this is a file",
-            false => "no such folder",
+            true => (
+                std::io::ErrorKind::NotADirectory,
+                "a dataset is a folder, this is a file",
+            ),
+            false => (std::io::ErrorKind::NotFound, "no such folder"),
         };
         return Err(DatasetError::Io {
             path: dir.to_path_buf(),
-            error: std::io::Error::new(std::io::ErrorKind::NotFound, why),
+            error: std::io::Error::new(why.0, why.1),
         });
     }
     if dir.join("transforms_train.json").exists() {
@@ -366,7 +369,7 @@ pub fn read_nerfstudio(dir: &Path, background: Vec3) -> Result<Dataset, DatasetE
             .get("camera_model")
             .or_else(|| json.get("camera_model"))
             .map_or(Some("PINHOLE"), |m| m.as_str())
-            .ok_or_else(|| field(&path, "camera_model", "must be a string"))?;
+            .ok_or_else(|| field(&path, named("camera_model"), "must be a string"))?;
         let coefficient = |name: &str| Ok::<f32, DatasetError>(number(name)?.unwrap_or(0.0) as f32);
         let (camera_model, distortion) = match model {
             "PINHOLE" => (CameraModel::Pinhole, Vec4::ZERO),
@@ -375,7 +378,7 @@ pub fn read_nerfstudio(dir: &Path, background: Vec3) -> Result<Dataset, DatasetE
                     if coefficient(name)? != 0.0 {
                         return Err(field(
                             &path,
-                            name,
+                            named(name),
                             "is not zero: OPENCV distortion is not supported (undistort the images, or calibrate as OPENCV_FISHEYE)",
                         ));
                     }
@@ -394,7 +397,7 @@ pub fn read_nerfstudio(dir: &Path, background: Vec3) -> Result<Dataset, DatasetE
             other => {
                 return Err(field(
                     &path,
-                    "camera_model",
+                    named("camera_model"),
                     format!("`{other}` is not supported (PINHOLE, OPENCV, OPENCV_FISHEYE)"),
                 ));
             }

@@ -25,7 +25,7 @@ pub fn write_atomic(
 /// Files that appear together or not at all (a picture and its depth, a scene and its camera,
 /// a dataset's views and transforms): each is written to a temporary file beside its target,
 /// and none is moved into place until every one is written. Dropped uncommitted, the staged
-/// files are deleted and the targets left as they were.
+/// files are deleted and the targets left as they were (folders made for them stay).
 #[derive(Default)]
 pub struct Outputs {
     staged: Vec<(tempfile::TempPath, PathBuf)>,
@@ -62,8 +62,9 @@ impl Outputs {
     }
 
     /// Moves every staged file into place, after checking that none would land on a folder
-    /// or on a path another one takes (the renames themselves, within one folder, do not fail
-    /// for other reasons short of the disk going away).
+    /// or on a path another one takes. Only the renames are left by then: one that fails
+    /// midway (a target held open on Windows, a folder that forbids replacing another's file)
+    /// leaves the targets renamed before it replaced.
     pub fn commit(self) -> Result<(), CommitError> {
         let mut targets = std::collections::HashSet::new();
         for (_, path) in &self.staged {
@@ -71,10 +72,11 @@ impl Outputs {
                 path: path.clone(),
                 error: std::io::Error::new(std::io::ErrorKind::InvalidInput, why),
             };
-            if path.is_dir() {
+            // A link to a folder would be replaced, not followed.
+            if std::fs::symlink_metadata(path).is_ok_and(|m| m.is_dir()) {
                 return Err(refused("it is a folder"));
             }
-            if !targets.insert(path.clone()) {
+            if !targets.insert(same_file_key(path)) {
                 return Err(refused("another output of the same command goes there"));
             }
         }
@@ -86,6 +88,17 @@ impl Outputs {
         }
         Ok(())
     }
+}
+
+/// What names one file however the path is spelled (`a.ply`, `./a.ply`, `d/../a.ply`): the
+/// canonical folder (it exists: the staged file is in it) and the name.
+fn same_file_key(path: &Path) -> (PathBuf, Option<std::ffi::OsString>) {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let dir = dir.canonicalize().unwrap_or_else(|_| dir.to_path_buf());
+    (dir, path.file_name().map(|n| n.to_os_string()))
 }
 
 /// A staged output that could not be put in place.
