@@ -9,10 +9,10 @@ use anyhow::{Context, Result, anyhow, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use plotters::prelude::*;
 use splat_runtime::glam::Vec3;
+use splat_runtime::io::Outputs;
 use splat_runtime::io::dataset::{self, Dataset};
-use splat_runtime::io::image::write_image;
+use splat_runtime::io::image::stage_image;
 use splat_runtime::io::ply::{self, GaussianCloud, ToStored};
-use splat_runtime::io::write_atomic;
 use splat_runtime::pipeline::MAX_SIDE;
 use splat_runtime::train::fit::{Evaluation, FitOptions, StepReport, fit_from, render_views};
 use splat_runtime::train::gpu_fit::{fit_gpu_from, render_views_gpu};
@@ -425,10 +425,11 @@ impl Fit<'_> {
             if let Some(c) = r.checkpoint
                 && saved.is_ok()
             {
-                saved = c
-                    .write(&checkpoint_path)
+                let mut outputs = Outputs::default();
+                saved = (outputs.stage(&checkpoint_path, |w| c.write_to(w)))
                     .with_context(|| format!("writing {}", checkpoint_path.display()))
-                    .and_then(|()| log.write_csv(&metrics));
+                    .and_then(|()| log.stage_csv(&mut outputs, &metrics))
+                    .and_then(|()| Ok(outputs.commit()?));
             }
             // Without a terminal (a log, a batch job) the bar draws nothing: a line every
             // twentieth of the run instead.
@@ -494,13 +495,18 @@ impl Fit<'_> {
             sh_degree: 3,
             gaussians: params.iter().map(ToStored::to_stored).collect(),
         };
-        ply::write(&ply_path, &cloud).with_context(|| format!("writing {}", ply_path.display()))?;
+        // The result, its renders, the metrics and the curve appear together.
+        let mut outputs = Outputs::default();
+        (outputs.stage(&ply_path, |w| ply::write_to(w, &cloud)))
+            .with_context(|| format!("writing {}", ply_path.display()))?;
         for (k, image) in images.iter().enumerate() {
             let path = out.join("test").join(format!("{k:03}.png"));
-            write_image(&path, image).with_context(|| format!("writing {}", path.display()))?;
+            stage_image(&mut outputs, &path, image)
+                .with_context(|| format!("writing {}", path.display()))?;
         }
-        log.write_csv(&metrics)?;
-        log.plot(&out.join("curve.png"))?;
+        log.stage_csv(&mut outputs, &metrics)?;
+        log.plot(&mut outputs, &out.join("curve.png"))?;
+        outputs.commit()?;
         crate::wrote(out);
         Ok(())
     }
@@ -658,7 +664,7 @@ impl Log {
 
     /// One row per step: the loss, its L1 and SSIM terms, the primitive count, and the test
     /// PSNR and SSIM where measured (step 0: before training).
-    fn write_csv(&self, path: &Path) -> Result<()> {
+    fn stage_csv(&self, outputs: &mut Outputs, path: &Path) -> Result<()> {
         let evals: BTreeMap<usize, Evaluation> = self.evaluations.iter().copied().collect();
         let test = |step: usize| match evals.get(&step) {
             Some(e) => format!("{:.4},{:.5}", e.psnr, e.ssim),
@@ -678,13 +684,13 @@ impl Log {
             ));
         }
         let text = rows.join("\n") + "\n";
-        write_atomic(path, |w| w.write_all(text.as_bytes()))
+        (outputs.stage(path, |w| w.write_all(text.as_bytes())))
             .with_context(|| format!("writing {}", path.display()))
     }
 
     /// The training loss (a running mean over 50 steps, in decades) above the test PSNR, by
     /// step.
-    fn plot(&self, path: &Path) -> Result<()> {
+    fn plot(&self, outputs: &mut Outputs, path: &Path) -> Result<()> {
         let last = self.steps.last().map_or(1, |s| s.0);
         let window = 50;
         let smooth: Vec<(f64, f64)> = self
@@ -700,7 +706,7 @@ impl Log {
             .iter()
             .map(|(s, e)| (*s as f64, e.psnr))
             .collect();
-        plot::png(path, (900, 640), |root| {
+        plot::png(outputs, path, (900, 640), |root| {
             let err = plot::drawing("training curve".into());
             let (top, bottom) = root.split_vertically(320);
             let caption = "training loss (mean of 50 steps)";

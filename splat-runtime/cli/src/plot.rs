@@ -1,10 +1,12 @@
 //! Plots as PNG: drawn by plotters into a pixel buffer (text in DejaVu Sans, embedded, so no
-//! system font is needed), written atomically by the runtime's image writer.
+//! system font is needed), staged with the command's other outputs by the runtime's image
+//! writer.
 
 use anyhow::{Context, Result, anyhow};
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use splat_runtime::Image;
+use splat_runtime::io::Outputs;
 use std::path::Path;
 use std::sync::Once;
 
@@ -19,8 +21,10 @@ fn register_font() {
     });
 }
 
-/// Draws with `draw` on a white `width` x `height` canvas and writes it to `path` as PNG.
+/// Draws with `draw` on a white `width` x `height` canvas and stages it in `outputs` as the
+/// PNG `path`.
 pub fn png(
+    outputs: &mut Outputs,
     path: &Path,
     (width, height): (u32, u32),
     draw: impl FnOnce(&Area) -> Result<()>,
@@ -31,11 +35,16 @@ pub fn png(
         channels: 3,
         data: vec![1.0; (width * height * 3) as usize],
     };
-    png_over(path, &white, draw)
+    png_over(outputs, path, &white, draw)
 }
 
-/// Draws with `draw` over the RGB picture `base` and writes it to `path` as PNG.
-pub fn png_over(path: &Path, base: &Image, draw: impl FnOnce(&Area) -> Result<()>) -> Result<()> {
+/// Draws with `draw` over the RGB picture `base` and stages it in `outputs` as the PNG `path`.
+pub fn png_over(
+    outputs: &mut Outputs,
+    path: &Path,
+    base: &Image,
+    draw: impl FnOnce(&Area) -> Result<()>,
+) -> Result<()> {
     register_font();
     let (width, height) = (base.width, base.height);
     let mut rgb: Vec<u8> = (base.data.iter())
@@ -51,7 +60,7 @@ pub fn png_over(path: &Path, base: &Image, draw: impl FnOnce(&Area) -> Result<()
         data: rgb.iter().map(|b| *b as f32 / 255.0).collect(),
         ..*base
     };
-    splat_runtime::io::image::write_image(path, &image)
+    splat_runtime::io::image::stage_image(outputs, path, &image)
         .with_context(|| format!("writing {}", path.display()))
 }
 

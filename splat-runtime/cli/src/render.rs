@@ -6,7 +6,7 @@ use anyhow::{Result, bail};
 use plotters::prelude::RGBColor;
 use splat_runtime::gpu::{GpuScene, HardwareRenderer};
 use splat_runtime::io::ply::{FromStored, GaussianCloud};
-use splat_runtime::io::{camera as camera_io, image as image_io, ply};
+use splat_runtime::io::{Outputs, camera as camera_io, image as image_io, ply};
 use splat_runtime::pipeline::precision::Precision;
 use splat_runtime::{Camera, CameraModel, Frame, Image, RenderOptions, SplatMethod, render};
 use std::path::PathBuf;
@@ -212,7 +212,8 @@ pub(crate) fn gallery(
             }
         }
     }
-    crate::plot::png_over(out, &grid, |area| {
+    let mut outputs = Outputs::default();
+    crate::plot::png_over(&mut outputs, out, &grid, |area| {
         let err = crate::plot::drawing("gallery's labels".to_string());
         let label = crate::plot::text(15);
         for (c, model) in CameraModel::ALL.into_iter().enumerate() {
@@ -237,6 +238,7 @@ pub(crate) fn gallery(
         }
         Ok(())
     })?;
+    outputs.commit()?;
     crate::wrote(out);
     Ok(())
 }

@@ -18,7 +18,7 @@ use splat_runtime::gpu::entries::Accumulation;
 use splat_runtime::gpu::sort::RadixSort;
 use splat_runtime::gpu::{Gpu, GpuRenderer, GpuScene, HardwareRenderer};
 use splat_runtime::io::ply::FromStored;
-use splat_runtime::io::{ply, write_atomic};
+use splat_runtime::io::{Outputs, ply};
 use splat_runtime::pipeline::precision::Precision;
 use splat_runtime::pipeline::shade::Blend;
 use splat_runtime::{Camera, FrameGrad, RenderOptions, SplatMethod, param_groups};
@@ -525,12 +525,15 @@ fn write_outputs(dir: &std::path::Path, rows: &[Row], method: &str) -> Result<()
             }
         }
     }
+    // The tables and their plot appear together.
+    let mut outputs = Outputs::default();
     for (name, text) in [("tradeoff.csv", &summary), ("gradients.csv", &detail)] {
         let path = dir.join(name);
-        write_atomic(&path, |w| w.write_all(text.as_bytes()))
+        (outputs.stage(&path, |w| w.write_all(text.as_bytes())))
             .with_context(|| format!("writing {}", path.display()))?;
     }
-    draw(&dir.join("tradeoff.png"), rows, method)?;
+    draw(&mut outputs, &dir.join("tradeoff.png"), rows, method)?;
+    outputs.commit()?;
     crate::wrote(dir);
     Ok(())
 }
@@ -654,7 +657,7 @@ const COLORS: [RGBColor; 11] = [
 /// Two panels: forward time against image RMSE, forward + backward time against the worst
 /// group's gradient error; a color per knob, and the Pareto front of the settings measured
 /// against the same reference.
-fn draw(path: &std::path::Path, rows: &[Row], method: &str) -> Result<()> {
+fn draw(outputs: &mut Outputs, path: &std::path::Path, rows: &[Row], method: &str) -> Result<()> {
     let knobs: Vec<&str> = rows.iter().fold(vec![], |mut k, r| {
         if !k.contains(&r.knob) {
             k.push(r.knob);
@@ -674,7 +677,7 @@ fn draw(path: &std::path::Path, rows: &[Row], method: &str) -> Result<()> {
             (time, r.gradient_error().unwrap_or(0.0))
         })
         .collect();
-    plot::png(path, (1400, 560), |root| {
+    plot::png(outputs, path, (1400, 560), |root| {
         let panels = root.split_evenly((1, 2));
         let all: Vec<&Row> = rows.iter().collect();
         let series = [

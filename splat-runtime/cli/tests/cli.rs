@@ -1222,6 +1222,30 @@ fn outputs_that_belong_together_appear_together_or_not_at_all() {
         );
     }
     assert_eq!(kept("keep.ply"), scene, "the scene was replaced");
+    // A fit whose renders cannot be written leaves the previous run's result (its last
+    // checkpoint, with the metrics up to it, is written apart, before).
+    tiny_dataset(&dir.path().join("data"), 2);
+    let fit = [
+        "fit",
+        "data",
+        "--steps",
+        "2",
+        "--backend",
+        "cpu",
+        "--out",
+        "run",
+    ];
+    ok(&splat(&fit, dir.path()));
+    // What the run would write is not this.
+    write(dir.path(), "run/scene.ply", b"the previous result");
+    std::fs::remove_file(dir.path().join("run/test/000.png")).unwrap();
+    std::fs::create_dir(dir.path().join("run/test/000.png")).unwrap();
+    refused(splat(&fit, dir.path()), "000.png: it is a folder");
+    assert_eq!(
+        kept("run/scene.ply"),
+        b"the previous result",
+        "the result was replaced"
+    );
     let leftovers: Vec<_> = std::fs::read_dir(dir.path())
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
