@@ -183,17 +183,34 @@ fn rigid(m: &[[f32; 4]; 4], name: &'static str) -> Result<(Mat3, Vec3), CameraEr
     }
     let col = |c: usize| Vec3::new(m[0][c], m[1][c], m[2][c]);
     let rotation = Mat3::from_cols(col(0), col(1), col(2));
-    let off = (rotation.transpose() * rotation - Mat3::IDENTITY)
+    match rotation_defect(&rotation) {
+        Some(NotRotation::Off(off)) => Err(CameraError::NotRigid(name, off)),
+        Some(NotRotation::Mirror) => Err(CameraError::Mirrored(name)),
+        None => Ok((rotation, col(3))),
+    }
+}
+
+/// What keeps a pose's 3x3 part from being a rotation (scale or shear would distort every
+/// render, a mirror flip it).
+pub(super) enum NotRotation {
+    /// The largest entry of R^T R - I, past 1e-3.
+    Off(f32),
+    /// A negative determinant.
+    Mirror,
+}
+
+pub(super) fn rotation_defect(rotation: &Mat3) -> Option<NotRotation> {
+    let off = (rotation.transpose() * *rotation - Mat3::IDENTITY)
         .to_cols_array()
         .iter()
         .fold(0.0f32, |a, v| a.max(v.abs()));
     if off > 1e-3 {
-        return Err(CameraError::NotRigid(name, off));
+        Some(NotRotation::Off(off))
+    } else if rotation.determinant() < 0.0 {
+        Some(NotRotation::Mirror)
+    } else {
+        None
     }
-    if rotation.determinant() < 0.0 {
-        return Err(CameraError::Mirrored(name));
-    }
-    Ok((rotation, col(3)))
 }
 
 /// `camera` with the rolling shutter that ends at the last row's pose `(rotation,

@@ -15,6 +15,7 @@
 //! RGBA images are composited on the chosen background. Every error names the file and the
 //! field.
 
+use super::camera::NotRotation;
 use super::{Outputs, colmap};
 use crate::pipeline::Image;
 use crate::types::{Camera, CameraModel};
@@ -133,16 +134,17 @@ pub(super) fn field(
 /// RGBA images on `background`.
 pub fn read(dir: &Path, background: Vec3) -> Result<Dataset, DatasetError> {
     if !dir.is_dir() {
-        let why = match dir.exists() {
-            true => (
-                std::io::ErrorKind::NotADirectory,
+        use std::io::{Error, ErrorKind};
+        let error = match dir.exists() {
+            true => Error::new(
+                ErrorKind::NotADirectory,
                 "a dataset is a folder, this is a file",
             ),
-            false => (std::io::ErrorKind::NotFound, "no such folder"),
+            false => Error::new(ErrorKind::NotFound, "no such folder"),
         };
         return Err(DatasetError::Io {
             path: dir.to_path_buf(),
-            error: std::io::Error::new(why.0, why.1),
+            error,
         });
     }
     if dir.join("transforms_train.json").exists() {
@@ -304,12 +306,12 @@ pub fn read_nerfstudio(dir: &Path, background: Vec3) -> Result<Dataset, DatasetE
     };
     for (k, frame) in frames.iter().enumerate() {
         let at = |f: &str| format!("frames[{k}].{f}");
-        // A per-frame value overrides the global one.
         // Where a value comes from, for errors.
         let named = |name: &str| match frame.get(name) {
             Some(_) => at(name),
             None => name.to_string(),
         };
+        // A per-frame value overrides the global one.
         let number = |name: &str| -> Result<Option<f64>, DatasetError> {
             match frame.get(name).or_else(|| json.get(name)) {
                 None => Ok(None),
@@ -337,7 +339,7 @@ pub fn read_nerfstudio(dir: &Path, background: Vec3) -> Result<Dataset, DatasetE
             v => Err(field(
                 &path,
                 named(name),
-                format!("must be a whole number of pixels, not {v}"),
+                format!("must be a positive whole number of pixels, not {v}"),
             )),
         };
         let file = frame["file_path"]
@@ -512,18 +514,16 @@ fn posed_camera(c2w_gl: &Mat4, focal: Vec2, image: &Image) -> Result<Camera, Str
             c2w_gl.row(3).to_array()
         ));
     }
-    let rotation = Mat3::from_mat4(*c2w_gl);
-    let off = (rotation.transpose() * rotation - Mat3::IDENTITY)
-        .to_cols_array()
-        .iter()
-        .fold(0.0f32, |a, v| a.max(v.abs()));
-    if off > 1e-3 {
-        return Err(format!(
-            "is not a rigid pose: its 3x3 part is off a rotation by {off:.2e} (the largest entry of R^T R - I)"
-        ));
-    }
-    if rotation.determinant() < 0.0 {
-        return Err("mirrors the world (its 3x3 part has a negative determinant)".into());
+    match super::camera::rotation_defect(&Mat3::from_mat4(*c2w_gl)) {
+        Some(NotRotation::Off(off)) => {
+            return Err(format!(
+                "is not a rigid pose: its 3x3 part is off a rotation by {off:.2e} (the largest entry of R^T R - I)"
+            ));
+        }
+        Some(NotRotation::Mirror) => {
+            return Err("mirrors the world (its 3x3 part has a negative determinant)".into());
+        }
+        None => {}
     }
     // OpenGL to OpenCV camera axes: y and z flip.
     let c2w = *c2w_gl * Mat4::from_diagonal(Vec4::new(1.0, -1.0, -1.0, 1.0));
@@ -744,12 +744,12 @@ mod tests {
             (
                 json!({"w": 30.5}),
                 none.clone(),
-                "w must be a whole number of pixels",
+                "w must be a positive whole number of pixels",
             ),
             (
                 json!({"h": -1}),
                 none.clone(),
-                "h must be a whole number of pixels",
+                "h must be a positive whole number of pixels",
             ),
             (
                 json!({"w": 31}),

@@ -38,11 +38,7 @@ impl Outputs {
         path: &Path,
         write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
     ) -> std::io::Result<()> {
-        let dir = match path.parent() {
-            Some(d) if !d.as_os_str().is_empty() => d,
-            _ => Path::new("."),
-        };
-        let mut tmp = tempfile::NamedTempFile::new_in(dir)?;
+        let mut tmp = tempfile::NamedTempFile::new_in(folder_of(path))?;
         {
             let mut buf = std::io::BufWriter::new(tmp.as_file_mut());
             write(&mut buf)?;
@@ -93,12 +89,17 @@ impl Outputs {
 /// What names one file however the path is spelled (`a.ply`, `./a.ply`, `d/../a.ply`): the
 /// canonical folder (it exists: the staged file is in it) and the name.
 fn same_file_key(path: &Path) -> (PathBuf, Option<std::ffi::OsString>) {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
+    let dir = folder_of(path);
     let dir = dir.canonicalize().unwrap_or_else(|_| dir.to_path_buf());
     (dir, path.file_name().map(|n| n.to_os_string()))
+}
+
+/// The folder `path` is in (`.` for a bare name).
+fn folder_of(path: &Path) -> &Path {
+    match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    }
 }
 
 /// A staged output that could not be put in place.
