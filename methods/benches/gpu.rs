@@ -4,10 +4,11 @@
 //! Rasterization for 3D Gaussian Splatting", Table I), with f32 atomics and with the
 //! compare-exchange loop; and the wall time of a frame through the one-shot path (upload,
 //! build, render, download) against the resident pipeline (scene and renderer kept, nothing
-//! read back but the intersection count). GPU stage times are GPU timestamps where the adapter
-//! has them. Each figure is the best of 3 runs after a warm-up (pipelines compile on first
-//! use). On a machine without a GPU the wgpu backend runs on a software adapter (lavapipe):
-//! the ratios then compare two CPU implementations, not a GPU.
+//! read back but the intersection count); last, the GPU stages again from shaders compiled
+//! with naga's run-time checks. GPU stage times are GPU timestamps where the adapter has them.
+//! Each figure is the best of 3 runs after a warm-up (pipelines compile on first use). On a
+//! machine without a GPU the wgpu backend runs on a software adapter (lavapipe): the ratios
+//! then compare two CPU implementations, not a GPU.
 //!
 //! `cargo bench -p splat-methods --bench gpu [-- N WIDTH HEIGHT]`
 
@@ -192,6 +193,34 @@ fn main() {
                 "u32 compare-exchange"
             },
             ms(blend[0])
+        );
+    }
+
+    // The same frames from shaders compiled with naga's run-time checks (a second device on
+    // the same adapter): what the checks cost per stage.
+    let checked = Gpu::new().unwrap().with_shader_checks(true);
+    let scene_checked = GpuScene::<Method>::new(&checked, &params).unwrap();
+    let mut renderer_checked = GpuRenderer::<Method>::new(&checked, &opts).unwrap();
+    let checked_run = |renderer: &mut GpuRenderer<Method>| {
+        renderer.forward(&scene_checked, &camera).unwrap();
+        renderer.backward(&scene_checked, &grad, acc).unwrap();
+        let s = renderer.download_frame().unwrap().stats;
+        let b = renderer.download_gradients().unwrap().gradients.stats;
+        [s.preprocess, s.rasterize, s.shade, b.blend, b.project]
+    };
+    checked_run(&mut renderer_checked);
+    let on = best(3, || checked_run(&mut renderer_checked));
+    println!(
+        "\nGPU stages with naga's run-time checks (index clamps, division guards, loop counters):"
+    );
+    println!("| stage | checks off (ms) | checks on (ms) | on / off |");
+    println!("|---|---:|---:|---:|");
+    for (k, name) in names.iter().enumerate() {
+        println!(
+            "| {name} | {:.1} | {:.1} | {:.2} |",
+            ms(g[k]),
+            ms(on[k]),
+            ms(on[k]) / ms(g[k])
         );
     }
 }

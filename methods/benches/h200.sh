@@ -39,6 +39,8 @@ bench() { timeout "$1" $splat bench --scene "$scene/scene.ply" --camera "$scene/
 
 part "issue 11: our GPU frames, $N Gaussians at ${W}x$H"
 bench 60 --backend gpu --iters $ITERS --raw-out "$scene/ours.f32"
+part "issue 11: the same with naga's run-time checks in the shaders (what they cost)"
+bench 60 --backend gpu --iters $ITERS --shader-checks
 
 if [ $GSPLAT = 1 ]; then
     part "gsplat 1.5.3 on the same scene (compiles its CUDA code first)"

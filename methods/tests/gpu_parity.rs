@@ -7,7 +7,7 @@
 //!   a compare-exchange loop).
 //!
 //! The resident renderer (one renderer and scene across changing frames) equals the one-shot
-//! path frame by frame.
+//! path frame by frame; shaders compiled with naga's run-time checks equal those without.
 //!
 //! Needs a wgpu adapter (lavapipe is enough); with `SPLAT_REQUIRE_GPU=1` a missing adapter
 //! fails the test, otherwise it skips.
@@ -18,7 +18,7 @@ use splat_runtime::checks::forward::outputs_close;
 use splat_runtime::checks::{camera_words, group_error, words};
 use splat_runtime::glam::Vec2;
 use splat_runtime::gpu::entries::{Accumulation, Reduction};
-use splat_runtime::gpu::{GpuRenderer, GpuScene, adapter_or_skip};
+use splat_runtime::gpu::{Gpu, GpuRenderer, GpuScene, adapter_or_skip};
 use splat_runtime::types::Camera;
 use splat_runtime::{FrameGrad, RenderOptions, backward, render, render_for_backward};
 
@@ -199,6 +199,60 @@ fn gpu_gradients_match_cpu() {
             assert!(issued(Reduction::Subgroup) < issued(Reduction::None));
         }
     }
+}
+
+/// Shaders compiled with naga's run-time checks (`Gpu::with_shader_checks`) give the same
+/// frame and gradients as the default ones, bit for bit: two 16-px tiles and the workgroup
+/// reduction, so each gradient word is `0 + a + b`, the same bits in either order.
+#[test]
+fn shaders_with_run_time_checks_give_the_same_results() {
+    let Some(gpu) = adapter_or_skip() else {
+        return;
+    };
+    let checked = Gpu::new().unwrap().with_shader_checks(true);
+    assert!(!gpu.shader_checks && checked.shader_checks);
+    let cam = camera(32, 16);
+    let params = scene(8, 60, &cam, -1.0);
+    let opts = RenderOptions {
+        alpha: true,
+        depth: true,
+        ..Default::default()
+    };
+    let mut rng = fastrand::Rng::with_seed(9);
+    let mut random = |k: usize| (0..k).map(|_| rng.f32() * 2.0 - 1.0).collect::<Vec<f32>>();
+    let grad = FrameGrad {
+        color: random(32 * 16 * 3),
+        alpha: Some(random(32 * 16)),
+        depth: Some(random(32 * 16)),
+    };
+    let acc = Accumulation {
+        reduce: Reduction::Workgroup,
+        float_atomics: false,
+    };
+    let run = |gpu: &Gpu| -> Vec<u64> {
+        let (frame, mut state) =
+            splat_runtime::gpu::render::render_for_backward::<Method>(gpu, &params, &cam, &opts)
+                .unwrap();
+        let g = splat_runtime::gpu::render::backward(&mut state, &grad, acc).unwrap();
+        let image = [frame.color, frame.alpha.unwrap(), frame.depth.unwrap()];
+        let image = image
+            .iter()
+            .flat_map(|i| i.data.iter().map(|v| v.to_bits() as u64));
+        let grads = flat_words(&g.gradients.params)
+            .into_iter()
+            .map(f64::to_bits);
+        image.chain(grads).collect()
+    };
+    let (plain, with_checks) = (run(&gpu), run(&checked));
+    let moved = flat_words(&params).len();
+    let nonzero = plain[plain.len() - moved..]
+        .iter()
+        .filter(|&&b| f64::from_bits(b) != 0.0);
+    assert!(
+        nonzero.count() > moved / 4,
+        "most gradient words are nonzero"
+    );
+    assert!(plain == with_checks, "the checks changed a result");
 }
 
 #[test]

@@ -43,6 +43,10 @@ pub struct BenchArgs {
     width: u32,
     #[arg(long, default_value_t = 600)]
     height: u32,
+    /// Compile the GPU shaders with naga's run-time checks (index clamps, division guards, a
+    /// counter bounding each loop), to measure what they cost; off by default.
+    #[arg(long)]
+    shader_checks: bool,
 }
 
 pub fn bench_cmd(args: &BenchArgs, methods: &[Method]) -> Result<()> {
@@ -59,7 +63,7 @@ pub fn bench_cmd(args: &BenchArgs, methods: &[Method]) -> Result<()> {
         (args.width, args.height),
     )?;
     methods::check_camera(method, methods, &camera)?;
-    let gpu = crate::pick_gpu(args.backend)?;
+    let gpu = crate::pick_gpu(args.backend)?.map(|g| g.with_shader_checks(args.shader_checks));
     let task = Bench {
         args,
         method: method.name,
@@ -136,7 +140,11 @@ impl Bench<'_> {
         opts: &RenderOptions,
         grad: &FrameGrad,
     ) -> Result<Frame> {
-        println!("GPU: {}", gpu.adapter);
+        let checks = match gpu.shader_checks {
+            true => " (shaders with naga's run-time checks)",
+            false => "",
+        };
+        println!("GPU: {}{checks}", gpu.adapter);
         let scene = GpuScene::<M>::new(gpu, params)?;
         let mut renderer = GpuRenderer::<M>::new(gpu, opts)?;
         let acc = Accumulation::default_for(gpu);

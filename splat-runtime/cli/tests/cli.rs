@@ -1139,6 +1139,41 @@ fn fit_starts_from_a_colmap_datasets_points() {
     );
 }
 
+/// `bench --backend gpu` times device-resident frames; with `--shader-checks` it says the
+/// shaders carry naga's run-time checks (`methods/benches/h200.sh` times both).
+#[test]
+fn gpu_bench_times_resident_frames_with_or_without_shader_checks() {
+    let dir = temp();
+    for (extra, checked) in [(None, false), (Some("--shader-checks"), true)] {
+        let mut args = vec![
+            "bench",
+            "--backend",
+            "gpu",
+            "--iters",
+            "1",
+            "--width",
+            "48",
+            "--height",
+            "32",
+        ];
+        args.extend(extra);
+        let out = splat(&args, dir.path());
+        if !out.status.success() {
+            let stderr = String::from_utf8_lossy(&out.stderr);
+            assert!(stderr.contains("no GPU adapter"), "{stderr}");
+            assert!(std::env::var("SPLAT_REQUIRE_GPU").map_or(true, |v| v != "1"));
+            return;
+        }
+        let stdout = ok(&out);
+        assert!(stdout.contains("GPU (device-resident)"), "{stdout}");
+        assert_eq!(
+            stdout.contains("naga's run-time checks"),
+            checked,
+            "{stdout}"
+        );
+    }
+}
+
 /// `splat inspect | head` stops reading early: the command ends quietly, no panic.
 /// A reader that stops early (`| head`) ends a command quietly, as other Unix tools end:
 /// stopped by SIGPIPE, never a panic. The pipe is closed before the command starts, so its

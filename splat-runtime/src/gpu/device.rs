@@ -32,6 +32,9 @@ pub struct Gpu {
     /// Blending into `Rgba16Unorm` render targets (`TEXTURE_FORMAT_16BIT_NORM` and the
     /// adapter's format features).
     pub unorm16_targets: bool,
+    /// Whether naga adds its run-time checks to the shaders: index clamps, guarded integer
+    /// division and a counter bounding every loop ([`Gpu::with_shader_checks`]).
+    pub shader_checks: bool,
     limits: wgpu::Limits,
     pipelines: Mutex<HashMap<u64, wgpu::ComputePipeline>>,
 }
@@ -101,9 +104,40 @@ impl Gpu {
             timestamps: features.contains(wgpu::Features::TIMESTAMP_QUERY),
             float32_blending: features.contains(wgpu::Features::FLOAT32_BLENDABLE),
             unorm16_targets,
+            shader_checks: false,
             limits,
             pipelines: Mutex::new(HashMap::new()),
         })
+    }
+
+    /// The same device compiling its shaders with naga's run-time checks (`on`) or without
+    /// (the default). Off, the shaders run as written: every loop of the runtime's shaders is
+    /// bounded by a count, a method's code has no loops, array indices stay within their
+    /// arrays and divisors are image or record sizes, and storage buffers keep the driver's
+    /// robust access. On, each loop carries a 64-bit counter that keeps the driver from
+    /// unrolling it (wgpu issue 7698 reports compute passes 100x slower), each array index a
+    /// clamp and each integer division a guard: for finding a shader fault, and for
+    /// measuring what the checks cost.
+    pub fn with_shader_checks(mut self, on: bool) -> Gpu {
+        self.shader_checks = on;
+        self.pipelines.get_mut().unwrap().clear();
+        self
+    }
+
+    /// A shader module of WGSL `source` (its functions the entry points do not reach pruned),
+    /// with or without run-time checks as [`Gpu::shader_checks`] says.
+    pub fn shader_module(&self, label: &str, source: &str) -> wgpu::ShaderModule {
+        let desc = wgpu::ShaderModuleDescriptor {
+            label: Some(label),
+            source: wgpu::ShaderSource::Wgsl(super::prune::reachable_only(source).into()),
+        };
+        let checks = match self.shader_checks {
+            true => wgpu::ShaderRuntimeChecks::checked(),
+            false => wgpu::ShaderRuntimeChecks::unchecked(),
+        };
+        // SAFETY: the runtime's shaders stay within their arrays, bound every loop and
+        // divide by nonzero sizes (`with_shader_checks` says why).
+        unsafe { self.device.create_shader_module_trusted(desc, checks) }
     }
 
     /// The device's limits (those of the adapter).
@@ -209,12 +243,7 @@ impl Gpu {
             return Ok(p.clone());
         }
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let module = self
-            .device
-            .create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some(entry),
-                source: wgpu::ShaderSource::Wgsl(super::prune::reachable_only(source).into()),
-            });
+        let module = self.shader_module(entry, source);
         let pipeline = self
             .device
             .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {

@@ -7,6 +7,7 @@
 //! changes between backends.
 
 use super::kernel::{self, load};
+use super::scatter;
 use super::shade_pack::ShadePacking;
 use super::state::PixelState;
 use super::sums::Sums;
@@ -439,56 +440,13 @@ pub fn backward<M: SplatMethod>(
     let shade_grads: String = (0..nsf)
         .map(|k| {
             format!(
-                "                    g[{k}] = a.{};\n",
+                "                    {} = a.{};\n",
+                scatter::word(k),
                 adj.results[first + k].0
             )
         })
         .collect();
-    let scatter = match acc.reduce {
-        Reduction::Workgroup => {
-            "            for (var c0 = 0u; c0 < NG; c0 += RC) {
-                for (var k = 0u; k < RC; k++) {
-                    red[k * WG + lid] = select(0.0, g[min(c0 + k, NG - 1u)], c0 + k < NG);
-                }
-                workgroupBarrier();
-                for (var half = WG / 2u; half > 0u; half >>= 1u) {
-                    if (lid < half) {
-                        for (var k = 0u; k < RC; k++) {
-                            red[k * WG + lid] += red[k * WG + lid + half];
-                        }
-                    }
-                    workgroupBarrier();
-                }
-                if (lid < RC && c0 + lid < NG) {
-                    let v = red[lid * WG];
-                    if (v != 0.0) {
-                        add_grad(prim * NG + c0 + lid, v);
-                        my_issued++;
-                    }
-                }
-                workgroupBarrier();
-            }"
-        }
-        Reduction::Subgroup => {
-            "            if (subgroupAny(hit)) {
-                for (var k = 0u; k < NG; k++) {
-                    let v = subgroupAdd(g[k]);
-                    if (lane == 0u && v != 0.0) {
-                        add_grad(prim * NG + k, v);
-                        my_issued++;
-                    }
-                }
-            }"
-        }
-        Reduction::None => {
-            "            for (var k = 0u; k < NG; k++) {
-                if (g[k] != 0.0) {
-                    add_grad(prim * NG + k, g[k]);
-                    my_issued++;
-                }
-            }"
-        }
-    };
+    let scatter = scatter::scatter(acc.reduce, layout.grad_words, b.rc as usize);
     let sums = Sums::at(opts.gradient_precision);
     let (grad_atomic, atomic_add) = if sums.half {
         ("atomic<u32>", Sums::WGSL_ADD_HALF)
@@ -560,7 +518,6 @@ pub fn backward<M: SplatMethod>(
             ("PIXEL_GRAD_STORE", pixel_store),
             ("REDUCTION_NOTE", note.into()),
             ("NG", layout.grad_words.to_string()),
-            ("RC", b.rc.to_string()),
             ("GRAD_ATOMIC", grad_atomic.into()),
             ("CAMERA_BINDING", camera),
             (
@@ -591,7 +548,9 @@ pub fn backward<M: SplatMethod>(
                 format!("{}({})", adj.name, adj_args.join(", ")),
             ),
             ("SHADE_GRADS", shade_grads),
-            ("SCATTER", scatter.into()),
+            ("SCATTER", scatter),
+            ("GRAD_DECL", scatter::declare(layout.grad_words)),
+            ("DEPTH_GRAD", scatter::word(layout.grad_words - 1)),
             ("STATE", state.wgsl_load("pixel_state")),
             (
                 "D_FINAL",

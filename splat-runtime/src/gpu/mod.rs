@@ -27,6 +27,7 @@ mod prune;
 pub mod raster;
 pub mod render;
 pub mod resident;
+mod scatter;
 pub mod shade_pack;
 pub mod sort;
 pub mod state;

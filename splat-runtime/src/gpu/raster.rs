@@ -304,12 +304,7 @@ fn build_pipeline(
     formats: &[wgpu::TextureFormat],
 ) -> Result<wgpu::RenderPipeline, GpuError> {
     let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
-    let module = gpu
-        .device
-        .create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("splat quads"),
-            source: wgpu::ShaderSource::Wgsl(super::prune::reachable_only(source).into()),
-        });
+    let module = gpu.shader_module("splat quads", source);
     let under = wgpu::BlendComponent {
         src_factor: wgpu::BlendFactor::OneMinusDstAlpha,
         dst_factor: wgpu::BlendFactor::One,

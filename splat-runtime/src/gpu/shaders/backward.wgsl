@@ -5,7 +5,6 @@
 // with global atomics: {{REDUCTION_NOTE}}
 
 const NG: u32 = {{NG}}u; // gradient words per primitive: shade float slots, then depth
-const RC: u32 = {{RC}}u; // gradient words reduced per round
 // Whether a gradient asked for flows through alpha (`GradientSet::alpha_cotangent`).
 const ALPHA_COTANGENT: bool = {{ALPHA_COTANGENT}};
 
@@ -98,7 +97,8 @@ fn backward_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
         workgroupBarrier();
         for (var j = min(BATCH, at.end - b); j > 0u; j--) {
             let i = j - 1u;
-            var g: array<f32, NG>;
+            // The entry's gradient words, one scalar each (`gpu::scatter` says why).
+{{GRAD_DECL}}
             // Whether the entry reaches this pixel: with the subgroup reduction, a subgroup none
             // of whose pixels it reaches skips it.
             var hit = false;
@@ -114,7 +114,7 @@ fn backward_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
                     let first = !seen;
                     seen = true;
                     if ({{WANT_DEPTH}}) {
-                        g[NG - 1u] = w * d_d;
+                        {{DEPTH_GRAD}} = w * d_d;
                     }
                     var d_alpha = 0.0;
                     if (ALPHA_COTANGENT) {

@@ -1,0 +1,120 @@
+//! How the backward blend adds one list entry's gradient words to its primitive's sums,
+//! written out word by word.
+//!
+//! The words live in scalars `g0 .. g{NG-1}` (not an array walked by a loop): a loop over a
+//! per-invocation array inside the blend's hottest loop keeps the array in local memory
+//! unless the driver unrolls it, and naga's loop bounding (a 64-bit counter per loop that
+//! persists across entries) stands in the way of unrolling; around `subgroupAdd`, a loop the
+//! driver cannot prove uniform also costs a reconvergence per word.
+
+use super::entries::Reduction;
+use std::fmt::Write;
+
+/// The scalar holding gradient word `k` of the entry.
+pub fn word(k: usize) -> String {
+    format!("g{k}")
+}
+
+/// Declares the `words` gradient scalars of one entry, zeroed.
+pub fn declare(words: usize) -> String {
+    (0..words)
+        .map(|k| format!("            var {} = 0.0;\n", word(k)))
+        .collect()
+}
+
+/// Adds the `words` scalars to the sums of primitive `prim` (at `prim * NG + k`) through
+/// `add_grad`, counting each global add in `my_issued`; `reduce` says what is summed first.
+/// `round` is how many words one workgroup reduction round sums (its `red` holds
+/// `round * WG` floats).
+pub fn scatter(reduce: Reduction, words: usize, round: usize) -> String {
+    let add = |indent: &str, k: &str, v: &str| {
+        format!(
+            "{indent}if ({v} != 0.0) {{
+{indent}    add_grad(prim * NG + {k}, {v});
+{indent}    my_issued++;
+{indent}}}
+"
+        )
+    };
+    let mut s = String::new();
+    match reduce {
+        Reduction::None => {
+            for k in 0..words {
+                s += &add("            ", &format!("{k}u"), &word(k));
+            }
+        }
+        Reduction::Subgroup => {
+            // A subgroup none of whose pixels the entry reaches skips its reductions.
+            s += "            if (subgroupAny(hit)) {\n";
+            for k in 0..words {
+                let _ = writeln!(s, "                let v{k} = subgroupAdd({});", word(k));
+            }
+            s += "                if (lane == 0u) {\n";
+            for k in 0..words {
+                s += &add("                    ", &format!("{k}u"), &format!("v{k}"));
+            }
+            s += "                }\n            }\n";
+        }
+        Reduction::Workgroup => {
+            for first in (0..words).step_by(round.max(1)) {
+                let n = round.min(words - first);
+                for k in 0..n {
+                    let _ = writeln!(s, "            red[{k}u * WG + lid] = {};", word(first + k));
+                }
+                s += "            workgroupBarrier();
+            for (var half = WG / 2u; half > 0u; half >>= 1u) {
+                if (lid < half) {\n";
+                for k in 0..n {
+                    let _ = writeln!(
+                        s,
+                        "                    red[{k}u * WG + lid] += red[{k}u * WG + lid + half];"
+                    );
+                }
+                s += "                }
+                workgroupBarrier();
+            }\n";
+                let _ = writeln!(s, "            if (lid < {n}u) {{");
+                s += "                let v = red[lid * WG];\n";
+                s += &add("                ", &format!("{first}u + lid"), "v");
+                s += "            }\n            workgroupBarrier();\n";
+            }
+        }
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_word_is_added_once_in_each_reduction() {
+        for (reduce, round) in [
+            (Reduction::None, 1),
+            (Reduction::Subgroup, 1),
+            (Reduction::Workgroup, 4),
+            (Reduction::Workgroup, 3),
+        ] {
+            let s = scatter(reduce, 10, round);
+            // No loop walks the words: the only loop left is the workgroup tree's.
+            assert_eq!(
+                s.matches("for (").count(),
+                10usize.div_ceil(round) * (reduce == Reduction::Workgroup) as usize
+            );
+            match reduce {
+                Reduction::Workgroup => {
+                    // Rounds of `round` words cover 0..10, each word read once.
+                    for k in 0..10 {
+                        assert_eq!(s.matches(&format!("= g{k};")).count(), 1, "{s}");
+                    }
+                    assert_eq!(s.matches("add_grad(").count(), 10usize.div_ceil(round));
+                }
+                _ => {
+                    for k in 0..10 {
+                        assert_eq!(s.matches(&format!("prim * NG + {k}u,")).count(), 1, "{s}");
+                    }
+                }
+            }
+        }
+    }
+}
