@@ -265,17 +265,8 @@ pub(crate) fn render_cmd(args: &RenderArgs, methods: &[Method]) -> Result<()> {
     let camera: Camera = match &args.camera {
         Some(path) => camera_io::read(path)?,
         None => {
-            let side = 1..=splat_runtime::pipeline::MAX_SIDE;
-            if !side.contains(&args.width) || !side.contains(&args.height) {
-                bail!(
-                    "image size {}x{} is out of range (1..={} per side)",
-                    args.width,
-                    args.height,
-                    side.end()
-                );
-            }
             let model = args.camera_model.unwrap_or(Model::Pinhole);
-            scene::camera(args.width, args.height, model.into())
+            scene::built_in_camera(args.width, args.height, model.into())?
         }
     };
     methods::check_camera(method, methods, &camera)?;

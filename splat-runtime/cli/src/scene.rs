@@ -141,9 +141,22 @@ pub fn given_or_built_in(
     };
     let camera = match camera {
         Some(path) => splat_runtime::io::camera::read(path)?,
-        None => self::camera(width, height, CameraModel::Pinhole),
+        None => built_in_camera(width, height, CameraModel::Pinhole)?,
     };
     Ok((cloud, camera))
+}
+
+/// The built-in view ([`camera`]) at `width` x `height`, refused before any work when a side
+/// is out of range.
+pub fn built_in_camera(width: u32, height: u32, model: CameraModel) -> anyhow::Result<Camera> {
+    let side = 1..=splat_runtime::pipeline::MAX_SIDE;
+    if !side.contains(&width) || !side.contains(&height) {
+        anyhow::bail!(
+            "image size {width}x{height} is out of range (1..={} per side)",
+            side.end()
+        );
+    }
+    Ok(camera(width, height, model))
 }
 
 /// Looks at the origin from slightly above the ring plane, 6 units away: a pinhole with a

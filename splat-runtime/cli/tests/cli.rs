@@ -1062,15 +1062,23 @@ fn bench_times_both_passes_and_writes_the_raw_image_render_would() {
     assert_eq!(raw, reference, "bench's raw image differs from render's");
 
     let out = dir.path().join("never.f32");
-    let bad: [(&[&str], &str); 3] = [
+    let bad: [(&[&str], &str); 4] = [
         (&["--iters", "0"], "--iters"),
         (&["--threads", "2,0"], "--threads 0"),
         (&["--scene", "missing.ply"], "missing.ply"),
+        (&["--width", "0"], "image size 0x600 is out of range"),
     ];
     for (extra, needle) in bad {
         let mut args = vec!["bench", "--backend", "cpu", "--raw-out", "never.f32"];
         args.extend(extra);
-        fails(&splat(&args, dir.path()), needle, &out);
+        let run = splat(&args, dir.path());
+        fails(&run, needle, &out);
+        // Refused before any work: nothing printed as if it had started.
+        assert!(
+            run.stdout.is_empty(),
+            "{:?}",
+            String::from_utf8_lossy(&run.stdout)
+        );
     }
 }
 
