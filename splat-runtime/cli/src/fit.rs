@@ -291,6 +291,7 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
         random_background: args.random_background,
         eval_every: (args.eval_every > 0).then_some(args.eval_every),
         checkpoint_every: (args.checkpoint_every > 0).then_some(args.checkpoint_every),
+        stop: Some(crate::interrupt_flag()),
         ..Default::default()
     };
     std::fs::create_dir_all(args.out.join("test"))
@@ -464,8 +465,26 @@ impl Fit<'_> {
                 "the CPU".to_string()
             }
         };
-        bar.finish();
+        let stopped = state.step < opts.steps;
+        match stopped {
+            true => bar.abandon(),
+            false => bar.finish(),
+        }
         saved?;
+        if stopped {
+            let kept = match opts.checkpoint_every {
+                Some(_) => format!(
+                    "its checkpoint and metrics are in {}: the same command with --resume goes on",
+                    args.out.display()
+                ),
+                None => "nothing was saved (--checkpoint-every 0)".to_string(),
+            };
+            bail!(
+                "stopped by a signal after step {} of {}; {kept}",
+                state.step,
+                opts.steps
+            );
+        }
         if faulty_steps > 0 {
             println!(
                 "warning: {faulty_steps} steps left parameter words alone (non-finite gradients or steps); the scene stayed finite"

@@ -674,6 +674,105 @@ fn fit_trains_on_a_dataset_and_writes_its_outputs() {
     }
 }
 
+/// Ctrl-C during `splat fit` ends the run after the step in progress with its checkpoint and
+/// metrics saved (and no result written); `--resume` goes on from that step. On both loops
+/// (the GPU's where there is an adapter).
+#[cfg(unix)]
+#[test]
+fn an_interrupted_fit_saves_its_checkpoint_and_resumes_from_it() {
+    use std::io::{BufRead, Read};
+    let dir = tempfile::tempdir().unwrap();
+    tiny_dataset(&dir.path().join("data"), 3);
+    for (backend, steps) in [("cpu", "200000"), ("gpu", "400")] {
+        let args = [
+            "fit",
+            "data",
+            "--steps",
+            steps,
+            "--points",
+            "100",
+            "--backend",
+            backend,
+            "--eval-every",
+            "0",
+            "--checkpoint-every",
+            "100000",
+            "--out",
+            backend,
+        ];
+        // Runs `fit`, sends SIGINT at its first progress line: the step the stop message
+        // names, or None where there is no GPU adapter.
+        let interrupted = |extra: &[&str]| -> Option<usize> {
+            let mut child = Command::new(env!("CARGO_BIN_EXE_splat"))
+                .args(args.iter().chain(extra))
+                .current_dir(dir.path())
+                .stdout(std::process::Stdio::piped())
+                .stderr(std::process::Stdio::piped())
+                .spawn()
+                .unwrap();
+            let mut lines = std::io::BufReader::new(child.stdout.take().unwrap()).lines();
+            let first = lines
+                .by_ref()
+                .map(Result::unwrap)
+                .find(|l| l.starts_with("step "));
+            if first.is_some() {
+                // SAFETY: a plain signal to the child's pid.
+                assert_eq!(unsafe { libc::kill(child.id() as i32, libc::SIGINT) }, 0);
+            }
+            lines.for_each(drop);
+            let mut stderr = String::new();
+            child
+                .stderr
+                .take()
+                .unwrap()
+                .read_to_string(&mut stderr)
+                .unwrap();
+            let status = child.wait().unwrap();
+            assert!(
+                !status.success() && !stderr.contains("panicked"),
+                "{stderr}"
+            );
+            if first.is_none() && stderr.contains("no GPU adapter") {
+                assert!(std::env::var("SPLAT_REQUIRE_GPU").map_or(true, |v| v != "1"));
+                return None;
+            }
+            let step: usize = (stderr.split("stopped by a signal after step ").nth(1))
+                .and_then(|rest| rest.split(' ').next())
+                .and_then(|k| k.parse().ok())
+                .unwrap_or_else(|| panic!("no stop message in {stderr}"));
+            assert!(
+                stderr.contains("the same command with --resume goes on"),
+                "{stderr}"
+            );
+            Some(step)
+        };
+        let out = dir.path().join(backend);
+        // The metrics' last step: one row per step from 0.
+        let last_row = || {
+            let csv = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
+            let steps: Vec<usize> = (csv.lines().skip(1))
+                .map(|l| l.split(',').next().unwrap().parse().unwrap())
+                .collect();
+            assert_eq!(steps, (0..steps.len()).collect::<Vec<_>>());
+            steps.len() - 1
+        };
+        let Some(first) = interrupted(&[]) else {
+            continue;
+        };
+        assert!(first < steps.parse().unwrap(), "{backend}");
+        assert!(out.join("checkpoint.bin").exists());
+        assert!(
+            !out.join("scene.ply").exists(),
+            "an interrupted run wrote its result"
+        );
+        assert_eq!(last_row(), first);
+        // Resumed, it goes on from there: its metrics continue the first run's, row for row.
+        let second = interrupted(&["--resume"]).unwrap();
+        assert!(second > first, "{backend}: {second} after {first}");
+        assert_eq!(last_row(), second);
+    }
+}
+
 /// `--strategy mcmc` starts the primitives as the MCMC paper does (opacity 0.5, not 3DGS's
 /// 0.1) and trains; `--strategy fixed` keeps the count; an unknown strategy is refused.
 #[test]

@@ -14,6 +14,8 @@ use crate::io::dataset::{Dataset, View};
 use crate::method::{SplatMethod, param_groups, word_name};
 use crate::pipeline::{FrameGrad, Image, RenderError, RenderOptions};
 use glam::{Vec2, Vec3};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// How one parameter word is trained: its learning rate decays exponentially from `first` to
 /// `last` over the run, and it stays fixed (no gradient, no moment) before step `from_step`
@@ -118,6 +120,19 @@ pub struct FitOptions {
     /// Report the run's state (to save as a checkpoint) after every this many steps and after
     /// the last.
     pub checkpoint_every: Option<usize>,
+    /// Once set (by a signal handler, another thread), the run ends after the step in
+    /// progress: that step's state is reported as a checkpoint (where checkpoints are on) and
+    /// left in the loop's `state`, whose `step` then falls short of `steps`.
+    pub stop: Option<Arc<AtomicBool>>,
+}
+
+impl FitOptions {
+    /// Whether the run was asked to stop ([`FitOptions::stop`]).
+    pub fn stop_requested(&self) -> bool {
+        self.stop
+            .as_ref()
+            .is_some_and(|s| s.load(Ordering::Relaxed))
+    }
 }
 
 impl Default for FitOptions {
@@ -136,6 +151,7 @@ impl Default for FitOptions {
             densify: Some(Strategy::Adc(DensifyOptions::default())),
             eval_every: None,
             checkpoint_every: None,
+            stop: None,
         }
     }
 }
@@ -285,9 +301,9 @@ pub fn evaluate<M: SplatMethod>(
 }
 
 /// Whether a checkpoint is reported after `step`: every `FitOptions::checkpoint_every` steps
-/// and after the last one.
-pub(crate) fn saves_at(opts: &FitOptions, step: usize) -> bool {
-    let last = step + 1 == opts.steps;
+/// and after the last one (the last of the run, or the one it `stops` after).
+pub(crate) fn saves_at(opts: &FitOptions, step: usize, stops: bool) -> bool {
+    let last = step + 1 == opts.steps || stops;
     after_every(opts.checkpoint_every, step)
         || (last && opts.checkpoint_every.is_some_and(|n| n > 0))
 }
@@ -334,8 +350,9 @@ pub fn fit<M: Trainable>(
 }
 
 /// Trains on the CPU from `state` (a run's first state, [`Checkpoint::start`], or a checkpoint
-/// it reported) to its last step; `state` ends as the run's last state. The same steps follow
-/// from a checkpoint as in the run that wrote it.
+/// it reported) to its last step, or to the step in progress when `opts.stop` is set; `state`
+/// ends as the run's state after that step. The same steps follow from a checkpoint as in the
+/// run that wrote it.
 pub fn fit_from<M: Trainable>(
     data: &Dataset,
     state: &mut Checkpoint,
@@ -425,8 +442,9 @@ pub fn fit_from<M: Trainable>(
             true => Some(evaluate::<M>(&params, &data.test, opts)?),
             false => None,
         };
-        let save = saves_at(opts, step);
-        if save || step + 1 == opts.steps {
+        let stops = opts.stop_requested();
+        let save = saves_at(opts, step, stops);
+        if save || step + 1 == opts.steps || stops {
             state.step = step + 1;
             state.params = flat.clone();
             state.adam = adam.state();
@@ -445,6 +463,9 @@ pub fn fit_from<M: Trainable>(
             evaluation,
             checkpoint: save.then_some(&*state),
         });
+        if stops {
+            break;
+        }
     }
     Ok(())
 }

@@ -174,8 +174,9 @@ pub fn fit_gpu_from<M: Trainable>(
             }
             false => None,
         };
-        let save = saves_at(opts, step);
-        if save || step + 1 == opts.steps {
+        let stops = opts.stop_requested();
+        let save = saves_at(opts, step, stops);
+        if save || step + 1 == opts.steps || stops {
             let n = scene.len();
             state.step = step + 1;
             state.params = flatten::<M>(&scene.download(gpu)?);
@@ -199,6 +200,9 @@ pub fn fit_gpu_from<M: Trainable>(
             evaluation,
             checkpoint: save.then_some(&*state),
         });
+        if stops {
+            break;
+        }
     }
     Ok(())
 }
