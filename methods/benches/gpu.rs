@@ -198,6 +198,9 @@ fn main() {
 
     // The same frames from shaders compiled with naga's run-time checks (a second device on
     // the same adapter): what the checks cost per stage.
+    if !gpu.timestamps {
+        return;
+    }
     let checked = Gpu::new().unwrap().with_shader_checks(true);
     let scene_checked = GpuScene::<Method>::new(&checked, &params).unwrap();
     let mut renderer_checked = GpuRenderer::<Method>::new(&checked, &opts).unwrap();

@@ -1,6 +1,6 @@
 #!/bin/bash
 # Issues 11, 12 and 14 measured on the lent H200 beside gsplat, as one device call (about 5
-# minutes on 2026-11-30; each part has its own time limit, most important first; the CPU
+# minutes on 2026-11-30, plus up to one for the shader-checks run added since; each part has its own time limit, most important first; the CPU
 # sweep by thread count only with CPU=1). Prepared here, run there
 # from the repository root with carry [".gl", ".dev"]:
 #   .gl/   the Vulkan loader debs (see the device README);

@@ -202,15 +202,17 @@ fn gpu_gradients_match_cpu() {
 }
 
 /// Shaders compiled with naga's run-time checks (`Gpu::with_shader_checks`) give the same
-/// frame and gradients as the default ones, bit for bit: two 16-px tiles and the workgroup
-/// reduction, so each gradient word is `0 + a + b`, the same bits in either order.
+/// frame and gradients as the default ones: bit for bit on a software adapter (two 16-px
+/// tiles and the workgroup reduction, so each gradient word is `0 + a + b`, the same bits in
+/// either order); a hardware driver may contract multiply-adds differently in the two
+/// programs, so there within 1e-5 of the largest value.
 #[test]
 fn shaders_with_run_time_checks_give_the_same_results() {
     let Some(gpu) = adapter_or_skip() else {
         return;
     };
     let checked = Gpu::new().unwrap().with_shader_checks(true);
-    assert!(!gpu.shader_checks && checked.shader_checks);
+    assert!(!gpu.shader_checks() && checked.shader_checks());
     let cam = camera(32, 16);
     let params = scene(8, 60, &cam, -1.0);
     let opts = RenderOptions {
@@ -229,30 +231,36 @@ fn shaders_with_run_time_checks_give_the_same_results() {
         reduce: Reduction::Workgroup,
         float_atomics: false,
     };
-    let run = |gpu: &Gpu| -> Vec<u64> {
+    let run = |gpu: &Gpu| -> Vec<f64> {
         let (frame, mut state) =
             splat_runtime::gpu::render::render_for_backward::<Method>(gpu, &params, &cam, &opts)
                 .unwrap();
         let g = splat_runtime::gpu::render::backward(&mut state, &grad, acc).unwrap();
         let image = [frame.color, frame.alpha.unwrap(), frame.depth.unwrap()];
-        let image = image
-            .iter()
-            .flat_map(|i| i.data.iter().map(|v| v.to_bits() as u64));
-        let grads = flat_words(&g.gradients.params)
-            .into_iter()
-            .map(f64::to_bits);
-        image.chain(grads).collect()
+        let image = image.iter().flat_map(|i| i.data.iter().map(|&v| v as f64));
+        image.chain(flat_words(&g.gradients.params)).collect()
     };
     let (plain, with_checks) = (run(&gpu), run(&checked));
     let moved = flat_words(&params).len();
-    let nonzero = plain[plain.len() - moved..]
-        .iter()
-        .filter(|&&b| f64::from_bits(b) != 0.0);
+    let nonzero = plain[plain.len() - moved..].iter().filter(|&&v| v != 0.0);
     assert!(
         nonzero.count() > moved / 4,
         "most gradient words are nonzero"
     );
-    assert!(plain == with_checks, "the checks changed a result");
+    if gpu.software {
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert!(
+            bits(&plain) == bits(&with_checks),
+            "the checks changed a result"
+        );
+    } else {
+        let largest = plain.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let worst = (plain.iter().zip(&with_checks)).fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        assert!(
+            worst <= 1e-5 * largest,
+            "the checks moved a result by {worst}"
+        );
+    }
 }
 
 #[test]

@@ -64,6 +64,9 @@ pub fn bench_cmd(args: &BenchArgs, methods: &[Method]) -> Result<()> {
     )?;
     methods::check_camera(method, methods, &camera)?;
     let gpu = crate::pick_gpu(args.backend)?.map(|g| g.with_shader_checks(args.shader_checks));
+    if args.shader_checks && gpu.is_none() {
+        bail!("--shader-checks is for the GPU's shaders; this run is on the CPU");
+    }
     let task = Bench {
         args,
         method: method.name,
@@ -140,7 +143,7 @@ impl Bench<'_> {
         opts: &RenderOptions,
         grad: &FrameGrad,
     ) -> Result<Frame> {
-        let checks = match gpu.shader_checks {
+        let checks = match gpu.shader_checks() {
             true => " (shaders with naga's run-time checks)",
             false => "",
         };

@@ -3,6 +3,7 @@
 //! training; the result written as an INRIA PLY beside the test renders, the metrics as CSV
 //! and the training curve as a plot.
 
+use crate::interrupt::Listening;
 use crate::methods::{self, Method};
 use crate::{plot, scene};
 use anyhow::{Context, Result, anyhow, bail};
@@ -291,7 +292,6 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
         random_background: args.random_background,
         eval_every: (args.eval_every > 0).then_some(args.eval_every),
         checkpoint_every: (args.checkpoint_every > 0).then_some(args.checkpoint_every),
-        stop: Some(crate::interrupt_flag()),
         ..Default::default()
     };
     std::fs::create_dir_all(args.out.join("test"))
@@ -455,6 +455,12 @@ impl Fit<'_> {
                 bar.set_message(status);
             }
         };
+        // Ctrl-C during the steps ends the run after the step in progress, with its checkpoint.
+        let listening = crate::interrupt::listen();
+        let opts = &FitOptions {
+            stop: listening.as_ref().map(Listening::flag),
+            ..opts.clone()
+        };
         let place = match &gpu {
             Some(gpu) => {
                 fit_gpu_from::<M>(gpu, data, &mut state, extent, opts, report)?;
@@ -465,6 +471,7 @@ impl Fit<'_> {
                 "the CPU".to_string()
             }
         };
+        drop(listening);
         let stopped = state.step < opts.steps;
         match stopped {
             true => bar.abandon(),
@@ -480,7 +487,7 @@ impl Fit<'_> {
                 None => "nothing was saved (--checkpoint-every 0)".to_string(),
             };
             bail!(
-                "stopped by a signal after step {} of {}; {kept}",
+                "stopped by Ctrl-C after step {} of {}; {kept}",
                 state.step,
                 opts.steps
             );

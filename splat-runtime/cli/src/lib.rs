@@ -17,6 +17,7 @@
 
 mod bench;
 mod fit;
+mod interrupt;
 mod methods;
 mod plot;
 mod render;
@@ -33,8 +34,6 @@ use splat_runtime::gpu::Gpu;
 use splat_runtime::io::{Outputs, camera as camera_io, dataset, ply};
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, OnceLock};
 
 #[derive(Parser)]
 #[command(
@@ -163,26 +162,6 @@ fn end_quietly_on_a_closed_pipe() {
     unsafe {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
-}
-
-/// The flag Ctrl-C (SIGINT) and SIGTERM set, for long work to end cleanly at its next step
-/// (`splat fit` saves its checkpoint): the handler is installed on first use, and the flag
-/// cleared for the caller. A second signal ends the process at once. Where the program
-/// already has a handler of its own, signals keep their previous effect.
-pub(crate) fn interrupt_flag() -> Arc<AtomicBool> {
-    static FLAG: OnceLock<Arc<AtomicBool>> = OnceLock::new();
-    let flag = FLAG.get_or_init(|| {
-        let flag = Arc::new(AtomicBool::new(false));
-        let seen = flag.clone();
-        let _ = ctrlc::set_handler(move || {
-            if seen.swap(true, Ordering::SeqCst) {
-                std::process::exit(130);
-            }
-        });
-        flag
-    });
-    flag.store(false, Ordering::SeqCst);
-    flag.clone()
 }
 
 /// Runs the command line `args` (the program's name first) offering `methods`.

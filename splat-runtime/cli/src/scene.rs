@@ -135,13 +135,13 @@ pub fn given_or_built_in(
     camera: Option<&std::path::Path>,
     (width, height): (u32, u32),
 ) -> anyhow::Result<(GaussianCloud, Camera)> {
-    let cloud = match scene {
-        Some(path) => splat_runtime::io::ply::read(path)?,
-        None => planet(),
-    };
     let camera = match camera {
         Some(path) => splat_runtime::io::camera::read(path)?,
         None => built_in_camera(width, height, CameraModel::Pinhole)?,
+    };
+    let cloud = match scene {
+        Some(path) => splat_runtime::io::ply::read(path)?,
+        None => planet(),
     };
     Ok((cloud, camera))
 }

@@ -683,7 +683,7 @@ fn an_interrupted_fit_saves_its_checkpoint_and_resumes_from_it() {
     use std::io::{BufRead, Read};
     let dir = tempfile::tempdir().unwrap();
     tiny_dataset(&dir.path().join("data"), 3);
-    for (backend, steps) in [("cpu", "200000"), ("gpu", "400")] {
+    for (backend, steps) in [("cpu", "2000"), ("gpu", "400")] {
         let args = [
             "fit",
             "data",
@@ -736,7 +736,7 @@ fn an_interrupted_fit_saves_its_checkpoint_and_resumes_from_it() {
                 assert!(std::env::var("SPLAT_REQUIRE_GPU").map_or(true, |v| v != "1"));
                 return None;
             }
-            let step: usize = (stderr.split("stopped by a signal after step ").nth(1))
+            let step: usize = (stderr.split("stopped by Ctrl-C after step ").nth(1))
                 .and_then(|rest| rest.split(' ').next())
                 .and_then(|k| k.parse().ok())
                 .unwrap_or_else(|| panic!("no stop message in {stderr}"));
@@ -1161,8 +1161,12 @@ fn bench_times_both_passes_and_writes_the_raw_image_render_would() {
     assert_eq!(raw, reference, "bench's raw image differs from render's");
 
     let out = dir.path().join("never.f32");
-    let bad: [(&[&str], &str); 4] = [
+    let bad: [(&[&str], &str); 5] = [
         (&["--iters", "0"], "--iters"),
+        (
+            &["--shader-checks"],
+            "--shader-checks is for the GPU's shaders",
+        ),
         (&["--threads", "2,0"], "--threads 0"),
         (&["--scene", "missing.ply"], "missing.ply"),
         (&["--width", "0"], "image size 0x600 is out of range"),

@@ -32,9 +32,9 @@ pub struct Gpu {
     /// Blending into `Rgba16Unorm` render targets (`TEXTURE_FORMAT_16BIT_NORM` and the
     /// adapter's format features).
     pub unorm16_targets: bool,
-    /// Whether naga adds its run-time checks to the shaders: index clamps, guarded integer
-    /// division and a counter bounding every loop ([`Gpu::with_shader_checks`]).
-    pub shader_checks: bool,
+    /// Whether naga adds its run-time checks to the shaders ([`Gpu::with_shader_checks`]);
+    /// part of what the compiled pipelines are, so only set through that.
+    shader_checks: bool,
     limits: wgpu::Limits,
     pipelines: Mutex<HashMap<u64, wgpu::ComputePipeline>>,
 }
@@ -112,9 +112,10 @@ impl Gpu {
 
     /// The same device compiling its shaders with naga's run-time checks (`on`) or without
     /// (the default). Off, the shaders run as written: every loop of the runtime's shaders is
-    /// bounded by a count, a method's code has no loops, array indices stay within their
-    /// arrays and divisors are image or record sizes, and storage buffers keep the driver's
-    /// robust access. On, each loop carries a 64-bit counter that keeps the driver from
+    /// bounded by a count but the compare-exchange loops, which end once their exchange
+    /// succeeds; a method's code has no loops; array indices stay within their arrays;
+    /// divisors are image or record sizes; and storage buffers keep the driver's robust
+    /// access. On, each loop carries a 64-bit counter that keeps the driver from
     /// unrolling it (wgpu issue 7698 reports compute passes 100x slower), each array index a
     /// clamp and each integer division a guard: for finding a shader fault, and for
     /// measuring what the checks cost.
@@ -122,6 +123,11 @@ impl Gpu {
         self.shader_checks = on;
         self.pipelines.get_mut().unwrap().clear();
         self
+    }
+
+    /// Whether the shaders carry naga's run-time checks ([`Gpu::with_shader_checks`]).
+    pub fn shader_checks(&self) -> bool {
+        self.shader_checks
     }
 
     /// A shader module of WGSL `source` (its functions the entry points do not reach pruned),
@@ -135,8 +141,8 @@ impl Gpu {
             true => wgpu::ShaderRuntimeChecks::checked(),
             false => wgpu::ShaderRuntimeChecks::unchecked(),
         };
-        // SAFETY: the runtime's shaders stay within their arrays, bound every loop and
-        // divide by nonzero sizes (`with_shader_checks` says why).
+        // SAFETY: the runtime's shaders stay within their arrays, end every loop and divide
+        // by nonzero sizes (`with_shader_checks` says why).
         unsafe { self.device.create_shader_module_trusted(desc, checks) }
     }
 

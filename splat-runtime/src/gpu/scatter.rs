@@ -24,9 +24,9 @@ pub fn declare(words: usize) -> String {
 
 /// Adds the `words` scalars to the sums of primitive `prim` (at `prim * NG + k`) through
 /// `add_grad`, counting each global add in `my_issued`; `reduce` says what is summed first.
-/// `round` is how many words one workgroup reduction round sums (its `red` holds
-/// `round * WG` floats).
-pub fn scatter(reduce: Reduction, words: usize, round: usize) -> String {
+/// `words_per_round` is how many words one workgroup reduction round sums (its `red` holds
+/// `words_per_round * WG` floats).
+pub fn scatter(reduce: Reduction, words: usize, words_per_round: usize) -> String {
     let add = |indent: &str, k: &str, v: &str| {
         format!(
             "{indent}if ({v} != 0.0) {{
@@ -48,16 +48,15 @@ pub fn scatter(reduce: Reduction, words: usize, round: usize) -> String {
             s += "            if (subgroupAny(hit)) {\n";
             for k in 0..words {
                 let _ = writeln!(s, "                let v{k} = subgroupAdd({});", word(k));
-            }
-            s += "                if (lane == 0u) {\n";
-            for k in 0..words {
+                s += "                if (lane == 0u) {\n";
                 s += &add("                    ", &format!("{k}u"), &format!("v{k}"));
+                s += "                }\n";
             }
-            s += "                }\n            }\n";
+            s += "            }\n";
         }
         Reduction::Workgroup => {
-            for first in (0..words).step_by(round.max(1)) {
-                let n = round.min(words - first);
+            for first in (0..words).step_by(words_per_round.max(1)) {
+                let n = words_per_round.min(words - first);
                 for k in 0..n {
                     let _ = writeln!(s, "            red[{k}u * WG + lid] = {};", word(first + k));
                 }
