@@ -15,6 +15,21 @@ fn splat(args: &[&str], dir: &Path) -> Output {
         .expect("run splat")
 }
 
+/// Whether `out` failed for want of a GPU adapter (the test then skips its GPU part); with
+/// `SPLAT_REQUIRE_GPU=1` (CI, on lavapipe) that is a failure.
+fn no_adapter(out: &Output) -> bool {
+    if out.status.success() {
+        return false;
+    }
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("no GPU adapter"), "{stderr}");
+    assert!(
+        std::env::var("SPLAT_REQUIRE_GPU").map_or(true, |v| v != "1"),
+        "{stderr}"
+    );
+    true
+}
+
 fn ok(out: &Output) -> String {
     let stdout = String::from_utf8_lossy(&out.stdout).to_string();
     assert!(
@@ -486,13 +501,7 @@ fn gpu_backend_renders_when_an_adapter_exists() {
         ],
         dir.path(),
     );
-    if !out.status.success() {
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        assert!(stderr.contains("no GPU adapter"), "{stderr}");
-        assert!(
-            std::env::var("SPLAT_REQUIRE_GPU").map_or(true, |v| v != "1"),
-            "{stderr}"
-        );
+    if no_adapter(&out) {
         return;
     }
     assert!(String::from_utf8_lossy(&out.stdout).contains("on GPU"));
@@ -662,15 +671,11 @@ fn fit_trains_on_a_dataset_and_writes_its_outputs() {
         &[&args[..], &["--out", "gpu", "--backend", "gpu"]].concat(),
         dir.path(),
     );
-    if gpu.status.success() {
+    if !no_adapter(&gpu) {
         let stdout = String::from_utf8_lossy(&gpu.stdout);
         assert!(stdout.contains("20 steps on the GPU"), "{stdout}");
         let fit = fit_output(&dir.path().join("gpu"), 3, (16, 16));
         assert_eq!(fit.scene.gaussians.len(), 200);
-    } else {
-        let stderr = String::from_utf8_lossy(&gpu.stderr);
-        assert!(stderr.contains("no GPU adapter"), "{stderr}");
-        assert!(std::env::var("SPLAT_REQUIRE_GPU").map_or(true, |v| v != "1"));
     }
 }
 
@@ -1269,10 +1274,7 @@ fn gpu_bench_times_resident_frames_with_or_without_shader_checks() {
         ];
         args.extend(extra);
         let out = splat(&args, dir.path());
-        if !out.status.success() {
-            let stderr = String::from_utf8_lossy(&out.stderr);
-            assert!(stderr.contains("no GPU adapter"), "{stderr}");
-            assert!(std::env::var("SPLAT_REQUIRE_GPU").map_or(true, |v| v != "1"));
+        if no_adapter(&out) {
             return;
         }
         let stdout = ok(&out);
@@ -1532,10 +1534,7 @@ fn tradeoff_sweeps_every_knob_and_writes_its_table_and_plot() {
 
     let args = [&["tradeoff", "--backend", "gpu", "--out", "gpu"][..], &size].concat();
     let out = splat(&args, dir.path());
-    if !out.status.success() {
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        assert!(stderr.contains("no GPU adapter"), "{stderr}");
-        assert!(std::env::var("SPLAT_REQUIRE_GPU").map_or(true, |v| v != "1"));
+    if no_adapter(&out) {
         return;
     }
     // The GPU renders tiles of 8 and 16 only; the hardware path adds a row per target format
