@@ -74,21 +74,23 @@ fn main() {
     let acc = Accumulation::default_for(&gpu);
     let scene_gpu = GpuScene::<Method>::new(&gpu, &params).unwrap();
     let mut renderer = GpuRenderer::<Method>::new(&gpu, &opts).unwrap();
-    let gpu_run = |renderer: &mut GpuRenderer<Method>, acc: Accumulation| {
-        renderer.forward(&scene_gpu, &camera).unwrap();
-        renderer.backward(&scene_gpu, &grad, acc).unwrap();
-        let s = renderer.download_frame().unwrap().stats;
-        let g = renderer.download_gradients().unwrap();
-        let b = g.gradients.stats;
-        (
-            [s.preprocess, s.rasterize, s.shade, b.blend, b.project],
-            g.atomics,
-        )
-    };
+    // One frame's stage times and global atomic adds, on the device `scene` lives on.
+    let gpu_run =
+        |renderer: &mut GpuRenderer<Method>, scene: &GpuScene<Method>, acc: Accumulation| {
+            renderer.forward(scene, &camera).unwrap();
+            renderer.backward(scene, &grad, acc).unwrap();
+            let s = renderer.download_frame().unwrap().stats;
+            let g = renderer.download_gradients().unwrap();
+            let b = g.gradients.stats;
+            (
+                [s.preprocess, s.rasterize, s.shade, b.blend, b.project],
+                g.atomics,
+            )
+        };
     cpu();
-    gpu_run(&mut renderer, acc);
+    gpu_run(&mut renderer, &scene_gpu, acc);
     let c = best(3, cpu);
-    let g = best(3, || gpu_run(&mut renderer, acc).0);
+    let g = best(3, || gpu_run(&mut renderer, &scene_gpu, acc).0);
     println!("\n| stage | CPU backend (ms) | GPU backend (ms) | GPU / CPU |");
     println!("|---|---:|---:|---:|");
     let names = [
@@ -181,7 +183,7 @@ fn main() {
         };
         let mut issued = 0;
         let blend = best(3, || {
-            let (t, a) = gpu_run(&mut renderer, acc);
+            let (t, a) = gpu_run(&mut renderer, &scene_gpu, acc);
             issued = a;
             [t[3]]
         });
@@ -204,15 +206,8 @@ fn main() {
     let checked = Gpu::new().unwrap().with_shader_checks(true);
     let scene_checked = GpuScene::<Method>::new(&checked, &params).unwrap();
     let mut renderer_checked = GpuRenderer::<Method>::new(&checked, &opts).unwrap();
-    let checked_run = |renderer: &mut GpuRenderer<Method>| {
-        renderer.forward(&scene_checked, &camera).unwrap();
-        renderer.backward(&scene_checked, &grad, acc).unwrap();
-        let s = renderer.download_frame().unwrap().stats;
-        let b = renderer.download_gradients().unwrap().gradients.stats;
-        [s.preprocess, s.rasterize, s.shade, b.blend, b.project]
-    };
-    checked_run(&mut renderer_checked);
-    let on = best(3, || checked_run(&mut renderer_checked));
+    gpu_run(&mut renderer_checked, &scene_checked, acc);
+    let on = best(3, || gpu_run(&mut renderer_checked, &scene_checked, acc).0);
     println!(
         "\nGPU stages with naga's run-time checks (index clamps, division guards, loop counters):"
     );
