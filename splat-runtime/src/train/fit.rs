@@ -300,12 +300,17 @@ pub fn evaluate<M: SplatMethod>(
     Evaluation::of(&render_views::<M>(params, views, opts)?, views)
 }
 
+/// Whether `step` is the run's last: its final step, or the one it `stops` after
+/// ([`FitOptions::stop`]).
+pub(crate) fn ends_after(opts: &FitOptions, step: usize, stops: bool) -> bool {
+    step + 1 == opts.steps || stops
+}
+
 /// Whether a checkpoint is reported after `step`: every `FitOptions::checkpoint_every` steps
-/// and after the last one (the last of the run, or the one it `stops` after).
+/// and after the run's last ([`ends_after`]).
 pub(crate) fn saves_at(opts: &FitOptions, step: usize, stops: bool) -> bool {
-    let last = step + 1 == opts.steps || stops;
     after_every(opts.checkpoint_every, step)
-        || (last && opts.checkpoint_every.is_some_and(|n| n > 0))
+        || (ends_after(opts, step, stops) && opts.checkpoint_every.is_some_and(|n| n > 0))
 }
 
 /// Whether something done every `every` steps (`FitOptions::eval_every`,
@@ -444,7 +449,7 @@ pub fn fit_from<M: Trainable>(
         };
         let stops = opts.stop_requested();
         let save = saves_at(opts, step, stops);
-        if save || step + 1 == opts.steps || stops {
+        if save || ends_after(opts, step, stops) {
             state.step = step + 1;
             state.params = flat.clone();
             state.adam = adam.state();

@@ -9,7 +9,7 @@ use super::checkpoint::Checkpoint;
 use super::densify::Densifier;
 use super::fit::{
     Evaluation, FitError, FitOptions, StepReport, Trainable, adopt, after_every, composite,
-    flatten, for_training, rates_for, saves_at, step_background, step_rates,
+    ends_after, flatten, for_training, rates_for, saves_at, step_background, step_rates,
 };
 use crate::flat::Flat;
 use crate::gpu::entries::Accumulation;
@@ -176,7 +176,7 @@ pub fn fit_gpu_from<M: Trainable>(
         };
         let stops = opts.stop_requested();
         let save = saves_at(opts, step, stops);
-        if save || step + 1 == opts.steps || stops {
+        if save || ends_after(opts, step, stops) {
             let n = scene.len();
             state.step = step + 1;
             state.params = flatten::<M>(&scene.download(gpu)?);
