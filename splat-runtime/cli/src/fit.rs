@@ -10,6 +10,7 @@ use anyhow::{Context, Result, anyhow, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use plotters::prelude::*;
 use splat_runtime::glam::Vec3;
+use splat_runtime::gpu::Gpu;
 use splat_runtime::io::Outputs;
 use splat_runtime::io::dataset::{self, Dataset};
 use splat_runtime::io::image::stage_image;
@@ -18,11 +19,13 @@ use splat_runtime::pipeline::MAX_SIDE;
 use splat_runtime::train::fit::{Evaluation, FitOptions, StepReport, fit_from, render_views};
 use splat_runtime::train::gpu_fit::{fit_gpu_from, render_views_gpu};
 use splat_runtime::train::loss::{LossValue, WINDOW};
-use splat_runtime::train::{Checkpoint, DensifyOptions, McmcOptions, Strategy, Trainable, init};
+use splat_runtime::train::{
+    Checkpoint, DensifyOptions, McmcOptions, StepTimes, Strategy, Trainable, init,
+};
 use splat_runtime::{Effects, GradientSet, RenderOptions, param_groups};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 #[derive(clap::Args)]
 pub struct FitArgs {
@@ -402,11 +405,13 @@ impl Fit<'_> {
         bar.set_position(state.step as u64);
         let first = state.step;
         let mut faulty_steps = 0usize;
+        let mut times = StepTimes::default();
         let line_every = (opts.steps - first).div_ceil(20).next_multiple_of(10);
         let t = Instant::now();
         let report = |r: &StepReport| {
             bar.inc(1);
             log.record(r);
+            times += r.times;
             if r.faults.any() {
                 faulty_steps += 1;
                 match faulty_steps {
@@ -515,6 +520,7 @@ impl Fit<'_> {
             before.ssim,
             after.ssim
         );
+        print_step_times(&times, opts.steps - first, gpu.as_ref());
         let out = &args.out;
         let ply_path = out.join("scene.ply");
         let cloud = GaussianCloud {
@@ -536,6 +542,35 @@ impl Fit<'_> {
         crate::wrote(out);
         Ok(())
     }
+}
+
+/// Where the run's steps spent their time, per stage: a table of the mean per step.
+fn print_step_times(total: &StepTimes, steps: usize, gpu: Option<&Gpu>) {
+    let clocks = match gpu {
+        Some(g) if g.timestamps => {
+            "the GPU's stages by its timestamps, the step by the host's clock"
+        }
+        Some(_) => "this adapter has no timestamp queries: its stages read zero",
+        None => "the host's clock",
+    };
+    println!("\nWhere a step's time went (mean of {steps} steps; {clocks}):");
+    println!("| stage | ms per step | share |");
+    println!("|---|---:|---:|");
+    let per_step = |d: Duration| d.as_secs_f64() * 1e3 / steps.max(1) as f64;
+    let wall = per_step(total.wall);
+    let other = match gpu {
+        Some(_) => "other (host work, submissions, waits for the GPU)",
+        None => "other (the loop's own host work)",
+    };
+    let rows = (total.stages().into_iter()).chain([(other, total.unaccounted())]);
+    for (stage, d) in rows.filter(|(_, d)| !d.is_zero()) {
+        let ms = per_step(d);
+        println!(
+            "| {stage} | {ms:.2} | {:.1}% |",
+            100.0 * ms / wall.max(1e-12)
+        );
+    }
+    println!("| step | {wall:.2} | 100% |");
 }
 
 /// `opts` training every parameter group of `M` (`--method method`) but those named in

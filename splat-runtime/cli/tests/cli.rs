@@ -660,6 +660,7 @@ fn fit_trains_on_a_dataset_and_writes_its_outputs() {
         .collect();
     assert_eq!(lines.len(), 2, "{stdout}");
     assert!(lines[0].starts_with("step 10/20: ") && lines[1].starts_with("step 20/20: "));
+    step_times_add_up(&stdout);
     let fit = fit_output(&dir.path().join("out"), 3, (16, 16));
     assert_eq!((fit.scene.sh_degree, fit.scene.gaussians.len()), (3, 200));
     // Step 0 (before training), then 20 steps; PSNR before and after only.
@@ -674,9 +675,36 @@ fn fit_trains_on_a_dataset_and_writes_its_outputs() {
     if !no_adapter(&gpu) {
         let stdout = String::from_utf8_lossy(&gpu.stdout);
         assert!(stdout.contains("20 steps on the GPU"), "{stdout}");
+        step_times_add_up(&stdout);
         let fit = fit_output(&dir.path().join("gpu"), 3, (16, 16));
         assert_eq!(fit.scene.gaussians.len(), 200);
     }
+}
+
+/// The table of where `splat fit`'s steps spent their time: the forward and backward blends
+/// among its rows (lavapipe has timestamps), and its rows add up to the step (to the
+/// rounding of their figures).
+fn step_times_add_up(stdout: &str) {
+    let rows: Vec<(&str, f64)> = stdout
+        .lines()
+        .skip_while(|l| !l.starts_with("Where a step's time went (mean of 20 steps"))
+        .skip(3)
+        .map_while(|l| {
+            let cells: Vec<&str> = l.split(" | ").collect();
+            let stage = cells.first()?.strip_prefix("| ")?;
+            Some((stage, cells.get(1)?.parse().ok()?))
+        })
+        .collect();
+    let (last, stages) = rows.split_last().expect(stdout);
+    assert_eq!(last.0, "step", "{stdout}");
+    for stage in ["shade", "backward blend"] {
+        assert!(stages.iter().any(|s| s.0 == stage), "{stdout}");
+    }
+    let sum: f64 = stages.iter().map(|s| s.1).sum();
+    assert!(
+        (sum - last.1).abs() <= 0.005 * rows.len() as f64,
+        "{stdout}"
+    );
 }
 
 /// Ctrl-C during `splat fit` ends the run after the step in progress with its checkpoint and

@@ -333,17 +333,38 @@ impl Gpu {
 
     /// Reads the first `words` words of `buffer` back.
     pub fn read(&self, buffer: &wgpu::Buffer, words: usize) -> Result<Vec<u32>, GpuError> {
-        let size = 4 * words.max(1) as u64;
+        let [out] = self.read_together([(buffer, words)])?;
+        Ok(out)
+    }
+
+    /// Reads the first words of each buffer back, with one submission and one wait for all
+    /// (each read alone is a round trip to the GPU).
+    pub fn read_together<const N: usize>(
+        &self,
+        parts: [(&wgpu::Buffer, usize); N],
+    ) -> Result<[Vec<u32>; N], GpuError> {
+        let total: usize = parts.iter().map(|p| p.1.max(1)).sum();
         let readback = self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("readback"),
-            size,
+            size: 4 * total.max(1) as u64,
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
         let mut encoder = self.device.create_command_encoder(&Default::default());
-        encoder.copy_buffer_to_buffer(buffer, 0, &readback, 0, size);
+        let mut at = 0;
+        for (buffer, words) in parts {
+            let size = 4 * words.max(1) as u64;
+            encoder.copy_buffer_to_buffer(buffer, 0, &readback, at, size);
+            at += size;
+        }
         self.queue.submit([encoder.finish()]);
-        self.read_mappable(&readback, words)
+        let all = self.read_mappable(&readback, total)?;
+        let mut rest = &all[..];
+        Ok(parts.map(|(_, words)| {
+            let (part, tail) = rest.split_at(words.max(1));
+            rest = tail;
+            part[..words].to_vec()
+        }))
     }
 
     /// Reads the first `words` words of a `MAP_READ` buffer, once the GPU is done with it.
@@ -460,6 +481,21 @@ pub fn dispatch(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn buffers_read_together_come_back_whole_and_in_order() {
+        let Some(gpu) = super::super::adapter_or_skip() else {
+            return;
+        };
+        let a: Vec<u32> = (0..70).collect();
+        let b: Vec<u32> = (100..103).collect();
+        let (ba, bb) = (
+            gpu.buffer_from("a", &a).unwrap(),
+            gpu.buffer_from("b", &b).unwrap(),
+        );
+        let [got_b, none, got_a] = gpu.read_together([(&bb, 3), (&ba, 0), (&ba, 70)]).unwrap();
+        assert_eq!((got_a, got_b, none), (a, b, vec![]));
+    }
 
     #[test]
     fn buffers_past_the_device_limits_are_refused_by_name() {

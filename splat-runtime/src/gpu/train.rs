@@ -162,11 +162,16 @@ impl GpuLoss {
         Ok(())
     }
 
-    /// The value of the last loss recorded (reads a few words back).
-    pub fn value(&self, gpu: &Gpu) -> Result<LossValue, GpuTrainError> {
+    /// The partial sums of the last loss recorded, to read back ([`Gpu::read_together`])
+    /// for [`GpuLoss::value`].
+    pub fn sums(&self) -> Result<(&wgpu::Buffer, usize), GpuTrainError> {
         let (w, h) = self.last.ok_or(GpuTrainError::NoLoss)?;
-        let groups = (w * h).div_ceil(64) as usize;
-        let sums = gpu.read(&self.sums, 2 * groups)?;
+        Ok((&self.sums, 2 * (w * h).div_ceil(64) as usize))
+    }
+
+    /// The value of the last loss recorded, from its partial sums read back.
+    pub fn value(&self, sums: &[u32]) -> Result<LossValue, GpuTrainError> {
+        let (w, h) = self.last.ok_or(GpuTrainError::NoLoss)?;
         let total = |slot: usize| -> f64 {
             sums.iter()
                 .skip(slot)
@@ -271,14 +276,20 @@ impl GpuAdam {
         Ok(())
     }
 
-    /// The words the last recorded step could not move (a few words read back).
-    pub fn faults(&self, gpu: &Gpu) -> Result<Faults, GpuError> {
-        let f = gpu.read(&self.faults, 3)?;
-        Ok(Faults {
-            gradients: f[0],
-            steps: f[1],
-            first: (f[2] != u32::MAX).then_some(f[2] as usize),
-        })
+    /// Where the last recorded step says which words it could not move, to read back
+    /// ([`Gpu::read_together`]) for [`GpuAdam::faults`].
+    pub fn fault_words(&self) -> (&wgpu::Buffer, usize) {
+        (&self.faults, 3)
+    }
+
+    /// The words the last recorded step could not move, from [`GpuAdam::fault_words`] read
+    /// back.
+    pub fn faults(words: &[u32]) -> Faults {
+        Faults {
+            gradients: words[0],
+            steps: words[1],
+            first: (words[2] != u32::MAX).then_some(words[2] as usize),
+        }
     }
 
     /// The step count and the moments of `primitives` primitives, for a checkpoint.
@@ -579,7 +590,8 @@ mod tests {
         loss.record(&gpu, &mut enc, (1, bg, (w, h)), &state_buf, 5, &grad_buf)
             .unwrap();
         gpu.queue.submit([enc.finish()]);
-        let got = loss.value(&gpu).unwrap();
+        let (sums, len) = loss.sums().unwrap();
+        let got = loss.value(&gpu.read(sums, len).unwrap()).unwrap();
         let grad: Vec<f32> = gpu
             .read(&grad_buf, pixels * 5)
             .unwrap()
@@ -653,7 +665,9 @@ mod tests {
                 .map(|(k, g)| if k % words == 2 { 0.0 } else { *g })
                 .collect();
             let want = host.step(&mut cpu, &locked, &rates.map(|r: f32| r.max(0.0)));
-            assert_eq!(adam.faults(&gpu).unwrap(), want, "step {step}");
+            let (faults, len) = adam.fault_words();
+            let got = GpuAdam::faults(&gpu.read(faults, len).unwrap());
+            assert_eq!(got, want, "step {step}");
         }
         let got: Vec<f32> = gpu
             .read(&params, prims * words)

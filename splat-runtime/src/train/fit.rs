@@ -9,6 +9,7 @@ use super::checkpoint::Checkpoint;
 use super::densify::{Densifier, DensifyOptions, Refinement, Shape, screen_gradient};
 use super::loss::{self, LossError, LossValue};
 use super::mcmc::{Mcmc, McmcOptions};
+use super::step_times::StepTimes;
 use crate::flat::Flat;
 use crate::io::dataset::{Dataset, View};
 use crate::method::{SplatMethod, param_groups, word_name};
@@ -16,6 +17,7 @@ use crate::pipeline::{FrameGrad, Image, RenderError, RenderOptions};
 use glam::{Vec2, Vec3};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
 
 /// How one parameter word is trained: its learning rate decays exponentially from `first` to
 /// `last` over the run, and it stays fixed (no gradient, no moment) before step `from_step`
@@ -336,6 +338,8 @@ pub struct StepReport<'a> {
     /// The run's state after this step, on the steps `FitOptions::checkpoint_every` asks for
     /// (and the last).
     pub checkpoint: Option<&'a Checkpoint>,
+    /// Where this step's time went.
+    pub times: StepTimes,
 }
 
 /// Trains `params` on the training views of `data` for `opts.steps` steps on the CPU (with
@@ -378,10 +382,18 @@ pub fn fit_from<M: Trainable>(
     let mut rng = fastrand::Rng::with_seed(state.rng);
     let render_opts = for_training(&opts.render);
     for step in state.step..opts.steps {
+        let started = Instant::now();
         let view = &data.train[rng.usize(..data.train.len())];
         let background = step_background(opts, &mut rng);
         let (frame, pass) =
             crate::pipeline::render_for_backward::<M>(&params, &view.camera, &render_opts)?;
+        let mut times = StepTimes {
+            preprocess: frame.stats.preprocess,
+            rasterize: frame.stats.rasterize,
+            shade: frame.stats.shade,
+            ..Default::default()
+        };
+        let clock = Instant::now();
         let image = composite(frame.color, frame.alpha.as_ref(), background);
         let (value, d_color) =
             loss::loss_and_gradient(&image, &view.on(background), opts.ssim_weight)?;
@@ -396,17 +408,22 @@ pub fn fit_from<M: Trainable>(
             alpha: Some(d_alpha),
             depth: None,
         };
+        times.loss = clock.elapsed();
         let g = crate::pipeline::backward::<M>(&pass, &params, &view.camera, &grad)?;
+        (times.blend, times.project) = (g.stats.blend + g.stats.reduce, g.stats.project);
         for (p, out) in g.params.iter().zip(grads.chunks_exact_mut(words)) {
             p.write_words(out);
         }
+        let clock = Instant::now();
         if let Some(m) = &mcmc {
             m.regularize(&flat, &mut grads, words);
         }
         let lr = step_rates(&rates, step, opts.steps);
         let faults = adam.step(&mut flat, &grads, &lr);
+        times.optimizer = clock.elapsed();
         let mut refinement = None;
         if let Some(m) = &mcmc {
+            let clock = Instant::now();
             if m.opts.refines_at(step) {
                 read_into::<M>(&mut params, &flat);
                 let r = m.refine::<M>(&mut params, &mut rng);
@@ -415,12 +432,16 @@ pub fn fit_from<M: Trainable>(
                 grads = vec![0.0; flat.len()];
                 refinement = Some(r);
             }
+            times.densify = clock.elapsed();
+            let clock = Instant::now();
             // A position not trained yet (a negative rate) is not stirred either.
             let rate = lr[m.words.position].max(0.0);
             m.perturb(&mut flat, words, rate, rng.u32(..));
+            times.optimizer += clock.elapsed();
         }
         read_into::<M>(&mut params, &flat);
         if let Some(d) = densifier.as_mut().filter(|d| step < d.opts.stop) {
+            let clock = Instant::now();
             let shade_words = M::Shade::LEN;
             d.observe(pass.pre.visible.iter().map(|&(i, _)| {
                 let i = i as usize;
@@ -428,6 +449,8 @@ pub fn fit_from<M: Trainable>(
                 let grad = screen_gradient::<M>(&params[i], &g.params[i], shade, &view.camera);
                 (i, grad)
             }));
+            times.statistics = clock.elapsed();
+            let clock = Instant::now();
             if d.refines_at(step) {
                 let r = d.refine::<M>(&mut params, step, extent, &mut rng);
                 adam.remap(&r.origin);
@@ -442,11 +465,14 @@ pub fn fit_from<M: Trainable>(
                 adam.forget(|k| flat[k] != after[k]);
                 flat = after;
             }
+            times.densify = clock.elapsed();
         }
+        let clock = Instant::now();
         let evaluation = match after_every(opts.eval_every, step) {
             true => Some(evaluate::<M>(&params, &data.test, opts)?),
             false => None,
         };
+        times.evaluation = clock.elapsed();
         let stops = opts.stop_requested();
         let save = saves_at(opts, step, stops);
         if save || ends_after(opts, step, stops) {
@@ -467,6 +493,10 @@ pub fn fit_from<M: Trainable>(
             faults,
             evaluation,
             checkpoint: save.then_some(&*state),
+            times: StepTimes {
+                wall: started.elapsed(),
+                ..times
+            },
         });
         if stops {
             break;

@@ -1,8 +1,8 @@
 //! The training loop on the GPU, step for step the CPU loop of [`super::fit`]: the scene, the
 //! target images, the loss, the gradients and Adam's moments live on the device. A step is
 //! the renderer's forward (which reads back the intersection count), the loss and backward,
-//! Adam, density control's statistics or MCMC's penalties and noise, and a read-back of the
-//! loss value and of the words Adam could not step (a few words). Every hundred steps density control or MCMC refines on the host:
+//! Adam, density control's statistics or MCMC's penalties and noise, and one read-back of the
+//! loss value and of the words Adam could not step (a few words), then of the stage times. Every hundred steps density control or MCMC refines on the host:
 //! the scene and the moments go down and back up.
 
 use super::checkpoint::Checkpoint;
@@ -11,14 +11,17 @@ use super::fit::{
     Evaluation, FitError, FitOptions, StepReport, Trainable, adopt, after_every, composite,
     ends_after, flatten, for_training, rates_for, saves_at, step_background, step_rates,
 };
+use super::step_times::StepTimes;
 use crate::flat::Flat;
 use crate::gpu::entries::Accumulation;
+use crate::gpu::timing::StageTimer;
 use crate::gpu::train::{GpuAdam, GpuLoss, GpuMcmc, GpuObserver, GpuTrainError, ScreenSource};
 use crate::gpu::{Gpu, GpuRenderError, GpuRenderer, GpuScene};
 use crate::io::dataset::{Dataset, View};
 use crate::method::SplatMethod;
 use crate::pipeline::Image;
 use glam::{Vec2, Vec3};
+use std::time::Instant;
 
 impl From<GpuTrainError> for FitError {
     fn from(e: GpuTrainError) -> FitError {
@@ -98,8 +101,10 @@ pub fn fit_gpu_from<M: Trainable>(
         None => None,
     };
     let acc = Accumulation::default_for(gpu);
+    let timer = StageTimer::new(gpu, STAGES);
     let mut rng = fastrand::Rng::with_seed(state.rng);
     for step in state.step..opts.steps {
+        let started = Instant::now();
         let k = rng.usize(..data.train.len());
         let camera = &data.train[k].camera;
         let background = step_background(opts, &mut rng);
@@ -111,7 +116,9 @@ pub fn fit_gpu_from<M: Trainable>(
         let state_words = renderer.state_layout().words() as u32;
         let pixel_state = renderer.pixel_state();
         let target = (k, background, size);
+        timer.start(&mut enc, LOSS);
         loss.record(gpu, &mut enc, target, pixel_state, state_words, &grad)?;
+        timer.end(&mut enc, LOSS);
         gpu.queue.submit([enc.finish()]);
         renderer.backward_on_device(&scene, acc)?;
 
@@ -119,18 +126,26 @@ pub fn fit_gpu_from<M: Trainable>(
         let n = scene.len();
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         let param_grads = renderer.param_gradients();
+        timer.start(&mut enc, OPTIMIZER);
         if let Some(m) = &mcmc {
             m.record_regularize(gpu, &mut enc, scene.buffer(), param_grads, n)?;
         }
         adam.record(gpu, &mut enc, scene.buffer(), param_grads, n, &lr)?;
+        timer.end(&mut enc, OPTIMIZER);
         let observing = densifier.as_ref().filter(|d| step < d.opts.stop);
+        timer.start(&mut enc, STATISTICS);
         if observing.is_some() {
             observer.record(gpu, &mut enc, &renderer, &scene, source)?;
         }
+        timer.end(&mut enc, STATISTICS);
+        timer.resolve(&mut enc, LOSS..NOISE);
         gpu.queue.submit([enc.finish()]);
-        let value = loss.value(gpu)?;
-        let faults = adam.faults(gpu)?;
+        // The step's one wait: the loss value and Adam's faults together.
+        let [sums, fault_words] = gpu.read_together([loss.sums()?, adam.fault_words()])?;
+        let value = loss.value(&sums)?;
+        let faults = GpuAdam::faults(&fault_words);
 
+        let clock = Instant::now();
         let mut refinement = None;
         if let Some(m) = &mcmc {
             if m.mcmc.opts.refines_at(step) {
@@ -143,7 +158,10 @@ pub fn fit_gpu_from<M: Trainable>(
             // A position not trained yet (a negative rate) is not stirred either.
             let (n, lr) = (scene.len(), lr[m.mcmc.words.position].max(0.0));
             let mut enc = gpu.device.create_command_encoder(&Default::default());
+            timer.start(&mut enc, NOISE);
             m.record_perturb(gpu, &mut enc, scene.buffer(), n, lr, rng.u32(..))?;
+            timer.end(&mut enc, NOISE);
+            timer.resolve(&mut enc, NOISE..STAGES);
             gpu.queue.submit([enc.finish()]);
         }
         if let Some(d) = densifier.as_mut().filter(|d| step < d.opts.stop)
@@ -167,6 +185,11 @@ pub fn fit_gpu_from<M: Trainable>(
             adam.remap(gpu, n, &origin, |k| before[k] != after[k])?;
             scene.upload(gpu, &host)?;
         }
+        let densify = clock.elapsed();
+        // Before the evaluation's frames replace this step's stage times.
+        let mut times = step_times(&renderer, &timer, gpu)?;
+        times.densify = densify;
+        let clock = Instant::now();
         let evaluation = match after_every(opts.eval_every, step) {
             true => {
                 let images = render_resident(&mut renderer, &scene, &data.test, opts.background)?;
@@ -174,6 +197,7 @@ pub fn fit_gpu_from<M: Trainable>(
             }
             false => None,
         };
+        times.evaluation = clock.elapsed();
         let stops = opts.stop_requested();
         let save = saves_at(opts, step, stops);
         if save || ends_after(opts, step, stops) {
@@ -199,12 +223,48 @@ pub fn fit_gpu_from<M: Trainable>(
             faults,
             evaluation,
             checkpoint: save.then_some(&*state),
+            times: StepTimes {
+                wall: started.elapsed(),
+                ..times
+            },
         });
         if stops {
             break;
         }
     }
     Ok(())
+}
+
+// The loop's own timed stages, besides the renderer's (two timestamps each).
+const LOSS: u32 = 0;
+const OPTIMIZER: u32 = 1;
+const STATISTICS: u32 = 2;
+/// MCMC's position noise, after the step's read-back (refinement comes first, as on the CPU).
+const NOISE: u32 = 3;
+const STAGES: u32 = 4;
+
+/// The last step's stage times on the GPU: the renderer's and the loop's `timer`'s (a stage
+/// never recorded, MCMC's noise without MCMC, reads zero). Zero on an adapter without
+/// timestamps.
+fn step_times<M: SplatMethod>(
+    renderer: &GpuRenderer<M>,
+    timer: &StageTimer,
+    gpu: &Gpu,
+) -> Result<StepTimes, FitError> {
+    let r = renderer.stage_times()?;
+    let own = timer.read(gpu)?.unwrap_or_default();
+    let own = |s: u32| own.get(s as usize).copied().unwrap_or_default();
+    Ok(StepTimes {
+        preprocess: r.preprocess,
+        rasterize: r.rasterize,
+        shade: r.shade,
+        loss: own(LOSS),
+        blend: r.blend,
+        project: r.project,
+        optimizer: own(OPTIMIZER) + own(NOISE),
+        statistics: own(STATISTICS),
+        ..Default::default()
+    })
 }
 
 /// Where a step's screen-space gradients are read on the device, as

@@ -1,7 +1,7 @@
 //! What training shares across methods: the photometric loss with its gradient and the
 //! evaluation metrics ([`loss`]), Adam ([`adam`]), where training starts ([`init`]), adaptive
-//! density control ([`densify`]) or MCMC ([`mcmc`]), checkpoints ([`checkpoint`]), and the
-//! loop with the trait a method implements to take part ([`fit`]), also on the GPU
+//! density control ([`densify`]) or MCMC ([`mcmc`]), checkpoints ([`checkpoint`]), where a
+//! step's time goes ([`step_times`]), and the loop with the trait a method implements to take part ([`fit`]), also on the GPU
 //! ([`gpu_fit`]).
 
 pub mod adam;
@@ -13,8 +13,10 @@ pub mod gpu_fit;
 pub mod init;
 pub mod loss;
 pub mod mcmc;
+pub mod step_times;
 
 pub use checkpoint::Checkpoint;
 pub use densify::{DensifyOptions, Shape};
 pub use fit::{FitOptions, Rate, Strategy, Trainable};
 pub use mcmc::McmcOptions;
+pub use step_times::StepTimes;
