@@ -298,7 +298,9 @@ fn gpu_handles_empty_scenes_and_refuses_bad_input_clearly() {
 /// One renderer and one scene across frames whose parameters, cameras, image sizes and
 /// intersection counts change (up and down, so buffers are reused and grown): every frame
 /// equals a fresh one-shot render bit for bit, and its gradients equal the one-shot backward's
-/// (up to the order of the atomic adds).
+/// (up to the order of the atomic adds). The second frame outgrows the room the first left
+/// for its keys: recorded whole before its count is known, it is cut short on the device and
+/// rendered again.
 #[test]
 fn the_resident_renderer_matches_one_shot_frames_as_scenes_change() {
     let Some(gpu) = adapter_or_skip() else {
@@ -334,9 +336,10 @@ fn the_resident_renderer_matches_one_shot_frames_as_scenes_change() {
         assert_eq!(got.depth, want.depth, "frame {k}");
         assert_eq!(info.intersections, want.stats.intersections);
         println!(
-            "frame {k}: {w}x{h}, {count} Gaussians, {} intersections",
-            info.intersections
+            "frame {k}: {w}x{h}, {count} Gaussians, {} intersections, redone: {}",
+            info.intersections, info.redone
         );
+        assert_eq!(info.redone, k == 1, "frame {k}");
         let pixels = (w * h) as usize;
         let mut rng = fastrand::Rng::with_seed(seed);
         let mut random = |n: usize| (0..n).map(|_| rng.f32() - 0.5).collect::<Vec<f32>>();

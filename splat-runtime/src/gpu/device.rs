@@ -440,6 +440,11 @@ impl Grown {
         })
     }
 
+    /// The words it holds.
+    pub fn words(&self) -> usize {
+        self.words
+    }
+
     /// Makes room for `words` (contents are lost when it grows).
     pub fn ensure(&mut self, gpu: &Gpu, words: usize) -> Result<(), GpuError> {
         if words <= self.words {

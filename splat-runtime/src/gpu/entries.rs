@@ -127,8 +127,11 @@ pub fn tiles<M: SplatMethod>(emit: bool, use_cull: bool) -> Result<String, GpuEr
     let (entry, emit_code) = if emit {
         (
             EMIT,
-            "keys[first + n] = vec2<u32>(bitcast<u32>(max(word(i, 1u), 0.0)), ty * frame[1].x + tx);
-                vals[first + n] = i;",
+            // Past the buffers' room (frame[1].w) the frame is cut and rendered again.
+            "if (first + n < frame[1].w) {
+                    keys[first + n] = vec2<u32>(bitcast<u32>(max(word(i, 1u), 0.0)), ty * frame[1].x + tx);
+                    vals[first + n] = i;
+                }",
         )
     } else {
         (COUNT, "")

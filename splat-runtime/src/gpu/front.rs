@@ -1,10 +1,14 @@
 //! The front of a GPU frame, shared by the tile-based forward pass ([`super::resident`]) and
 //! the hardware-rasterized one ([`super::raster`]): `project` per primitive, each primitive's
-//! count of (kept) tiles, their prefix sum and the total read back (the frame's one wait,
-//! which sizes the sort); then the (depth, tile) keys emitted and sorted. The hardware path
-//! runs it with one tile covering the image: one key per visible primitive, sorted by depth.
+//! count of (kept) tiles and their prefix sum; then the (depth, tile) keys emitted and sorted.
+//! How many keys there are is settled on the device (`settle.wgsl`): all of them, or as many
+//! as the buffers hold, so a frame can be recorded whole with the room of the frames before it
+//! and learn afterwards whether it fitted ([`Counted::cut`]). A frame that must know first
+//! reads its count back in between ([`Front::count`], then [`Front::reserve`]). The hardware
+//! path runs it with one tile covering the image: one key per visible primitive, sorted by
+//! depth.
 
-use super::device::{Grown, Kernel, dispatch};
+use super::device::{Grown, Kernel, as_bytes, dispatch};
 use super::entries::{self, Layout};
 use super::per_model::PerModel;
 use super::resident::{GpuRenderError, GpuScene, words_of};
@@ -31,14 +35,19 @@ pub(crate) struct Counted {
     pub intersections: u64,
     /// Primitives whose box holds a pixel centre.
     pub visible: usize,
+    /// Whether the buffers held fewer keys than that (the frame's lists were cut).
+    pub cut: bool,
 }
+
+const SETTLE: &str = include_str!("shaders/settle.wgsl");
 
 pub(crate) struct Front {
     project: PerModel<Kernel>,
     count: Kernel,
+    settle: Kernel,
     emit: Kernel,
     pub camera: wgpu::Buffer,
-    /// (primitives, width, height, tile size), (tiles_x, P_max, tiles, 0).
+    /// (primitives, width, height, tile size), (tiles_x, P_max, tiles, keys the buffers hold).
     pub frame_info: wgpu::Buffer,
     /// (primitives, 0, 0, 0).
     pub count_info: wgpu::Buffer,
@@ -46,12 +55,17 @@ pub(crate) struct Front {
     counts: Grown,
     /// Intersections (low, high word), primitives with a tile rectangle.
     totals: wgpu::Buffer,
+    /// Keys emitted and sorted, 1 if the lists were cut (`settle.wgsl`).
+    key_count: wgpu::Buffer,
+    /// `totals` then `key_count`, for the host.
     totals_staging: wgpu::Buffer,
     scan: Scan,
     pub keys: Grown,
     /// The primitive of each sorted key.
     pub prims: Grown,
     sort: RadixSort,
+    /// Keys the buffers hold (zero before the first count).
+    room: usize,
     /// Primitives, tiles and camera model of the frame counted last.
     n: u32,
     tiles: u32,
@@ -65,6 +79,7 @@ impl Front {
         Ok(Front {
             project: PerModel::new(),
             count: gpu.kernel(&entries::tiles::<M>(false, use_cull)?, "count_tiles")?,
+            settle: gpu.kernel(SETTLE, "settle_count")?,
             emit: gpu.kernel(&entries::tiles::<M>(true, use_cull)?, "emit_tiles")?,
             camera: gpu.buffer("camera", Camera::LEN)?,
             frame_info: gpu.uniform_buffer(8),
@@ -72,9 +87,10 @@ impl Front {
             projected: grown("projected primitives", 1)?,
             counts: grown("tiles per primitive", 1)?,
             totals: gpu.buffer("intersection totals", 3)?,
+            key_count: gpu.buffer("keys sorted", 2)?,
             totals_staging: gpu.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("intersection totals readback"),
-                size: 12,
+                size: 20,
                 usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             }),
@@ -82,23 +98,30 @@ impl Front {
             keys: grown("intersection keys", 2)?,
             prims: grown("intersection primitives", 1)?,
             sort: RadixSort::new(gpu)?,
+            room: 0,
             n: 0,
             tiles: 0,
             model: CameraModel::Pinhole,
         })
     }
 
-    /// Submission 1: project `scene` through `camera`, count each primitive's tiles of `grid`,
-    /// prefix sum (timed as `PROJECT` and `COUNT`); waits for the total. Lists are read
-    /// capped at `p_max` entries.
-    pub fn count<M: SplatMethod>(
+    /// Keys the buffers hold: a frame with more intersections is cut ([`Counted::cut`]).
+    /// Zero before the first [`Front::reserve`].
+    pub fn room(&self) -> usize {
+        self.room
+    }
+
+    /// Records `project` of `scene` through `camera`, each primitive's count of tiles of
+    /// `grid` and their prefix sum (timed as `PROJECT` and `COUNT`). Lists are read capped at
+    /// `p_max` entries.
+    pub fn record_count<M: SplatMethod>(
         &mut self,
         gpu: &Gpu,
-        scene: &GpuScene<M>,
-        camera: &Camera,
+        enc: &mut wgpu::CommandEncoder,
+        (scene, camera): (&GpuScene<M>, &Camera),
         (grid, p_max): (&TileGrid, u32),
         timer: &StageTimer,
-    ) -> Result<Counted, GpuRenderError> {
+    ) -> Result<(), GpuRenderError> {
         let n = scene.len();
         let n32 = n as u32;
         let model = camera.model;
@@ -122,14 +145,13 @@ impl Front {
                 grid.tiles_x,
                 p_max,
                 self.tiles,
-                0,
+                self.room as u32,
             ],
         );
         gpu.write(&self.count_info, &[n32, 0, 0, 0]);
 
-        let mut enc = gpu.device.create_command_encoder(&Default::default());
         enc.clear_buffer(&self.totals, 0, None);
-        timer.start(&mut enc, PROJECT);
+        timer.start(enc, PROJECT);
         let bind = gpu.bind_named(
             &project,
             &[
@@ -139,9 +161,9 @@ impl Front {
                 ("harness_count", &self.count_info),
             ],
         )?;
-        dispatch(&mut enc, &project.pipeline, &bind, n32.div_ceil(64));
-        timer.end(&mut enc, PROJECT);
-        timer.start(&mut enc, COUNT);
+        dispatch(enc, &project.pipeline, &bind, n32.div_ceil(64));
+        timer.end(enc, PROJECT);
+        timer.start(enc, COUNT);
         let bind = gpu.bind_named(
             &self.count,
             &[
@@ -151,37 +173,69 @@ impl Front {
                 ("totals", &self.totals),
             ],
         )?;
-        dispatch(&mut enc, &self.count.pipeline, &bind, n32.div_ceil(256));
-        self.scan.record(gpu, &mut enc, &self.counts)?;
-        timer.end(&mut enc, COUNT);
+        dispatch(enc, &self.count.pipeline, &bind, n32.div_ceil(256));
+        self.scan.record(gpu, enc, &self.counts)?;
+        timer.end(enc, COUNT);
+        Ok(())
+    }
+
+    /// Submission 1 of a frame that waits for its count: [`Front::record_count`], then the
+    /// totals read back.
+    pub fn count<M: SplatMethod>(
+        &mut self,
+        gpu: &Gpu,
+        frame: (&GpuScene<M>, &Camera),
+        grid: (&TileGrid, u32),
+        timer: &StageTimer,
+    ) -> Result<Counted, GpuRenderError> {
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        self.record_count(gpu, &mut enc, frame, grid, timer)?;
         enc.copy_buffer_to_buffer(&self.totals, 0, &self.totals_staging, 0, 12);
         gpu.queue.submit([enc.finish()]);
         let t = gpu.read_mappable(&self.totals_staging, 3)?;
-        let total = t[0] as u64 | (t[1] as u64) << 32;
-        if total > MAX_INTERSECTIONS {
+        counted(&t, false)
+    }
+
+    /// Makes room for `keys` keys (with a quarter to spare when the buffers grow); refuses
+    /// more than a frame may have.
+    pub fn reserve(&mut self, gpu: &Gpu, keys: u64) -> Result<(), GpuRenderError> {
+        if keys > MAX_INTERSECTIONS {
             return Err(RenderError::TooManyIntersections {
-                count: total,
+                count: keys,
                 limit: MAX_INTERSECTIONS,
             }
             .into());
         }
-        Ok(Counted {
-            intersections: total,
-            visible: t[2] as usize,
-        })
+        let keys = keys as usize;
+        self.keys.ensure(gpu, 2 * keys)?;
+        self.prims.ensure(gpu, keys)?;
+        self.room = (self.keys.words() / 2).min(self.prims.words());
+        // The frame's uniform says how many keys fit (recorded frames read it when they run).
+        let room = [self.room as u32];
+        gpu.queue
+            .write_buffer(&self.frame_info, 28, as_bytes(&room));
+        Ok(())
     }
 
-    /// Records the emission of the `counted` keys and their sort by (tile, depth).
+    /// Records the keys' count for this frame (all, or the buffers' room: `settle.wgsl`), their
+    /// emission and sort by (tile, depth), and the copy of the totals that
+    /// [`Front::counted`] reads.
     pub fn emit_sorted(
         &mut self,
         gpu: &Gpu,
         enc: &mut wgpu::CommandEncoder,
-        counted: Counted,
     ) -> Result<(), GpuError> {
-        let total = counted.intersections as usize;
-        self.keys.ensure(gpu, 2 * total)?;
-        self.prims.ensure(gpu, total)?;
-        self.sort.prepare(gpu, total as u32, self.tiles)?;
+        let room = self.room as u32;
+        self.sort.prepare(gpu, room, self.tiles)?;
+        let bind = gpu.bind_named(
+            &self.settle,
+            &[
+                ("totals", &self.totals),
+                ("frame", &self.frame_info),
+                ("key_count", &self.key_count),
+            ],
+        )?;
+        dispatch(enc, &self.settle.pipeline, &bind, 1);
         let bind = gpu.bind_named(
             &self.emit,
             &[
@@ -193,6 +247,40 @@ impl Front {
             ],
         )?;
         dispatch(enc, &self.emit.pipeline, &bind, self.n.div_ceil(256));
-        self.sort.record(gpu, enc, &self.keys, &self.prims)
+        self.sort
+            .record(gpu, enc, &self.keys, &self.prims, &self.key_count)?;
+        enc.copy_buffer_to_buffer(&self.totals, 0, &self.totals_staging, 0, 12);
+        enc.copy_buffer_to_buffer(&self.key_count, 0, &self.totals_staging, 12, 8);
+        Ok(())
     }
+
+    /// How many keys the frame sorts, on the device (`[keys, cut]`): the count the tile
+    /// ranges read.
+    pub fn key_count(&self) -> &wgpu::Buffer {
+        &self.key_count
+    }
+
+    /// The last frame's totals, once it has run (waits for it).
+    pub fn counted(&self, gpu: &Gpu) -> Result<Counted, GpuRenderError> {
+        let t = gpu.read_mappable(&self.totals_staging, 5)?;
+        counted(&t, t[4] != 0)
+    }
+}
+
+/// The totals' words (intersections low and high, visible) as a count; refuses more
+/// intersections than a frame may have.
+fn counted(t: &[u32], cut: bool) -> Result<Counted, GpuRenderError> {
+    let total = t[0] as u64 | (t[1] as u64) << 32;
+    if total > MAX_INTERSECTIONS {
+        return Err(RenderError::TooManyIntersections {
+            count: total,
+            limit: MAX_INTERSECTIONS,
+        }
+        .into());
+    }
+    Ok(Counted {
+        intersections: total,
+        visible: t[2] as usize,
+        cut,
+    })
 }

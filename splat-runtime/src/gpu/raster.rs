@@ -152,9 +152,8 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
         }
         // One tile over the whole image: one key per visible primitive, sorted by depth.
         let whole = TileGrid::new(grid.width, grid.height, grid.width.max(grid.height));
-        let counted = self
-            .front
-            .count(gpu, scene, camera, (&whole, u32::MAX), &self.timer)?;
+        let counted = (self.front).count(gpu, (scene, camera), (&whole, u32::MAX), &self.timer)?;
+        self.front.reserve(gpu, counted.intersections)?;
         let size = (grid.width, grid.height);
         let made_for = |t: &wgpu::Texture| (t.width(), t.height());
         if self.targets.first().map(made_for) != Some(size) {
@@ -162,7 +161,7 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
         }
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         self.timer.start(&mut enc, SORT);
-        self.front.emit_sorted(gpu, &mut enc, counted)?;
+        self.front.emit_sorted(gpu, &mut enc)?;
         self.timer.end(&mut enc, SORT);
         self.timer.start(&mut enc, DRAW);
         let mut inputs: Vec<(&str, &wgpu::Buffer)> = vec![
@@ -218,6 +217,7 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
             primitives: scene.len(),
             visible: counted.visible,
             intersections: counted.intersections as usize,
+            redone: false,
         };
         self.frame = Some(info);
         Ok(info)

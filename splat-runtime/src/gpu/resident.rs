@@ -1,8 +1,8 @@
 //! The device-resident GPU pipeline: a scene whose parameters live in a device buffer, and a
 //! renderer whose kernels are built once and whose buffers persist across frames (grown to
-//! the largest frame so far, never re-created for a steady one). A frame is two submissions
-//! with one small readback between them (the intersection count, which sizes the sort); the
-//! backward pass is one submission; images and gradients stay on the device until the caller
+//! the largest frame so far, never re-created for a steady one). A frame is one submission
+//! (the renderer's first, and one whose intersections outgrew the buffers, read the count back
+//! first: [`GpuRenderer::submit`]); the backward pass is one submission; images and gradients stay on the device until the caller
 //! downloads them. This is the loop a trainer runs: render, loss, backward, optimizer step,
 //! with no host transfer per step.
 //!
@@ -39,7 +39,7 @@ pub enum GpuRenderError {
     Render(#[from] RenderError),
     #[error(transparent)]
     Gpu(#[from] GpuError),
-    #[error("the backward pass needs a frame: render one first")]
+    #[error("no finished frame: render one first (or finish the one submitted)")]
     NoFrame,
     #[error("the scene has {got} primitives, the frame was rendered with {want}")]
     SceneChanged { got: usize, want: usize },
@@ -128,6 +128,9 @@ pub struct FrameInfo {
     pub primitives: usize,
     pub visible: usize,
     pub intersections: usize,
+    /// Whether its intersections outgrew the room the frames before had left, so that it was
+    /// rendered a second time ([`GpuRenderer::finish`]).
+    pub redone: bool,
 }
 
 /// The last frame's stage times (GPU timestamps; zero on an adapter without them). The
@@ -183,8 +186,19 @@ pub struct GpuRenderer<'g, M: SplatMethod> {
     pixel_cotangent: Grown,
     ray_partials: Grown,
     timer: StageTimer,
+    /// The frame submitted last, until [`GpuRenderer::finish`] knows it fitted.
+    pending: Option<Pending>,
+    /// The last frame finished.
     frame: Option<FrameInfo>,
     method: PhantomData<M>,
+}
+
+/// A frame submitted and not yet finished.
+#[derive(Clone, Copy)]
+struct Pending {
+    grid: TileGrid,
+    primitives: usize,
+    camera: Camera,
 }
 
 impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
@@ -231,24 +245,35 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             pixel_cotangent: grown("pixel data cotangents", 1)?,
             ray_partials: grown("camera ray gradient partials", 1)?,
             timer: StageTimer::new(gpu, STAGES),
+            pending: None,
             frame: None,
             method: PhantomData,
         })
     }
 
-    /// The last frame rendered, if any.
+    /// The last frame finished, if any.
     pub fn frame(&self) -> Option<FrameInfo> {
         self.frame
     }
 
     /// Renders `scene` through `camera` into the renderer's buffers (download with
-    /// [`GpuRenderer::download_frame`]). Waits once, for the intersection count.
+    /// [`GpuRenderer::download_frame`]): [`GpuRenderer::submit`], then
+    /// [`GpuRenderer::finish`].
     pub fn forward(
         &mut self,
         scene: &GpuScene<M>,
         camera: &Camera,
     ) -> Result<FrameInfo, GpuRenderError> {
-        self.frame = None;
+        self.submit(scene, camera)?;
+        self.finish(scene)
+    }
+
+    /// Records and submits the frame of `scene` through `camera` without waiting for it.
+    /// With the room the buffers have from the frames before, the frame is one submission
+    /// (the number of keys it sorts is settled on the device); the renderer's first frame
+    /// reads its intersection count back in between, to make that room.
+    pub fn submit(&mut self, scene: &GpuScene<M>, camera: &Camera) -> Result<(), GpuRenderError> {
+        (self.frame, self.pending) = (None, None);
         let gpu = self.gpu;
         let grid = crate::pipeline::check::<M>(camera, &self.opts)?;
         let n = scene.len();
@@ -257,25 +282,31 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             .opts
             .p_max
             .map_or(u32::MAX, |p| p.min(u32::MAX as usize) as u32);
-        // Submission 1: project, count, prefix sum; the total comes back.
-        let counted = self
-            .front
-            .count(gpu, scene, camera, (&grid, p_max), &self.timer)?;
+        let frame = (scene, camera);
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        // Project, count, prefix sum.
+        if self.front.room() == 0 {
+            let counted = self.front.count(gpu, frame, (&grid, p_max), &self.timer)?;
+            self.front.reserve(gpu, counted.intersections)?;
+        } else {
+            (self.front).record_count(gpu, &mut enc, frame, (&grid, p_max), &self.timer)?;
+        }
 
-        // Submission 2: emit, sort, ranges, bins, shade.
-        let total32 = counted.intersections as u32;
-        self.tiles.prepare(gpu, total32, tiles, p_max)?;
+        // Emit, sort, ranges, bins, shade.
+        self.tiles
+            .prepare(gpu, self.front.room() as u32, tiles, p_max)?;
         let pixels = (grid.width * grid.height) as usize;
         self.pixels.ensure(gpu, pixels * self.state.words())?;
-        let mut enc = gpu.device.create_command_encoder(&Default::default());
         self.timer.start(&mut enc, PACK);
         if let Some(packer) = &mut self.packer {
             packer.record(gpu, &mut enc, &self.front, n)?;
         }
         self.timer.end(&mut enc, PACK);
         self.timer.start(&mut enc, SORT);
-        self.front.emit_sorted(gpu, &mut enc, counted)?;
-        self.tiles.record(gpu, &mut enc, &self.front.keys)?;
+        self.front.emit_sorted(gpu, &mut enc)?;
+        let key_count = self.front.key_count();
+        self.tiles
+            .record(gpu, &mut enc, &self.front.keys, key_count)?;
         self.timer.end(&mut enc, SORT);
         self.timer.start(&mut enc, SHADE);
         let (model, opts, state) = (camera.model, self.opts, self.state);
@@ -295,13 +326,43 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         self.timer.end(&mut enc, SHADE);
         self.timer.resolve(&mut enc, PROJECT..BLEND);
         gpu.queue.submit([enc.finish()]);
-        let info = FrameInfo {
+        self.pending = Some(Pending {
             grid,
             primitives: n,
+            camera: *camera,
+        });
+        Ok(())
+    }
+
+    /// Waits for the frame submitted last and says what it was. A frame with more
+    /// intersections than the buffers held (its tile lists were cut short) is rendered again
+    /// first, with room for them.
+    pub fn finish(&mut self, scene: &GpuScene<M>) -> Result<FrameInfo, GpuRenderError> {
+        if let Some(info) = self.frame {
+            return Ok(info);
+        }
+        let p = self.pending.ok_or(GpuRenderError::NoFrame)?;
+        if scene.len() != p.primitives {
+            return Err(GpuRenderError::SceneChanged {
+                got: scene.len(),
+                want: p.primitives,
+            });
+        }
+        let mut counted = self.front.counted(self.gpu)?;
+        let redone = counted.cut;
+        while counted.cut {
+            self.front.reserve(self.gpu, counted.intersections)?;
+            self.submit(scene, &p.camera)?;
+            counted = self.front.counted(self.gpu)?;
+        }
+        let info = FrameInfo {
+            grid: p.grid,
+            primitives: p.primitives,
             visible: counted.visible,
             intersections: counted.intersections as usize,
+            redone,
         };
-        self.frame = Some(info);
+        (self.frame, self.pending) = (Some(info), None);
         Ok(info)
     }
 

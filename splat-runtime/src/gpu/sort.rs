@@ -100,7 +100,8 @@ impl Scan {
 
 /// Stable LSD radix sort of `vec2(depth bits, tile)` keys with their values, by tile then
 /// depth, only over the tile bits the frame has. Sorts in place: the keys end where they
-/// started (an odd pass count ends with a copy back).
+/// started (an odd pass count ends with a copy back). Sized on the host for the buffers' room,
+/// it sorts as many keys as a count on the device says.
 pub struct RadixSort {
     histogram: Kernel,
     scatter: Kernel,
@@ -108,9 +109,10 @@ pub struct RadixSort {
     keys_tmp: Grown,
     vals_tmp: Grown,
     scan: Scan,
-    /// `[n, shift, key word, blocks]` per pass.
+    /// `[0, shift, key word, blocks]` per pass.
     passes: Vec<wgpu::Buffer>,
-    n: u32,
+    /// Keys the buffers hold.
+    room: u32,
     digits: Vec<(u32, u32)>,
 }
 
@@ -124,7 +126,7 @@ impl RadixSort {
             vals_tmp: Grown::new(gpu, "sorted values", 1)?,
             scan: Scan::new(gpu)?,
             passes: vec![],
-            n: 0,
+            room: 0,
             digits: vec![],
         })
     }
@@ -135,13 +137,14 @@ impl RadixSort {
         2 * 12 * n
     }
 
-    /// Sizes the buffers for `n` keys over `tiles` tiles and writes each pass's uniform.
-    pub fn prepare(&mut self, gpu: &Gpu, n: u32, tiles: u32) -> Result<(), GpuError> {
+    /// Sizes the buffers for up to `room` keys over `tiles` tiles and writes each pass's
+    /// uniform.
+    pub fn prepare(&mut self, gpu: &Gpu, room: u32, tiles: u32) -> Result<(), GpuError> {
         let tile_bits = 32 - tiles.saturating_sub(1).leading_zeros();
-        let blocks = n.div_ceil(SORT_BLOCK).max(1);
+        let blocks = room.div_ceil(SORT_BLOCK).max(1);
         self.hist.ensure(gpu, (BUCKETS * blocks) as usize)?;
-        self.keys_tmp.ensure(gpu, 2 * n as usize)?;
-        self.vals_tmp.ensure(gpu, n as usize)?;
+        self.keys_tmp.ensure(gpu, 2 * room as usize)?;
+        self.vals_tmp.ensure(gpu, room as usize)?;
         self.scan.prepare(gpu, BUCKETS * blocks)?;
         // Least significant digit first: depth (word 0), then tile (word 1).
         self.digits = (0..32 / DIGIT_BITS)
@@ -152,27 +155,34 @@ impl RadixSort {
             self.passes.push(gpu.uniform_buffer(4));
         }
         for ((word, shift), info) in self.digits.iter().zip(&self.passes) {
-            gpu.write(info, &[n, *shift, *word, blocks]);
+            gpu.write(info, &[0, *shift, *word, blocks]);
         }
-        self.n = n;
+        self.room = room;
         Ok(())
     }
 
-    /// Records the sort of the first `n` keys and values (as prepared) in place.
+    /// Records the sort in place of the first `key_count[0]` keys and values (at most the
+    /// room prepared).
     pub fn record(
         &self,
         gpu: &Gpu,
         encoder: &mut wgpu::CommandEncoder,
         keys: &wgpu::Buffer,
         vals: &wgpu::Buffer,
+        key_count: &wgpu::Buffer,
     ) -> Result<(), GpuError> {
-        let blocks = self.n.div_ceil(SORT_BLOCK).max(1);
+        let blocks = self.room.div_ceil(SORT_BLOCK).max(1);
         let (mut from, mut to) = ((keys, vals), (&*self.keys_tmp, &*self.vals_tmp));
         for info in &self.passes[..self.digits.len()] {
             let (h, s) = (&self.histogram, &self.scatter);
             let bind = gpu.bind_named(
                 h,
-                &[("keys_in", from.0), ("hist", &self.hist), ("info", info)],
+                &[
+                    ("keys_in", from.0),
+                    ("hist", &self.hist),
+                    ("info", info),
+                    ("key_count", key_count),
+                ],
             )?;
             dispatch(encoder, &h.pipeline, &bind, blocks);
             self.scan.record(gpu, encoder, &self.hist)?;
@@ -185,14 +195,16 @@ impl RadixSort {
                     ("vals_in", from.1),
                     ("keys_out", to.0),
                     ("vals_out", to.1),
+                    ("key_count", key_count),
                 ],
             )?;
             dispatch(encoder, &s.pipeline, &bind, blocks);
             std::mem::swap(&mut from, &mut to);
         }
-        if self.digits.len() % 2 == 1 && self.n > 0 {
-            encoder.copy_buffer_to_buffer(from.0, 0, keys, 0, 8 * self.n as u64);
-            encoder.copy_buffer_to_buffer(from.1, 0, vals, 0, 4 * self.n as u64);
+        // The whole room: the count is on the device.
+        if self.digits.len() % 2 == 1 && self.room > 0 {
+            encoder.copy_buffer_to_buffer(from.0, 0, keys, 0, 8 * self.room as u64);
+            encoder.copy_buffer_to_buffer(from.1, 0, vals, 0, 4 * self.room as u64);
         }
         Ok(())
     }
@@ -205,9 +217,9 @@ pub struct TileRanges {
     bins_kernel: Kernel,
     pub ranges: Grown,
     pub order: Grown,
-    ranges_info: wgpu::Buffer,
     bins_info: wgpu::Buffer,
-    n: u32,
+    /// Keys the buffers hold.
+    room: u32,
     tiles: u32,
 }
 
@@ -218,38 +230,44 @@ impl TileRanges {
             bins_kernel: gpu.kernel(BINS, "bin_tiles")?,
             ranges: Grown::new(gpu, "tile ranges", 2)?,
             order: Grown::new(gpu, "tile order", 1)?,
-            ranges_info: gpu.uniform_buffer(4),
             bins_info: gpu.uniform_buffer(4),
-            n: 0,
+            room: 0,
             tiles: 0,
         })
     }
 
-    pub fn prepare(&mut self, gpu: &Gpu, n: u32, tiles: u32, p_max: u32) -> Result<(), GpuError> {
+    /// Sizes the ranges for `tiles` tiles of up to `room` sorted keys.
+    pub fn prepare(
+        &mut self,
+        gpu: &Gpu,
+        room: u32,
+        tiles: u32,
+        p_max: u32,
+    ) -> Result<(), GpuError> {
         self.ranges.ensure(gpu, 2 * tiles as usize)?;
         self.order.ensure(gpu, tiles as usize)?;
-        gpu.write(&self.ranges_info, &[n, 0, 0, 0]);
         gpu.write(&self.bins_info, &[tiles, p_max, 0, 0]);
-        (self.n, self.tiles) = (n, tiles);
+        (self.room, self.tiles) = (room, tiles);
         Ok(())
     }
 
-    /// Records the ranges of the sorted `keys` and the binned tile order.
+    /// Records the ranges of the first `key_count[0]` sorted `keys` and the binned tile order.
     pub fn record(
         &self,
         gpu: &Gpu,
         encoder: &mut wgpu::CommandEncoder,
         keys: &wgpu::Buffer,
+        key_count: &wgpu::Buffer,
     ) -> Result<(), GpuError> {
         encoder.clear_buffer(&self.ranges, 0, Some(8 * self.tiles as u64));
         let k = &self.ranges_kernel;
         let named = [
             ("keys", keys),
             ("ranges", &self.ranges),
-            ("info", &self.ranges_info),
+            ("key_count", key_count),
         ];
         let bind = gpu.bind_named(k, &named)?;
-        dispatch(encoder, &k.pipeline, &bind, self.n.div_ceil(256));
+        dispatch(encoder, &k.pipeline, &bind, self.room.div_ceil(256));
         self.record_bins(gpu, encoder)
     }
 
@@ -316,20 +334,26 @@ mod tests {
         let keys: Vec<(u32, u32)> = (0..9001)
             .map(|_| (depths[rng.usize(0..40)], rng.u32(0..tiles)))
             .collect();
-        let flat: Vec<u32> = keys.iter().flat_map(|(d, t)| [*d, *t]).collect();
-        let vals: Vec<u32> = (0..keys.len() as u32).collect();
         let n = keys.len() as u32;
+        // The buffers hold 5,000 more keys than the count on the device says to sort: first
+        // in order (tile 0, depth 0), they would move ahead of every key if sorted.
+        let room = n + 5000;
+        let flat: Vec<u32> = keys.iter().flat_map(|(d, t)| [*d, *t]).collect();
+        let vals: Vec<u32> = (0..n).collect();
+        let pad = |v: &[u32], words: u32| [v, &vec![0; words as usize]].concat();
         let (k, v) = (
-            gpu.buffer_from("keys", &flat).unwrap(),
-            gpu.buffer_from("vals", &vals).unwrap(),
+            gpu.buffer_from("keys", &pad(&flat, 2 * (room - n)))
+                .unwrap(),
+            gpu.buffer_from("vals", &pad(&vals, room - n)).unwrap(),
         );
+        let count = gpu.buffer_from("key count", &[n, 0]).unwrap();
         let mut sort = RadixSort::new(gpu).unwrap();
-        sort.prepare(gpu, n, tiles).unwrap();
+        sort.prepare(gpu, room, tiles).unwrap();
         let mut ranges = TileRanges::new(gpu).unwrap();
-        ranges.prepare(gpu, n, tiles, u32::MAX).unwrap();
+        ranges.prepare(gpu, room, tiles, u32::MAX).unwrap();
         let mut enc = gpu.device.create_command_encoder(&Default::default());
-        sort.record(gpu, &mut enc, &k, &v).unwrap();
-        ranges.record(gpu, &mut enc, &k).unwrap();
+        sort.record(gpu, &mut enc, &k, &v, &count).unwrap();
+        ranges.record(gpu, &mut enc, &k, &count).unwrap();
         gpu.finish(enc).unwrap();
         let ranges = &ranges.ranges;
         let got_vals = gpu.read(&v, n as usize).unwrap();

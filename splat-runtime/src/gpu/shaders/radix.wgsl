@@ -1,5 +1,8 @@
-// One pass of a stable LSD radix sort of (depth bits, tile) keys with u32 values, on an 8-bit
-// digit of the key word `info.z` (0 = depth, 1 = tile) at bit `info.y`.
+// One pass of a stable LSD radix sort of the first `key_count[0]` (depth bits, tile) keys with
+// u32 values, on an 8-bit digit of the key word `info.z` (0 = depth, 1 = tile) at bit
+// `info.y`. The count is read on the device (the frame's count kernel writes it), so a frame
+// is recorded before it is known; `info.w` blocks cover the buffers, and blocks past the count
+// find no keys.
 // `radix_histogram`: digit counts per block, digit-major (`hist[digit * blocks + block]`), so
 // an exclusive scan of `hist` gives every (digit, block) its first output slot.
 // `radix_scatter`: a block's keys go out a chunk of 256 at a time. Each invocation sets its
@@ -16,10 +19,11 @@ const MASK_WORDS: u32 = WG / 32u;
 
 @group(0) @binding(0) var<storage, read> keys_in: array<vec2<u32>>;
 @group(0) @binding(1) var<storage, read_write> hist: array<u32>;
-@group(0) @binding(2) var<uniform> info: vec4<u32>; // n, shift, key word, blocks
+@group(0) @binding(2) var<uniform> info: vec4<u32>; // 0, shift, key word, blocks
 @group(0) @binding(3) var<storage, read> vals_in: array<u32>;
 @group(0) @binding(4) var<storage, read_write> keys_out: array<vec2<u32>>;
 @group(0) @binding(5) var<storage, read_write> vals_out: array<u32>;
+@group(0) @binding(6) var<storage, read> key_count: array<u32>;
 
 var<workgroup> counts: array<atomic<u32>, RADIX>;
 // Bit `lid % 32` of word `digit * MASK_WORDS + lid / 32`: invocation `lid` holds `digit`.
@@ -39,9 +43,10 @@ fn radix_histogram(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocat
     }
     atomicStore(&counts[lid], 0u);
     workgroupBarrier();
+    let n = key_count[0];
     for (var c = 0u; c < CHUNKS; c++) {
         let i = block * BLOCK + c * WG + lid;
-        if (i < info.x) {
+        if (i < n) {
             atomicAdd(&counts[digit_of(keys_in[i])], 1u);
         }
     }
@@ -66,14 +71,15 @@ fn radix_scatter(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocatio
     clear_own_mask(lid);
     let word = lid / 32u;
     let bit = lid % 32u;
+    let n = key_count[0];
     for (var c = 0u; c < CHUNKS; c++) {
         let first = block * BLOCK + c * WG;
-        if (first >= info.x) {
+        if (first >= n) {
             break;
         }
         workgroupBarrier();
         let i = first + lid;
-        let valid = i < info.x;
+        let valid = i < n;
         var d = 0u;
         if (valid) {
             d = digit_of(keys_in[i]);

@@ -1,14 +1,15 @@
-// Tile ranges from the sorted keys: tile t's entries are [ranges[2t], ranges[2t + 1]).
-// `ranges` is cleared to zero beforehand, so tiles without entries read as empty.
+// Tile ranges from the first `key_count[0]` sorted keys: tile t's entries are
+// [ranges[2t], ranges[2t + 1]). `ranges` is cleared to zero beforehand, so tiles without
+// entries read as empty.
 
 @group(0) @binding(0) var<storage, read> keys: array<vec2<u32>>;
 @group(0) @binding(1) var<storage, read_write> ranges: array<u32>;
-@group(0) @binding(2) var<uniform> info: vec4<u32>; // x = number of keys
+@group(0) @binding(2) var<storage, read> key_count: array<u32>;
 
 @compute @workgroup_size(256)
 fn tile_ranges(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let i = (wid.y * 65535u + wid.x) * 256u + lid;
-    let n = info.x;
+    let n = key_count[0];
     if (i >= n) {
         return;
     }

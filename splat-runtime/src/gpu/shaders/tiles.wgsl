@@ -7,7 +7,8 @@ const CULL_AT: u32 = 6u;
 
 @group(0) @binding(0) var<storage, read> projected: array<u32>;
 @group(0) @binding(1) var<storage, read_write> counts: array<u32>;
-// frame[0] = (primitives, width, height, tile size), frame[1] = (tiles_x, ..)
+// frame[0] = (primitives, width, height, tile size), frame[1] = (tiles_x, P_max, tiles, keys the
+// buffers hold)
 @group(0) @binding(2) var<uniform> frame: array<vec4<u32>, 2>;
 
 fn word(i: u32, k: u32) -> f32 {
