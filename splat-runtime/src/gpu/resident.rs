@@ -1,9 +1,10 @@
 //! The device-resident GPU pipeline: a scene whose parameters live in a device buffer, and a
 //! renderer whose kernels are built once and whose buffers persist across frames (grown to
 //! the largest frame so far, never re-created for a steady one). A frame is one submission
-//! (the renderer's first, and one whose intersections outgrew the buffers, read the count back
-//! first: [`GpuRenderer::submit`]); the backward pass is one submission; images and gradients stay on the device until the caller
-//! downloads them. This is the loop a trainer runs: render, loss, backward, optimizer step,
+//! ([`GpuRenderer::submit`]: a renderer's first reads its intersection count back between
+//! two; a frame whose intersections outgrew the buffers is rendered again by
+//! [`GpuRenderer::finish`]); the backward pass is one submission; images and gradients stay on
+//! the device until the caller downloads them. This is the loop a trainer runs: render, loss, backward, optimizer step,
 //! with no host transfer per step.
 //!
 //! Stages, as on the CPU: preprocess (`project`), rasterize (count kept tiles with

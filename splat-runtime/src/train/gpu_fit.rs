@@ -1,9 +1,10 @@
 //! The training loop on the GPU, step for step the CPU loop of [`super::fit`]: the scene, the
 //! target images, the loss, the gradients and Adam's moments live on the device. A step is
-//! the renderer's forward (which reads back the intersection count), the loss and backward,
-//! Adam, density control's statistics or MCMC's penalties and noise, and one read-back of the
-//! loss value and of the words Adam could not step (a few words), then of the stage times. Every hundred steps density control or MCMC refines on the host:
-//! the scene and the moments go down and back up.
+//! the renderer's forward (which waits for the frame, to know that it fitted its buffers), the
+//! loss and backward, Adam, density control's statistics or MCMC's penalties and noise, and one
+//! read-back of the loss value and of the words Adam could not step (a few words), then of the
+//! stage times. Every hundred steps density control or MCMC refines on the host: the scene and
+//! the moments go down and back up.
 
 use super::checkpoint::Checkpoint;
 use super::densify::Densifier;

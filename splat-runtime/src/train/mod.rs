@@ -1,8 +1,8 @@
 //! What training shares across methods: the photometric loss with its gradient and the
 //! evaluation metrics ([`loss`]), Adam ([`adam`]), where training starts ([`init`]), adaptive
 //! density control ([`densify`]) or MCMC ([`mcmc`]), checkpoints ([`checkpoint`]), where a
-//! step's time goes ([`step_times`]), and the loop with the trait a method implements to take part ([`fit`]), also on the GPU
-//! ([`gpu_fit`]).
+//! step's time goes ([`step_times`]), and the loop with the trait a method implements to take
+//! part ([`fit`]), also on the GPU ([`gpu_fit`]).
 
 pub mod adam;
 pub mod checkpoint;
