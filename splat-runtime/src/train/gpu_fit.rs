@@ -145,6 +145,10 @@ pub fn fit_gpu_from<M: Trainable>(
         let [sums, fault_words] = gpu.read_together([loss.sums()?, adam.fault_words()])?;
         let value = loss.value(&sums)?;
         let faults = GpuAdam::faults(&fault_words);
+        // Read now, with nothing left to wait for (MCMC's noise, recorded below, is timed in the
+        // next step's read: the previous step's noise), and before the evaluation's frames
+        // replace the renderer's times.
+        let mut times = step_times(&renderer, &timer, gpu)?;
 
         let clock = Instant::now();
         let mut refinement = None;
@@ -156,6 +160,7 @@ pub fn fit_gpu_from<M: Trainable>(
                 scene.upload(gpu, &host)?;
                 refinement = Some(r);
             }
+            times.densify = clock.elapsed();
             // A position not trained yet (a negative rate) is not stirred either.
             let (n, lr) = (scene.len(), lr[m.mcmc.words.position].max(0.0));
             let mut enc = gpu.device.create_command_encoder(&Default::default());
@@ -185,11 +190,8 @@ pub fn fit_gpu_from<M: Trainable>(
             let after = flatten::<M>(&host);
             adam.remap(gpu, n, &origin, |k| before[k] != after[k])?;
             scene.upload(gpu, &host)?;
+            times.densify = clock.elapsed();
         }
-        let densify = clock.elapsed();
-        // Before the evaluation's frames replace this step's stage times.
-        let mut times = step_times(&renderer, &timer, gpu)?;
-        times.densify = densify;
         let clock = Instant::now();
         let evaluation = match after_every(opts.eval_every, step) {
             true => {
@@ -245,8 +247,8 @@ const NOISE: u32 = 3;
 const STAGES: u32 = 4;
 
 /// The last step's stage times on the GPU: the renderer's and the loop's `timer`'s (a stage
-/// never recorded, MCMC's noise without MCMC, reads zero). Zero on an adapter without
-/// timestamps.
+/// not recorded yet, MCMC's noise without MCMC or before its first step, reads zero). Zero on
+/// an adapter without timestamps.
 fn step_times<M: SplatMethod>(
     renderer: &GpuRenderer<M>,
     timer: &StageTimer,
