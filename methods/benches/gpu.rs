@@ -101,20 +101,9 @@ fn main() {
         "project adjoint",
     ];
     for (k, name) in names.iter().enumerate() {
-        println!(
-            "| {name} | {:.1} | {:.1} | {:.2} |",
-            ms(c[k]),
-            ms(g[k]),
-            ms(g[k]) / ms(c[k])
-        );
+        ratio_row(name, c[k], g[k]);
     }
-    let (ct, gt): (Duration, Duration) = (c.iter().sum(), g.iter().sum());
-    println!(
-        "| total | {:.1} | {:.1} | {:.2} |",
-        ms(ct),
-        ms(gt),
-        ms(gt) / ms(ct)
-    );
+    ratio_row("total", c.iter().sum(), g.iter().sum());
 
     let wait = || gpu.wait().unwrap();
     let timed = |f: &mut dyn FnMut()| {
@@ -214,11 +203,16 @@ fn main() {
     println!("| stage | checks off (ms) | checks on (ms) | on / off |");
     println!("|---|---:|---:|---:|");
     for (k, name) in names.iter().enumerate() {
-        println!(
-            "| {name} | {:.1} | {:.1} | {:.2} |",
-            ms(g[k]),
-            ms(on[k]),
-            ms(on[k]) / ms(g[k])
-        );
+        ratio_row(name, g[k], on[k]);
     }
+}
+
+/// A table row: a stage's two times in ms and the second over the first.
+fn ratio_row(name: &str, base: Duration, other: Duration) {
+    println!(
+        "| {name} | {:.1} | {:.1} | {:.2} |",
+        ms(base),
+        ms(other),
+        ms(other) / ms(base)
+    );
 }

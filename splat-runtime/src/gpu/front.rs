@@ -64,7 +64,7 @@ pub(crate) struct Front {
     /// The primitive of each sorted key.
     pub prims: Grown,
     sort: RadixSort,
-    /// Keys the buffers hold (zero before the first count).
+    /// Keys the buffers hold (zero before the first `reserve`).
     room: usize,
     /// Primitives, tiles and camera model of the frame counted last.
     n: u32,
@@ -135,6 +135,7 @@ impl Front {
         self.counts.ensure(gpu, n)?;
         self.scan.prepare(gpu, n32)?;
         gpu.write(&self.camera, &words_of(std::slice::from_ref(camera)));
+        // All but the last word, the room, which only `reserve` writes.
         gpu.write(
             &self.frame_info,
             &[
@@ -145,7 +146,6 @@ impl Front {
                 grid.tiles_x,
                 p_max,
                 self.tiles,
-                self.room as u32,
             ],
         );
         gpu.write(&self.count_info, &[n32, 0, 0, 0]);
@@ -196,17 +196,10 @@ impl Front {
         counted(&t, false)
     }
 
-    /// Makes room for `keys` keys (with a quarter to spare when the buffers grow); refuses
-    /// more than a frame may have.
-    pub fn reserve(&mut self, gpu: &Gpu, keys: u64) -> Result<(), GpuRenderError> {
-        if keys > MAX_INTERSECTIONS {
-            return Err(RenderError::TooManyIntersections {
-                count: keys,
-                limit: MAX_INTERSECTIONS,
-            }
-            .into());
-        }
-        let keys = keys as usize;
+    /// Makes room for the keys `counted` found, with a quarter to spare when the buffers
+    /// grow (a `Counted` holds at most `MAX_INTERSECTIONS`: reading the totals refuses more).
+    pub fn reserve(&mut self, gpu: &Gpu, counted: Counted) -> Result<(), GpuError> {
+        let keys = counted.intersections as usize;
         self.keys.ensure(gpu, 2 * keys)?;
         self.prims.ensure(gpu, keys)?;
         self.room = (self.keys.words() / 2).min(self.prims.words());

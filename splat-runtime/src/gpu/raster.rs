@@ -153,7 +153,7 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
         // One tile over the whole image: one key per visible primitive, sorted by depth.
         let whole = TileGrid::new(grid.width, grid.height, grid.width.max(grid.height));
         let counted = (self.front).count(gpu, (scene, camera), (&whole, u32::MAX), &self.timer)?;
-        self.front.reserve(gpu, counted.intersections)?;
+        self.front.reserve(gpu, counted)?;
         let size = (grid.width, grid.height);
         let made_for = |t: &wgpu::Texture| (t.width(), t.height());
         if self.targets.first().map(made_for) != Some(size) {

@@ -288,7 +288,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         // Project, count, prefix sum.
         if self.front.room() == 0 {
             let counted = self.front.count(gpu, frame, (&grid, p_max), &self.timer)?;
-            self.front.reserve(gpu, counted.intersections)?;
+            self.front.reserve(gpu, counted)?;
         } else {
             (self.front).record_count(gpu, &mut enc, frame, (&grid, p_max), &self.timer)?;
         }
@@ -352,7 +352,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         let mut counted = self.front.counted(self.gpu)?;
         let redone = counted.cut;
         while counted.cut {
-            self.front.reserve(self.gpu, counted.intersections)?;
+            self.front.reserve(self.gpu, counted)?;
             self.submit(scene, &p.camera)?;
             counted = self.front.counted(self.gpu)?;
         }
