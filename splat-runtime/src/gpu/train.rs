@@ -24,7 +24,9 @@ const MCMC: &str = include_str!("shaders/mcmc.wgsl");
 /// The loss of the renderer's frame against one of a set of target images, all kept on the
 /// device.
 pub struct GpuLoss {
+    rows_kernel: Kernel,
     terms_kernel: Kernel,
+    spread_kernel: Kernel,
     gradient_kernel: Kernel,
     /// Every target image, RGB f32, one after another, and the coverage of those that have
     /// one; each one's offsets (words; coverage `u32::MAX` when opaque), size and background.
@@ -32,6 +34,8 @@ pub struct GpuLoss {
     coverage: wgpu::Buffer,
     views: Vec<Target>,
     taps: wgpu::Buffer,
+    /// The row-filtered moments, then the column-spread cotangents (`loss.wgsl`).
+    rows: Grown,
     terms: Grown,
     sums: Grown,
     info: wgpu::Buffer,
@@ -93,12 +97,15 @@ impl GpuLoss {
         }
         let taps: Vec<u32> = window().iter().map(|g| (*g as f32).to_bits()).collect();
         Ok(GpuLoss {
+            rows_kernel: gpu.kernel(LOSS, "ssim_rows")?,
             terms_kernel: gpu.kernel(LOSS, "ssim_terms")?,
+            spread_kernel: gpu.kernel(LOSS, "ssim_spread")?,
             gradient_kernel: gpu.kernel(LOSS, "loss_gradient")?,
             targets: gpu.buffer_from("target images", &words)?,
             coverage: gpu.buffer_from("target coverage", &alphas)?,
             views,
             taps: gpu.buffer_from("SSIM window", &taps)?,
+            rows: Grown::new(gpu, "SSIM row sums", 1)?,
             terms: Grown::new(gpu, "SSIM cotangents", 1)?,
             sums: Grown::new(gpu, "loss partial sums", 1)?,
             info: gpu.uniform_buffer(16),
@@ -132,6 +139,9 @@ impl GpuLoss {
         let (vw, vh) = (w + 1 - WINDOW as u32, h + 1 - WINDOW as u32);
         let (pixels, valid) = (w * h, vw * vh);
         let groups = pixels.div_ceil(64);
+        // Per row and valid column: 5 moments per channel, later 3 cotangents.
+        let row_cells = vw * h;
+        self.rows.ensure(gpu, row_cells as usize * 15)?;
         self.terms.ensure(gpu, valid as usize * 9)?;
         self.sums.ensure(gpu, 2 * groups as usize)?;
         let (b, b0) = (background, t.background);
@@ -139,25 +149,45 @@ impl GpuLoss {
         let ints = [w, h, state_words, t.offset, vw, vh, valid, t.coverage];
         gpu.write(&self.info, &[&ints[..], &floats].concat());
         encoder.clear_buffer(&self.sums, 0, None);
-        let mut inputs = vec![
-            ("pixel_state", pixel_state),
-            ("targets", &self.targets),
-            ("taps", &self.taps),
-            ("terms", &self.terms),
-            ("sums", &self.sums),
-            ("info", &self.info),
-            ("coverage", &self.coverage),
+        let (state, targets) = (("pixel_state", pixel_state), ("targets", &self.targets));
+        let (taps, info) = (("taps", &self.taps), ("info", &self.info));
+        let (rows, terms) = (("rows", &*self.rows), ("terms", &*self.terms));
+        let (sums, coverage) = (("sums", &*self.sums), ("coverage", &self.coverage));
+        let passes = [
+            (
+                &self.rows_kernel,
+                vec![state, targets, taps, rows, info, coverage],
+                row_cells,
+            ),
+            (
+                &self.terms_kernel,
+                vec![taps, rows, terms, sums, info],
+                valid,
+            ),
+            (
+                &self.spread_kernel,
+                vec![taps, rows, terms, info],
+                row_cells,
+            ),
+            (
+                &self.gradient_kernel,
+                vec![
+                    state,
+                    targets,
+                    taps,
+                    rows,
+                    sums,
+                    info,
+                    coverage,
+                    ("pixel_grad", pixel_grad),
+                ],
+                pixels,
+            ),
         ];
-        let bind = gpu.bind_named(&self.terms_kernel, &inputs)?;
-        dispatch(
-            encoder,
-            &self.terms_kernel.pipeline,
-            &bind,
-            valid.div_ceil(64),
-        );
-        inputs.push(("pixel_grad", pixel_grad));
-        let bind = gpu.bind_named(&self.gradient_kernel, &inputs)?;
-        dispatch(encoder, &self.gradient_kernel.pipeline, &bind, groups);
+        for (kernel, buffers, invocations) in passes {
+            let bind = gpu.bind_named(kernel, &buffers)?;
+            dispatch(encoder, &kernel.pipeline, &bind, invocations.div_ceil(64));
+        }
         self.last = Some((w, h));
         Ok(())
     }

@@ -3,12 +3,20 @@
 // window over the window positions inside the image ("valid"), C1 = 0.01², C2 = 0.03², means
 // over pixels (L1) and positions (SSIM) and the 3 channels. The render is composited on the
 // step's background first (x = color + T b), and so is the target where it has a coverage
-// (alpha): stored on its own background b0, it becomes target + (1 - alpha)(b - b0). Its gradient becomes the backward pass's output gradient:
-// per pixel the color channels, then alpha (-Σ g_c b_c), then depth (zero).
+// (alpha): stored on its own background b0, it becomes target + (1 - alpha)(b - b0). Its
+// gradient becomes the backward pass's output gradient: per pixel the color channels, then
+// alpha (-Σ g_c b_c), then depth (zero).
 //
-// Two passes: `ssim_terms`, per window position, the cotangents of the window's filtered
-// moments (mean of x, of x², of x y); `loss_gradient`, per pixel, L1's gradient plus those
-// cotangents spread back over the windows holding the pixel (the transposed filter).
+// The 11 x 11 window is the product of two 11-tap filters, so it runs as two 11-tap passes,
+// and so does its transpose (121 taps per window position would be 5.5x the work):
+// - `ssim_rows`, per row and valid column: each channel's moments (x, y, x², y², x y) filtered
+//   along the row, into `rows`;
+// - `ssim_terms`, per window position: those filtered down the column, SSIM, and the
+//   cotangents of the window's means (of x, of x² and y², of x y) into `terms`;
+// - `ssim_spread`, per row and valid column: the cotangents of the windows holding it spread
+//   down the column (the transposed filter), into `rows` again;
+// - `loss_gradient`, per pixel: L1's gradient plus those spread along the row, applied to
+//   the pixel's x and y.
 
 struct LossInfo {
     // width, height, pixel state words per pixel (3 colors, T, the depth sum if kept; f32),
@@ -19,7 +27,7 @@ struct LossInfo {
     valid: vec4<u32>,
     // the step's background rgb, λ
     background: vec4<f32>,
-    // the target's own background rgb, unused
+    // the target's own background b0 (rgb)
     base: vec4<f32>,
 }
 
@@ -27,6 +35,9 @@ struct LossInfo {
 @group(0) @binding(1) var<storage, read> targets: array<f32>;
 @group(0) @binding(2) var<storage, read> taps: array<f32, 11>;
 @group(0) @binding(3) var<storage, read_write> terms: array<f32>;
+// Per row y and valid column x: 15 words (5 moments per channel) after `ssim_rows`, 9 (3
+// spread cotangents per channel) after `ssim_spread`.
+@group(0) @binding(8) var<storage, read_write> rows: array<f32>;
 @group(0) @binding(4) var<storage, read_write> pixel_grad: array<f32>;
 @group(0) @binding(5) var<storage, read_write> sums: array<f32>;
 @group(0) @binding(6) var<uniform> info: LossInfo;
@@ -66,6 +77,41 @@ fn reduce(lid: u32, group: u32, slot: u32, v: f32) {
     }
 }
 
+// One invocation per row and valid column, `info.valid.x` by `info.size.y`.
+fn row_cell(wid: vec3<u32>, lid: u32) -> u32 {
+    return (wid.y * 65535u + wid.x) * 64u + lid;
+}
+
+@compute @workgroup_size(64)
+fn ssim_rows(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let i = row_cell(wid, lid);
+    if (i >= info.valid.x * info.size.y) {
+        return;
+    }
+    let x0 = i % info.valid.x;
+    let y = i / info.valid.x;
+    for (var c = 0u; c < 3u; c++) {
+        var m = array<f32, 5>(0.0, 0.0, 0.0, 0.0, 0.0);
+        for (var k = 0u; k < 11u; k++) {
+            let p = y * info.size.x + x0 + k;
+            let x = render(p, c);
+            let t = target_at(p, c);
+            let g = taps[k];
+            m[0] += g * x;
+            m[1] += g * t;
+            m[2] += g * x * x;
+            m[3] += g * t * t;
+            m[4] += g * x * t;
+        }
+        let o = (i * 3u + c) * 5u;
+        rows[o] = m[0];
+        rows[o + 1u] = m[1];
+        rows[o + 2u] = m[2];
+        rows[o + 3u] = m[3];
+        rows[o + 4u] = m[4];
+    }
+}
+
 @compute @workgroup_size(64)
 fn ssim_terms(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let group = wid.y * 65535u + wid.x;
@@ -74,31 +120,24 @@ fn ssim_terms(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_i
     if (i < info.valid.z) {
         let px = i % info.valid.x;
         let py = i / info.valid.x;
-        let w = info.size.x;
         // d(λ (1 - mean SSIM)) / d(s at one position and channel).
         let scale = -info.background.w / (3.0 * f32(info.valid.z));
         for (var c = 0u; c < 3u; c++) {
-            var mx = 0.0;
-            var my = 0.0;
-            var exx = 0.0;
-            var eyy = 0.0;
-            var exy = 0.0;
-            for (var ky = 0u; ky < 11u; ky++) {
-                for (var kx = 0u; kx < 11u; kx++) {
-                    let g = taps[ky] * taps[kx];
-                    let p = (py + ky) * w + px + kx;
-                    let x = render(p, c);
-                    let y = target_at(p, c);
-                    mx += g * x;
-                    my += g * y;
-                    exx += g * x * x;
-                    eyy += g * y * y;
-                    exy += g * x * y;
-                }
+            var m = array<f32, 5>(0.0, 0.0, 0.0, 0.0, 0.0);
+            for (var k = 0u; k < 11u; k++) {
+                let o = (((py + k) * info.valid.x + px) * 3u + c) * 5u;
+                let g = taps[k];
+                m[0] += g * rows[o];
+                m[1] += g * rows[o + 1u];
+                m[2] += g * rows[o + 2u];
+                m[3] += g * rows[o + 3u];
+                m[4] += g * rows[o + 4u];
             }
-            let vx = exx - mx * mx;
-            let vy = eyy - my * my;
-            let cxy = exy - mx * my;
+            let mx = m[0];
+            let my = m[1];
+            let vx = m[2] - mx * mx;
+            let vy = m[3] - my * my;
+            let cxy = m[4] - mx * my;
             let a = 2.0 * mx * my + C1;
             let b = 2.0 * cxy + C2;
             let cc = mx * mx + my * my + C1;
@@ -115,6 +154,33 @@ fn ssim_terms(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_i
 }
 
 @compute @workgroup_size(64)
+fn ssim_spread(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let i = row_cell(wid, lid);
+    if (i >= info.valid.x * info.size.y) {
+        return;
+    }
+    let px = i % info.valid.x;
+    let qy = i / info.valid.x;
+    // The window positions py = qy - k (k = 0..10) inside the valid rows hold row qy as tap k.
+    let first = u32(max(i32(qy) - i32(info.valid.y) + 1, 0));
+    let last = min(qy, 10u);
+    for (var c = 0u; c < 3u; c++) {
+        var s = array<f32, 3>(0.0, 0.0, 0.0);
+        for (var k = first; k <= last; k++) {
+            let t = (((qy - k) * info.valid.x + px) * 3u + c) * 3u;
+            let g = taps[k];
+            s[0] += g * terms[t];
+            s[1] += g * terms[t + 1u];
+            s[2] += g * terms[t + 2u];
+        }
+        let o = (i * 3u + c) * 3u;
+        rows[o] = s[0];
+        rows[o + 1u] = s[1];
+        rows[o + 2u] = s[2];
+    }
+}
+
+@compute @workgroup_size(64)
 fn loss_gradient(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let group = wid.y * 65535u + wid.x;
     let q = group * 64u + lid;
@@ -122,31 +188,26 @@ fn loss_gradient(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocatio
     let pixels = w * info.size.y;
     var l1 = 0.0;
     if (q < pixels) {
-        let qx = i32(q % w);
-        let qy = i32(q / w);
+        let qx = q % w;
+        let qy = q / w;
+        // The columns px = qx - k (k = 0..10) inside the valid ones hold column qx as tap k.
+        let first = u32(max(i32(qx) - i32(info.valid.x) + 1, 0));
+        let last = min(qx, 10u);
         let l1_scale = (1.0 - info.background.w) / (3.0 * f32(pixels));
         var d_alpha = 0.0;
         for (var c = 0u; c < 3u; c++) {
             let x = render(q, c);
             let y = target_at(q, c);
             l1 += abs(x - y);
-            var g = l1_scale * sign(x - y);
-            // The windows at positions q - k (k = 0..10 per axis) that hold q, as tap k.
-            for (var ky = 0; ky < 11; ky++) {
-                let py = qy - ky;
-                if (py < 0 || py >= i32(info.valid.y)) {
-                    continue;
-                }
-                for (var kx = 0; kx < 11; kx++) {
-                    let px = qx - kx;
-                    if (px < 0 || px >= i32(info.valid.x)) {
-                        continue;
-                    }
-                    let t = ((u32(py) * info.valid.x + u32(px)) * 3u + c) * 3u;
-                    let wk = taps[ky] * taps[kx];
-                    g += wk * (terms[t] + 2.0 * x * terms[t + 1u] + y * terms[t + 2u]);
-                }
+            var s = array<f32, 3>(0.0, 0.0, 0.0);
+            for (var k = first; k <= last; k++) {
+                let o = ((qy * info.valid.x + qx - k) * 3u + c) * 3u;
+                let g = taps[k];
+                s[0] += g * rows[o];
+                s[1] += g * rows[o + 1u];
+                s[2] += g * rows[o + 2u];
             }
+            let g = l1_scale * sign(x - y) + s[0] + 2.0 * x * s[1] + y * s[2];
             pixel_grad[q * 5u + c] = g;
             d_alpha -= g * info.background[c];
         }
