@@ -1169,3 +1169,130 @@ where
     }
     assert!(cpu_grad2d[0] > 0.0 && cpu_grad2d[5] > 0.0);
 }
+
+/// A GPU training step recorded behind a frame that turns out cut (more intersections than
+/// the buffers held; the GPU loop does not wait for its frame) changes nothing: the
+/// parameters, Adam's moments and density control's statistics stay as they were. Taken again
+/// with room, the step equals that of a renderer that had room from the start.
+#[test]
+fn a_gpu_step_from_a_cut_frame_is_held_back_and_taken_again() {
+    use crate::common::{camera, spread_gaussians};
+    use splat_runtime::Flat;
+    use splat_runtime::gpu::entries::Accumulation;
+    use splat_runtime::gpu::train::{AdamStep, GpuAdam, GpuObserver, ScreenSource};
+    use splat_runtime::gpu::{GpuRenderer, GpuScene};
+    let Some(gpu) = splat_runtime::gpu::adapter_or_skip() else {
+        return;
+    };
+    let (small_cam, cam) = (camera(40, 32), camera(72, 56));
+    let params = spread_gaussians(&cam, 300, 2);
+    let words = <Params as Flat>::LEN;
+    let rates = vec![1e-3; words];
+    let opts = RenderOptions::default();
+    let acc = Accumulation::default_for(&gpu);
+    let mut rng = fastrand::Rng::with_seed(5);
+    // Per pixel: color, alpha, depth.
+    let pixel_grad: Vec<u32> = (0..72 * 56 * 5)
+        .map(|_| (rng.f32() - 0.5).to_bits())
+        .collect();
+    // One step as the GPU loop records it: the frame submitted and not waited for.
+    let step = |renderer: &mut GpuRenderer<Method>,
+                scene: &GpuScene<Method>,
+                adam: &mut GpuAdam,
+                observer: &mut GpuObserver| {
+        renderer.submit(scene, &cam).unwrap();
+        gpu.write(renderer.pixel_gradients().unwrap(), &pixel_grad);
+        renderer.backward_on_device(scene, acc).unwrap();
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        let adam_step = AdamStep {
+            params: scene.buffer(),
+            grads: renderer.param_gradients(),
+            primitives: scene.len(),
+            rates: &rates,
+            held_by: Some(renderer.frame_keys()),
+        };
+        adam.record(&gpu, &mut enc, adam_step).unwrap();
+        let source = ScreenSource::Shade { slot: 0 };
+        (observer.record(&gpu, &mut enc, renderer, scene, source)).unwrap();
+        gpu.queue.submit([enc.finish()]);
+        renderer.settle(scene).unwrap()
+    };
+    let flat = |ps: &[Params]| -> Vec<f32> {
+        let mut out = vec![0.0; ps.len() * words];
+        for (p, o) in ps.iter().zip(out.chunks_exact_mut(words)) {
+            p.write_words(o);
+        }
+        out
+    };
+    let bits = |ps: &[Params]| -> Vec<u32> { flat(ps).into_iter().map(f32::to_bits).collect() };
+
+    // A renderer whose buffers hold the small frame's keys only.
+    let mut renderer = GpuRenderer::<Method>::new(&gpu, &opts).unwrap();
+    let mut scene = GpuScene::<Method>::new(&gpu, &spread_gaussians(&small_cam, 30, 1)).unwrap();
+    renderer.forward(&scene, &small_cam).unwrap();
+    scene.upload(&gpu, &params).unwrap();
+    let mut adam = GpuAdam::new(&gpu, words).unwrap();
+    let mut observer = GpuObserver::new(&gpu).unwrap();
+    let cut = step(&mut renderer, &scene, &mut adam, &mut observer);
+    assert!(cut.is_none(), "the frame outgrows the first frame's room");
+    let (faults, len) = adam.fault_words();
+    assert_eq!(
+        gpu.read(faults, len).unwrap(),
+        [0, 0, u32::MAX],
+        "no word stepped"
+    );
+    let unchanged = bits(&scene.download(&gpu).unwrap()) == bits(&params);
+    assert!(unchanged, "the parameters are as they were");
+    let moments = adam.download(&gpu, params.len()).unwrap();
+    assert!(moments.m.iter().chain(&moments.v).all(|x| *x == 0.0));
+    let (grad2d, seen) = observer.take(&gpu, params.len()).unwrap();
+    assert!(grad2d.iter().all(|g| *g == 0.0) && seen.iter().all(|s| *s == 0));
+    adam.take_back();
+    let taken = step(&mut renderer, &scene, &mut adam, &mut observer).expect("room now");
+    assert!(taken.intersections > 0 && !taken.redone);
+
+    let mut roomy = GpuRenderer::<Method>::new(&gpu, &opts).unwrap();
+    let reference = GpuScene::<Method>::new(&gpu, &params).unwrap();
+    roomy.forward(&reference, &cam).unwrap();
+    let (mut adam_ref, mut observer_ref) = (
+        GpuAdam::new(&gpu, words).unwrap(),
+        GpuObserver::new(&gpu).unwrap(),
+    );
+    let want = step(&mut roomy, &reference, &mut adam_ref, &mut observer_ref).unwrap();
+    assert_eq!(taken.intersections, want.intersections);
+    let (got, want) = (
+        adam.download(&gpu, params.len()).unwrap(),
+        adam_ref.download(&gpu, params.len()).unwrap(),
+    );
+    assert_eq!(
+        (got.step, want.step),
+        (1, 1),
+        "the held step was taken back"
+    );
+    // Gradients summed by atomics, in any order: gpu_parity's bound.
+    let largest = want.m.iter().fold(0.0f32, |m, g| m.max(g.abs()));
+    assert!(largest > 0.0);
+    for (k, (a, b)) in got.m.iter().zip(&want.m).enumerate() {
+        assert!((a - b).abs() <= 1e-3 * largest, "m[{k}]: {a} vs {b}");
+    }
+    // A first Adam step moves each word by its rate times the sign of its gradient.
+    let (stepped, stepped_ref) = (
+        scene.download(&gpu).unwrap(),
+        reference.download(&gpu).unwrap(),
+    );
+    let moved = |ps: &[Params]| -> Vec<f32> {
+        let was = flat(&params);
+        flat(ps).iter().zip(&was).map(|(a, b)| a - b).collect()
+    };
+    let (moved, moved_ref) = (moved(&stepped), moved(&stepped_ref));
+    assert!(moved.iter().any(|d| d.abs() > 5e-4), "the step was taken");
+    for (k, (a, b)) in moved.iter().zip(&moved_ref).enumerate() {
+        assert!((a - b).abs() <= 2.5e-3, "word {k}: moved {a} vs {b}");
+    }
+    let (seen, seen_ref) = (
+        observer.take(&gpu, params.len()).unwrap().1,
+        observer_ref.take(&gpu, params.len()).unwrap().1,
+    );
+    assert_eq!(seen, seen_ref);
+    assert!(seen.contains(&1));
+}

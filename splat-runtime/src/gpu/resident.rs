@@ -4,8 +4,9 @@
 //! ([`GpuRenderer::submit`]: a renderer's first reads its intersection count back between
 //! two; a frame whose intersections outgrew the buffers is rendered again by
 //! [`GpuRenderer::finish`]); the backward pass is one submission; images and gradients stay on
-//! the device until the caller downloads them. This is the loop a trainer runs: render, loss, backward, optimizer step,
-//! with no host transfer per step.
+//! the device until the caller downloads them. This is the loop a trainer runs: render, loss,
+//! backward, optimizer step, with no host transfer per step and no wait for the frame
+//! ([`GpuRenderer::settle`] says afterwards whether it fitted).
 //!
 //! Stages, as on the CPU: preprocess (`project`), rasterize (count kept tiles with
 //! `tile_cull`, prefix sum, emit (tile, depth) keys, radix sort, tile ranges, trip-count
@@ -269,11 +270,20 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         self.finish(scene)
     }
 
-    /// Records and submits the frame of `scene` through `camera` without waiting for it.
-    /// With the room the buffers have from the frames before, the frame is one submission
-    /// (the number of keys it sorts is settled on the device); the renderer's first frame
-    /// reads its intersection count back in between, to make that room.
-    pub fn submit(&mut self, scene: &GpuScene<M>, camera: &Camera) -> Result<(), GpuRenderError> {
+    /// Records and submits the frame of `scene` through `camera` without waiting for it, and
+    /// says its tile grid. With the room the buffers have from the frames before, the frame is
+    /// one submission (the number of keys it sorts is settled on the device); the renderer's
+    /// first frame reads its intersection count back in between, to make that room.
+    ///
+    /// Work recorded from the submitted frame before [`GpuRenderer::settle`] or
+    /// [`GpuRenderer::finish`] (its backward pass, a loss) is right only if the frame fitted
+    /// its buffers; a step that changes state from it is held back on the device when it did
+    /// not ([`GpuRenderer::frame_keys`]).
+    pub fn submit(
+        &mut self,
+        scene: &GpuScene<M>,
+        camera: &Camera,
+    ) -> Result<TileGrid, GpuRenderError> {
         (self.frame, self.pending) = (None, None);
         let gpu = self.gpu;
         let grid = crate::pipeline::check::<M>(camera, &self.opts)?;
@@ -332,7 +342,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             primitives: n,
             camera: *camera,
         });
-        Ok(())
+        Ok(grid)
     }
 
     /// Waits for the frame submitted last and says what it was. A frame with more
@@ -342,6 +352,22 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         if let Some(info) = self.frame {
             return Ok(info);
         }
+        let camera = self.pending.ok_or(GpuRenderError::NoFrame)?.camera;
+        let mut redone = false;
+        loop {
+            if let Some(info) = self.settle(scene)? {
+                return Ok(FrameInfo { redone, ..info });
+            }
+            redone = true;
+            self.submit(scene, &camera)?;
+        }
+    }
+
+    /// Waits for the frame submitted last (at once after a wait that covered it) and says
+    /// whether it fitted the buffers: `Some` finishes it, as [`GpuRenderer::finish`] does;
+    /// `None`: its tile lists were cut short, the buffers have room for it now, and it and
+    /// what was recorded from it must be submitted again.
+    pub fn settle(&mut self, scene: &GpuScene<M>) -> Result<Option<FrameInfo>, GpuRenderError> {
         let p = self.pending.ok_or(GpuRenderError::NoFrame)?;
         if scene.len() != p.primitives {
             return Err(GpuRenderError::SceneChanged {
@@ -349,22 +375,35 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
                 want: p.primitives,
             });
         }
-        let mut counted = self.front.counted(self.gpu)?;
-        let redone = counted.cut;
-        while counted.cut {
+        let counted = self.front.counted(self.gpu)?;
+        if counted.cut {
             self.front.reserve(self.gpu, counted)?;
-            self.submit(scene, &p.camera)?;
-            counted = self.front.counted(self.gpu)?;
+            self.pending = None;
+            return Ok(None);
         }
         let info = FrameInfo {
             grid: p.grid,
             primitives: p.primitives,
             visible: counted.visible,
             intersections: counted.intersections as usize,
-            redone,
+            redone: false,
         };
         (self.frame, self.pending) = (Some(info), None);
-        Ok(info)
+        Ok(Some(info))
+    }
+
+    /// The key count of the frame submitted last, on the device (`[keys sorted, cut]`,
+    /// `settle.wgsl`): a kernel that changes state from the frame binds it and does nothing
+    /// when word 1 is set (the frame was cut: [`GpuRenderer::settle`]).
+    pub fn frame_keys(&self) -> &wgpu::Buffer {
+        self.front.key_count()
+    }
+
+    /// The grid and primitive count of the frame finished last, or else of the one submitted.
+    fn current(&self) -> Result<(TileGrid, usize), GpuRenderError> {
+        let frame = self.frame.map(|f| (f.grid, f.primitives));
+        let pending = self.pending.map(|p| (p.grid, p.primitives));
+        frame.or(pending).ok_or(GpuRenderError::NoFrame)
     }
 
     /// The last frame's outputs (as `RenderOptions` asked) and stats.
@@ -441,7 +480,8 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
 
     /// The backward pass of the last frame of `scene`, with the output gradients already in
     /// [`GpuRenderer::pixel_gradients`] (written there by a loss on the device; depth's
-    /// ignored): no host transfer.
+    /// ignored): no host transfer. The frame may be one submitted and not finished yet
+    /// ([`GpuRenderer::submit`] says when that is right).
     pub fn backward_on_device(
         &mut self,
         scene: &GpuScene<M>,
@@ -453,8 +493,8 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
     /// The buffer of the last frame's output gradients: per pixel the color channels, alpha,
     /// depth.
     pub fn pixel_gradients(&mut self) -> Result<&wgpu::Buffer, GpuRenderError> {
-        let info = self.frame.ok_or(GpuRenderError::NoFrame)?;
-        let pixels = (info.grid.width * info.grid.height) as usize;
+        let (grid, _) = self.current()?;
+        let pixels = (grid.width * grid.height) as usize;
         self.pixel_grad
             .ensure(self.gpu, pixels * (self.layout.channels + 2))?;
         Ok(&self.pixel_grad)
@@ -516,17 +556,16 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         acc: Accumulation,
     ) -> Result<(), GpuRenderError> {
         let gpu = self.gpu;
-        let info = self.frame.ok_or(GpuRenderError::NoFrame)?;
-        if scene.len() != info.primitives {
+        let (grid, n) = self.current()?;
+        if scene.len() != n {
             return Err(GpuRenderError::SceneChanged {
                 got: scene.len(),
-                want: info.primitives,
+                want: n,
             });
         }
-        let (grid, layout) = (info.grid, self.layout);
+        let layout = self.layout;
         let pixels = (grid.width * grid.height) as usize;
         let blend = self.blend(want_depth, acc)?;
-        let n = info.primitives;
         let groups = (n as u32).div_ceil(64).max(1);
         let npx = M::PixelLanes::default().as_ref().len();
         let sum_words = self.sums.words(n * layout.grad_words);

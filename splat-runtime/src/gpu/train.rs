@@ -221,6 +221,19 @@ impl GpuLoss {
     }
 }
 
+/// What one device Adam step reads and writes.
+pub struct AdamStep<'a> {
+    pub params: &'a wgpu::Buffer,
+    pub grads: &'a wgpu::Buffer,
+    pub primitives: usize,
+    /// Per word of a primitive; negative for words not trained yet.
+    pub rates: &'a [f32],
+    /// The key count of the frame the gradients come from
+    /// ([`GpuRenderer::frame_keys`]): the step is held back on the device when that frame
+    /// was cut ([`GpuAdam::take_back`] then undoes its count). `None`: always taken.
+    pub held_by: Option<&'a wgpu::Buffer>,
+}
+
 /// Adam's moments on the device, for parameters with `words` float words per primitive.
 pub struct GpuAdam {
     kernel: Kernel,
@@ -230,6 +243,8 @@ pub struct GpuAdam {
     info: wgpu::Buffer,
     /// The last step's [`Faults`]: two counts and the first word.
     faults: wgpu::Buffer,
+    /// `[0, 0]`: what a step not held by a frame reads as its frame's key count.
+    uncut: wgpu::Buffer,
     words: usize,
     step: u64,
     pub beta1: f32,
@@ -247,6 +262,7 @@ impl GpuAdam {
             rates: gpu.buffer("learning rates", words)?,
             info: gpu.uniform_buffer(12),
             faults: gpu.buffer("Adam's faults", 3)?,
+            uncut: gpu.buffer("a frame key count never cut", 2)?,
             words,
             step: 0,
             beta1: 0.9,
@@ -255,17 +271,21 @@ impl GpuAdam {
         })
     }
 
-    /// Records one step of the `primitives` primitives' words in `params` against `grads`;
-    /// `rates` per word of a primitive, negative for words not trained yet.
+    /// Records one step of `step.primitives` primitives' words in `step.params` against
+    /// `step.grads`.
     pub fn record(
         &mut self,
         gpu: &Gpu,
         encoder: &mut wgpu::CommandEncoder,
-        params: &wgpu::Buffer,
-        grads: &wgpu::Buffer,
-        primitives: usize,
-        rates: &[f32],
+        step: AdamStep,
     ) -> Result<(), GpuError> {
+        let AdamStep {
+            params,
+            grads,
+            primitives,
+            rates,
+            held_by,
+        } = step;
         assert_eq!(
             rates.len(),
             self.words,
@@ -295,6 +315,7 @@ impl GpuAdam {
                 ("rates", &self.rates),
                 ("info", &self.info),
                 ("faults", &self.faults),
+                ("frame_keys", held_by.unwrap_or(&self.uncut)),
             ],
         )?;
         dispatch(
@@ -307,6 +328,13 @@ impl GpuAdam {
     }
 
     /// Where the last recorded step says which words it could not move, to read back
+    /// Takes back the count of the step recorded last, which its frame held back on the
+    /// device ([`AdamStep::held_by`]): the next step's bias corrections are those it would
+    /// have had.
+    pub fn take_back(&mut self) {
+        self.step -= 1;
+    }
+
     /// ([`Gpu::read_together`]) for [`GpuAdam::faults`].
     pub fn fault_words(&self) -> (&wgpu::Buffer, usize) {
         (&self.faults, 3)
@@ -413,7 +441,8 @@ impl GpuObserver {
 
     /// Records the statistics of the renderer's last frame of `scene` (after its backward
     /// pass): each primitive counted where `project` saw it and its box covers a pixel, its
-    /// screen-space gradient read from `source`.
+    /// screen-space gradient read from `source`; none if the frame was cut
+    /// ([`GpuRenderer::frame_keys`]).
     pub fn record<M: SplatMethod>(
         &mut self,
         gpu: &Gpu,
@@ -458,6 +487,7 @@ impl GpuObserver {
                 ("grad2d", &self.grad2d),
                 ("seen", &self.seen),
                 ("info", &self.info),
+                ("frame_keys", renderer.frame_keys()),
             ],
         )?;
         dispatch(encoder, &self.kernel.pipeline, &bind, n.div_ceil(256));
@@ -686,8 +716,14 @@ mod tests {
             }
             let grads = gpu.buffer_from("grads", &to_words(&g)).unwrap();
             let mut enc = gpu.device.create_command_encoder(&Default::default());
-            adam.record(&gpu, &mut enc, &params, &grads, prims, &rates)
-                .unwrap();
+            let adam_step = AdamStep {
+                params: &params,
+                grads: &grads,
+                primitives: prims,
+                rates: &rates,
+                held_by: None,
+            };
+            adam.record(&gpu, &mut enc, adam_step).unwrap();
             gpu.queue.submit([enc.finish()]);
             let locked: Vec<f32> = g
                 .iter()

@@ -1,10 +1,11 @@
 //! The training loop on the GPU, step for step the CPU loop of [`super::fit`]: the scene, the
 //! target images, the loss, the gradients and Adam's moments live on the device. A step is
-//! the renderer's forward (which waits for the frame, to know that it fitted its buffers), the
-//! loss and backward, Adam, density control's statistics or MCMC's penalties and noise, and one
-//! read-back of the loss value and of the words Adam could not step (a few words), then of the
-//! stage times. Every hundred steps density control or MCMC refines on the host: the scene and
-//! the moments go down and back up.
+//! the renderer's forward, the loss and backward, Adam, density control's statistics or MCMC's
+//! penalties and noise, all recorded without waiting for the frame, and one read-back of the
+//! loss value and of the words Adam could not step (a few words), then of the stage times. A
+//! frame that did not fit the renderer's buffers holds Adam and the statistics back on the
+//! device ([`crate::gpu::GpuRenderer::settle`]), and the step runs again. Every hundred steps
+//! density control or MCMC refines on the host: the scene and the moments go down and back up.
 
 use super::checkpoint::Checkpoint;
 use super::densify::Densifier;
@@ -16,7 +17,9 @@ use super::step_times::StepTimes;
 use crate::flat::Flat;
 use crate::gpu::entries::Accumulation;
 use crate::gpu::timing::StageTimer;
-use crate::gpu::train::{GpuAdam, GpuLoss, GpuMcmc, GpuObserver, GpuTrainError, ScreenSource};
+use crate::gpu::train::{
+    AdamStep, GpuAdam, GpuLoss, GpuMcmc, GpuObserver, GpuTrainError, ScreenSource,
+};
 use crate::gpu::{Gpu, GpuRenderError, GpuRenderer, GpuScene};
 use crate::io::dataset::{Dataset, View};
 use crate::method::SplatMethod;
@@ -109,42 +112,55 @@ pub fn fit_gpu_from<M: Trainable>(
         let k = rng.usize(..data.train.len());
         let camera = &data.train[k].camera;
         let background = step_background(opts, &mut rng);
-        let frame = renderer.forward(&scene, camera)?;
-        let size = (frame.grid.width, frame.grid.height);
-        let mut enc = gpu.device.create_command_encoder(&Default::default());
-        let grad = renderer.pixel_gradients()?.clone();
-        // Words per pixel of the frame's state (not `words`, the parameters' per primitive).
-        let state_words = renderer.state_layout().words() as u32;
-        let pixel_state = renderer.pixel_state();
-        let target = (k, background, size);
-        timer.start(&mut enc, LOSS);
-        loss.record(gpu, &mut enc, target, pixel_state, state_words, &grad)?;
-        timer.end(&mut enc, LOSS);
-        gpu.queue.submit([enc.finish()]);
-        renderer.backward_on_device(&scene, acc)?;
-
         let lr = step_rates(&rates, step, opts.steps);
+        let observing = densifier.as_ref().is_some_and(|d| step < d.opts.stop);
         let n = scene.len();
-        let mut enc = gpu.device.create_command_encoder(&Default::default());
-        let param_grads = renderer.param_gradients();
-        timer.start(&mut enc, OPTIMIZER);
-        if let Some(m) = &mcmc {
-            m.record_regularize(gpu, &mut enc, scene.buffer(), param_grads, n)?;
-        }
-        adam.record(gpu, &mut enc, scene.buffer(), param_grads, n, &lr)?;
-        timer.end(&mut enc, OPTIMIZER);
-        let observing = densifier.as_ref().filter(|d| step < d.opts.stop);
-        timer.start(&mut enc, STATISTICS);
-        if observing.is_some() {
-            observer.record(gpu, &mut enc, &renderer, &scene, source)?;
-        }
-        timer.end(&mut enc, STATISTICS);
-        timer.resolve(&mut enc, LOSS..NOISE);
-        gpu.queue.submit([enc.finish()]);
-        // The step's one wait: the loss value and Adam's faults together.
-        let [sums, fault_words] = gpu.read_together([loss.sums()?, adam.fault_words()])?;
-        let value = loss.value(&sums)?;
-        let faults = GpuAdam::faults(&fault_words);
+        // The frame is not waited for: the loss, backward pass, Adam and the statistics are
+        // recorded behind it, and the step's one wait reads the loss value and Adam's faults.
+        // A frame with more intersections than the buffers held (its lists cut short) holds
+        // Adam and the statistics back on the device, and the step runs again with room.
+        let (value, faults) = loop {
+            let grid = renderer.submit(&scene, camera)?;
+            let mut enc = gpu.device.create_command_encoder(&Default::default());
+            let grad = renderer.pixel_gradients()?.clone();
+            // Words per pixel of the frame's state (not `words`, the parameters' per primitive).
+            let state_words = renderer.state_layout().words() as u32;
+            let pixel_state = renderer.pixel_state();
+            let target = (k, background, (grid.width, grid.height));
+            timer.start(&mut enc, LOSS);
+            loss.record(gpu, &mut enc, target, pixel_state, state_words, &grad)?;
+            timer.end(&mut enc, LOSS);
+            gpu.queue.submit([enc.finish()]);
+            renderer.backward_on_device(&scene, acc)?;
+
+            let mut enc = gpu.device.create_command_encoder(&Default::default());
+            let param_grads = renderer.param_gradients();
+            timer.start(&mut enc, OPTIMIZER);
+            if let Some(m) = &mcmc {
+                m.record_regularize(gpu, &mut enc, scene.buffer(), param_grads, n)?;
+            }
+            let adam_step = AdamStep {
+                params: scene.buffer(),
+                grads: param_grads,
+                primitives: n,
+                rates: &lr,
+                held_by: Some(renderer.frame_keys()),
+            };
+            adam.record(gpu, &mut enc, adam_step)?;
+            timer.end(&mut enc, OPTIMIZER);
+            timer.start(&mut enc, STATISTICS);
+            if observing {
+                observer.record(gpu, &mut enc, &renderer, &scene, source)?;
+            }
+            timer.end(&mut enc, STATISTICS);
+            timer.resolve(&mut enc, LOSS..NOISE);
+            gpu.queue.submit([enc.finish()]);
+            let [sums, fault_words] = gpu.read_together([loss.sums()?, adam.fault_words()])?;
+            match renderer.settle(&scene)? {
+                Some(_) => break (loss.value(&sums)?, GpuAdam::faults(&fault_words)),
+                None => adam.take_back(),
+            }
+        };
         // Read now, with nothing left to wait for (MCMC's noise, recorded below, is timed in the
         // next step's read: the previous step's noise), and before the evaluation's frames
         // replace the renderer's times.

@@ -3,6 +3,7 @@
 // its moments move), bias-corrected moments. Words it cannot step are left as on the CPU
 // (`train::adam::Fault`) and counted in `faults`: a non-finite gradient skips the word; a step
 // that would make the word or its second moment non-finite is undone and its moments restart.
+// A step from a frame whose tile lists were cut is held back whole (`frame_keys`).
 
 struct AdamInfo {
     // parameter words in all, words per primitive, unused, unused
@@ -21,6 +22,8 @@ struct AdamInfo {
 @group(0) @binding(5) var<uniform> info: AdamInfo;
 // words with a non-finite gradient, steps undone, the lowest such word (cleared to 0, 0, ~0)
 @group(0) @binding(6) var<storage, read_write> faults: array<atomic<u32>, 3>;
+// The key count of the frame the gradients come from, [keys sorted, cut] (`settle.wgsl`).
+@group(0) @binding(7) var<storage, read> frame_keys: array<u32, 2>;
 
 fn fault(kind: u32, word: u32) {
     atomicAdd(&faults[kind], 1u);
@@ -30,7 +33,7 @@ fn fault(kind: u32, word: u32) {
 @compute @workgroup_size(256)
 fn adam_step(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let i = (wid.y * 65535u + wid.x) * 256u + lid;
-    if (i >= info.size.x) {
+    if (i >= info.size.x || frame_keys[1] != 0u) {
         return;
     }
     let lr = rates[i % info.size.y];

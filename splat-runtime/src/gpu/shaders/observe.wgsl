@@ -23,6 +23,8 @@ struct ObserveInfo {
 @group(0) @binding(5) var<storage, read_write> grad2d: array<f32>;
 @group(0) @binding(6) var<storage, read_write> seen: array<u32>;
 @group(0) @binding(7) var<uniform> info: ObserveInfo;
+// The frame's key count, [keys sorted, cut] (`settle.wgsl`): a cut frame is not counted.
+@group(0) @binding(8) var<storage, read> frame_keys: array<u32, 2>;
 
 fn vec_at(a: u32) -> vec3<f32> {
     return vec3<f32>(camera_words[a], camera_words[a + 1u], camera_words[a + 2u]);
@@ -31,7 +33,7 @@ fn vec_at(a: u32) -> vec3<f32> {
 @compute @workgroup_size(256)
 fn observe(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let i = (wid.y * 65535u + wid.x) * 256u + lid;
-    if (i >= info.size.x) {
+    if (i >= info.size.x || frame_keys[1] != 0u) {
         return;
     }
     // Seen as the CPU's `pipeline::filter` sees it (and gsplat, whose radii are 0 off the
