@@ -7,12 +7,14 @@
 //! device ([`crate::gpu::GpuRenderer::settle`]), and the step runs again. Every hundred steps
 //! density control or MCMC refines on the host: the scene and the moments go down and back up.
 
+use super::adam::Faults;
 use super::checkpoint::Checkpoint;
 use super::densify::Densifier;
 use super::fit::{
     Evaluation, FitError, FitOptions, StepReport, Trainable, adopt, after_every, composite,
     ends_after, flatten, for_training, rates_for, saves_at, step_background, step_rates,
 };
+use super::loss::LossValue;
 use super::step_times::StepTimes;
 use crate::flat::Flat;
 use crate::gpu::entries::Accumulation;
@@ -24,6 +26,7 @@ use crate::gpu::{Gpu, GpuRenderError, GpuRenderer, GpuScene};
 use crate::io::dataset::{Dataset, View};
 use crate::method::SplatMethod;
 use crate::pipeline::Image;
+use crate::types::Camera;
 use glam::{Vec2, Vec3};
 use std::time::Instant;
 
@@ -78,7 +81,7 @@ pub fn fit_gpu_from<M: Trainable>(
             M::NAME
         ))
     })?;
-    let mut renderer = GpuRenderer::<M>::new(gpu, &for_training(&opts.render))?;
+    let renderer = GpuRenderer::<M>::new(gpu, &for_training(&opts.render))?;
     // The loss on the device reads the frame as f32 words.
     if opts.render.precision != crate::pipeline::precision::Precision::F32 {
         return Err(FitError::Unsupported(format!(
@@ -93,19 +96,25 @@ pub fn fit_gpu_from<M: Trainable>(
         )));
     }
     let targets: Vec<_> = data.train.iter().collect();
-    let mut loss = GpuLoss::new(gpu, &targets, opts.ssim_weight as f32)?;
     let mut scene = GpuScene::<M>::new(gpu, &state.params::<M>())?;
     let mut adam = GpuAdam::new(gpu, words)?;
     adam.restore(gpu, &state.adam)?;
-    let mut observer = GpuObserver::new(gpu)?;
+    let mut device = DeviceStep {
+        gpu,
+        renderer,
+        loss: GpuLoss::new(gpu, &targets, opts.ssim_weight as f32)?,
+        adam,
+        observer: GpuObserver::new(gpu)?,
+        mcmc: match opts.mcmc::<M>()? {
+            Some(m) => Some(GpuMcmc::new(gpu, m, words)?),
+            None => None,
+        },
+        source,
+        acc: Accumulation::default_for(gpu),
+        timer: StageTimer::new(gpu, STAGES),
+    };
     let mut densifier =
         (opts.adc()).map(|d| Densifier::resume(d.clone(), scene.len(), &state.grad2d, &state.seen));
-    let mcmc = match opts.mcmc::<M>()? {
-        Some(m) => Some(GpuMcmc::new(gpu, m, words)?),
-        None => None,
-    };
-    let acc = Accumulation::default_for(gpu);
-    let timer = StageTimer::new(gpu, STAGES);
     let mut rng = fastrand::Rng::with_seed(state.rng);
     for step in state.step..opts.steps {
         let started = Instant::now();
@@ -115,64 +124,19 @@ pub fn fit_gpu_from<M: Trainable>(
         let lr = step_rates(&rates, step, opts.steps);
         let observing = densifier.as_ref().is_some_and(|d| step < d.opts.stop);
         let n = scene.len();
-        // The frame is not waited for: the loss, backward pass, Adam and the statistics are
-        // recorded behind it, and the step's one wait reads the loss value and Adam's faults.
-        // A frame with more intersections than the buffers held (its lists cut short) holds
-        // Adam and the statistics back on the device, and the step runs again with room.
-        let (value, faults) = loop {
-            let grid = renderer.submit(&scene, camera)?;
-            let mut enc = gpu.device.create_command_encoder(&Default::default());
-            let grad = renderer.pixel_gradients()?.clone();
-            // Words per pixel of the frame's state (not `words`, the parameters' per primitive).
-            let state_words = renderer.state_layout().words() as u32;
-            let pixel_state = renderer.pixel_state();
-            let target = (k, background, (grid.width, grid.height));
-            timer.start(&mut enc, LOSS);
-            loss.record(gpu, &mut enc, target, pixel_state, state_words, &grad)?;
-            timer.end(&mut enc, LOSS);
-            gpu.queue.submit([enc.finish()]);
-            renderer.backward_on_device(&scene, acc)?;
-
-            let mut enc = gpu.device.create_command_encoder(&Default::default());
-            let param_grads = renderer.param_gradients();
-            timer.start(&mut enc, OPTIMIZER);
-            if let Some(m) = &mcmc {
-                m.record_regularize(gpu, &mut enc, scene.buffer(), param_grads, n)?;
-            }
-            let adam_step = AdamStep {
-                params: scene.buffer(),
-                grads: param_grads,
-                primitives: n,
-                rates: &lr,
-                held_by: Some(renderer.frame_keys()),
-            };
-            adam.record(gpu, &mut enc, adam_step)?;
-            timer.end(&mut enc, OPTIMIZER);
-            timer.start(&mut enc, STATISTICS);
-            if observing {
-                observer.record(gpu, &mut enc, &renderer, &scene, source)?;
-            }
-            timer.end(&mut enc, STATISTICS);
-            timer.resolve(&mut enc, LOSS..NOISE);
-            gpu.queue.submit([enc.finish()]);
-            let [sums, fault_words] = gpu.read_together([loss.sums()?, adam.fault_words()])?;
-            match renderer.settle(&scene)? {
-                Some(_) => break (loss.value(&sums)?, GpuAdam::faults(&fault_words)),
-                None => adam.take_back(),
-            }
-        };
+        let (value, faults) = device.take(&scene, (k, camera, background), &lr, observing)?;
         // Read now, with nothing left to wait for (MCMC's noise, recorded below, is timed in the
         // next step's read: the previous step's noise), and before the evaluation's frames
         // replace the renderer's times.
-        let mut times = step_times(&renderer, &timer, gpu)?;
+        let mut times = device.times()?;
 
         let clock = Instant::now();
         let mut refinement = None;
-        if let Some(m) = &mcmc {
+        if let Some(m) = &device.mcmc {
             if m.mcmc.opts.refines_at(step) {
                 let mut host = scene.download(gpu)?;
                 let r = m.mcmc.refine::<M>(&mut host, &mut rng);
-                adam.remap(gpu, n, &r.origin, |_| false)?;
+                device.adam.remap(gpu, n, &r.origin, |_| false)?;
                 scene.upload(gpu, &host)?;
                 refinement = Some(r);
             }
@@ -180,10 +144,10 @@ pub fn fit_gpu_from<M: Trainable>(
             // A position not trained yet (a negative rate) is not stirred either.
             let (n, lr) = (scene.len(), lr[m.mcmc.words.position].max(0.0));
             let mut enc = gpu.device.create_command_encoder(&Default::default());
-            timer.start(&mut enc, NOISE);
+            device.timer.start(&mut enc, NOISE);
             m.record_perturb(gpu, &mut enc, scene.buffer(), n, lr, rng.u32(..))?;
-            timer.end(&mut enc, NOISE);
-            timer.resolve(&mut enc, NOISE..STAGES);
+            device.timer.end(&mut enc, NOISE);
+            device.timer.resolve(&mut enc, NOISE..STAGES);
             gpu.queue.submit([enc.finish()]);
         }
         if let Some(d) = densifier.as_mut().filter(|d| step < d.opts.stop)
@@ -192,7 +156,7 @@ pub fn fit_gpu_from<M: Trainable>(
             let mut host = scene.download(gpu)?;
             let mut origin: Vec<Option<usize>> = (0..n).map(Some).collect();
             if d.refines_at(step) {
-                let (grad2d, seen) = observer.take(gpu, n)?;
+                let (grad2d, seen) = device.observer.take(gpu, n)?;
                 d.add_observations(&grad2d, &seen);
                 let r = d.refine::<M>(&mut host, step, extent, &mut rng);
                 origin = r.origin.clone();
@@ -204,14 +168,17 @@ pub fn fit_gpu_from<M: Trainable>(
             }
             // Only the words the reset moved (opacities) forget their moments.
             let after = flatten::<M>(&host);
-            adam.remap(gpu, n, &origin, |k| before[k] != after[k])?;
+            device
+                .adam
+                .remap(gpu, n, &origin, |k| before[k] != after[k])?;
             scene.upload(gpu, &host)?;
             times.densify = clock.elapsed();
         }
         let clock = Instant::now();
         let evaluation = match after_every(opts.eval_every, step) {
             true => {
-                let images = render_resident(&mut renderer, &scene, &data.test, opts.background)?;
+                let images =
+                    render_resident(&mut device.renderer, &scene, &data.test, opts.background)?;
                 Some(Evaluation::of(&images, &data.test)?)
             }
             false => None,
@@ -223,10 +190,10 @@ pub fn fit_gpu_from<M: Trainable>(
             let n = scene.len();
             state.step = step + 1;
             state.params = flatten::<M>(&scene.download(gpu)?);
-            state.adam = adam.download(gpu, n)?;
+            state.adam = device.adam.download(gpu, n)?;
             (state.grad2d, state.seen) = match densifier.as_mut() {
                 Some(d) => {
-                    let (grad2d, seen) = observer.take(gpu, n)?;
+                    let (grad2d, seen) = device.observer.take(gpu, n)?;
                     d.add_observations(&grad2d, &seen);
                     d.statistics()
                 }
@@ -262,28 +229,102 @@ const STATISTICS: u32 = 2;
 const NOISE: u32 = 3;
 const STAGES: u32 = 4;
 
-/// The last step's stage times on the GPU: the renderer's and the loop's `timer`'s (a stage
-/// not recorded yet, MCMC's noise without MCMC or before its first step, reads zero). Zero on
-/// an adapter without timestamps.
-fn step_times<M: SplatMethod>(
-    renderer: &GpuRenderer<M>,
-    timer: &StageTimer,
-    gpu: &Gpu,
-) -> Result<StepTimes, FitError> {
-    let r = renderer.stage_times()?;
-    let own = timer.read(gpu)?.unwrap_or_default();
-    let own = |s: u32| own.get(s as usize).copied().unwrap_or_default();
-    Ok(StepTimes {
-        preprocess: r.preprocess,
-        rasterize: r.rasterize,
-        shade: r.shade,
-        loss: own(LOSS),
-        blend: r.blend,
-        project: r.project,
-        optimizer: own(OPTIMIZER) + own(NOISE),
-        statistics: own(STATISTICS),
-        ..Default::default()
-    })
+/// What a step runs on the device: the renderer, the loss, Adam, density control's statistics
+/// or MCMC's terms, and the timer of the loop's own stages.
+struct DeviceStep<'g, M: SplatMethod> {
+    gpu: &'g Gpu,
+    renderer: GpuRenderer<'g, M>,
+    loss: GpuLoss,
+    adam: GpuAdam,
+    observer: GpuObserver,
+    mcmc: Option<GpuMcmc>,
+    source: ScreenSource,
+    acc: Accumulation,
+    timer: StageTimer,
+}
+
+impl<M: SplatMethod> DeviceStep<'_, M> {
+    /// One step from training view `k` through `camera` on `background`, at the learning
+    /// rates `lr`, with density control's statistics if `observing`: the value of its loss
+    /// and the words Adam could not step.
+    ///
+    /// The frame is not waited for: the loss, the backward pass, Adam and the statistics are
+    /// recorded behind it, and the step's one wait reads the loss value and Adam's faults. A
+    /// frame with more intersections than the buffers held (its lists cut short) holds Adam
+    /// and the statistics back on the device, and the step runs again with room.
+    fn take(
+        &mut self,
+        scene: &GpuScene<M>,
+        (k, camera, background): (usize, &Camera, Vec3),
+        lr: &[f32],
+        observing: bool,
+    ) -> Result<(LossValue, Faults), FitError> {
+        let (gpu, n, timer) = (self.gpu, scene.len(), &self.timer);
+        loop {
+            let grid = self.renderer.submit(scene, camera)?;
+            let renderer = &mut self.renderer;
+            let mut enc = gpu.device.create_command_encoder(&Default::default());
+            let grad = renderer.pixel_gradients()?.clone();
+            // Words per pixel of the frame's state (not the parameters' per primitive).
+            let state_words = renderer.state_layout().words() as u32;
+            let target = (k, background, (grid.width, grid.height));
+            timer.start(&mut enc, LOSS);
+            let state = renderer.pixel_state();
+            (self.loss).record(gpu, &mut enc, target, state, state_words, &grad)?;
+            timer.end(&mut enc, LOSS);
+            gpu.queue.submit([enc.finish()]);
+            renderer.backward_on_device(scene, self.acc)?;
+
+            let mut enc = gpu.device.create_command_encoder(&Default::default());
+            let param_grads = renderer.param_gradients();
+            timer.start(&mut enc, OPTIMIZER);
+            if let Some(m) = &self.mcmc {
+                m.record_regularize(gpu, &mut enc, scene.buffer(), param_grads, n)?;
+            }
+            let adam_step = AdamStep {
+                params: scene.buffer(),
+                grads: param_grads,
+                primitives: n,
+                rates: lr,
+                held_by: Some(renderer.frame_keys()),
+            };
+            self.adam.record(gpu, &mut enc, adam_step)?;
+            timer.end(&mut enc, OPTIMIZER);
+            timer.start(&mut enc, STATISTICS);
+            if observing {
+                (self.observer).record(gpu, &mut enc, renderer, scene, self.source)?;
+            }
+            timer.end(&mut enc, STATISTICS);
+            timer.resolve(&mut enc, LOSS..NOISE);
+            gpu.queue.submit([enc.finish()]);
+            let parts = [self.loss.sums()?, self.adam.fault_words()];
+            let [sums, fault_words] = gpu.read_together(parts)?;
+            match renderer.settle(scene)? {
+                Some(_) => return Ok((self.loss.value(&sums)?, GpuAdam::faults(&fault_words))),
+                None => self.adam.take_back(),
+            }
+        }
+    }
+
+    /// The last step's stage times on the GPU: the renderer's and the loop's own (a stage not
+    /// recorded yet, MCMC's noise without MCMC or before its first step, reads zero). Zero on
+    /// an adapter without timestamps.
+    fn times(&self) -> Result<StepTimes, FitError> {
+        let r = self.renderer.stage_times()?;
+        let own = self.timer.read(self.gpu)?.unwrap_or_default();
+        let own = |s: u32| own.get(s as usize).copied().unwrap_or_default();
+        Ok(StepTimes {
+            preprocess: r.preprocess,
+            rasterize: r.rasterize,
+            shade: r.shade,
+            loss: own(LOSS),
+            blend: r.blend,
+            project: r.project,
+            optimizer: own(OPTIMIZER) + own(NOISE),
+            statistics: own(STATISTICS),
+            ..Default::default()
+        })
+    }
 }
 
 /// Where a step's screen-space gradients are read on the device, as
