@@ -62,7 +62,9 @@ fn target_at(p: u32, c: u32) -> f32 {
     return t + (1.0 - coverage[info.valid.w + p]) * (info.background[c] - info.base[c]);
 }
 
-// Sums `v` over the workgroup into sums[2 * group + slot].
+// Sums `v` over the workgroup into sums[2 * group + slot]. (A dispatch past 65,535 groups is
+// rounded up to whole rows: groups past the buffer's end, all of whose values are zero, write
+// nothing.)
 fn reduce(lid: u32, group: u32, slot: u32, v: f32) {
     partial[lid] = v;
     workgroupBarrier();
@@ -72,7 +74,7 @@ fn reduce(lid: u32, group: u32, slot: u32, v: f32) {
         }
         workgroupBarrier();
     }
-    if (lid == 0u) {
+    if (lid == 0u && 2u * group + slot < arrayLength(&sums)) {
         sums[2u * group + slot] = partial[0];
     }
 }

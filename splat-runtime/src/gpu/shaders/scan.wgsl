@@ -31,7 +31,9 @@ fn scan_blocks(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_
     if (i < info.x) {
         data[i] = partial[lid] - v;
     }
-    if (lid == 255u) {
+    // A dispatch past 65,535 blocks is rounded up to whole rows: blocks past the buffer's end
+    // (all of whose words are past the data's) write nothing.
+    if (lid == 255u && block < arrayLength(&sums)) {
         sums[block] = partial[255];
     }
 }
