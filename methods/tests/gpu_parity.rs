@@ -373,3 +373,44 @@ fn the_resident_renderer_matches_one_shot_frames_as_scenes_change() {
 fn flat_words(ps: &[Params]) -> Vec<f64> {
     ps.iter().flat_map(words).collect()
 }
+
+/// A frame of more than 65,535 tiles (tile 8 at 2056 x 2048: 65,792) is dispatched as rows of
+/// 65,535 workgroups, the last row with spare ones that must take no tile. Each pixel blends
+/// the same entries in the same order whatever the tile size, so it equals the frame of tile
+/// 16 (16,448 tiles, one row) bit for bit; both count the CPU's intersections.
+#[test]
+fn a_frame_of_more_than_65535_tiles_equals_one_of_fewer() {
+    let Some(gpu) = adapter_or_skip() else {
+        return;
+    };
+    let cam = camera(2056, 2048);
+    let params = spread_gaussians(&cam, 300, 3);
+    let frame = |tile_size| {
+        let opts = RenderOptions {
+            tile_size,
+            alpha: true,
+            depth: true,
+            ..Default::default()
+        };
+        let cpu = render::<Method>(&params, &cam, &opts).unwrap();
+        let got = splat_runtime::gpu::render::render::<Method>(&gpu, &params, &cam, &opts);
+        let got = got.unwrap();
+        assert_eq!(
+            got.stats.intersections, cpu.stats.intersections,
+            "tile {tile_size}"
+        );
+        got
+    };
+    let (many, few) = (frame(8), frame(16));
+    let alpha = &many.alpha.as_ref().unwrap().data;
+    let coverage = alpha.iter().sum::<f32>() / alpha.len() as f32;
+    assert!(
+        coverage > 0.05,
+        "the scene covers the image (mean alpha {coverage})"
+    );
+    assert!(many.color == few.color, "color");
+    assert!(
+        many.alpha == few.alpha && many.depth == few.depth,
+        "alpha and depth"
+    );
+}
