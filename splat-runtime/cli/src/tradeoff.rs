@@ -15,7 +15,6 @@ use crate::plot;
 use anyhow::{Context, Result, bail};
 use plotters::prelude::*;
 use splat_runtime::gpu::entries::Accumulation;
-use splat_runtime::gpu::sort::RadixSort;
 use splat_runtime::gpu::{Gpu, GpuRenderer, GpuScene, HardwareRenderer};
 use splat_runtime::io::ply::FromStored;
 use splat_runtime::io::{Outputs, ply};
@@ -444,7 +443,7 @@ impl Tradeoff<'_> {
             backward: Some(backward),
             bytes: allocated(gpu),
             intersections: frame.stats.intersections,
-            sort_bytes: Some(RadixSort::bytes_for(frame.stats.intersections)),
+            sort_bytes: Some(renderer.sort_bytes()),
             color: frame.color.data,
             gradients: vec![],
         };

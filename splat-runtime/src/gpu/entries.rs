@@ -24,6 +24,7 @@ pub const FINITE: &str = include_str!("shaders/finite.wgsl");
 /// `fn pixel_span`: the pixels a projected primitive covers, as the CPU's `pipeline::filter`
 /// and `TileGrid::rect` (needs [`FINITE`]).
 pub const PIXEL_SPAN: &str = include_str!("shaders/pixel_span.wgsl");
+const DEPTH: &str = include_str!("shaders/depth.wgsl");
 const COUNT: &str = include_str!("shaders/count.wgsl");
 const EMIT: &str = include_str!("shaders/emit.wgsl");
 const TILE_PASS: &str = include_str!("shaders/tile_pass.wgsl");
@@ -102,8 +103,19 @@ pub fn project<M: SplatMethod>(model: CameraModel) -> Result<String, GpuError> {
     ))
 }
 
-/// `count_tiles` (`emit` false) or `emit_tiles`; `use_cull` false keeps every box tile.
-pub fn tiles<M: SplatMethod>(emit: bool, use_cull: bool) -> Result<String, GpuError> {
+/// The entry points over each primitive's tiles (`shaders/tiles.wgsl`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TilesEntry {
+    /// `depth_keys`: the keys of the depth sort.
+    DepthKeys,
+    /// `count_tiles`: each primitive's kept tiles, front to back.
+    Count,
+    /// `emit_tiles`: one (tile, primitive) key per kept tile, front to back.
+    Emit,
+}
+
+/// The module of `entry`; `use_cull` false keeps every box tile.
+pub fn tiles<M: SplatMethod>(entry: TilesEntry, use_cull: bool) -> Result<String, GpuError> {
     let wgsl = M::SOURCE.wgsl;
     let layout = Layout::of::<M>();
     let keep = if M::HAS_TILE_CULL && use_cull {
@@ -124,17 +136,17 @@ pub fn tiles<M: SplatMethod>(emit: bool, use_cull: bool) -> Result<String, GpuEr
     } else {
         "true".into()
     };
-    let (entry, emit_code) = if emit {
-        (
+    let (entry, emit_code) = match entry {
+        TilesEntry::DepthKeys => (DEPTH, ""),
+        TilesEntry::Count => (COUNT, ""),
+        TilesEntry::Emit => (
             EMIT,
             // Past the buffers' room (frame[1].w) the frame is cut and rendered again.
             "if (first + n < frame[1].w) {
-                    keys[first + n] = vec2<u32>(bitcast<u32>(max(word(i, 1u), 0.0)), ty * frame[1].x + tx);
+                    keys[first + n] = ty * frame[1].x + tx;
                     vals[first + n] = i;
                 }",
-        )
-    } else {
-        (COUNT, "")
+        ),
     };
     let body = fill(
         TILES,

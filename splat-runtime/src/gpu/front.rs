@@ -1,15 +1,19 @@
 //! The front of a GPU frame, shared by the tile-based forward pass ([`super::resident`]) and
-//! the hardware-rasterized one ([`super::raster`]): `project` per primitive, each primitive's
-//! count of (kept) tiles and their prefix sum; then the (depth, tile) keys emitted and sorted.
+//! the hardware-rasterized one ([`super::raster`]): `project` per primitive, the primitives
+//! sorted by depth, each one's count of (kept) tiles front to back and their prefix sum; then
+//! one tile key per (primitive, tile) emitted front to back and sorted, stably, by tile: each
+//! tile's list comes out front to back (ties by index, as the CPU's) after a sort of the
+//! primitives on 32 bits and of the keys on the tile bits only, where one sort of all keys on
+//! (tile, depth) would take 32 more bits of passes over every key.
 //! How many keys there are is settled on the device (`settle.wgsl`): all of them, or as many
 //! as the buffers hold, so a frame can be recorded whole with the room of the frames before it
 //! and learn afterwards whether it fitted ([`Counted::cut`]). A frame that must know first
 //! reads its count back in between ([`Front::count`], then [`Front::reserve`]). The hardware
-//! path runs it with one tile covering the image: one key per visible primitive, sorted by
-//! depth.
+//! path runs it with one tile covering the image: one key per visible primitive, front to
+//! back (no tile pass).
 
 use super::device::{Grown, Kernel, as_bytes, dispatch};
-use super::entries::{self, Layout};
+use super::entries::{self, Layout, TilesEntry};
 use super::per_model::PerModel;
 use super::resident::{GpuRenderError, GpuScene, words_of};
 use super::sort::{RadixSort, Scan};
@@ -24,6 +28,7 @@ use crate::types::{Camera, CameraModel};
 
 // The front's timed stages, the first of every renderer's timer (two timestamps each).
 pub(crate) const PROJECT: u32 = 0;
+/// The depth sort, the count and its prefix sum.
 pub(crate) const COUNT: u32 = 1;
 /// Emit and sort (and whatever the renderer adds before its next stage).
 pub(crate) const SORT: u32 = 2;
@@ -41,8 +46,12 @@ pub(crate) struct Counted {
 
 const SETTLE: &str = include_str!("shaders/settle.wgsl");
 
+/// Bits of the depth keys (`depth.wgsl`): a float's.
+const DEPTH_BITS: u32 = 32;
+
 pub(crate) struct Front {
     project: PerModel<Kernel>,
+    depth: Kernel,
     count: Kernel,
     settle: Kernel,
     emit: Kernel,
@@ -52,6 +61,12 @@ pub(crate) struct Front {
     /// (primitives, 0, 0, 0).
     pub count_info: wgpu::Buffer,
     pub projected: Grown,
+    /// The depth sort's keys and values: the primitives front to back once sorted.
+    depth_keys: Grown,
+    order: Grown,
+    /// `[primitives]`: the depth sort's count.
+    primitives: wgpu::Buffer,
+    depth_sort: RadixSort,
     counts: Grown,
     /// Intersections (low, high word), primitives with a tile rectangle.
     totals: wgpu::Buffer,
@@ -60,10 +75,11 @@ pub(crate) struct Front {
     /// `totals` then `key_count`, for the host.
     totals_staging: wgpu::Buffer,
     scan: Scan,
+    /// Each intersection's tile.
     pub keys: Grown,
     /// The primitive of each sorted key.
     pub prims: Grown,
-    sort: RadixSort,
+    tile_sort: RadixSort,
     /// Keys the buffers hold (zero before the first `reserve`).
     room: usize,
     /// Primitives, tiles and camera model of the frame counted last.
@@ -78,13 +94,27 @@ impl Front {
         let grown = |what, words| Grown::new(gpu, what, words);
         Ok(Front {
             project: PerModel::new(),
-            count: gpu.kernel(&entries::tiles::<M>(false, use_cull)?, "count_tiles")?,
+            depth: gpu.kernel(
+                &entries::tiles::<M>(TilesEntry::DepthKeys, use_cull)?,
+                "depth_keys",
+            )?,
+            count: gpu.kernel(
+                &entries::tiles::<M>(TilesEntry::Count, use_cull)?,
+                "count_tiles",
+            )?,
             settle: gpu.kernel(SETTLE, "settle_count")?,
-            emit: gpu.kernel(&entries::tiles::<M>(true, use_cull)?, "emit_tiles")?,
+            emit: gpu.kernel(
+                &entries::tiles::<M>(TilesEntry::Emit, use_cull)?,
+                "emit_tiles",
+            )?,
             camera: gpu.buffer("camera", Camera::LEN)?,
             frame_info: gpu.uniform_buffer(8),
             count_info: gpu.uniform_buffer(4),
             projected: grown("projected primitives", 1)?,
+            depth_keys: grown("depth keys", 1)?,
+            order: grown("primitives front to back", 1)?,
+            primitives: gpu.buffer("primitives to sort", 1)?,
+            depth_sort: RadixSort::new(gpu)?,
             counts: grown("tiles per primitive", 1)?,
             totals: gpu.buffer("intersection totals", 3)?,
             key_count: gpu.buffer("keys sorted", 2)?,
@@ -95,9 +125,9 @@ impl Front {
                 mapped_at_creation: false,
             }),
             scan: Scan::new(gpu)?,
-            keys: grown("intersection keys", 2)?,
+            keys: grown("intersection keys", 1)?,
             prims: grown("intersection primitives", 1)?,
-            sort: RadixSort::new(gpu)?,
+            tile_sort: RadixSort::new(gpu)?,
             room: 0,
             n: 0,
             tiles: 0,
@@ -111,9 +141,9 @@ impl Front {
         self.room
     }
 
-    /// Records `project` of `scene` through `camera`, each primitive's count of tiles of
-    /// `grid` and their prefix sum (timed as `PROJECT` and `COUNT`). Lists are read capped at
-    /// `p_max` entries.
+    /// Records `project` of `scene` through `camera`, the depth sort, each primitive's count
+    /// of tiles of `grid` front to back and their prefix sum (timed as `PROJECT` and
+    /// `COUNT`). Lists are read capped at `p_max` entries.
     pub fn record_count<M: SplatMethod>(
         &mut self,
         gpu: &Gpu,
@@ -132,8 +162,12 @@ impl Front {
         self.model = model;
         self.tiles = grid.tile_count() as u32;
         self.projected.ensure(gpu, n * Layout::of::<M>().stride)?;
+        self.depth_keys.ensure(gpu, n)?;
+        self.order.ensure(gpu, n)?;
+        self.depth_sort.prepare(gpu, n32, DEPTH_BITS)?;
         self.counts.ensure(gpu, n)?;
         self.scan.prepare(gpu, n32)?;
+        gpu.write(&self.primitives, &[n32]);
         gpu.write(&self.camera, &words_of(std::slice::from_ref(camera)));
         // All but the last word, the room, which only `reserve` writes.
         gpu.write(
@@ -165,12 +199,25 @@ impl Front {
         timer.end(enc, PROJECT);
         timer.start(enc, COUNT);
         let bind = gpu.bind_named(
+            &self.depth,
+            &[
+                ("projected", &self.projected),
+                ("frame", &self.frame_info),
+                ("keys", &self.depth_keys),
+                ("order", &self.order),
+            ],
+        )?;
+        dispatch(enc, &self.depth.pipeline, &bind, n32.div_ceil(256));
+        self.depth_sort
+            .record(gpu, enc, &self.depth_keys, &self.order, &self.primitives)?;
+        let bind = gpu.bind_named(
             &self.count,
             &[
                 ("projected", &self.projected),
                 ("counts", &self.counts),
                 ("frame", &self.frame_info),
                 ("totals", &self.totals),
+                ("order", &self.order),
             ],
         )?;
         dispatch(enc, &self.count.pipeline, &bind, n32.div_ceil(256));
@@ -200,9 +247,9 @@ impl Front {
     /// grow (a `Counted` holds at most `MAX_INTERSECTIONS`: reading the totals refuses more).
     pub fn reserve(&mut self, gpu: &Gpu, counted: Counted) -> Result<(), GpuError> {
         let keys = counted.intersections as usize;
-        self.keys.ensure(gpu, 2 * keys)?;
+        self.keys.ensure(gpu, keys)?;
         self.prims.ensure(gpu, keys)?;
-        self.room = (self.keys.words() / 2).min(self.prims.words());
+        self.room = self.keys.words().min(self.prims.words());
         // The frame's uniform says how many keys fit (recorded frames read it when they run).
         let room = [self.room as u32];
         gpu.queue
@@ -211,7 +258,7 @@ impl Front {
     }
 
     /// Records the keys' count for this frame (all, or the buffers' room: `settle.wgsl`), their
-    /// emission and sort by (tile, depth), and the copy of the totals that
+    /// emission front to back and sort by tile, and the copy of the totals that
     /// [`Front::counted`] reads.
     pub fn emit_sorted(
         &mut self,
@@ -219,7 +266,7 @@ impl Front {
         enc: &mut wgpu::CommandEncoder,
     ) -> Result<(), GpuError> {
         let room = self.room as u32;
-        self.sort.prepare(gpu, room, self.tiles)?;
+        self.tile_sort.prepare(gpu, room, tile_bits(self.tiles))?;
         let bind = gpu.bind_named(
             &self.settle,
             &[
@@ -237,10 +284,11 @@ impl Front {
                 ("frame", &self.frame_info),
                 ("keys", &self.keys),
                 ("vals", &self.prims),
+                ("order", &self.order),
             ],
         )?;
         dispatch(enc, &self.emit.pipeline, &bind, self.n.div_ceil(256));
-        self.sort
+        self.tile_sort
             .record(gpu, enc, &self.keys, &self.prims, &self.key_count)?;
         enc.copy_buffer_to_buffer(&self.totals, 0, &self.totals_staging, 0, 12);
         enc.copy_buffer_to_buffer(&self.key_count, 0, &self.totals_staging, 12, 8);
@@ -258,6 +306,18 @@ impl Front {
         let t = gpu.read_mappable(&self.totals_staging, 5)?;
         counted(&t, t[4] != 0)
     }
+}
+
+/// Bits of a tile index among `tiles`: the bits the tile sort sorts.
+fn tile_bits(tiles: u32) -> u32 {
+    32 - tiles.saturating_sub(1).leading_zeros()
+}
+
+/// Bytes the sorts of a frame of `primitives` with `intersections` over `tiles` tiles hold:
+/// the depth sort's and the tile sort's keys, values and scratch copies.
+pub fn sort_bytes(primitives: usize, intersections: usize, tiles: u32) -> usize {
+    RadixSort::bytes_for(primitives, DEPTH_BITS)
+        + RadixSort::bytes_for(intersections, tile_bits(tiles))
 }
 
 /// The totals' words (intersections low and high, visible) as a count; refuses more

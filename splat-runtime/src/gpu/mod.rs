@@ -36,6 +36,7 @@ pub mod timing;
 pub mod train;
 
 pub use device::Gpu;
+pub use front::sort_bytes;
 pub use raster::HardwareRenderer;
 pub use resident::{GpuRenderError, GpuRenderer, GpuScene, StageTimes};
 

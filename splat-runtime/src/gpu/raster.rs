@@ -1,6 +1,6 @@
 //! The hardware-rasterized forward pass (Yuan and He's differentiable hardware rasterization,
-//! forward half): no tile lists. The visible primitives are sorted once by depth (O(N) sort
-//! memory where the tile path sorts one key per (primitive, tile) pair), drawn as quads over
+//! forward half): no tile lists. The primitives are sorted once by depth (O(N) sort memory
+//! where the tile path also sorts one key per (primitive, tile) pair), drawn as quads over
 //! their boxes by a render pipeline whose fragment shader calls the method's generated
 //! `evaluate`, and blended front to back by fixed-function blending into render targets of the
 //! precision `RenderOptions::precision` asks for: `Rgba32Float`, `Rgba16Float`, `Rgba16Unorm`
@@ -150,7 +150,8 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
             );
             return Err(GpuError::Hardware(why).into());
         }
-        // One tile over the whole image: one key per visible primitive, sorted by depth.
+        // One tile over the whole image: one key per visible primitive, front to back (the
+        // depth sort's order; no tile pass).
         let whole = TileGrid::new(grid.width, grid.height, grid.width.max(grid.height));
         let counted = (self.front).count(gpu, (scene, camera), (&whole, u32::MAX), &self.timer)?;
         self.front.reserve(gpu, counted)?;
@@ -223,10 +224,10 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
         Ok(info)
     }
 
-    /// Bytes the last frame's depth sort used: its keys and values, and their scratch copies.
+    /// Bytes the last frame's sorts used ([`super::sort_bytes`]).
     pub fn sort_bytes(&self) -> usize {
         self.frame
-            .map_or(0, |f| super::sort::RadixSort::bytes_for(f.intersections))
+            .map_or(0, |f| super::sort_bytes(f.primitives, f.intersections, 1))
     }
 
     /// The last frame's outputs (as `RenderOptions` asked), read back from the targets.

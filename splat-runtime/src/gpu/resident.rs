@@ -27,6 +27,7 @@ use super::{Gpu, GpuError};
 use crate::flat::Flat;
 use crate::method::SplatMethod;
 use crate::pipeline::grid::TileGrid;
+use crate::pipeline::rasterize::TileLists;
 use crate::pipeline::{
     BackwardStats, Frame, FrameGrad, Gradients, Image, RenderError, RenderOptions, Stats,
 };
@@ -451,6 +452,25 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         })
     }
 
+    /// The last frame's tile lists, read back: each tile's primitives front to back, whole
+    /// (`P_max` caps what the blends read, not the lists), as the CPU's
+    /// [`TileLists`](crate::pipeline::rasterize::TileLists).
+    pub fn download_tile_lists(&self) -> Result<TileLists, GpuRenderError> {
+        let info = self.frame.ok_or(GpuRenderError::NoFrame)?;
+        let tiles = info.grid.tile_count();
+        let ranges = self.gpu.read(&self.tiles.ranges, 2 * tiles)?;
+        let keyed = self.gpu.read(&self.front.prims, info.intersections)?;
+        let mut lists = TileLists {
+            prims: Vec::with_capacity(info.intersections),
+            ranges: vec![0],
+        };
+        for r in ranges.chunks_exact(2) {
+            lists.prims.extend(&keyed[r[0] as usize..r[1] as usize]);
+            lists.ranges.push(lists.prims.len() as u32);
+        }
+        Ok(lists)
+    }
+
     /// The backward pass of the last frame of `scene` (unchanged since), given the gradient of
     /// each output, with the gradient accumulation `acc`: one submission; the gradients stay
     /// on the device until [`GpuRenderer::download_gradients`].
@@ -699,6 +719,13 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
     /// blend left it; `None` where the sums are held in f16.
     pub fn shade_gradients(&self) -> Option<(&wgpu::Buffer, usize)> {
         (!self.sums.half).then_some((&*self.grads, self.layout.grad_words))
+    }
+
+    /// Bytes the last frame's sorts used ([`super::sort_bytes`]).
+    pub fn sort_bytes(&self) -> usize {
+        self.frame.map_or(0, |f| {
+            super::sort_bytes(f.primitives, f.intersections, f.grid.tile_count() as u32)
+        })
     }
 
     /// Bytes the last backward pass's per-primitive gradient sums took.

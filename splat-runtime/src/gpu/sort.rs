@@ -1,8 +1,7 @@
-//! The method-independent GPU stages: exclusive prefix sum, stable radix sort of
-//! (depth bits, tile) keys, tile ranges and trip-count binning. Each stage owns the buffers it
-//! needs between frames (grown to the largest frame so far, never re-created for a steady
-//! one): `prepare` sizes them and writes the frame's uniforms, `record` adds the dispatches
-//! to the caller's encoder.
+//! The method-independent GPU stages: exclusive prefix sum, stable radix sort of u32 keys,
+//! tile ranges and trip-count binning. Each stage owns the buffers it needs between frames
+//! (grown to the largest frame so far, never re-created for a steady one): `prepare` sizes
+//! them and writes the frame's uniforms, `record` adds the dispatches to the caller's encoder.
 
 use super::device::{Grown, Kernel, dispatch};
 use super::{Gpu, GpuError};
@@ -98,10 +97,10 @@ impl Scan {
     }
 }
 
-/// Stable LSD radix sort of `vec2(depth bits, tile)` keys with their values, by tile then
-/// depth, only over the tile bits the frame has. Sorts in place: the keys end where they
-/// started (an odd pass count ends with a copy back). Sized on the host for the buffers' room,
-/// it sorts as many keys as a count on the device says.
+/// Stable LSD radix sort of u32 keys with u32 values, over as many low key bits as the caller
+/// says. Sorts in place: the keys end where they started (an odd pass count ends with a copy
+/// back). Sized on the host for the buffers' room, it sorts as many keys as a count on the
+/// device says.
 pub struct RadixSort {
     histogram: Kernel,
     scatter: Kernel,
@@ -109,11 +108,12 @@ pub struct RadixSort {
     keys_tmp: Grown,
     vals_tmp: Grown,
     scan: Scan,
-    /// `[0, shift, key word, blocks]` per pass.
+    /// `[shift, blocks]` per pass.
     passes: Vec<wgpu::Buffer>,
     /// Keys the buffers hold.
     room: u32,
-    digits: Vec<(u32, u32)>,
+    /// Passes the prepared sort takes.
+    digits: u32,
 }
 
 impl RadixSort {
@@ -122,42 +122,41 @@ impl RadixSort {
             histogram: gpu.kernel(RADIX, "radix_histogram")?,
             scatter: gpu.kernel(RADIX, "radix_scatter")?,
             hist: Grown::new(gpu, "radix-sort histograms", BUCKETS as usize)?,
-            keys_tmp: Grown::new(gpu, "sorted keys", 2)?,
+            keys_tmp: Grown::new(gpu, "sorted keys", 1)?,
             vals_tmp: Grown::new(gpu, "sorted values", 1)?,
             scan: Scan::new(gpu)?,
             passes: vec![],
             room: 0,
-            digits: vec![],
+            digits: 0,
         })
     }
 
-    /// Bytes a sort of `n` keys holds: the keys (two words) and values, and their scratch
-    /// copies (the digit histograms aside).
-    pub fn bytes_for(n: usize) -> usize {
-        2 * 12 * n
+    /// Bytes a sort of `n` keys on their low `key_bits` holds: the keys and values, and their
+    /// scratch copies when it takes a pass (the digit histograms aside).
+    pub fn bytes_for(n: usize, key_bits: u32) -> usize {
+        let copies = if key_bits > 0 { 2 } else { 1 };
+        8 * n * copies
     }
 
-    /// Sizes the buffers for up to `room` keys over `tiles` tiles and writes each pass's
-    /// uniform.
-    pub fn prepare(&mut self, gpu: &Gpu, room: u32, tiles: u32) -> Result<(), GpuError> {
-        let tile_bits = 32 - tiles.saturating_sub(1).leading_zeros();
+    /// Sizes the buffers for up to `room` keys sorted on their low `key_bits` and writes each
+    /// pass's uniform.
+    pub fn prepare(&mut self, gpu: &Gpu, room: u32, key_bits: u32) -> Result<(), GpuError> {
+        self.digits = key_bits.min(32).div_ceil(DIGIT_BITS);
+        self.room = room;
+        if self.digits == 0 {
+            return Ok(());
+        }
         let blocks = room.div_ceil(SORT_BLOCK).max(1);
         self.hist.ensure(gpu, (BUCKETS * blocks) as usize)?;
-        self.keys_tmp.ensure(gpu, 2 * room as usize)?;
+        self.keys_tmp.ensure(gpu, room as usize)?;
         self.vals_tmp.ensure(gpu, room as usize)?;
         self.scan.prepare(gpu, BUCKETS * blocks)?;
-        // Least significant digit first: depth (word 0), then tile (word 1).
-        self.digits = (0..32 / DIGIT_BITS)
-            .map(|d| (0, d * DIGIT_BITS))
-            .chain((0..tile_bits.div_ceil(DIGIT_BITS)).map(|d| (1, d * DIGIT_BITS)))
-            .collect();
-        while self.passes.len() < self.digits.len() {
+        while self.passes.len() < self.digits as usize {
             self.passes.push(gpu.uniform_buffer(4));
         }
-        for ((word, shift), info) in self.digits.iter().zip(&self.passes) {
-            gpu.write(info, &[0, *shift, *word, blocks]);
+        for (d, info) in self.passes[..self.digits as usize].iter().enumerate() {
+            gpu.write(info, &[d as u32 * DIGIT_BITS, blocks, 0, 0]);
         }
-        self.room = room;
         Ok(())
     }
 
@@ -173,7 +172,7 @@ impl RadixSort {
     ) -> Result<(), GpuError> {
         let blocks = self.room.div_ceil(SORT_BLOCK).max(1);
         let (mut from, mut to) = ((keys, vals), (&*self.keys_tmp, &*self.vals_tmp));
-        for info in &self.passes[..self.digits.len()] {
+        for info in &self.passes[..self.digits as usize] {
             let (h, s) = (&self.histogram, &self.scatter);
             let bind = gpu.bind_named(
                 h,
@@ -202,9 +201,10 @@ impl RadixSort {
             std::mem::swap(&mut from, &mut to);
         }
         // The whole room: the count is on the device.
-        if self.digits.len() % 2 == 1 && self.room > 0 {
-            encoder.copy_buffer_to_buffer(from.0, 0, keys, 0, 8 * self.room as u64);
-            encoder.copy_buffer_to_buffer(from.1, 0, vals, 0, 4 * self.room as u64);
+        if self.digits % 2 == 1 && self.room > 0 {
+            let bytes = 4 * self.room as u64;
+            encoder.copy_buffer_to_buffer(from.0, 0, keys, 0, bytes);
+            encoder.copy_buffer_to_buffer(from.1, 0, vals, 0, bytes);
         }
         Ok(())
     }
@@ -313,68 +313,72 @@ mod tests {
     }
 
     #[test]
-    fn radix_sort_is_stable_and_orders_by_tile_then_depth() {
+    fn radix_sort_is_stable_and_orders_by_the_bits_asked() {
         let Some(gpu) = super::super::adapter_or_skip() else {
             return;
         };
-        // 300 tiles take two passes over the tile word (six in all), 200 one (five: the keys
-        // end in the scratch buffers and are copied back).
-        for tiles in [300, 200] {
-            sorts_by_tile_then_depth(&gpu, tiles);
-        }
-    }
-
-    fn sorts_by_tile_then_depth(gpu: &Gpu, tiles: u32) {
+        // Depth bits: four passes over random bits in every byte. 300 tiles: nine bits, two
+        // passes, with the ranges. 200 tiles: one pass (the keys end in the scratch buffers
+        // and are copied back).
         let mut rng = fastrand::Rng::with_seed(4);
-        // Few distinct depths, so many equal keys test stability, each with random bits in
-        // every byte; 9,001 keys = 3 blocks.
         let depths: Vec<u32> = (0..40)
             .map(|_| (0.1 + 100.0 * rng.f32()).to_bits())
             .collect();
-        let keys: Vec<(u32, u32)> = (0..9001)
-            .map(|_| (depths[rng.usize(0..40)], rng.u32(0..tiles)))
+        sorts_stably(&gpu, 32, &depths, None);
+        for tiles in [300, 200] {
+            let keys: Vec<u32> = (0..tiles).collect();
+            sorts_stably(&gpu, 32 - (tiles - 1).leading_zeros(), &keys, Some(tiles));
+        }
+    }
+
+    /// Sorts 9,001 keys (3 blocks) drawn from `distinct` (few, so many are equal and the sort
+    /// must keep their order) on their low `bits`; with `tiles`, the keys are tiles and their
+    /// ranges are checked too.
+    fn sorts_stably(gpu: &Gpu, bits: u32, distinct: &[u32], tiles: Option<u32>) {
+        let mut rng = fastrand::Rng::with_seed(5);
+        let keys: Vec<u32> = (0..9001)
+            .map(|_| distinct[rng.usize(0..distinct.len())])
             .collect();
         let n = keys.len() as u32;
-        // The buffers hold 5,000 more keys than the count on the device says to sort: first
-        // in order (tile 0, depth 0), they would move ahead of every key if sorted.
+        // The buffers hold 5,000 more keys than the count on the device says to sort: zero,
+        // they would move ahead of every key if sorted.
         let room = n + 5000;
-        let flat: Vec<u32> = keys.iter().flat_map(|(d, t)| [*d, *t]).collect();
         let vals: Vec<u32> = (0..n).collect();
-        let pad = |v: &[u32], words: u32| [v, &vec![0; words as usize]].concat();
+        let pad = |v: &[u32]| [v, &vec![0; (room - n) as usize]].concat();
         let (k, v) = (
-            gpu.buffer_from("keys", &pad(&flat, 2 * (room - n)))
-                .unwrap(),
-            gpu.buffer_from("vals", &pad(&vals, room - n)).unwrap(),
+            gpu.buffer_from("keys", &pad(&keys)).unwrap(),
+            gpu.buffer_from("vals", &pad(&vals)).unwrap(),
         );
         let count = gpu.buffer_from("key count", &[n, 0]).unwrap();
         let mut sort = RadixSort::new(gpu).unwrap();
-        sort.prepare(gpu, room, tiles).unwrap();
+        sort.prepare(gpu, room, bits).unwrap();
+        // Ranges only where the keys are tiles (a depth key is no tile index).
         let mut ranges = TileRanges::new(gpu).unwrap();
-        ranges.prepare(gpu, room, tiles, u32::MAX).unwrap();
+        ranges
+            .prepare(gpu, room, tiles.unwrap_or(1), u32::MAX)
+            .unwrap();
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         sort.record(gpu, &mut enc, &k, &v, &count).unwrap();
-        ranges.record(gpu, &mut enc, &k, &count).unwrap();
-        gpu.finish(enc).unwrap();
-        let ranges = &ranges.ranges;
-        let got_vals = gpu.read(&v, n as usize).unwrap();
-        let got_keys = gpu.read(&k, 2 * n as usize).unwrap();
-        let mut want: Vec<u32> = vals.clone();
-        want.sort_by_key(|&i| (keys[i as usize].1, keys[i as usize].0, i));
-        assert_eq!(got_vals, want);
-        for (i, &val) in want.iter().enumerate() {
-            let (d, t) = keys[val as usize];
-            assert_eq!((got_keys[2 * i], got_keys[2 * i + 1]), (d, t));
+        if tiles.is_some() {
+            ranges.record(gpu, &mut enc, &k, &count).unwrap();
         }
-        let ranges = gpu.read(ranges, 2 * tiles as usize).unwrap();
+        gpu.finish(enc).unwrap();
+        let got_vals = gpu.read(&v, n as usize).unwrap();
+        let got_keys = gpu.read(&k, n as usize).unwrap();
+        let mut want: Vec<u32> = vals.clone();
+        want.sort_by_key(|&i| (keys[i as usize], i));
+        assert_eq!(got_vals, want, "{bits} bits");
+        let want_keys: Vec<u32> = want.iter().map(|&i| keys[i as usize]).collect();
+        assert_eq!(got_keys, want_keys);
+        let Some(tiles) = tiles else {
+            return;
+        };
+        let ranges = gpu.read(&ranges.ranges, 2 * tiles as usize).unwrap();
         for t in 0..tiles {
-            let count = keys.iter().filter(|k| k.1 == t).count() as u32;
+            let count = keys.iter().filter(|&&k| k == t).count() as u32;
             let (s, e) = (ranges[2 * t as usize], ranges[2 * t as usize + 1]);
             assert_eq!(e - s, count, "tile {t}");
-            assert!(
-                want[s as usize..e as usize]
-                    .iter()
-                    .all(|&i| keys[i as usize].1 == t)
-            );
+            assert!(want_keys[s as usize..e as usize].iter().all(|&k| k == t));
         }
     }
 

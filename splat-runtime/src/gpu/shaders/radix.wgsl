@@ -1,8 +1,7 @@
-// One pass of a stable LSD radix sort of the first `key_count[0]` (depth bits, tile) keys with
-// u32 values, on an 8-bit digit of the key word `info.z` (0 = depth, 1 = tile) at bit
-// `info.y`. The count is read on the device (the frame's count kernel writes it), so a frame
-// is recorded before it is known; `info.w` blocks cover the buffers, and blocks past the count
-// find no keys.
+// One pass of a stable LSD radix sort of the first `key_count[0]` u32 keys with u32 values, on
+// the 8-bit digit at bit `info.x`. The count is read on the device (for a frame's tile keys,
+// `settle.wgsl` writes it), so a frame is recorded before it is known; `info.y` blocks cover the buffers,
+// and blocks past the count find no keys.
 // `radix_histogram`: digit counts per block, digit-major (`hist[digit * blocks + block]`), so
 // an exclusive scan of `hist` gives every (digit, block) its first output slot.
 // `radix_scatter`: a block's keys go out a chunk of 256 at a time. Each invocation sets its
@@ -17,11 +16,11 @@ const BLOCK: u32 = 4096u; // WG * CHUNKS
 const RADIX: u32 = 256u;
 const MASK_WORDS: u32 = WG / 32u;
 
-@group(0) @binding(0) var<storage, read> keys_in: array<vec2<u32>>;
+@group(0) @binding(0) var<storage, read> keys_in: array<u32>;
 @group(0) @binding(1) var<storage, read_write> hist: array<u32>;
-@group(0) @binding(2) var<uniform> info: vec4<u32>; // 0, shift, key word, blocks
+@group(0) @binding(2) var<uniform> info: vec4<u32>; // shift, blocks
 @group(0) @binding(3) var<storage, read> vals_in: array<u32>;
-@group(0) @binding(4) var<storage, read_write> keys_out: array<vec2<u32>>;
+@group(0) @binding(4) var<storage, read_write> keys_out: array<u32>;
 @group(0) @binding(5) var<storage, read_write> vals_out: array<u32>;
 @group(0) @binding(6) var<storage, read> key_count: array<u32>;
 
@@ -30,15 +29,15 @@ var<workgroup> counts: array<atomic<u32>, RADIX>;
 var<workgroup> members: array<atomic<u32>, RADIX * MASK_WORDS>;
 var<workgroup> next_slot: array<u32, RADIX>;
 
-fn digit_of(key: vec2<u32>) -> u32 {
-    return (select(key.x, key.y, info.z == 1u) >> info.y) & (RADIX - 1u);
+fn digit_of(key: u32) -> u32 {
+    return (key >> info.x) & (RADIX - 1u);
 }
 
 @compute @workgroup_size(256)
 fn radix_histogram(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let block = wid.y * 65535u + wid.x;
     // A dispatch of more than 65,535 blocks is a grid with spare workgroups at its end.
-    if (block >= info.w) {
+    if (block >= info.y) {
         return;
     }
     atomicStore(&counts[lid], 0u);
@@ -51,7 +50,7 @@ fn radix_histogram(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocat
         }
     }
     workgroupBarrier();
-    hist[lid * info.w + block] = atomicLoad(&counts[lid]);
+    hist[lid * info.y + block] = atomicLoad(&counts[lid]);
 }
 
 // Invocation `lid` owns digit `lid`'s mask: it clears it, and counts it into `next_slot`.
@@ -64,10 +63,10 @@ fn clear_own_mask(lid: u32) {
 @compute @workgroup_size(256)
 fn radix_scatter(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let block = wid.y * 65535u + wid.x;
-    if (block >= info.w) {
+    if (block >= info.y) {
         return;
     }
-    next_slot[lid] = hist[lid * info.w + block];
+    next_slot[lid] = hist[lid * info.y + block];
     clear_own_mask(lid);
     let word = lid / 32u;
     let bit = lid % 32u;

@@ -1,11 +1,14 @@
-// Count and emit of (primitive, tile) intersections. Both visit a primitive's tiles through
-// `kept_tiles` (whose emit step is empty when counting), so they cannot disagree.
-// `projected` holds `project`'s result per primitive: visible, depth, bbox (4), cull, shade.
+// The primitives' tiles: the depth sort's keys (`depth.wgsl`), then, over the primitives front
+// to back, the count and emission of (primitive, tile) intersections. Count and emit visit a
+// primitive's tiles through `kept_tiles` (whose emit step is empty when counting), so they
+// cannot disagree. `projected` holds `project`'s result per primitive: visible, depth, bbox
+// (4), cull, shade.
 
 const STRIDE: u32 = {{STRIDE}}u;
 const CULL_AT: u32 = 6u;
 
 @group(0) @binding(0) var<storage, read> projected: array<u32>;
+// Per primitive front to back: its kept tiles, then (scanned) its first key.
 @group(0) @binding(1) var<storage, read_write> counts: array<u32>;
 // frame[0] = (primitives, width, height, tile size), frame[1] = (tiles_x, P_max, tiles, keys the
 // buffers hold)
