@@ -197,7 +197,7 @@ pub fn outputs_close(label: &str, want: &Frame, got: &Frame, abs: f32, rel: f32)
 /// [0, 1], unorm half a step) from the tile path's f32, plus 1e-5; the depth sums (f16 in the
 /// narrow formats) by 2n u times the farthest depth. Unorm formats are compared with the tile
 /// path's values saturated to [0, 1]. Returns each format with its worst error as a fraction
-/// of the bound, and asserts the depth sort holds one key per visible primitive.
+/// of the bound, and asserts the frame holds one key per visible primitive (no tile pass).
 #[cfg(feature = "gpu")]
 pub fn hardware_forward_matches_tiles<M: SplatMethod>(
     label: &str,

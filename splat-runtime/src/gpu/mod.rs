@@ -2,7 +2,8 @@
 //!
 //! - [`device`]: the device, its optional features, cached pipelines, buffers within limits.
 //! - [`dispatch`] / [`kernel`]: run any generated WGSL function over a batch (tests, tools).
-//! - [`sort`]: prefix sum, radix sort on (tile, depth) keys, tile ranges, trip-count binning.
+//! - [`sort`]: prefix sum, stable radix sort of u32 keys (depths, then tiles), tile ranges,
+//!   trip-count binning.
 //! - [`entries`]: the method-specific entry points (project, count/emit with `tile_cull`,
 //!   per-tile shading, backward blend, `project`'s adjoint) around the generated WGSL.
 //! - [`resident`]: the device-resident pipeline: [`GpuScene`] (parameters on the device) and

@@ -8,9 +8,9 @@
 //! backward, optimizer step, with no host transfer per step and no wait for the frame
 //! ([`GpuRenderer::settle`] says afterwards whether it fitted).
 //!
-//! Stages, as on the CPU: preprocess (`project`), rasterize (count kept tiles with
-//! `tile_cull`, prefix sum, emit (tile, depth) keys, radix sort, tile ranges, trip-count
-//! binning), shade (one workgroup per tile); backward blend, then `project`'s adjoint (and
+//! Stages, as on the CPU: preprocess (`project`), rasterize (depth sort of the primitives,
+//! count kept tiles with `tile_cull`, prefix sum, emit tile keys front to back, radix sort on
+//! the tile bits, tile ranges, trip-count binning), shade (one workgroup per tile); backward blend, then `project`'s adjoint (and
 //! `pixel_info`'s for ray methods). Stage times come from GPU timestamps where the adapter has
 //! them.
 
@@ -141,7 +141,7 @@ pub struct FrameInfo {
 #[derive(Clone, Copy, Debug, Default)]
 pub struct StageTimes {
     pub preprocess: Duration,
-    /// Count, emit, sort, ranges and bins.
+    /// Depth sort, count, emit, tile sort, ranges and bins.
     pub rasterize: Duration,
     pub shade: Duration,
     pub blend: Duration,
