@@ -16,7 +16,7 @@ use super::device::{Grown, Kernel, as_bytes, dispatch};
 use super::entries::{self, Layout, TilesEntry};
 use super::per_model::PerModel;
 use super::resident::{GpuRenderError, GpuScene, words_of};
-use super::sort::{RadixSort, Scan};
+use super::sort::{RadixSort, Scan, tile_bits};
 use super::timing::StageTimer;
 use super::{Gpu, GpuError};
 use crate::flat::Flat;
@@ -306,11 +306,6 @@ impl Front {
         let t = gpu.read_mappable(&self.totals_staging, 5)?;
         counted(&t, t[4] != 0)
     }
-}
-
-/// Bits of a tile index among `tiles`: the bits the tile sort sorts.
-fn tile_bits(tiles: u32) -> u32 {
-    32 - tiles.saturating_sub(1).leading_zeros()
 }
 
 /// Bytes the sorts of a frame of `primitives` with `intersections` over `tiles` tiles hold:

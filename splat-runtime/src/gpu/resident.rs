@@ -10,8 +10,8 @@
 //!
 //! Stages, as on the CPU: preprocess (`project`), rasterize (depth sort of the primitives,
 //! count kept tiles with `tile_cull`, prefix sum, emit tile keys front to back, radix sort on
-//! the tile bits, tile ranges, trip-count binning), shade (one workgroup per tile); backward blend, then `project`'s adjoint (and
-//! `pixel_info`'s for ray methods). Stage times come from GPU timestamps where the adapter has
+//! the tile bits, tile ranges, trip-count binning), shade (one workgroup per tile); backward
+//! blend, then `project`'s adjoint (and `pixel_info`'s for ray methods). Stage times come from GPU timestamps where the adapter has
 //! them.
 
 use super::device::{Grown, Kernel, dispatch};

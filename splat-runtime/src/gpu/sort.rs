@@ -97,6 +97,11 @@ impl Scan {
     }
 }
 
+/// Bits of a tile index among `tiles`: the bits a sort of tile keys sorts.
+pub(crate) fn tile_bits(tiles: u32) -> u32 {
+    32 - tiles.saturating_sub(1).leading_zeros()
+}
+
 /// Stable LSD radix sort of u32 keys with u32 values, over as many low key bits as the caller
 /// says. Sorts in place: the keys end where they started (an odd pass count ends with a copy
 /// back). Sized on the host for the buffers' room, it sorts as many keys as a count on the
@@ -327,7 +332,7 @@ mod tests {
         sorts_stably(&gpu, 32, &depths, None);
         for tiles in [300, 200] {
             let keys: Vec<u32> = (0..tiles).collect();
-            sorts_stably(&gpu, 32 - (tiles - 1).leading_zeros(), &keys, Some(tiles));
+            sorts_stably(&gpu, tile_bits(tiles), &keys, Some(tiles));
         }
     }
 

@@ -1,7 +1,7 @@
 // One pass of a stable LSD radix sort of the first `key_count[0]` u32 keys with u32 values, on
 // the 8-bit digit at bit `info.x`. The count is read on the device (for a frame's tile keys,
-// `settle.wgsl` writes it), so a frame is recorded before it is known; `info.y` blocks cover the buffers,
-// and blocks past the count find no keys.
+// `settle.wgsl` writes it), so a frame is recorded before it is known; `info.y` blocks cover
+// the buffers, and blocks past the count find no keys.
 // `radix_histogram`: digit counts per block, digit-major (`hist[digit * blocks + block]`), so
 // an exclusive scan of `hist` gives every (digit, block) its first output slot.
 // `radix_scatter`: a block's keys go out a chunk of 256 at a time. Each invocation sets its
