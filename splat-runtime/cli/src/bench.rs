@@ -21,9 +21,8 @@ pub struct BenchArgs {
     /// INRIA 3DGS PLY scene (default: the built-in one).
     #[arg(long)]
     scene: Option<PathBuf>,
-    /// Camera JSON (default: the built-in pinhole view at --width x --height).
-    #[arg(long)]
-    camera: Option<PathBuf>,
+    #[command(flatten)]
+    camera: crate::view::CameraArgs,
     #[arg(long)]
     method: String,
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
@@ -59,7 +58,7 @@ pub fn bench_cmd(args: &BenchArgs, methods: &[Method]) -> Result<()> {
     }
     let (cloud, camera) = crate::scene::given_or_built_in(
         args.scene.as_deref(),
-        args.camera.as_deref(),
+        &args.camera,
         (args.width, args.height),
     )?;
     methods::check_camera(method, methods, &camera)?;

@@ -23,6 +23,7 @@ mod plot;
 mod render;
 mod scene;
 mod tradeoff;
+mod view;
 
 pub use methods::{Instance, Method};
 

@@ -4,9 +4,10 @@ use crate::methods::{self, Method};
 use crate::{Backend, Model, pick_gpu, scene};
 use anyhow::{Result, bail};
 use plotters::prelude::RGBColor;
+use splat_runtime::glam::Vec3;
 use splat_runtime::gpu::{GpuScene, HardwareRenderer};
 use splat_runtime::io::ply::{FromStored, GaussianCloud};
-use splat_runtime::io::{Outputs, camera as camera_io, image as image_io, ply};
+use splat_runtime::io::{Outputs, image as image_io, ply};
 use splat_runtime::pipeline::precision::Precision;
 use splat_runtime::{Camera, CameraModel, Frame, Image, RenderOptions, SplatMethod, render};
 use std::path::PathBuf;
@@ -17,9 +18,8 @@ pub struct RenderArgs {
     /// INRIA 3DGS PLY scene.
     #[arg(long)]
     scene: Option<PathBuf>,
-    /// Camera JSON (default: the built-in view, at --width x --height, of --camera-model).
-    #[arg(long)]
-    camera: Option<PathBuf>,
+    #[command(flatten)]
+    camera: crate::view::CameraArgs,
     /// The built-in camera's model (default pinhole; a camera file names its own).
     #[arg(long, value_enum, conflicts_with = "camera")]
     camera_model: Option<Model>,
@@ -262,11 +262,12 @@ pub(crate) fn render_cmd(args: &RenderArgs, methods: &[Method]) -> Result<()> {
         Some(path) => (ply::read(path)?, path.display().to_string()),
         None => (scene::planet(), "built-in planet".to_string()),
     };
-    let camera: Camera = match &args.camera {
-        Some(path) => camera_io::read(path)?,
+    let (camera, shot) = match args.camera.read()? {
+        Some(given) => (given.camera, given.shot),
         None => {
             let model = args.camera_model.unwrap_or(Model::Pinhole);
-            scene::built_in_camera(args.width, args.height, model.into())?
+            let camera = scene::built_in_camera(args.width, args.height, model.into())?;
+            (camera, None)
         }
     };
     methods::check_camera(method, methods, &camera)?;
@@ -324,6 +325,15 @@ pub(crate) fn render_cmd(args: &RenderArgs, methods: &[Method]) -> Result<()> {
             ms(s.preprocess),
             ms(s.rasterize),
             ms(s.shade)
+        );
+    }
+    if let Some(shot) = &shot {
+        // The renderer composites on black, so the picture is taken on black too.
+        let picture = shot.load(Vec3::ZERO)?.image;
+        let psnr = splat_runtime::train::loss::psnr(&frame.color, &picture)?;
+        println!(
+            "PSNR {psnr:.2} dB against the view's picture {} (on black)",
+            shot.path.display()
         );
     }
     for p in written {

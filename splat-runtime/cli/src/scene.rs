@@ -132,11 +132,11 @@ fn stars(rng: &mut Lcg) -> Vec<StoredGaussian> {
 /// `width` x `height`).
 pub fn given_or_built_in(
     scene: Option<&std::path::Path>,
-    camera: Option<&std::path::Path>,
+    camera: &crate::view::CameraArgs,
     (width, height): (u32, u32),
 ) -> anyhow::Result<(GaussianCloud, Camera)> {
-    let camera = match camera {
-        Some(path) => splat_runtime::io::camera::read(path)?,
+    let camera = match camera.read()? {
+        Some(given) => given.camera,
         None => built_in_camera(width, height, CameraModel::Pinhole)?,
     };
     let cloud = match scene {

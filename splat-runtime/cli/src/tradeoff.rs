@@ -30,9 +30,8 @@ pub struct TradeoffArgs {
     /// INRIA 3DGS PLY scene (default: the built-in one).
     #[arg(long)]
     scene: Option<PathBuf>,
-    /// Camera JSON (default: the built-in pinhole view at --width x --height).
-    #[arg(long)]
-    camera: Option<PathBuf>,
+    #[command(flatten)]
+    camera: crate::view::CameraArgs,
     #[arg(long)]
     method: String,
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
@@ -181,7 +180,7 @@ pub fn tradeoff_cmd(args: &TradeoffArgs, methods: &[Method]) -> Result<()> {
     let exact = methods.iter().find(|m| m.exact);
     let (cloud, camera) = crate::scene::given_or_built_in(
         args.scene.as_deref(),
-        args.camera.as_deref(),
+        &args.camera,
         (args.width, args.height),
     )?;
     methods::check_camera(method, methods, &camera)?;

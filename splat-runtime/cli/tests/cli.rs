@@ -1220,6 +1220,93 @@ fn bench_times_both_passes_and_writes_the_raw_image_render_would() {
 
 /// A COLMAP dataset in text format: 3 views of 16x16 by a pinhole camera looking down +z
 /// from z = -3, and 40 sparse points around the origin.
+/// A dataset's view is a camera: `render`, `bench` and `tradeoff` take `--camera DATASET
+/// --view SPLIT/K`; `render` measures its image against the view's picture.
+#[test]
+fn a_dataset_view_is_a_camera() {
+    let dir = tempfile::tempdir().unwrap();
+    let args = [
+        "dataset", "--out", "planet", "--views", "9", "--width", "96", "--height", "72",
+    ];
+    ok(&splat(&args, dir.path()));
+    let render = |extra: &[&str], out: &str| {
+        let mut args = vec!["render", "--backend", "cpu", "--out", out];
+        args.extend(extra);
+        splat(&args, dir.path())
+    };
+    // The planet with its stars against pictures of it without them: close, not equal (about
+    // 20 dB); against another view's picture, far (about 11).
+    let psnr = |stdout: &str| -> f64 {
+        (stdout.split("PSNR ").nth(1))
+            .and_then(|s| s.split(' ').next())
+            .and_then(|s| s.parse().ok())
+            .unwrap_or_else(|| panic!("no PSNR in {stdout}"))
+    };
+    let picked = ["--camera", "planet", "--view", "test/1"];
+    let stdout = ok(&render(&picked, "a.npy"));
+    assert!(psnr(&stdout) > 18.0, "{stdout}");
+    assert!(stdout.contains("96x72"), "{stdout}");
+    let planet = dir.path().join("planet/test");
+    std::fs::copy(planet.join("r_0.png"), planet.join("r_1.png")).unwrap();
+    assert!(psnr(&ok(&render(&picked, "a.npy"))) < 14.0);
+    // test/0 by default; another view is another image.
+    ok(&render(&["--camera", "planet"], "first.npy"));
+    ok(&render(
+        &["--camera", "planet", "--view", "test/0"],
+        "test0.npy",
+    ));
+    ok(&render(
+        &["--camera", "planet", "--view", "train/0"],
+        "train0.npy",
+    ));
+    let image = |name: &str| read_npy(&dir.path().join(name)).1;
+    assert_eq!(image("first.npy"), image("test0.npy"));
+    assert_ne!(image("test0.npy"), image("train0.npy"));
+    assert_ne!(image("test0.npy"), image("a.npy"));
+    let stdout = ok(&splat(
+        &[
+            "bench",
+            "--method",
+            "3dgs",
+            "--backend",
+            "cpu",
+            "--iters",
+            "1",
+            "--camera",
+            "planet",
+            "--view",
+            "train/6",
+        ],
+        dir.path(),
+    ));
+    assert!(stdout.contains("96x72"), "{stdout}");
+
+    let out = dir.path().join("b.png");
+    let cases: [(&[&str], &str); 4] = [
+        (
+            &["--camera", "planet", "--view", "test/2"],
+            "there is no view test/2: the dataset has 2 test views (test/0 to test/1)",
+        ),
+        (
+            &["--camera", "planet", "--view", "side/0"],
+            "expected test/K or train/K",
+        ),
+        (&["--view", "test/0"], "--camera"),
+        (
+            &[
+                "--camera",
+                "planet/transforms_test.json",
+                "--view",
+                "test/0",
+            ],
+            "is not a dataset folder",
+        ),
+    ];
+    for (extra, needle) in cases {
+        fails(&render(extra, "b.png"), needle, &out);
+    }
+}
+
 fn tiny_colmap_dataset(dir: &Path) {
     std::fs::create_dir_all(dir.join("sparse/0")).unwrap();
     std::fs::create_dir_all(dir.join("images")).unwrap();

@@ -10,7 +10,7 @@
 //! The files are untrusted: every count in a binary file is checked against the bytes left
 //! before anything is allocated, and every error names the file and the element.
 
-use super::dataset::{Dataset, DatasetError, Point, View, field, read_image};
+use super::dataset::{Dataset, DatasetError, Point, Shot, Shots, field, image_size};
 use crate::types::{Camera, CameraModel};
 use glam::{DMat3, DQuat, DVec3, DVec4, Mat3, Vec2, Vec3, Vec4};
 use rayon::prelude::*;
@@ -59,34 +59,27 @@ pub fn read_colmap(
     background: Vec3,
     images: Option<&str>,
 ) -> Result<Dataset, DatasetError> {
+    shots(dir, images)?.load(background)
+}
+
+/// The posed pictures of the COLMAP dataset in `dir` (as [`read_colmap`] reads it), without
+/// their pixels.
+pub(super) fn shots(dir: &Path, images: Option<&str>) -> Result<Shots, DatasetError> {
     let sparse = Sparse::find(dir).ok_or_else(|| DatasetError::NotADataset(dir.to_path_buf()))?;
     let cameras = sparse.cameras()?;
-    let mut shots = sparse.shots(&cameras)?;
-    if shots.is_empty() {
+    let mut registered = sparse.registered(&cameras)?;
+    if registered.is_empty() {
         return Err(DatasetError::Empty(sparse.file("images")));
     }
     // The whole model before any picture: a broken model fails fast.
     let points = sparse.points()?;
-    shots.sort_by(|a, b| a.name.cmp(&b.name));
+    registered.sort_by(|a, b| a.name.cmp(&b.name));
     let folder = dir.join(images.unwrap_or("images"));
     let cameras_file = sparse.name("cameras");
-    let views = shots
-        .par_iter()
-        .map(|shot| shot.view(&folder, background, &cameras_file))
+    let shots = (registered.par_iter())
+        .map(|image| image.shot(&folder, &cameras_file))
         .collect::<Result<Vec<_>, _>>()?;
-    let mut data = Dataset {
-        train: vec![],
-        test: vec![],
-        points,
-    };
-    for (k, view) in views.into_iter().enumerate() {
-        if k % 8 == 0 {
-            data.test.push(view);
-        } else {
-            data.train.push(view);
-        }
-    }
-    Ok(data)
+    Ok(Shots::every_8th_held_out(shots, points))
 }
 
 /// The two encodings of a COLMAP model.
@@ -103,7 +96,7 @@ struct Sparse {
 }
 
 /// An image of the model: its name, its camera's id and that camera posed.
-struct Shot {
+struct Registered {
     name: String,
     camera_id: i32,
     camera: Camera,
@@ -170,7 +163,7 @@ impl Sparse {
 
     /// The images, each with its camera posed; refused when one names a camera not in
     /// `cameras`.
-    fn shots(&self, cameras: &HashMap<i32, Camera>) -> Result<Vec<Shot>, DatasetError> {
+    fn registered(&self, cameras: &HashMap<i32, Camera>) -> Result<Vec<Registered>, DatasetError> {
         let path = self.file("images");
         let list = match self.format {
             Format::Binary => binary_file(
@@ -192,7 +185,7 @@ impl Sparse {
                         format!("refers to camera {camera}, which is not in {file}"),
                     )
                 })?;
-                Ok(Shot {
+                Ok(Registered {
                     name: posed.name,
                     camera_id: posed.camera_id,
                     camera: Camera {
@@ -222,30 +215,24 @@ impl Sparse {
     }
 }
 
-impl Shot {
-    /// The view of this shot's picture in `folder`, its camera fitted to the picture's size
-    /// (`cameras` names the cameras file, for errors).
-    fn view(&self, folder: &Path, background: Vec3, cameras: &str) -> Result<View, DatasetError> {
+impl Registered {
+    /// This image's picture in `folder`, its camera fitted to the picture's size (`cameras`
+    /// names the cameras file, for errors).
+    fn shot(&self, folder: &Path, cameras: &str) -> Result<Shot, DatasetError> {
         let path = folder.join(&self.name);
-        let (image, coverage) = read_image(&path, background)?;
-        let camera = rescaled(&self.camera, image.width, image.height).ok_or_else(|| {
+        let (width, height) = image_size(&path)?;
+        let camera = rescaled(&self.camera, width, height).ok_or_else(|| {
             let want = self.camera.size;
             field(
                 &path,
                 "size",
                 format!(
-                    "{}x{} does not scale camera {}'s {}x{} in {cameras}: the aspect ratio differs",
-                    image.width, image.height, self.camera_id, want.x, want.y
+                    "{width}x{height} does not scale camera {}'s {}x{} in {cameras}: the aspect ratio differs",
+                    self.camera_id, want.x, want.y
                 ),
             )
         })?;
-        Ok(View {
-            name: path.display().to_string(),
-            camera,
-            image,
-            coverage,
-            background,
-        })
+        Ok(Shot { path, camera })
     }
 }
 

@@ -20,6 +20,7 @@ use super::{Outputs, colmap};
 use crate::pipeline::Image;
 use crate::types::{Camera, CameraModel};
 use glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
+use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
 /// One posed image.
@@ -54,6 +55,81 @@ impl View {
             }
         }
         std::borrow::Cow::Owned(image)
+    }
+}
+
+/// A posed picture before its pixels are read: the file, and the camera fitted to its size
+/// (from the file's header). What rendering a view of a dataset needs.
+#[derive(Clone, Debug)]
+pub struct Shot {
+    pub path: PathBuf,
+    pub camera: Camera,
+}
+
+impl Shot {
+    /// The view: the picture decoded and composited on `background`.
+    pub fn load(&self, background: Vec3) -> Result<View, DatasetError> {
+        let (image, coverage) = read_image(&self.path, background)?;
+        let size = Vec2::new(image.width as f32, image.height as f32);
+        if size != self.camera.size {
+            let header = self.camera.size;
+            return Err(field(
+                &self.path,
+                "size",
+                format!(
+                    "decodes to {}x{} pixels, its header says {}x{}",
+                    size.x, size.y, header.x, header.y
+                ),
+            ));
+        }
+        Ok(View {
+            name: self.path.display().to_string(),
+            camera: self.camera,
+            image,
+            coverage,
+            background,
+        })
+    }
+}
+
+/// A dataset's posed pictures, read from its files without decoding a pixel.
+#[derive(Clone, Debug)]
+pub struct Shots {
+    pub train: Vec<Shot>,
+    pub test: Vec<Shot>,
+    /// As [`Dataset::points`].
+    pub points: Vec<Point>,
+}
+
+impl Shots {
+    /// Every picture decoded (in parallel) and composited on `background`.
+    pub fn load(self, background: Vec3) -> Result<Dataset, DatasetError> {
+        let load = |shots: &[Shot]| {
+            (shots.par_iter())
+                .map(|shot| shot.load(background))
+                .collect::<Result<Vec<_>, _>>()
+        };
+        Ok(Dataset {
+            train: load(&self.train)?,
+            test: load(&self.test)?,
+            points: self.points,
+        })
+    }
+
+    /// Every 8th of `shots` (from the first) held out for testing, as 3DGS does.
+    pub(super) fn every_8th_held_out(shots: Vec<Shot>, points: Vec<Point>) -> Shots {
+        let (mut train, mut test) = (vec![], vec![]);
+        for (k, shot) in shots.into_iter().enumerate() {
+            match k % 8 {
+                0 => test.push(shot),
+                _ => train.push(shot),
+            }
+        }
+        Shots {
+            train,
+            test,
+            points,
+        }
     }
 }
 
@@ -133,6 +209,11 @@ pub(super) fn field(
 /// if it holds `transforms.json`, else COLMAP with the pictures in `images/`), compositing
 /// RGBA images on `background`.
 pub fn read(dir: &Path, background: Vec3) -> Result<Dataset, DatasetError> {
+    read_shots(dir)?.load(background)
+}
+
+/// The posed pictures of the dataset in `dir` (as [`read`] finds it), without their pixels.
+pub fn read_shots(dir: &Path) -> Result<Shots, DatasetError> {
     if !dir.is_dir() {
         use std::io::{Error, ErrorKind};
         let error = match dir.exists() {
@@ -148,11 +229,11 @@ pub fn read(dir: &Path, background: Vec3) -> Result<Dataset, DatasetError> {
         });
     }
     if dir.join("transforms_train.json").exists() {
-        read_blender(dir, background)
+        blender_shots(dir)
     } else if dir.join("transforms.json").exists() {
-        read_nerfstudio(dir, background)
+        nerfstudio_shots(dir)
     } else if colmap::is_colmap(dir) {
-        colmap::read_colmap(dir, background, None)
+        colmap::shots(dir, None)
     } else {
         Err(DatasetError::NotADataset(dir.to_path_buf()))
     }
@@ -160,9 +241,13 @@ pub fn read(dir: &Path, background: Vec3) -> Result<Dataset, DatasetError> {
 
 /// Reads a Blender-format dataset from `dir`, compositing RGBA images on `background`.
 pub fn read_blender(dir: &Path, background: Vec3) -> Result<Dataset, DatasetError> {
-    Ok(Dataset {
-        train: read_split(&dir.join("transforms_train.json"), background)?,
-        test: read_split(&dir.join("transforms_test.json"), background)?,
+    blender_shots(dir)?.load(background)
+}
+
+fn blender_shots(dir: &Path) -> Result<Shots, DatasetError> {
+    Ok(Shots {
+        train: split_shots(&dir.join("transforms_train.json"))?,
+        test: split_shots(&dir.join("transforms_test.json"))?,
         points: Vec::new(),
     })
 }
@@ -291,6 +376,10 @@ fn read_json(path: &Path) -> Result<serde_json::Value, DatasetError> {
 /// Reads a nerfstudio `transforms.json` in `dir`; every 8th frame (from the first) is a test
 /// view.
 pub fn read_nerfstudio(dir: &Path, background: Vec3) -> Result<Dataset, DatasetError> {
+    nerfstudio_shots(dir)?.load(background)
+}
+
+fn nerfstudio_shots(dir: &Path) -> Result<Shots, DatasetError> {
     let path = dir.join("transforms.json");
     let json = read_json(&path)?;
     let frames = json["frames"]
@@ -299,11 +388,7 @@ pub fn read_nerfstudio(dir: &Path, background: Vec3) -> Result<Dataset, DatasetE
     if frames.is_empty() {
         return Err(DatasetError::Empty(path));
     }
-    let mut data = Dataset {
-        train: vec![],
-        test: vec![],
-        points: Vec::new(),
-    };
+    let mut shots = Vec::with_capacity(frames.len());
     for (k, frame) in frames.iter().enumerate() {
         let at = |f: &str| format!("frames[{k}].{f}");
         // Where a value comes from, for errors.
@@ -354,16 +439,14 @@ pub fn read_nerfstudio(dir: &Path, background: Vec3) -> Result<Dataset, DatasetE
         })?;
         let image_path = dir.join(file);
         let (w, h) = (side("w")?, side("h")?);
-        let (image, coverage) = read_image(&image_path, background)?;
-        if (w, h) != (image.width, image.height) {
+        let (width, height) = image_size(&image_path)?;
+        if (w, h) != (width, height) {
             return Err(field(
                 &path,
                 format!("{} and {}", named("w"), named("h")),
                 format!(
-                    "say {w}x{h} pixels, but {} is {}x{}",
+                    "say {w}x{h} pixels, but {} is {width}x{height}",
                     image_path.display(),
-                    image.width,
-                    image.height
                 ),
             ));
         }
@@ -409,26 +492,18 @@ pub fn read_nerfstudio(dir: &Path, background: Vec3) -> Result<Dataset, DatasetE
             principal: Vec2::new(required("cx")? as f32, required("cy")? as f32),
             model: camera_model,
             distortion,
-            ..posed_camera(&c2w, focal, &image)
+            ..posed_camera(&c2w, focal, (width, height))
                 .map_err(|problem| field(&path, at("transform_matrix"), problem))?
         };
-        let view = View {
-            name: image_path.display().to_string(),
+        shots.push(Shot {
+            path: image_path,
             camera,
-            image,
-            coverage,
-            background,
-        };
-        if k % 8 == 0 {
-            data.test.push(view);
-        } else {
-            data.train.push(view);
-        }
+        });
     }
-    Ok(data)
+    Ok(Shots::every_8th_held_out(shots, Vec::new()))
 }
 
-fn read_split(path: &Path, background: Vec3) -> Result<Vec<View>, DatasetError> {
+fn split_shots(path: &Path) -> Result<Vec<Shot>, DatasetError> {
     let json = read_json(path)?;
     let angle = json["camera_angle_x"]
         .as_f64()
@@ -447,7 +522,7 @@ fn read_split(path: &Path, background: Vec3) -> Result<Vec<View>, DatasetError> 
         return Err(DatasetError::Empty(path.to_path_buf()));
     }
     let dir = path.parent().unwrap_or(Path::new("."));
-    let mut views = Vec::with_capacity(frames.len());
+    let mut shots = Vec::with_capacity(frames.len());
     let mut size = None;
     for (k, frame) in frames.iter().enumerate() {
         let at = |f: &str| format!("frames[{k}].{f}");
@@ -465,8 +540,7 @@ fn read_split(path: &Path, background: Vec3) -> Result<Vec<View>, DatasetError> 
                 "must be 4 rows of 4 finite numbers",
             )
         })?;
-        let (image, coverage) = read_image(&image_path, background)?;
-        let dims = (image.width, image.height);
+        let dims = image_size(&image_path)?;
         if let Some(want) = size.filter(|s| *s != dims) {
             return Err(DatasetError::Size {
                 path: image_path,
@@ -476,18 +550,15 @@ fn read_split(path: &Path, background: Vec3) -> Result<Vec<View>, DatasetError> 
             });
         }
         size = Some(dims);
-        let focal = 0.5 * image.width as f32 / (0.5 * angle as f32).tan();
-        let camera = posed_camera(&c2w, Vec2::splat(focal), &image)
+        let focal = 0.5 * dims.0 as f32 / (0.5 * angle as f32).tan();
+        let camera = posed_camera(&c2w, Vec2::splat(focal), dims)
             .map_err(|problem| field(path, at("transform_matrix"), problem))?;
-        views.push(View {
-            name: image_path.display().to_string(),
+        shots.push(Shot {
+            path: image_path,
             camera,
-            image,
-            coverage,
-            background,
         });
     }
-    Ok(views)
+    Ok(shots)
 }
 
 fn matrix(v: &serde_json::Value) -> Option<Mat4> {
@@ -504,9 +575,10 @@ fn matrix(v: &serde_json::Value) -> Option<Mat4> {
 }
 
 /// The OpenCV world-to-camera pose of an OpenGL camera-to-world matrix, in a pinhole camera
-/// with the principal point at the centre of `image` (its size); what is wrong with the matrix
-/// if it is not a rigid pose (scale or shear would distort every render against its image).
-fn posed_camera(c2w_gl: &Mat4, focal: Vec2, image: &Image) -> Result<Camera, String> {
+/// with the principal point at the centre of a picture of `(width, height)` pixels; what is
+/// wrong with the matrix if it is not a rigid pose (scale or shear would distort every render
+/// against its image).
+fn posed_camera(c2w_gl: &Mat4, focal: Vec2, (width, height): (u32, u32)) -> Result<Camera, String> {
     // Written by other programs as the inverse of a pose: within rounding of the unit row.
     if !c2w_gl.row(3).abs_diff_eq(Vec4::W, 1e-4) {
         return Err(format!(
@@ -528,7 +600,7 @@ fn posed_camera(c2w_gl: &Mat4, focal: Vec2, image: &Image) -> Result<Camera, Str
     // OpenGL to OpenCV camera axes: y and z flip.
     let c2w = *c2w_gl * Mat4::from_diagonal(Vec4::new(1.0, -1.0, -1.0, 1.0));
     let w2c = c2w.inverse();
-    let size = Vec2::new(image.width as f32, image.height as f32);
+    let size = Vec2::new(width as f32, height as f32);
     Ok(Camera {
         rotation: Mat3::from_mat4(w2c),
         translation: w2c.w_axis.truncate(),
@@ -539,12 +611,13 @@ fn posed_camera(c2w_gl: &Mat4, focal: Vec2, image: &Image) -> Result<Camera, Str
     })
 }
 
-/// An image as RGB in [0, 1], alpha composited on `background`, and its alpha unless opaque.
-pub(super) fn read_image(
-    path: &Path,
-    background: Vec3,
-) -> Result<(Image, Option<Vec<f32>>), DatasetError> {
-    let img = image::open(path).map_err(|error| match error {
+/// A picture's width and height, read from its header.
+pub(super) fn image_size(path: &Path) -> Result<(u32, u32), DatasetError> {
+    image::image_dimensions(path).map_err(|error| image_error(path, error))
+}
+
+fn image_error(path: &Path, error: image::ImageError) -> DatasetError {
+    match error {
         image::ImageError::IoError(error) => DatasetError::Io {
             path: path.to_path_buf(),
             error,
@@ -553,7 +626,12 @@ pub(super) fn read_image(
             path: path.to_path_buf(),
             error,
         },
-    })?;
+    }
+}
+
+/// An image as RGB in [0, 1], alpha composited on `background`, and its alpha unless opaque.
+fn read_image(path: &Path, background: Vec3) -> Result<(Image, Option<Vec<f32>>), DatasetError> {
+    let img = image::open(path).map_err(|error| image_error(path, error))?;
     let rgba = img.to_rgba32f();
     let (width, height) = rgba.dimensions();
     let mut data = Vec::with_capacity(width as usize * height as usize * 3);
@@ -653,6 +731,37 @@ mod tests {
                 .fold(0.0f32, |m, (x, y)| m.max((x - y).abs()));
             assert!(worst < 1.5 / 255.0, "{worst}");
         }
+    }
+
+    /// The posed pictures are read from the files' headers, their pixels only when loaded:
+    /// the same cameras as a full read, and a picture whose pixels are broken past its header
+    /// fails on loading, by name.
+    #[test]
+    fn shots_are_read_without_their_pixels() {
+        let dir = tempfile::tempdir().unwrap();
+        let eyes = [Vec3::new(3.0, 1.0, -2.0), Vec3::new(-2.5, -0.5, 2.0)];
+        let data = Dataset {
+            train: eyes.iter().map(|e| view(*e, Vec3::ZERO)).collect(),
+            test: vec![view(Vec3::new(0.5, 2.0, 3.0), Vec3::ZERO)],
+            points: vec![],
+        };
+        write_blender(dir.path(), &data).unwrap();
+        let full = read(dir.path(), Vec3::ZERO).unwrap();
+        let shots = read_shots(dir.path()).unwrap();
+        let cameras = |views: &[View]| views.iter().map(|v| v.camera).collect::<Vec<_>>();
+        let shot_cameras = |shots: &[Shot]| shots.iter().map(|s| s.camera).collect::<Vec<_>>();
+        assert_eq!(shot_cameras(&shots.train), cameras(&full.train));
+        assert_eq!(shot_cameras(&shots.test), cameras(&full.test));
+        // The PNG cut a few bytes into its pixel data (the first IDAT chunk).
+        let png = dir.path().join("train/r_1.png");
+        let bytes = std::fs::read(&png).unwrap();
+        let idat = bytes.windows(4).position(|w| w == b"IDAT").unwrap();
+        std::fs::write(&png, &bytes[..idat + 8]).unwrap();
+        let shots = read_shots(dir.path()).unwrap();
+        assert_eq!(shots.train[1].camera, full.train[1].camera);
+        assert!(shots.train[0].load(Vec3::ZERO).is_ok());
+        let err = shots.load(Vec3::ZERO).unwrap_err().to_string();
+        assert!(err.contains("r_1.png"), "{err}");
     }
 
     /// What the format cannot say is refused by file and frame.
