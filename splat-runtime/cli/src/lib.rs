@@ -16,6 +16,7 @@
 //! The project's own `splat` binary is this entry point with the built-in methods.
 
 mod bench;
+mod eval;
 mod fit;
 mod interrupt;
 mod methods;
@@ -95,6 +96,9 @@ enum Command {
     /// Train a Gaussian method on posed images (Blender, nerfstudio or COLMAP), on the GPU or
     /// the CPU.
     Fit(fit::FitArgs),
+    /// Measure a scene on a dataset's views as `splat fit` measures its result: PSNR and SSIM
+    /// per view and their mean, with the renders and a CSV in --out.
+    Eval(eval::EvalArgs),
     /// Print the Rust or WGSL the #[splat_method] compiler generated for a method.
     Inspect {
         #[arg(long)]
@@ -180,7 +184,7 @@ where
         .collect();
     // The methods are known only now: every `--method` lists them and defaults to the first.
     let mut command = Cli::command();
-    for sub in ["render", "bench", "tradeoff", "fit", "inspect"] {
+    for sub in ["render", "bench", "tradeoff", "fit", "eval", "inspect"] {
         command = command.mut_subcommand(sub, |s| {
             s.mut_arg("method", |a| {
                 a.value_parser(clap::builder::PossibleValuesParser::new(names.clone()))
@@ -197,6 +201,7 @@ fn dispatch(cli: Cli, methods: &[Method]) -> Result<()> {
     match cli.command {
         Command::Render(args) => render::render_cmd(&args, methods),
         Command::Fit(args) => fit::fit_cmd(&args, methods),
+        Command::Eval(args) => eval::eval_cmd(&args, methods),
         Command::Bench(args) => bench::bench_cmd(&args, methods),
         Command::Tradeoff(args) => tradeoff::tradeoff_cmd(&args, methods),
         Command::Scene { out, camera_out } => {

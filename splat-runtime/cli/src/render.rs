@@ -120,7 +120,7 @@ impl Render<'_> {
 }
 
 /// Renders `cloud` with `method` on `backend`; returns the frame and where it ran.
-fn render_method(
+pub(crate) fn render_method(
     method: &Method,
     cloud: &GaussianCloud,
     camera: &Camera,

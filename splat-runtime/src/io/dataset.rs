@@ -437,7 +437,7 @@ fn nerfstudio_shots(dir: &Path) -> Result<Shots, DatasetError> {
                 "must be 4 rows of 4 finite numbers",
             )
         })?;
-        let image_path = dir.join(file);
+        let image_path = joined(dir, file);
         let (w, h) = (side("w")?, side("h")?);
         let (width, height) = image_size(&image_path)?;
         if (w, h) != (width, height) {
@@ -529,7 +529,7 @@ fn split_shots(path: &Path) -> Result<Vec<Shot>, DatasetError> {
         let file = frame["file_path"]
             .as_str()
             .ok_or_else(|| field(path, at("file_path"), "must be a string"))?;
-        let mut image_path = dir.join(file);
+        let mut image_path = joined(dir, file);
         if image_path.extension().is_none() {
             image_path.set_extension("png");
         }
@@ -559,6 +559,11 @@ fn split_shots(path: &Path) -> Result<Vec<Shot>, DatasetError> {
         });
     }
     Ok(shots)
+}
+
+/// `dir` joined with a frame's `file_path`, without the `./` such paths often start with.
+fn joined(dir: &Path, file: &str) -> PathBuf {
+    dir.join(file).components().collect()
 }
 
 fn matrix(v: &serde_json::Value) -> Option<Mat4> {

@@ -254,7 +254,9 @@ pub(crate) fn for_training(r: &RenderOptions) -> RenderOptions {
     }
 }
 
-pub(crate) fn composite(mut color: Image, alpha: Option<&Image>, background: Vec3) -> Image {
+/// `color` (rendered on black) composited on `background` through `alpha`, as training and
+/// evaluation see a render.
+pub fn composite(mut color: Image, alpha: Option<&Image>, background: Vec3) -> Image {
     if let Some(a) = alpha {
         let b = background.to_array();
         for (px, a) in color.data.chunks_exact_mut(3).zip(&a.data) {

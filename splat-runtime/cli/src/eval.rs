@@ -1,0 +1,144 @@
+//! `splat eval`: a scene measured on a dataset's views as `splat fit` measures its result:
+//! each view rendered, composited on the background and compared with its picture (PSNR,
+//! SSIM); the mean, the worst and best views, and with `--out` the renders and a CSV. For a
+//! scene trained by `splat fit` or by another program (any INRIA 3DGS PLY).
+
+use crate::methods::{self, Method};
+use crate::{Backend, render};
+use anyhow::{Context, Result};
+use splat_runtime::RenderOptions;
+use splat_runtime::glam::Vec3;
+use splat_runtime::io::dataset::{self, Shot};
+use splat_runtime::io::image::stage_image;
+use splat_runtime::io::{Outputs, ply};
+use splat_runtime::train::fit::composite;
+use splat_runtime::train::loss;
+use std::path::PathBuf;
+
+#[derive(clap::Args)]
+pub struct EvalArgs {
+    /// Dataset folder (Blender, nerfstudio or COLMAP, as `splat fit` reads it).
+    dataset: PathBuf,
+    /// The scene to measure (INRIA 3DGS PLY; `splat fit` writes it as scene.ply).
+    #[arg(long)]
+    scene: PathBuf,
+    #[arg(long)]
+    method: String,
+    /// Which views: the held-out ones or the training ones (the splits `splat fit` uses).
+    #[arg(long, value_enum, default_value_t = Split::Test)]
+    split: Split,
+    /// Composite the renders and pictures on white instead of black (as `splat fit --white`).
+    #[arg(long)]
+    white: bool,
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    backend: Backend,
+    /// Output folder: every view's render (`<split>/000.png`, ... in the dataset's order) and
+    /// `eval.csv` (view, picture, PSNR, SSIM).
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum Split {
+    Test,
+    Train,
+}
+
+/// One view's measures.
+struct Measured {
+    shot: Shot,
+    psnr: f64,
+    ssim: f64,
+}
+
+pub(crate) fn eval_cmd(args: &EvalArgs, methods: &[Method]) -> Result<()> {
+    let method = methods::find(methods, &args.method)?;
+    let cloud = ply::read(&args.scene)?;
+    let shots = dataset::read_shots(&args.dataset)?;
+    let (split, shots) = match args.split {
+        Split::Test => ("test", shots.test),
+        Split::Train => ("train", shots.train),
+    };
+    if shots.is_empty() {
+        anyhow::bail!("{}: no {split} views", args.dataset.display());
+    }
+    for shot in &shots {
+        methods::check_camera(method, methods, &shot.camera)?;
+    }
+    let background = if args.white { Vec3::ONE } else { Vec3::ZERO };
+    // As `splat fit` renders its test views: alpha for the background, the default knobs.
+    let opts = RenderOptions {
+        alpha: true,
+        ..Default::default()
+    };
+    if let Some(out) = &args.out {
+        let folder = out.join(split);
+        std::fs::create_dir_all(&folder)
+            .with_context(|| format!("creating {}", folder.display()))?;
+    }
+    let bar = indicatif::ProgressBar::new(shots.len() as u64);
+    let mut measured = Vec::with_capacity(shots.len());
+    let mut outputs = Outputs::default();
+    let mut place = String::new();
+    for (k, shot) in shots.into_iter().enumerate() {
+        let picture = shot.load(background)?.image;
+        let (frame, backend) =
+            render::render_method(method, &cloud, &shot.camera, &opts, args.backend, false)?;
+        place = backend;
+        let image = composite(frame.color, frame.alpha.as_ref(), background);
+        let psnr = loss::psnr(&image, &picture)?;
+        let ssim = loss::ssim(&image, &picture)?;
+        if let Some(out) = &args.out {
+            let path = out.join(split).join(format!("{k:03}.png"));
+            stage_image(&mut outputs, &path, &image)
+                .with_context(|| format!("writing {}", path.display()))?;
+        }
+        measured.push(Measured { shot, psnr, ssim });
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+
+    let n = measured.len() as f64;
+    let mean = |f: fn(&Measured) -> f64| measured.iter().map(f).sum::<f64>() / n;
+    println!(
+        "{} on {place}: {} primitives (SH degree {}) from {}, {} {split} views of {}",
+        method.name,
+        cloud.gaussians.len(),
+        cloud.sh_degree,
+        args.scene.display(),
+        measured.len(),
+        args.dataset.display(),
+    );
+    println!(
+        "mean PSNR {:.2} dB, SSIM {:.4} (on {})",
+        mean(|m| m.psnr),
+        mean(|m| m.ssim),
+        if args.white { "white" } else { "black" }
+    );
+    let by_psnr = |a: &&Measured, b: &&Measured| a.psnr.total_cmp(&b.psnr);
+    let worst = measured.iter().min_by(by_psnr).expect("at least one view");
+    let best = measured.iter().max_by(by_psnr).expect("at least one view");
+    for (what, m) in [("worst", worst), ("best", best)] {
+        println!(
+            "{what}: {:.2} dB, SSIM {:.4}, {}",
+            m.psnr,
+            m.ssim,
+            m.shot.path.display()
+        );
+    }
+    if let Some(out) = &args.out {
+        let csv = out.join("eval.csv");
+        (outputs.stage(&csv, |w| {
+            writeln!(w, "view,picture,psnr,ssim")?;
+            for (k, m) in measured.iter().enumerate() {
+                let picture = m.shot.path.display().to_string().replace('"', "\"\"");
+                writeln!(w, "{split}/{k},\"{picture}\",{:.4},{:.6}", m.psnr, m.ssim)?;
+            }
+            Ok(())
+        }))
+        .with_context(|| format!("writing {}", csv.display()))?;
+        outputs.commit()?;
+        crate::wrote(out);
+    }
+    Ok(())
+}
