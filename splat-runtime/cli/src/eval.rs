@@ -76,6 +76,7 @@ pub(crate) fn eval_cmd(args: &EvalArgs, methods: &[Method]) -> Result<()> {
         std::fs::create_dir_all(&folder)
             .with_context(|| format!("creating {}", folder.display()))?;
     }
+    let gpu = crate::pick_gpu(args.backend)?;
     let bar = indicatif::ProgressBar::new(shots.len() as u64);
     let mut measured = Vec::with_capacity(shots.len());
     let mut outputs = Outputs::default();
@@ -83,7 +84,7 @@ pub(crate) fn eval_cmd(args: &EvalArgs, methods: &[Method]) -> Result<()> {
     for (k, shot) in shots.into_iter().enumerate() {
         let picture = shot.load(background)?.image;
         let (frame, backend) =
-            render::render_method(method, &cloud, &shot.camera, &opts, args.backend, false)?;
+            render::render_method(method, &cloud, &shot.camera, &opts, gpu.as_ref(), false)?;
         place = backend;
         let image = composite(frame.color, frame.alpha.as_ref(), background);
         let psnr = loss::psnr(&image, &picture)?;

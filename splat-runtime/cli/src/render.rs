@@ -5,7 +5,7 @@ use crate::{Backend, Model, pick_gpu, scene};
 use anyhow::{Result, bail};
 use plotters::prelude::RGBColor;
 use splat_runtime::glam::Vec3;
-use splat_runtime::gpu::{GpuScene, HardwareRenderer};
+use splat_runtime::gpu::{Gpu, GpuScene, HardwareRenderer};
 use splat_runtime::io::ply::{FromStored, GaussianCloud};
 use splat_runtime::io::{Outputs, image as image_io, ply};
 use splat_runtime::pipeline::precision::Precision;
@@ -65,12 +65,12 @@ pub struct RenderArgs {
     height: u32,
 }
 
-/// Renders a scene with the chosen method on the chosen backend.
+/// Renders a scene with the chosen method on the GPU picked, or on the CPU.
 pub struct Render<'a> {
     cloud: &'a GaussianCloud,
     camera: &'a Camera,
     opts: &'a RenderOptions,
-    backend: Backend,
+    gpu: Option<&'a Gpu>,
     /// The hardware-rasterized forward pass (GPU only).
     hardware: bool,
 }
@@ -91,18 +91,13 @@ impl Render<'_> {
         M::Params: FromStored,
     {
         let params: Vec<M::Params> = self.cloud.params();
-        // The hardware rasterizer needs a GPU: `auto` takes a software one too.
-        let backend = match (self.hardware, self.backend) {
-            (true, Backend::Auto) => Backend::Gpu,
-            (_, backend) => backend,
-        };
-        Ok(match pick_gpu(backend)? {
+        Ok(match self.gpu {
             None if self.hardware => {
                 bail!("--hardware rasterizes with the GPU: use --backend gpu or auto")
             }
             Some(gpu) if self.hardware => {
-                let mut renderer = HardwareRenderer::<M>::new(&gpu, self.opts)?;
-                renderer.forward(&GpuScene::new(&gpu, &params)?, self.camera)?;
+                let mut renderer = HardwareRenderer::<M>::new(gpu, self.opts)?;
+                renderer.forward(&GpuScene::new(gpu, &params)?, self.camera)?;
                 let frame = renderer.download_frame()?;
                 (frame, format!("GPU (hardware rasterizer), {}", gpu.adapter))
             }
@@ -112,7 +107,7 @@ impl Render<'_> {
             ),
             Some(gpu) => {
                 let frame =
-                    splat_runtime::gpu::render::render::<M>(&gpu, &params, self.camera, self.opts)?;
+                    splat_runtime::gpu::render::render::<M>(gpu, &params, self.camera, self.opts)?;
                 (frame, format!("GPU, {}", gpu.adapter))
             }
         })
@@ -125,14 +120,14 @@ pub(crate) fn render_method(
     cloud: &GaussianCloud,
     camera: &Camera,
     opts: &RenderOptions,
-    backend: Backend,
+    gpu: Option<&Gpu>,
     hardware: bool,
 ) -> Result<(Frame, String)> {
     let task = Render {
         cloud,
         camera,
         opts,
-        backend,
+        gpu,
         hardware,
     };
     (method.instance(cloud.sh_degree, camera).render)(&task)
@@ -176,7 +171,7 @@ pub(crate) fn gallery(
     for (r, method) in methods.iter().enumerate() {
         for (c, model) in CameraModel::ALL.into_iter().enumerate() {
             let camera = scene::camera(width, height, model);
-            let panel = match render_method(method, &cloud, &camera, &opts, Backend::Cpu, false) {
+            let panel = match render_method(method, &cloud, &camera, &opts, None, false) {
                 Ok((frame, _)) => {
                     println!(
                         "{} / {model}: {} visible, {} intersections, shade {:.1} ms",
@@ -281,8 +276,14 @@ pub(crate) fn render_cmd(args: &RenderArgs, methods: &[Method]) -> Result<()> {
         shade_precision: args.shade_precision,
         ..Default::default()
     };
+    // The hardware rasterizer needs a GPU: `auto` takes a software one too.
+    let backend = match (args.hardware, args.backend) {
+        (true, Backend::Auto) => Backend::Gpu,
+        (_, backend) => backend,
+    };
+    let gpu = pick_gpu(backend)?;
     let (frame, backend) =
-        render_method(method, &cloud, &camera, &opts, args.backend, args.hardware)?;
+        render_method(method, &cloud, &camera, &opts, gpu.as_ref(), args.hardware)?;
     let written = image_io::write_frame(&args.out, &frame)?;
     if args.explain {
         let effects = (method.instance(cloud.sh_degree, &camera).effects)(&camera, &opts);

@@ -1359,8 +1359,10 @@ fn eval_measures_a_scene_as_fit_did() {
     assert_eq!(csv.lines().count(), 3, "{csv}");
     assert!(csv.starts_with("view,picture,psnr,ssim\ntest/0,"), "{csv}");
 
-    let stdout = ok(&eval(&["--backend", "cpu", "--split", "train"]));
+    // The backend is picked once for all views (`auto` says why it took the CPU once).
+    let stdout = ok(&eval(&["--split", "train"]));
     assert!(stdout.contains("8 train views"), "{stdout}");
+    assert!(stdout.matches("backend auto").count() <= 1, "{stdout}");
     let gpu = eval(&["--backend", "gpu"]);
     if !no_adapter(&gpu) {
         let stdout = String::from_utf8_lossy(&gpu.stdout);
