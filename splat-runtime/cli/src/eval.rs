@@ -71,11 +71,6 @@ pub(crate) fn eval_cmd(args: &EvalArgs, methods: &[Method]) -> Result<()> {
         alpha: true,
         ..Default::default()
     };
-    if let Some(out) = &args.out {
-        let folder = out.join(split);
-        std::fs::create_dir_all(&folder)
-            .with_context(|| format!("creating {}", folder.display()))?;
-    }
     let gpu = crate::pick_gpu(args.backend)?;
     let bar = indicatif::ProgressBar::new(shots.len() as u64);
     let mut measured = Vec::with_capacity(shots.len());

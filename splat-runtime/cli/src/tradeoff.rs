@@ -490,7 +490,6 @@ fn ms(d: Option<f64>, digits: usize) -> String {
 }
 
 fn write_outputs(dir: &std::path::Path, rows: &[Row], method: &str) -> Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let mut summary = String::from(
         "knob,setting,forward_ms,backward_ms,memory_mib,intersections,sort_mib,psnr_db,max_abs,gradient_rel_rmse\n",
     );

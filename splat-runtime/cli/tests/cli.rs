@@ -1548,9 +1548,10 @@ fn outputs_that_belong_together_appear_together_or_not_at_all() {
     );
     assert_eq!(kept("o.png"), picture, "the picture was replaced");
     let scene_args = |camera: &'static str| ["scene", "--out", "keep.ply", "--camera-out", camera];
+    // A camera under a file: no folder can be made there.
     refused(
-        splat(&scene_args("nowhere/c.json"), dir.path()),
-        "nowhere/c.json",
+        splat(&scene_args("o.png/c.json"), dir.path()),
+        "writing o.png/c.json",
     );
     for same in ["keep.ply", "./keep.ply"] {
         refused(

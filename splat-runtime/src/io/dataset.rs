@@ -335,12 +335,6 @@ fn blender_angle(json_path: &Path, views: &[View]) -> Result<f32, DatasetError> 
 /// A view as an 8-bit RGBA PNG: its coverage as alpha, its color taken off its background
 /// (straight alpha, as Blender writes it).
 fn stage_rgba(outputs: &mut Outputs, path: &Path, view: &View) -> Result<(), DatasetError> {
-    if let Some(dir) = path.parent() {
-        std::fs::create_dir_all(dir).map_err(|e| DatasetError::Write {
-            path: dir.to_path_buf(),
-            error: e.to_string(),
-        })?;
-    }
     let b = view.background.to_array();
     let mut rgba = Vec::with_capacity(view.image.data.len() / 3 * 4);
     for (p, rgb) in view.image.data.chunks_exact(3).enumerate() {
@@ -804,6 +798,7 @@ mod tests {
         let err = write_blender(dir.path(), &data).unwrap_err().to_string();
         assert!(err.contains("r_0.png: it is a folder"), "{err}");
         for written in [
+            "train",
             "train/r_0.png",
             "transforms_train.json",
             "transforms_test.json",

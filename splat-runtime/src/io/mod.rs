@@ -23,12 +23,15 @@ pub fn write_atomic(
 }
 
 /// Files that appear together or not at all (a picture and its depth, a scene and its camera,
-/// a dataset's views and transforms): each is written to a temporary file beside its target,
-/// and none is moved into place until every one is written. Dropped uncommitted, the staged
-/// files are deleted and the targets left as they were (folders made for them stay).
+/// a dataset's views and transforms): each is written to a temporary file beside its target
+/// (in the target's folder, made if missing), and none is moved into place until every one is
+/// written. Dropped uncommitted, the staged files are deleted, the folders made for them
+/// removed, and the targets left as they were.
 #[derive(Default)]
 pub struct Outputs {
     staged: Vec<(tempfile::TempPath, PathBuf)>,
+    /// The folders `stage` made, outermost first.
+    made: Vec<PathBuf>,
 }
 
 impl Outputs {
@@ -38,6 +41,7 @@ impl Outputs {
         path: &Path,
         write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
     ) -> std::io::Result<()> {
+        self.make_folder(folder_of(path))?;
         let mut tmp = tempfile::NamedTempFile::new_in(folder_of(path))?;
         {
             let mut buf = std::io::BufWriter::new(tmp.as_file_mut());
@@ -61,7 +65,7 @@ impl Outputs {
     /// or on a path another one takes. Only the renames are left by then: one that fails
     /// midway (a target held open on Windows, a folder that forbids replacing another's file)
     /// leaves the targets renamed before it replaced.
-    pub fn commit(self) -> Result<(), CommitError> {
+    pub fn commit(mut self) -> Result<(), CommitError> {
         let mut targets = std::collections::HashSet::new();
         for (_, path) in &self.staged {
             let refused = |why: &str| CommitError {
@@ -76,13 +80,43 @@ impl Outputs {
                 return Err(refused("another output of the same command goes there"));
             }
         }
-        for (tmp, path) in self.staged {
+        // Once the renames begin, the folders made hold what they were made for.
+        self.made.clear();
+        for (tmp, path) in std::mem::take(&mut self.staged) {
             tmp.persist(&path).map_err(|e| CommitError {
                 path,
                 error: e.error,
             })?;
         }
         Ok(())
+    }
+}
+
+impl Outputs {
+    /// Makes `dir` and its missing parents, remembering which it made.
+    fn make_folder(&mut self, dir: &Path) -> std::io::Result<()> {
+        let missing: Vec<&Path> = (dir.ancestors())
+            .take_while(|d| !d.as_os_str().is_empty() && !d.exists())
+            .collect();
+        for d in missing.into_iter().rev() {
+            match std::fs::create_dir(d) {
+                Ok(()) => self.made.push(d.to_path_buf()),
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Drop for Outputs {
+    /// Uncommitted: the staged files go, then the folders made for them (innermost first;
+    /// one that something else has written into since stays).
+    fn drop(&mut self) {
+        self.staged.clear();
+        for d in self.made.iter().rev() {
+            let _ = std::fs::remove_dir(d);
+        }
     }
 }
 
@@ -108,4 +142,53 @@ fn folder_of(path: &Path) -> &Path {
 pub struct CommitError {
     pub path: PathBuf,
     pub error: std::io::Error,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Folders are made for the staged files and, uncommitted, removed with them: only the
+    /// ones made, and only while empty.
+    #[test]
+    fn folders_made_for_outputs_go_with_them() {
+        let dir = tempfile::tempdir().unwrap();
+        let at = |p: &str| dir.path().join(p);
+        std::fs::create_dir(at("kept")).unwrap();
+        let write = |w: &mut dyn Write| w.write_all(b"x");
+        let mut outputs = Outputs::default();
+        outputs.stage(&at("kept/a/b/one.txt"), write).unwrap();
+        outputs.stage(&at("kept/a/two.txt"), write).unwrap();
+        outputs.stage(&at("new/c/three.txt"), write).unwrap();
+        drop(outputs);
+        assert!(at("kept").is_dir());
+        for gone in ["kept/a", "new"] {
+            assert!(!at(gone).exists(), "{gone} stayed");
+        }
+
+        // A refused commit removes them too; one written into meanwhile stays.
+        let mut outputs = Outputs::default();
+        outputs.stage(&at("new/one.txt"), write).unwrap();
+        outputs.stage(&at("other/two.txt"), write).unwrap();
+        outputs.stage(&at("other/../other/two.txt"), write).unwrap();
+        std::fs::write(at("new/theirs.txt"), b"y").unwrap();
+        let err = outputs.commit().unwrap_err().to_string();
+        assert!(err.contains("another output"), "{err}");
+        assert!(!at("other").exists());
+        assert_eq!(std::fs::read_dir(at("new")).unwrap().count(), 1);
+
+        let mut outputs = Outputs::default();
+        outputs.stage(&at("made/d/four.txt"), write).unwrap();
+        outputs.commit().unwrap();
+        assert_eq!(std::fs::read(at("made/d/four.txt")).unwrap(), b"x");
+    }
+
+    /// The last ancestor of a relative path (`a/b` -> `a` -> ``) is the working folder,
+    /// which is there: nothing to make.
+    #[test]
+    fn a_relative_paths_last_ancestor_is_not_made() {
+        let mut outputs = Outputs::default();
+        outputs.make_folder(Path::new("")).unwrap();
+        assert!(outputs.made.is_empty());
+    }
 }
