@@ -15,6 +15,7 @@ use crate::io::dataset::{Dataset, View};
 use crate::method::{SplatMethod, param_groups, word_name};
 use crate::pipeline::{FrameGrad, Image, RenderError, RenderOptions};
 use glam::{Vec2, Vec3};
+use rayon::prelude::*;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
@@ -413,9 +414,7 @@ pub fn fit_from<M: Trainable>(
         times.loss = clock.elapsed();
         let g = crate::pipeline::backward::<M>(&pass, &params, &view.camera, &grad)?;
         (times.blend, times.project) = (g.stats.blend + g.stats.reduce, g.stats.project);
-        for (p, out) in g.params.iter().zip(grads.chunks_exact_mut(words)) {
-            p.write_words(out);
-        }
+        write_flat::<M>(&g.params, &mut grads);
         let clock = Instant::now();
         if let Some(m) = &mcmc {
             m.regularize(&flat, &mut grads, words);
@@ -632,19 +631,25 @@ pub(crate) fn step_background(opts: &FitOptions, rng: &mut fastrand::Rng) -> Vec
     }
 }
 
-/// Reads every primitive of `params` back from its words in `flat` (as many).
+/// Reads every primitive of `params` back from its words in `flat` (as many). In parallel,
+/// as [`write_flat`]: a step does both over every primitive.
 pub(crate) fn read_into<M: SplatMethod>(params: &mut [M::Params], flat: &[f32]) {
-    for (p, w) in params.iter_mut().zip(flat.chunks_exact(M::Params::LEN)) {
-        *p = M::Params::read_words(w);
-    }
+    (params.par_iter_mut())
+        .zip(flat.par_chunks_exact(M::Params::LEN))
+        .for_each(|(p, w)| *p = M::Params::read_words(w));
+}
+
+/// Writes the words of every primitive of `params` into `flat`, one after another. (On one
+/// thread, the two conversions took 4 ms of a 95 ms step on 100,000 primitives, 2 cores.)
+pub(crate) fn write_flat<M: SplatMethod>(params: &[M::Params], flat: &mut [f32]) {
+    (params.par_iter())
+        .zip(flat.par_chunks_exact_mut(M::Params::LEN))
+        .for_each(|(p, out)| p.write_words(out));
 }
 
 /// The parameter words of every primitive, one after another.
 pub(crate) fn flatten<M: SplatMethod>(params: &[M::Params]) -> Vec<f32> {
-    let words = M::Params::LEN;
-    let mut flat = vec![0.0f32; params.len() * words];
-    for (p, out) in params.iter().zip(flat.chunks_exact_mut(words)) {
-        p.write_words(out);
-    }
+    let mut flat = vec![0.0f32; params.len() * M::Params::LEN];
+    write_flat::<M>(params, &mut flat);
     flat
 }
