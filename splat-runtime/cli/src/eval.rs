@@ -4,6 +4,7 @@
 //! scene trained by `splat fit` or by another program (any INRIA 3DGS PLY).
 
 use crate::methods::{self, Method};
+use crate::view::Split;
 use crate::{Backend, render};
 use anyhow::{Context, Result};
 use splat_runtime::RenderOptions;
@@ -38,12 +39,6 @@ pub struct EvalArgs {
     out: Option<PathBuf>,
 }
 
-#[derive(Clone, Copy, clap::ValueEnum)]
-enum Split {
-    Test,
-    Train,
-}
-
 /// One view's measures.
 struct Measured {
     shot: Shot,
@@ -54,11 +49,8 @@ struct Measured {
 pub(crate) fn eval_cmd(args: &EvalArgs, methods: &[Method]) -> Result<()> {
     let method = methods::find(methods, &args.method)?;
     let cloud = ply::read(&args.scene)?;
-    let shots = dataset::read_shots(&args.dataset)?;
-    let (split, shots) = match args.split {
-        Split::Test => ("test", shots.test),
-        Split::Train => ("train", shots.train),
-    };
+    let shots = args.split.of(dataset::read_shots(&args.dataset)?);
+    let split = args.split.name();
     if shots.is_empty() {
         anyhow::bail!("{}: no {split} views", args.dataset.display());
     }
@@ -94,8 +86,9 @@ pub(crate) fn eval_cmd(args: &EvalArgs, methods: &[Method]) -> Result<()> {
     }
     bar.finish_and_clear();
 
+    // Summed as `splat fit` sums its evaluation (`train::fit::Evaluation`), to the last bit.
     let n = measured.len() as f64;
-    let mean = |f: fn(&Measured) -> f64| measured.iter().map(f).sum::<f64>() / n;
+    let mean = |f: fn(&Measured) -> f64| measured.iter().map(|m| f(m) / n).sum::<f64>();
     println!(
         "{} on {place}: {} primitives (SH degree {}) from {}, {} {split} views of {}",
         method.name,

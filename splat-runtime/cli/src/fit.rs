@@ -297,6 +297,8 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
         checkpoint_every: (args.checkpoint_every > 0).then_some(args.checkpoint_every),
         ..Default::default()
     };
+    // Made before training, not with the outputs at its end: an output folder that cannot be
+    // made fails the command before hours of training.
     std::fs::create_dir_all(args.out.join("test"))
         .with_context(|| format!("creating {}", args.out.join("test").display()))?;
     train(&Fit {

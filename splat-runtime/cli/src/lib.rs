@@ -1,5 +1,6 @@
 //! The `splat` command line as a library: a user crate offers its own methods with the same
-//! commands (render, bench, tradeoff, fit, inspect, gallery, scene) in a few lines:
+//! commands (render, bench, tradeoff, fit, eval, inspect, gallery, scene, dataset) in a few
+//! lines:
 //!
 //! ```no_run
 //! use splat_cli::{Instance, Method};

@@ -114,7 +114,8 @@ impl Render<'_> {
     }
 }
 
-/// Renders `cloud` with `method` on `backend`; returns the frame and where it ran.
+/// Renders `cloud` with `method` on `gpu`, or on the CPU without one; returns the frame and
+/// where it ran.
 pub(crate) fn render_method(
     method: &Method,
     cloud: &GaussianCloud,
@@ -266,6 +267,12 @@ pub(crate) fn render_cmd(args: &RenderArgs, methods: &[Method]) -> Result<()> {
         }
     };
     methods::check_camera(method, methods, &camera)?;
+    // The view's picture, on black as the renderer composites: read before anything is
+    // written, so a broken one fails the command with nothing written.
+    let picture = match &shot {
+        Some(shot) => Some((shot.load(Vec3::ZERO)?.image, shot.path.display())),
+        None => None,
+    };
     let load = t0.elapsed();
     let opts = RenderOptions {
         tile_size: args.tile,
@@ -328,14 +335,9 @@ pub(crate) fn render_cmd(args: &RenderArgs, methods: &[Method]) -> Result<()> {
             ms(s.shade)
         );
     }
-    if let Some(shot) = &shot {
-        // The renderer composites on black, so the picture is taken on black too.
-        let picture = shot.load(Vec3::ZERO)?.image;
-        let psnr = splat_runtime::train::loss::psnr(&frame.color, &picture)?;
-        println!(
-            "PSNR {psnr:.2} dB against the view's picture {} (on black)",
-            shot.path.display()
-        );
+    if let Some((picture, path)) = &picture {
+        let psnr = splat_runtime::train::loss::psnr(&frame.color, picture)?;
+        println!("PSNR {psnr:.2} dB against the view's picture {path} (on black)");
     }
     for p in written {
         crate::wrote(&p);

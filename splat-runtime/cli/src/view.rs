@@ -4,14 +4,14 @@
 use anyhow::{Result, bail};
 use splat_runtime::Camera;
 use splat_runtime::io::camera as camera_io;
-use splat_runtime::io::dataset::{self, Shot};
+use splat_runtime::io::dataset::{self, Shot, Shots};
 use std::path::PathBuf;
 use std::str::FromStr;
 
 #[derive(clap::Args)]
 pub struct CameraArgs {
     /// Camera JSON, or a dataset folder (Blender, nerfstudio or COLMAP, as `splat fit` reads
-    /// them) whose view --view to take (default: the built-in view at --width x --height).
+    /// them) whose view --view to take (default: the built-in view).
     #[arg(long)]
     pub camera: Option<PathBuf>,
     /// With a dataset as --camera: which of its views, `test/K` or `train/K` (K from 0; the
@@ -20,10 +20,34 @@ pub struct CameraArgs {
     pub view: Option<ViewPick>,
 }
 
+/// A dataset's held-out views or its training views, as `splat fit` splits them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Split {
+    Test,
+    Train,
+}
+
+impl Split {
+    pub fn name(self) -> &'static str {
+        match self {
+            Split::Test => "test",
+            Split::Train => "train",
+        }
+    }
+
+    /// This split's shots of `shots`.
+    pub fn of(self, shots: Shots) -> Vec<Shot> {
+        match self {
+            Split::Test => shots.test,
+            Split::Train => shots.train,
+        }
+    }
+}
+
 /// A view of a dataset: its split and its index there.
 #[derive(Clone, Copy, Debug)]
 pub struct ViewPick {
-    test: bool,
+    split: Split,
     index: usize,
 }
 
@@ -32,13 +56,11 @@ impl FromStr for ViewPick {
 
     fn from_str(s: &str) -> Result<Self, String> {
         let parsed = s.split_once('/').and_then(|(split, k)| {
-            let test = match split {
-                "test" => true,
-                "train" => false,
-                _ => return None,
-            };
+            let split = [Split::Test, Split::Train]
+                .into_iter()
+                .find(|t| t.name() == split)?;
             Some(ViewPick {
-                test,
+                split,
                 index: k.parse().ok()?,
             })
         });
@@ -48,8 +70,7 @@ impl FromStr for ViewPick {
 
 impl std::fmt::Display for ViewPick {
     fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
-        let split = if self.test { "test" } else { "train" };
-        write!(f, "{split}/{}", self.index)
+        write!(f, "{}/{}", self.split.name(), self.index)
     }
 }
 
@@ -77,26 +98,23 @@ impl CameraArgs {
             return Ok(Some(Given { camera, shot: None }));
         }
         let pick = self.view.unwrap_or(ViewPick {
-            test: true,
+            split: Split::Test,
             index: 0,
         });
-        let shots = dataset::read_shots(path)?;
-        let (name, mut split) = match pick.test {
-            true => ("test", shots.test),
-            false => ("train", shots.train),
-        };
-        let n = split.len();
+        let mut shots = pick.split.of(dataset::read_shots(path)?);
+        let (n, name) = (shots.len(), pick.split.name());
         if pick.index >= n {
+            let which = match n {
+                0 => String::new(),
+                1 => format!(" (only {name}/0)"),
+                n => format!(" ({name}/0 to {name}/{})", n - 1),
+            };
             bail!(
-                "{}: there is no view {pick}: the dataset has {n} {name} views{}",
-                path.display(),
-                match n {
-                    0 => String::new(),
-                    n => format!(" ({name}/0 to {name}/{})", n - 1),
-                }
+                "{}: there is no view {pick}: the dataset has {n} {name} views{which}",
+                path.display()
             );
         }
-        let shot = split.swap_remove(pick.index);
+        let shot = shots.swap_remove(pick.index);
         Ok(Some(Given {
             camera: shot.camera,
             shot: Some(shot),

@@ -1218,10 +1218,9 @@ fn bench_times_both_passes_and_writes_the_raw_image_render_would() {
     }
 }
 
-/// A COLMAP dataset in text format: 3 views of 16x16 by a pinhole camera looking down +z
-/// from z = -3, and 40 sparse points around the origin.
-/// A dataset's view is a camera: `render`, `bench` and `tradeoff` take `--camera DATASET
-/// --view SPLIT/K`; `render` measures its image against the view's picture.
+/// A dataset's view is a camera: `render` and `bench` take `--camera DATASET --view SPLIT/K`
+/// (`tradeoff` reads its camera as `bench` does); `render` measures its image against the
+/// view's picture, read before anything is written.
 #[test]
 fn a_dataset_view_is_a_camera() {
     let dir = tempfile::tempdir().unwrap();
@@ -1305,6 +1304,12 @@ fn a_dataset_view_is_a_camera() {
     for (extra, needle) in cases {
         fails(&render(extra, "b.png"), needle, &out);
     }
+    // A picture whose header reads but whose pixels do not: refused before the render is
+    // written.
+    let bytes = std::fs::read(planet.join("r_1.png")).unwrap();
+    let idat = bytes.windows(4).position(|w| w == b"IDAT").unwrap();
+    std::fs::write(planet.join("r_1.png"), &bytes[..idat + 8]).unwrap();
+    fails(&render(&picked, "b.png"), "r_1.png", &out);
 }
 
 /// `splat eval` measures a trained scene as `splat fit` measured it: the same mean PSNR and
@@ -1381,6 +1386,8 @@ fn eval_measures_a_scene_as_fit_did() {
     );
 }
 
+/// A COLMAP dataset in text format: 3 views of 16x16 by a pinhole camera looking down +z
+/// from z = -3, and 40 sparse points around the origin.
 fn tiny_colmap_dataset(dir: &Path) {
     std::fs::create_dir_all(dir.join("sparse/0")).unwrap();
     std::fs::create_dir_all(dir.join("images")).unwrap();

@@ -77,7 +77,7 @@ impl Shot {
                 &self.path,
                 "size",
                 format!(
-                    "decodes to {}x{} pixels, its header says {}x{}",
+                    "decodes to {}x{} pixels, but its camera is {}x{} (its header's size when the dataset was read)",
                     size.x, size.y, header.x, header.y
                 ),
             ));
@@ -102,7 +102,8 @@ pub struct Shots {
 }
 
 impl Shots {
-    /// Every picture decoded (in parallel) and composited on `background`.
+    /// Every picture decoded (in parallel, so with several broken ones, which the error names
+    /// may vary) and composited on `background`.
     pub fn load(self, background: Vec3) -> Result<Dataset, DatasetError> {
         let load = |shots: &[Shot]| {
             (shots.par_iter())
@@ -761,6 +762,20 @@ mod tests {
         assert!(shots.train[0].load(Vec3::ZERO).is_ok());
         let err = shots.load(Vec3::ZERO).unwrap_err().to_string();
         assert!(err.contains("r_1.png"), "{err}");
+        // A picture replaced by one of another size after the dataset was read.
+        let shots = read_shots(dir.path()).unwrap();
+        let other = Image {
+            width: 12,
+            height: 8,
+            channels: 3,
+            data: vec![0.5; 12 * 8 * 3],
+        };
+        super::super::image::write_image(&dir.path().join("test/r_0.png"), &other).unwrap();
+        let err = shots.test[0].load(Vec3::ZERO).unwrap_err().to_string();
+        assert!(
+            err.contains("r_0.png: size decodes to 12x8 pixels, but its camera is 30x20"),
+            "{err}"
+        );
     }
 
     /// What the format cannot say is refused by file and frame.

@@ -80,14 +80,15 @@ impl Outputs {
                 return Err(refused("another output of the same command goes there"));
             }
         }
-        // Once the renames begin, the folders made hold what they were made for.
-        self.made.clear();
+        // A rename failing midway drops the files not moved yet, and then the folders made
+        // for them alone (one holding a moved file is not empty and stays).
         for (tmp, path) in std::mem::take(&mut self.staged) {
             tmp.persist(&path).map_err(|e| CommitError {
                 path,
                 error: e.error,
             })?;
         }
+        self.made.clear();
         Ok(())
     }
 }
@@ -102,7 +103,10 @@ impl Outputs {
             match std::fs::create_dir(d) {
                 Ok(()) => self.made.push(d.to_path_buf()),
                 Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
-                Err(e) => return Err(e),
+                Err(e) => {
+                    let why = format!("cannot make the folder {}: {e}", d.display());
+                    return Err(std::io::Error::new(e.kind(), why));
+                }
             }
         }
         Ok(())
