@@ -716,7 +716,10 @@ fn an_interrupted_fit_saves_its_checkpoint_and_resumes_from_it() {
     use std::io::{BufRead, Read};
     let dir = tempfile::tempdir().unwrap();
     tiny_dataset(&dir.path().join("data"), 3);
-    for (backend, steps) in [("cpu", "2000"), ("gpu", "400")] {
+    // Long enough on the CPU (each step well under a millisecond) that the signal sent at
+    // the first progress line lands before the run ends on a loaded machine: with 2,000
+    // steps a CI run once finished first.
+    for (backend, steps) in [("cpu", "10000"), ("gpu", "400")] {
         let args = [
             "fit",
             "data",
