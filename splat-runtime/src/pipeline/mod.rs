@@ -320,11 +320,14 @@ fn forward<M: SplatMethod>(
         let l = lists.list(t);
         &l[..opts.p_max.map_or(l.len(), |p| p.min(l.len()))]
     };
-    // Trip-count binning: the longest lists start first so they do not finish last.
+    // Trip-count binning: the longest lists start first so they do not finish last. One tile
+    // per task: rayon's default halving gave one worker the long lists and the other the short
+    // ones (1.3x on 2 threads instead of 1.9x on a trained 200x200 scene).
     let mut order: Vec<u32> = (0..grid.tile_count() as u32).collect();
     order.sort_by_key(|&t| std::cmp::Reverse(capped(t as usize).len()));
     let tiles: Vec<(u32, shade::TileOutput)> = order
         .par_iter()
+        .with_max_len(1)
         .map(|&t| {
             (
                 t,
