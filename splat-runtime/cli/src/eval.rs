@@ -4,12 +4,12 @@
 //! scene trained by `splat fit` or by another program (any INRIA 3DGS PLY).
 
 use crate::methods::{self, Method};
-use crate::view::Split;
+use crate::view::{Downscale, Split};
 use crate::{Backend, render};
 use anyhow::{Context, Result};
 use splat_runtime::RenderOptions;
 use splat_runtime::glam::Vec3;
-use splat_runtime::io::dataset::{self, Shot};
+use splat_runtime::io::dataset::Shot;
 use splat_runtime::io::image::stage_image;
 use splat_runtime::io::{Outputs, ply};
 use splat_runtime::train::fit::composite;
@@ -31,6 +31,8 @@ pub struct EvalArgs {
     /// Composite the renders and pictures on white instead of black (as `splat fit --white`).
     #[arg(long)]
     white: bool,
+    #[command(flatten)]
+    downscale: Downscale,
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     backend: Backend,
     /// Output folder: every view's render (`<split>/000.png`, ... in the dataset's order) and
@@ -49,7 +51,7 @@ struct Measured {
 pub(crate) fn eval_cmd(args: &EvalArgs, methods: &[Method]) -> Result<()> {
     let method = methods::find(methods, &args.method)?;
     let cloud = ply::read(&args.scene)?;
-    let shots = args.split.of(dataset::read_shots(&args.dataset)?);
+    let shots = args.split.of(args.downscale.read(&args.dataset)?);
     let split = args.split.name();
     if shots.is_empty() {
         anyhow::bail!("{}: no {split} views", args.dataset.display());

@@ -5,6 +5,7 @@
 
 use crate::interrupt::Listening;
 use crate::methods::{self, Method};
+use crate::view::Downscale;
 use crate::{plot, scene};
 use anyhow::{Context, Result, anyhow, bail};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -12,7 +13,7 @@ use plotters::prelude::*;
 use splat_runtime::glam::Vec3;
 use splat_runtime::gpu::Gpu;
 use splat_runtime::io::Outputs;
-use splat_runtime::io::dataset::{self, Dataset};
+use splat_runtime::io::dataset::Dataset;
 use splat_runtime::io::image::stage_image;
 use splat_runtime::io::ply::{self, GaussianCloud, ToStored};
 use splat_runtime::pipeline::MAX_SIDE;
@@ -35,6 +36,8 @@ pub struct FitArgs {
     /// starts from the model's points). Without one: the built-in dataset, 32 views of the
     /// built-in planet (112x84, rendered by 3DGS), which trains in under a minute on 2 cores.
     dataset: Option<PathBuf>,
+    #[command(flatten)]
+    downscale: Downscale,
     /// The method to train (one that implements `Trainable`).
     #[arg(long)]
     method: String,
@@ -181,10 +184,13 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
     let t = Instant::now();
     let (data, name, defaults) = match &args.dataset {
         Some(dir) => (
-            dataset::read(dir, background)?,
+            args.downscale.read(dir)?.load(background)?,
             dir.display().to_string(),
             DATASET_DEFAULTS,
         ),
+        None if args.downscale.factor != 1 => {
+            bail!("--downscale applies to a dataset's pictures, and none was given")
+        }
         None => {
             let (views, width, height) = scene::DATASET;
             (

@@ -5,7 +5,7 @@ use anyhow::{Result, bail};
 use splat_runtime::Camera;
 use splat_runtime::io::camera as camera_io;
 use splat_runtime::io::dataset::{self, Shot, Shots};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
 #[derive(clap::Args)]
@@ -18,6 +18,27 @@ pub struct CameraArgs {
     /// splits `splat fit` uses) [default: test/0].
     #[arg(long, requires = "camera")]
     pub view: Option<ViewPick>,
+    #[command(flatten)]
+    pub downscale: Downscale,
+}
+
+/// How much smaller than its pictures a dataset's views are taken.
+#[derive(clap::Args, Clone, Copy)]
+pub struct Downscale {
+    /// A dataset's views N times smaller on each side (gsplat's `data_factor`): from the
+    /// copies in `images_N` beside `images` where the dataset has them (COLMAP, nerfstudio),
+    /// else each picture averaged over N x N blocks as it is read; the intrinsics scale with
+    /// the size.
+    #[arg(long = "downscale", value_name = "N", default_value_t = 1,
+          value_parser = clap::value_parser!(u32).range(1..))]
+    pub factor: u32,
+}
+
+impl Downscale {
+    /// The posed pictures of the dataset in `dir`, downscaled.
+    pub fn read(self, dir: &Path) -> Result<Shots> {
+        Ok(dataset::read_shots(dir)?.downscaled(self.factor)?)
+    }
 }
 
 /// A dataset's held-out views or its training views, as `splat fit` splits them.
@@ -85,12 +106,21 @@ impl CameraArgs {
     /// The camera of `--camera` (a camera file, or a dataset's view `--view`), or `None`.
     pub fn read(&self) -> Result<Option<Given>> {
         let Some(path) = &self.camera else {
+            if self.downscale.factor != 1 {
+                bail!("--downscale applies to a dataset's views: give one with --camera DATASET");
+            }
             return Ok(None);
         };
         if !path.is_dir() {
             if let Some(pick) = self.view {
                 bail!(
                     "--view {pick} picks a view of a dataset, and {} is not a dataset folder",
+                    path.display()
+                );
+            }
+            if self.downscale.factor != 1 {
+                bail!(
+                    "--downscale applies to a dataset's views, and {} is not a dataset folder",
                     path.display()
                 );
             }
@@ -101,7 +131,7 @@ impl CameraArgs {
             split: Split::Test,
             index: 0,
         });
-        let mut shots = pick.split.of(dataset::read_shots(path)?);
+        let mut shots = pick.split.of(self.downscale.read(path)?);
         let (n, name) = (shots.len(), pick.split.name());
         if pick.index >= n {
             let which = match n {

@@ -10,7 +10,7 @@
 //! The files are untrusted: every count in a binary file is checked against the bytes left
 //! before anything is allocated, and every error names the file and the element.
 
-use super::dataset::{Dataset, DatasetError, Point, Shot, Shots, field, image_size};
+use super::dataset::{Dataset, DatasetError, Point, Shot, Shots, field, image_size, rescaled};
 use crate::types::{Camera, CameraModel};
 use glam::{DMat3, DQuat, DVec3, DVec4, Mat3, Vec2, Vec3, Vec4};
 use rayon::prelude::*;
@@ -232,22 +232,8 @@ impl Registered {
                 ),
             )
         })?;
-        Ok(Shot { path, camera })
+        Ok(Shot::new(path, camera))
     }
-}
-
-/// `camera` for a picture of `width` x `height` pixels (a downscaled copy, as in `images_4`):
-/// the focal lengths and principal point scale with the size. `None` when the aspect ratio
-/// differs by more than a pixel.
-fn rescaled(camera: &Camera, width: u32, height: u32) -> Option<Camera> {
-    let size = Vec2::new(width as f32, height as f32);
-    let scale = size / camera.size;
-    ((camera.size.y * scale.x - size.y).abs() <= 1.0).then(|| Camera {
-        focal: camera.focal * scale,
-        principal: camera.principal * scale,
-        size,
-        ..*camera
-    })
 }
 
 /// How many parameters COLMAP camera `model` has; refused for the models we cannot train on.

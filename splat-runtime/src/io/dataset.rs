@@ -12,8 +12,8 @@
 //! pictures in `images/`, read by [`colmap::read_colmap`]; it also gives the dataset an
 //! initial point cloud.
 //!
-//! RGBA images are composited on the chosen background. Every error names the file and the
-//! field.
+//! RGBA images are composited on the chosen background. Views can be taken smaller than
+//! their pictures ([`Shots::downscaled`]). Every error names the file and the field.
 
 use super::camera::NotRotation;
 use super::{Outputs, colmap};
@@ -63,22 +63,96 @@ impl View {
 #[derive(Clone, Debug)]
 pub struct Shot {
     pub path: PathBuf,
+    /// The view's camera: fitted to the picture's size, divided by `downscale`.
     pub camera: Camera,
+    /// The picture is box-averaged by this factor on load ([`Shot::downscaled`]; 1: used as
+    /// stored).
+    pub downscale: u32,
 }
 
 impl Shot {
-    /// The view: the picture decoded and composited on `background`.
+    /// A shot of the picture at `path`, used at its size, seen by `camera`.
+    pub fn new(path: PathBuf, camera: Camera) -> Shot {
+        Shot {
+            path,
+            camera,
+            downscale: 1,
+        }
+    }
+
+    /// The view `factor` times smaller on each side, as gsplat's `data_factor`: from the copy
+    /// of the picture in the sibling folder `<folder>_<factor>` where there is one (COLMAP's
+    /// and nerfstudio's `images_4`; it must be that size, give or take a pixel of rounding),
+    /// else box-averaged over `factor` x `factor` blocks on load, the right and bottom pixels
+    /// that fill no block dropped. The intrinsics scale with the size.
+    pub fn downscaled(self, factor: u32) -> Result<Shot, DatasetError> {
+        if factor <= 1 {
+            return Ok(self);
+        }
+        let full = self.camera.size;
+        let want = full / factor as f32;
+        if let Some(copy) = self.copy_at(factor) {
+            let (width, height) = image_size(&copy)?;
+            let size = Vec2::new(width as f32, height as f32);
+            let camera = rescaled(&self.camera, width, height)
+                .filter(|_| (size - want).abs().max_element() <= 1.0)
+                .ok_or_else(|| {
+                    let problem = format!(
+                        "{width}x{height} is not {} downscaled {factor}x (about {}x{})",
+                        self.path.display(),
+                        want.x.round(),
+                        want.y.round()
+                    );
+                    field(&copy, "size", problem)
+                })?;
+            return Ok(Shot::new(copy, camera));
+        }
+        let size = want.floor();
+        if size.min_element() < 1.0 {
+            let problem = format!(
+                "{}x{} pixels cannot be downscaled {factor}x",
+                full.x, full.y
+            );
+            return Err(field(&self.path, "size", problem));
+        }
+        let camera = Camera {
+            focal: self.camera.focal / factor as f32,
+            principal: self.camera.principal / factor as f32,
+            size,
+            ..self.camera
+        };
+        Ok(Shot {
+            camera,
+            downscale: factor,
+            ..self
+        })
+    }
+
+    /// The picture's copy in `<folder>_<factor>` beside its folder, if there is one.
+    fn copy_at(&self, factor: u32) -> Option<PathBuf> {
+        let folder = self.path.parent()?;
+        let name = format!("{}_{factor}", folder.file_name()?.to_str()?);
+        let copy = folder.with_file_name(name).join(self.path.file_name()?);
+        copy.is_file().then_some(copy)
+    }
+
+    /// The view: the picture decoded, downscaled and composited on `background`.
     pub fn load(&self, background: Vec3) -> Result<View, DatasetError> {
         let (image, coverage) = read_image(&self.path, background)?;
+        let decoded = (image.width, image.height);
+        let (image, coverage) = match self.downscale {
+            1 => (image, coverage),
+            f => box_averaged(&image, coverage.as_deref(), f),
+        };
         let size = Vec2::new(image.width as f32, image.height as f32);
         if size != self.camera.size {
-            let header = self.camera.size;
+            let header = self.camera.size * self.downscale as f32;
             return Err(field(
                 &self.path,
                 "size",
                 format!(
                     "decodes to {}x{} pixels, but its camera is {}x{} (its header's size when the dataset was read)",
-                    size.x, size.y, header.x, header.y
+                    decoded.0, decoded.1, header.x, header.y
                 ),
             ));
         }
@@ -113,6 +187,20 @@ impl Shots {
         Ok(Dataset {
             train: load(&self.train)?,
             test: load(&self.test)?,
+            points: self.points,
+        })
+    }
+
+    /// Every view `factor` times smaller on each side ([`Shot::downscaled`]).
+    pub fn downscaled(self, factor: u32) -> Result<Shots, DatasetError> {
+        let down = |shots: Vec<Shot>| {
+            (shots.into_par_iter())
+                .map(|shot| shot.downscaled(factor))
+                .collect::<Result<Vec<_>, _>>()
+        };
+        Ok(Shots {
+            train: down(self.train)?,
+            test: down(self.test)?,
             points: self.points,
         })
     }
@@ -490,10 +578,7 @@ fn nerfstudio_shots(dir: &Path) -> Result<Shots, DatasetError> {
             ..posed_camera(&c2w, focal, (width, height))
                 .map_err(|problem| field(&path, at("transform_matrix"), problem))?
         };
-        shots.push(Shot {
-            path: image_path,
-            camera,
-        });
+        shots.push(Shot::new(image_path, camera));
     }
     Ok(Shots::every_8th_held_out(shots, Vec::new()))
 }
@@ -548,12 +633,23 @@ fn split_shots(path: &Path) -> Result<Vec<Shot>, DatasetError> {
         let focal = 0.5 * dims.0 as f32 / (0.5 * angle as f32).tan();
         let camera = posed_camera(&c2w, Vec2::splat(focal), dims)
             .map_err(|problem| field(path, at("transform_matrix"), problem))?;
-        shots.push(Shot {
-            path: image_path,
-            camera,
-        });
+        shots.push(Shot::new(image_path, camera));
     }
     Ok(shots)
+}
+
+/// `camera` for a picture of `width` x `height` pixels (a downscaled copy, as in `images_4`):
+/// the focal lengths and principal point scale with the size. `None` when the aspect ratio
+/// differs by more than a pixel.
+pub(super) fn rescaled(camera: &Camera, width: u32, height: u32) -> Option<Camera> {
+    let size = Vec2::new(width as f32, height as f32);
+    let scale = size / camera.size;
+    ((camera.size.y * scale.x - size.y).abs() <= 1.0).then(|| Camera {
+        focal: camera.focal * scale,
+        principal: camera.principal * scale,
+        size,
+        ..*camera
+    })
 }
 
 /// `dir` joined with a frame's `file_path`, without the `./` such paths often start with.
@@ -627,6 +723,40 @@ fn image_error(path: &Path, error: image::ImageError) -> DatasetError {
             error,
         },
     }
+}
+
+/// `image` (RGB) and its `coverage` averaged over blocks of `factor` x `factor` pixels, the
+/// right and bottom pixels that fill no block dropped. The average of pictures composited on
+/// one background is the average picture composited on it, so [`View::on`] still holds.
+fn box_averaged(image: &Image, coverage: Option<&[f32]>, factor: u32) -> (Image, Option<Vec<f32>>) {
+    let (f, w) = (factor as usize, image.width as usize);
+    let (width, height) = (image.width / factor, image.height / factor);
+    let average = |values: &[f32], channels: usize| -> Vec<f32> {
+        let mut out = vec![0.0f32; width as usize * height as usize * channels];
+        let norm = 1.0 / (f * f) as f32;
+        for (y, row) in out.chunks_exact_mut(width as usize * channels).enumerate() {
+            for (x, px) in row.chunks_exact_mut(channels).enumerate() {
+                for dy in 0..f {
+                    let start = ((y * f + dy) * w + x * f) * channels;
+                    for (i, v) in values[start..start + f * channels].iter().enumerate() {
+                        px[i % channels] += v;
+                    }
+                }
+                px.iter_mut().for_each(|v| *v *= norm);
+            }
+        }
+        out
+    };
+    let image = Image {
+        width,
+        height,
+        channels: 3,
+        data: average(&image.data, 3),
+    };
+    let coverage = coverage
+        .map(|c| average(c, 1))
+        .filter(|c| c.iter().any(|a| *a < 1.0));
+    (image, coverage)
 }
 
 /// An image as RGB in [0, 1], alpha composited on `background`, and its alpha unless opaque.
@@ -774,6 +904,116 @@ mod tests {
         let err = shots.test[0].load(Vec3::ZERO).unwrap_err().to_string();
         assert!(
             err.contains("r_0.png: size decodes to 12x8 pixels, but its camera is 30x20"),
+            "{err}"
+        );
+    }
+
+    /// `Shots::downscaled`: box averages of the composited picture and its coverage, the
+    /// intrinsics over the factor, the pixels that fill no block dropped; a copy in
+    /// `<folder>_<factor>` taken instead where there is one, and refused when its size is not
+    /// the factor's.
+    #[test]
+    fn views_are_downscaled_by_box_averages_or_taken_from_their_copies() {
+        let dir = tempfile::tempdir().unwrap();
+        let eyes = [Vec3::new(3.0, 1.0, -2.0), Vec3::new(-2.5, -0.5, 2.0)];
+        let data = Dataset {
+            train: eyes.iter().map(|e| view(*e, Vec3::ZERO)).collect(),
+            test: vec![view(Vec3::new(0.5, 2.0, 3.0), Vec3::ZERO)],
+            points: vec![],
+        };
+        write_blender(dir.path(), &data).unwrap();
+        let full = read(dir.path(), Vec3::ZERO).unwrap();
+        let (big, f) = (&full.train[1], 4usize);
+        let shot = read_shots(dir.path()).unwrap().downscaled(4).unwrap().train[1].clone();
+        let small = shot.load(Vec3::ZERO).unwrap();
+        // 30 x 20 over 4: 7 x 5, the last two columns dropped.
+        assert_eq!((small.image.width, small.image.height), (7, 5));
+        assert_eq!(small.camera.size, Vec2::new(7.0, 5.0));
+        assert_eq!(small.camera.focal, big.camera.focal / 4.0);
+        assert_eq!(small.camera.principal, big.camera.principal / 4.0);
+        assert_eq!(small.camera.rotation, big.camera.rotation);
+        let block_mean = |values: &[f32], channels: usize, x: usize, y: usize, c: usize| {
+            let mut sum = 0.0f64;
+            for dy in 0..f {
+                for dx in 0..f {
+                    sum += values[((y * f + dy) * 30 + x * f + dx) * channels + c] as f64;
+                }
+            }
+            sum / (f * f) as f64
+        };
+        let big_coverage = big.coverage.as_ref().unwrap();
+        let small_coverage = small.coverage.as_ref().unwrap();
+        for y in 0..5 {
+            for x in 0..7 {
+                for c in 0..3 {
+                    let got = small.image.data[(y * 7 + x) * 3 + c] as f64;
+                    let want = block_mean(&big.image.data, 3, x, y, c);
+                    assert!((got - want).abs() < 1e-6, "({x}, {y}) {c}: {got} vs {want}");
+                }
+                let got = small_coverage[y * 7 + x] as f64;
+                let want = block_mean(big_coverage, 1, x, y, 0);
+                assert!(
+                    (got - want).abs() < 1e-6,
+                    "({x}, {y}) coverage: {got} vs {want}"
+                );
+            }
+        }
+        // Averaging commutes with compositing: loaded on white is the black one moved to white.
+        let white = shot.load(Vec3::ONE).unwrap();
+        for (a, b) in white.image.data.iter().zip(&small.on(Vec3::ONE).data) {
+            assert!((a - b).abs() < 1e-6, "{a} vs {b}");
+        }
+        // A copy half the size in train_2 is taken as it is, for the view it copies only.
+        let copy = Image {
+            width: 15,
+            height: 10,
+            channels: 3,
+            data: vec![0.25; 15 * 10 * 3],
+        };
+        let copy_path = dir.path().join("train_2/r_0.png");
+        std::fs::create_dir(dir.path().join("train_2")).unwrap();
+        super::super::image::write_image(&copy_path, &copy).unwrap();
+        let shots = read_shots(dir.path()).unwrap().downscaled(2).unwrap();
+        let (taken, averaged) = (&shots.train[0], &shots.train[1]);
+        assert_eq!((&taken.path, taken.downscale), (&copy_path, 1));
+        assert_eq!(taken.camera.focal, full.train[0].camera.focal / 2.0);
+        assert_eq!(taken.camera.size, Vec2::new(15.0, 10.0));
+        assert!(
+            taken
+                .load(Vec3::ZERO)
+                .unwrap()
+                .image
+                .data
+                .iter()
+                .all(|v| (v - 0.25).abs() < 0.01)
+        );
+        assert_eq!(averaged.downscale, 2);
+        assert_eq!(averaged.load(Vec3::ZERO).unwrap().image.width, 15);
+        // A copy of another size is refused by name.
+        let wrong = Image {
+            width: 12,
+            height: 8,
+            channels: 3,
+            data: vec![0.25; 12 * 8 * 3],
+        };
+        super::super::image::write_image(&copy_path, &wrong).unwrap();
+        let err = read_shots(dir.path())
+            .unwrap()
+            .downscaled(2)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("train_2/r_0.png: size 12x8 is not") && err.contains("(about 15x10)"),
+            "{err}"
+        );
+        // A factor larger than the picture.
+        let err = read_shots(dir.path())
+            .unwrap()
+            .downscaled(32)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("30x20 pixels cannot be downscaled 32x"),
             "{err}"
         );
     }
