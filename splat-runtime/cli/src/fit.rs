@@ -468,7 +468,8 @@ impl Fit<'_> {
                 bar.set_message(status);
             }
         };
-        // Ctrl-C during the steps ends the run after the step in progress, with its checkpoint.
+        // Ctrl-C or SIGTERM during the steps ends the run after the step in progress, with its
+        // checkpoint.
         let listening = crate::interrupt::listen();
         let opts = &FitOptions {
             stop: listening.as_ref().map(Listening::flag),
@@ -484,6 +485,7 @@ impl Fit<'_> {
                 "the CPU".to_string()
             }
         };
+        let stopped_by = listening.as_ref().and_then(Listening::stopped_by);
         drop(listening);
         let stopped = state.step < opts.steps;
         match stopped {
@@ -500,7 +502,8 @@ impl Fit<'_> {
                 None => "nothing was saved (--checkpoint-every 0)".to_string(),
             };
             bail!(
-                "stopped by Ctrl-C after step {} of {}; {kept}",
+                "stopped by {} after step {} of {}; {kept}",
+                stopped_by.unwrap_or("a signal"),
                 state.step,
                 opts.steps
             );

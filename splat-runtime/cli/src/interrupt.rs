@@ -1,24 +1,35 @@
-//! Ctrl-C for work that can end cleanly (`splat fit` saves its checkpoint). While a run
-//! listens, the first Ctrl-C sets its flag and a second ends the process; when nothing
-//! listens, Ctrl-C ends the process at once, as without a handler. Only SIGINT is taken:
-//! SIGTERM and SIGHUP keep their effect (`nohup` still works), and a process started with
-//! SIGINT ignored (a background job) keeps ignoring it.
+//! Ctrl-C (SIGINT) and SIGTERM (what a batch scheduler sends at a job's time limit or on
+//! preemption) for work that can end cleanly (`splat fit` saves its checkpoint). While a run
+//! listens, the first such signal sets its flag and a second ends the process; when nothing
+//! listens, either ends the process at once, as without a handler. SIGHUP keeps its effect
+//! (`nohup` still works), and a signal the process was started with ignored (SIGINT in a
+//! background job) stays ignored.
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicI32, AtomicPtr, Ordering};
 use std::sync::{Arc, OnceLock};
 
-/// Exit status of a process ended by SIGINT, as shells report it.
-const INTERRUPTED: i32 = 130;
-
 static LISTENING: AtomicBool = AtomicBool::new(false);
+/// The listening run's flag (set once, never freed), for the SIGTERM handler.
+static FLAG: AtomicPtr<AtomicBool> = AtomicPtr::new(std::ptr::null_mut());
+/// The signal that set the flag.
+static RECEIVED: AtomicI32 = AtomicI32::new(0);
 
-/// A run listening for Ctrl-C until dropped.
+/// A run listening for Ctrl-C and SIGTERM until dropped.
 pub struct Listening(Arc<AtomicBool>);
 
 impl Listening {
-    /// Set once Ctrl-C was pressed during the run.
+    /// Set once a signal asked the run to stop.
     pub fn flag(&self) -> Arc<AtomicBool> {
         self.0.clone()
+    }
+
+    /// What asked the run to stop, in words ("Ctrl-C", "SIGTERM"), if anything did.
+    pub fn stopped_by(&self) -> Option<&'static str> {
+        match RECEIVED.load(Ordering::SeqCst) {
+            0 => None,
+            SIGTERM => Some("SIGTERM"),
+            _ => Some("Ctrl-C"),
+        }
     }
 }
 
@@ -28,40 +39,77 @@ impl Drop for Listening {
     }
 }
 
-/// Listens for Ctrl-C (the handler is installed on first use, its flag cleared); `None` where
-/// SIGINT is ignored or the program has a handler of its own.
+/// Listens for Ctrl-C and SIGTERM (the handlers are installed on first use, the flag
+/// cleared); `None` where neither can be taken (both ignored, or handlers of the program's
+/// own).
 pub fn listen() -> Option<Listening> {
-    static FLAG: OnceLock<Option<Arc<AtomicBool>>> = OnceLock::new();
-    let flag = FLAG.get_or_init(|| {
-        if sigint_ignored() {
-            return None;
-        }
+    static INSTALLED: OnceLock<Option<Arc<AtomicBool>>> = OnceLock::new();
+    let flag = INSTALLED.get_or_init(|| {
         let flag = Arc::new(AtomicBool::new(false));
-        let seen = flag.clone();
-        let installed = ctrlc::set_handler(move || {
-            if !LISTENING.load(Ordering::SeqCst) || seen.swap(true, Ordering::SeqCst) {
-                std::process::exit(INTERRUPTED);
-            }
-        });
-        installed.is_ok().then_some(flag)
+        FLAG.store(Arc::as_ptr(&flag).cast_mut(), Ordering::SeqCst);
+        let interrupt = !ignored(libc::SIGINT)
+            && ctrlc::set_handler(|| stop(libc::SIGINT, || std::process::exit(128 + libc::SIGINT)))
+                .is_ok();
+        let terminate = !ignored(SIGTERM) && on_sigterm();
+        (interrupt || terminate).then_some(flag)
     });
     let flag = flag.clone()?;
     flag.store(false, Ordering::SeqCst);
+    RECEIVED.store(0, Ordering::SeqCst);
     LISTENING.store(true, Ordering::SeqCst);
     Some(Listening(flag))
 }
 
+const SIGTERM: i32 = libc::SIGTERM;
+
+/// A signal's effect: set the listening run's flag, or, when nothing listens or the flag was
+/// already set, `exit`. Only atomics, so it may run inside a signal handler.
+fn stop(signal: i32, exit: impl Fn()) {
+    if !LISTENING.load(Ordering::SeqCst) {
+        exit();
+    }
+    let _ = RECEIVED.compare_exchange(0, signal, Ordering::SeqCst, Ordering::SeqCst);
+    // SAFETY: FLAG points into an Arc that a static holds for the rest of the process.
+    let flag = unsafe { FLAG.load(Ordering::SeqCst).as_ref() };
+    if flag.is_none_or(|f| f.swap(true, Ordering::SeqCst)) {
+        exit();
+    }
+}
+
+/// Installs the SIGTERM handler; false where it could not be.
 #[cfg(unix)]
-fn sigint_ignored() -> bool {
-    // SAFETY: reads the current action of SIGINT without changing it.
+fn on_sigterm() -> bool {
+    extern "C" fn handler(_: libc::c_int) {
+        // SAFETY: _exit is async-signal-safe.
+        stop(SIGTERM, || unsafe { libc::_exit(128 + SIGTERM) });
+    }
+    // SAFETY: installs a handler that only touches atomics and calls _exit.
+    unsafe {
+        let mut action: libc::sigaction = std::mem::zeroed();
+        action.sa_sigaction = handler as *const () as usize;
+        action.sa_flags = libc::SA_RESTART;
+        libc::sigemptyset(&mut action.sa_mask);
+        libc::sigaction(SIGTERM, &action, std::ptr::null_mut()) == 0
+    }
+}
+
+#[cfg(not(unix))]
+fn on_sigterm() -> bool {
+    false
+}
+
+/// Whether `signal` is ignored (as a background job's SIGINT is).
+#[cfg(unix)]
+fn ignored(signal: i32) -> bool {
+    // SAFETY: reads the current action of `signal` without changing it.
     unsafe {
         let mut old: libc::sigaction = std::mem::zeroed();
-        libc::sigaction(libc::SIGINT, std::ptr::null(), &mut old) == 0
+        libc::sigaction(signal, std::ptr::null(), &mut old) == 0
             && old.sa_sigaction == libc::SIG_IGN
     }
 }
 
 #[cfg(not(unix))]
-fn sigint_ignored() -> bool {
+fn ignored(_: i32) -> bool {
     false
 }

@@ -708,8 +708,9 @@ fn step_times_add_up(stdout: &str) {
 }
 
 /// Ctrl-C during `splat fit` ends the run after the step in progress with its checkpoint and
-/// metrics saved (and no result written); `--resume` goes on from that step. On both loops
-/// (the GPU's where there is an adapter).
+/// metrics saved (and no result written); `--resume` goes on from that step, and SIGTERM (a
+/// batch scheduler's stop) ends it as Ctrl-C does. On both loops (the GPU's where there is an
+/// adapter).
 #[cfg(unix)]
 #[test]
 fn an_interrupted_fit_saves_its_checkpoint_and_resumes_from_it() {
@@ -733,17 +734,17 @@ fn an_interrupted_fit_saves_its_checkpoint_and_resumes_from_it() {
             "--out",
             backend,
         ];
-        // Runs `fit`, sends SIGINT at its first progress line: the step the stop message
+        // Runs `fit`, sends `signal` at its first progress line: the step the stop message
         // names, or None where there is no GPU adapter.
-        let interrupted = |extra: &[&str]| -> Option<usize> {
+        let interrupted = |extra: &[&str], signal: i32| -> Option<usize> {
             use std::os::unix::process::CommandExt;
             let mut command = Command::new(env!("CARGO_BIN_EXE_splat"));
             // SAFETY: only resets a signal's action between fork and exec. A test run
             // started in the background (`cmd &`) ignores SIGINT, and `fit` keeps an
             // ignored SIGINT ignored, as it should: the child gets the default back.
             unsafe {
-                command.pre_exec(|| {
-                    libc::signal(libc::SIGINT, libc::SIG_DFL);
+                command.pre_exec(move || {
+                    libc::signal(signal, libc::SIG_DFL);
                     Ok(())
                 });
             }
@@ -761,7 +762,7 @@ fn an_interrupted_fit_saves_its_checkpoint_and_resumes_from_it() {
                 .find(|l| l.starts_with("step "));
             if first.is_some() {
                 // SAFETY: a plain signal to the child's pid.
-                assert_eq!(unsafe { libc::kill(child.id() as i32, libc::SIGINT) }, 0);
+                assert_eq!(unsafe { libc::kill(child.id() as i32, signal) }, 0);
             }
             lines.for_each(drop);
             let mut stderr = String::new();
@@ -780,7 +781,13 @@ fn an_interrupted_fit_saves_its_checkpoint_and_resumes_from_it() {
                 assert!(std::env::var("SPLAT_REQUIRE_GPU").map_or(true, |v| v != "1"));
                 return None;
             }
-            let step: usize = (stderr.split("stopped by Ctrl-C after step ").nth(1))
+            let name = if signal == libc::SIGTERM {
+                "SIGTERM"
+            } else {
+                "Ctrl-C"
+            };
+            let stop = format!("stopped by {name} after step ");
+            let step: usize = (stderr.split(&stop).nth(1))
                 .and_then(|rest| rest.split(' ').next())
                 .and_then(|k| k.parse().ok())
                 .unwrap_or_else(|| panic!("no stop message in {stderr}"));
@@ -800,7 +807,7 @@ fn an_interrupted_fit_saves_its_checkpoint_and_resumes_from_it() {
             assert_eq!(steps, (0..steps.len()).collect::<Vec<_>>());
             steps.len() - 1
         };
-        let Some(first) = interrupted(&[]) else {
+        let Some(first) = interrupted(&[], libc::SIGINT) else {
             continue;
         };
         assert!(first < steps.parse().unwrap(), "{backend}");
@@ -811,7 +818,7 @@ fn an_interrupted_fit_saves_its_checkpoint_and_resumes_from_it() {
         );
         assert_eq!(last_row(), first);
         // Resumed, it goes on from there: its metrics continue the first run's, row for row.
-        let second = interrupted(&["--resume"]).unwrap();
+        let second = interrupted(&["--resume"], libc::SIGTERM).unwrap();
         assert!(second > first, "{backend}: {second} after {first}");
         assert_eq!(last_row(), second);
     }

@@ -70,7 +70,7 @@ pub enum GpuError {
     #[error("reading results back failed: {0}")]
     Readback(String),
     #[error(
-        "{what} needs a {bytes}-byte buffer, over this GPU's limit of {limit} bytes: lower the resolution or the number of primitives"
+        "{what} needs a {bytes}-byte buffer, over this GPU's limit of {limit} bytes: lower the resolution (`--downscale` for a dataset) or the number of primitives"
     )]
     TooLarge {
         what: &'static str,
