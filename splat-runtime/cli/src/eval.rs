@@ -52,6 +52,7 @@ pub(crate) fn eval_cmd(args: &EvalArgs, methods: &[Method]) -> Result<()> {
     let method = methods::find(methods, &args.method)?;
     let cloud = ply::read(&args.scene)?;
     let shots = args.split.of(args.downscale.read(&args.dataset)?);
+    let taken = args.downscale.how(&shots);
     let split = args.split.name();
     if shots.is_empty() {
         anyhow::bail!("{}: no {split} views", args.dataset.display());
@@ -92,13 +93,15 @@ pub(crate) fn eval_cmd(args: &EvalArgs, methods: &[Method]) -> Result<()> {
     let n = measured.len() as f64;
     let mean = |f: fn(&Measured) -> f64| measured.iter().map(|m| f(m) / n).sum::<f64>();
     println!(
-        "{} on {place}: {} primitives (SH degree {}) from {}, {} {split} views of {}",
+        "{} on {place}: {} primitives (SH degree {}) from {}, {} {split} views of {}, {}x{}{taken}",
         method.name,
         cloud.gaussians.len(),
         cloud.sh_degree,
         args.scene.display(),
         measured.len(),
         args.dataset.display(),
+        measured[0].shot.camera.size.x,
+        measured[0].shot.camera.size.y,
     );
     println!(
         "mean PSNR {:.2} dB, SSIM {:.4} (on {})",

@@ -182,12 +182,13 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
     crate::check_out_folder(&args.out)?;
     let background = if args.white { Vec3::ONE } else { Vec3::ZERO };
     let t = Instant::now();
-    let (data, name, defaults) = match &args.dataset {
-        Some(dir) => (
-            args.downscale.read(dir)?.load(background)?,
-            dir.display().to_string(),
-            DATASET_DEFAULTS,
-        ),
+    let (data, name, defaults, taken) = match &args.dataset {
+        Some(dir) => {
+            let shots = args.downscale.read(dir)?;
+            let taken = args.downscale.how(shots.train.iter().chain(&shots.test));
+            let name = dir.display().to_string();
+            (shots.load(background)?, name, DATASET_DEFAULTS, taken)
+        }
         None if args.downscale.factor != 1 => {
             bail!("--downscale applies to a dataset's pictures, and none was given")
         }
@@ -197,6 +198,7 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
                 scene::dataset(views, width, height, background)?,
                 "the built-in dataset".to_string(),
                 BUILT_IN_DEFAULTS,
+                String::new(),
             )
         }
     };
@@ -264,7 +266,7 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
     let first = &data.train[0];
     methods::check_camera(method, methods, &first.camera)?;
     println!(
-        "{name}: {} training and {} test views of {}x{}, read in {:.1} s",
+        "{name}: {} training and {} test views of {}x{}{taken}, read in {:.1} s",
         data.train.len(),
         data.test.len(),
         first.image.width,

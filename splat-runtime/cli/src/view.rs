@@ -39,6 +39,29 @@ impl Downscale {
     pub fn read(self, dir: &Path) -> Result<Shots> {
         Ok(dataset::read_shots(dir)?.downscaled(self.factor)?)
     }
+
+    /// How `shots` were made smaller, for a report: " (from images_4)", " (pictures
+    /// averaged over 4x4 blocks)", both with counts, or nothing at full size.
+    pub fn how<'a>(self, shots: impl IntoIterator<Item = &'a Shot>) -> String {
+        let f = self.factor;
+        let shots: Vec<&Shot> = shots.into_iter().collect();
+        let all = || shots.iter().copied();
+        let copies: Vec<&Shot> = all().filter(|s| s.downscale < f).collect();
+        let folder = |s: &Shot| {
+            let parent = s.path.parent().and_then(Path::file_name);
+            parent.map_or_else(String::new, |p| p.to_string_lossy().into_owned())
+        };
+        let averaged = format!("averaged over {f}x{f} blocks");
+        match (copies.first(), copies.len()) {
+            _ if f == 1 => String::new(),
+            (None, _) => format!(" (pictures {averaged})"),
+            (Some(c), n) if n == all().count() => format!(" (from {})", folder(c)),
+            (Some(c), n) => {
+                let rest = all().count() - n;
+                format!(" ({n} from {}, {rest} {averaged})", folder(c))
+            }
+        }
+    }
 }
 
 /// A dataset's held-out views or its training views, as `splat fit` splits them.
