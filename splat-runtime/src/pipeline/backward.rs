@@ -12,9 +12,8 @@
 
 use super::ForwardState;
 use super::RenderError;
-use super::groups::GroupEntries;
 use super::precision::{Precision, Stored};
-use super::shade::{counts, group_pixels};
+use super::shade::{counts, group_pixels, misses_group};
 use crate::flat::Flat;
 use crate::lanes::{F32x8, LANES, M32x8};
 use crate::method::SplatMethod;
@@ -160,13 +159,9 @@ fn backward_tile_body<M: SplatMethod, const MODEL: u32>(
     let mut shade_lanes = vec![M::ShadeLanes::default(); list.len()];
     let mut shades = state.pre.tile_shades(list);
     let mut depth_lanes = vec![F32x8::splat(0.0); if want_depth { list.len() } else { 0 }];
-    // The entries each pixel group meets, up to the farthest any pixel of the tile took.
-    let reach = tile_reach(state, tx * s, ty * s, s);
-    let groups = GroupEntries::of(&state.pre.projected, &list[..reach], tx * s, ty * s, s);
     for row in 0..s {
         for gx in (0..s).step_by(LANES) {
             let (x0, y) = (tx * s + gx, ty * s + row);
-            let met = groups.group((row * s + gx) as usize / LANES);
             let (pixels, inside) = group_pixels::<M, MODEL>(grid, camera, x0, y);
             // Per-lane image index, clamped for lanes past the edge (they are masked out).
             let px = |l: usize| {
@@ -205,11 +200,12 @@ fn backward_tile_body<M: SplatMethod, const MODEL: u32>(
             let mut seen = M32x8::splat(false);
             let (mut behind, mut reference) = (M::ColorLanes::default(), M::ColorLanes::default());
             let (mut depth_behind, mut depth_reference) = (F32x8::splat(0.0), F32x8::splat(0.0));
-            let walked = ends.iter().max().copied().unwrap_or(0);
-            let met = &met[..met.partition_point(|&k| k < walked)];
-            for &k in met.iter().rev() {
-                let k = k as usize;
+            let walked = ends.iter().max().copied().unwrap_or(0) as usize;
+            for k in (0..walked).rev() {
                 let p = &state.pre.projected[list[k] as usize];
+                if misses_group(p, x0, y) {
+                    continue;
+                }
                 let shade = shades.get(k);
                 let c = M::evaluate_lanes(&pixels, shade);
                 let before_end = M32x8::from(std::array::from_fn(|l| (k as u32) < ends[l]));
@@ -288,18 +284,6 @@ fn backward_tile_body<M: SplatMethod, const MODEL: u32>(
             acc.depth.add(p, depth_lanes[k].masked_sum(all) * acc.scale);
         }
     }
-}
-
-/// How far into its list any pixel of the tile from `(x0, y0)` walked: the backward walk
-/// starts no farther.
-fn tile_reach<M: SplatMethod>(state: &ForwardState<M>, x0: u32, y0: u32, size: u32) -> usize {
-    let grid = &state.grid;
-    let (x1, y1) = ((x0 + size).min(grid.width), (y0 + size).min(grid.height));
-    let row = |y: u32| (y * grid.width) as usize;
-    (y0..y1)
-        .flat_map(|y| &state.ends[row(y) + x0 as usize..row(y) + x1 as usize])
-        .max()
-        .map_or(0, |&e| e as usize)
 }
 
 /// Adds the camera's cotangent through each inside lane's pixel data (`pixel_info`'s adjoint

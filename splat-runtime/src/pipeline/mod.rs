@@ -6,13 +6,11 @@
 //! 2. [`rasterize`]: per-tile depth-sorted lists (count, prefix sum, emit, sort, ranges).
 //! 3. [`shade`]: front-to-back blending per tile (rayon over tiles, 8 SIMD lanes over pixels),
 //!    tiles scheduled longest list first (trip-count binning).
-//! 4. [`backward`](mod@backward): the back-to-front backward blend (each pixel group walks
-//!    only the entries whose box meets it: [`groups`]), a per-primitive reduction, then
-//!    `project`'s adjoint per primitive.
+//! 4. [`backward`](mod@backward): the back-to-front backward blend, a per-primitive
+//!    reduction, then `project`'s adjoint per primitive.
 
 pub mod backward;
 pub mod grid;
-pub mod groups;
 pub mod precision;
 pub mod preprocess;
 pub mod rasterize;
