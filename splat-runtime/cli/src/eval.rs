@@ -9,7 +9,7 @@ use crate::{Backend, render};
 use anyhow::{Context, Result};
 use splat_runtime::RenderOptions;
 use splat_runtime::glam::Vec3;
-use splat_runtime::io::dataset::Shot;
+use splat_runtime::io::dataset::{self, Shot};
 use splat_runtime::io::image::stage_image;
 use splat_runtime::io::{Outputs, ply};
 use splat_runtime::train::fit::composite;
@@ -51,7 +51,7 @@ struct Measured {
 pub(crate) fn eval_cmd(args: &EvalArgs, methods: &[Method]) -> Result<()> {
     let method = methods::find(methods, &args.method)?;
     let cloud = ply::read(&args.scene)?;
-    let shots = args.split.of(args.downscale.read(&args.dataset)?);
+    let shots = (args.downscale).apply(args.split.of(dataset::read_shots(&args.dataset)?))?;
     let taken = args.downscale.how(&shots);
     let split = args.split.name();
     if shots.is_empty() {
@@ -93,15 +93,14 @@ pub(crate) fn eval_cmd(args: &EvalArgs, methods: &[Method]) -> Result<()> {
     let n = measured.len() as f64;
     let mean = |f: fn(&Measured) -> f64| measured.iter().map(|m| f(m) / n).sum::<f64>();
     println!(
-        "{} on {place}: {} primitives (SH degree {}) from {}, {} {split} views of {}, {}x{}{taken}",
+        "{} on {place}: {} primitives (SH degree {}) from {}, {} {split} views of {}, {}{taken}",
         method.name,
         cloud.gaussians.len(),
         cloud.sh_degree,
         args.scene.display(),
         measured.len(),
         args.dataset.display(),
-        measured[0].shot.camera.size.x,
-        measured[0].shot.camera.size.y,
+        sizes(&measured),
     );
     println!(
         "mean PSNR {:.2} dB, SSIM {:.4} (on {})",
@@ -135,4 +134,18 @@ pub(crate) fn eval_cmd(args: &EvalArgs, methods: &[Method]) -> Result<()> {
         crate::wrote(out);
     }
     Ok(())
+}
+
+/// The views' size, or the range of their sizes when they differ.
+fn sizes(measured: &[Measured]) -> String {
+    let size = |m: &Measured| (m.shot.camera.size.x as u32, m.shot.camera.size.y as u32);
+    let (smallest, largest) = (
+        measured.iter().map(size).min(),
+        measured.iter().map(size).max(),
+    );
+    match (smallest, largest) {
+        (Some(a), Some(b)) if a == b => format!("{}x{}", a.0, a.1),
+        (Some(a), Some(b)) => format!("{}x{} to {}x{}", a.0, a.1, b.0, b.1),
+        _ => String::new(),
+    }
 }

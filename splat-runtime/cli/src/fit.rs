@@ -13,7 +13,7 @@ use plotters::prelude::*;
 use splat_runtime::glam::Vec3;
 use splat_runtime::gpu::Gpu;
 use splat_runtime::io::Outputs;
-use splat_runtime::io::dataset::Dataset;
+use splat_runtime::io::dataset::{self, Dataset};
 use splat_runtime::io::image::stage_image;
 use splat_runtime::io::ply::{self, GaussianCloud, ToStored};
 use splat_runtime::pipeline::MAX_SIDE;
@@ -184,7 +184,7 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
     let t = Instant::now();
     let (data, name, defaults, taken) = match &args.dataset {
         Some(dir) => {
-            let shots = args.downscale.read(dir)?;
+            let shots = dataset::read_shots(dir)?.downscaled(args.downscale.factor)?;
             let taken = args.downscale.how(shots.train.iter().chain(&shots.test));
             let name = dir.display().to_string();
             (shots.load(background)?, name, DATASET_DEFAULTS, taken)

@@ -45,7 +45,12 @@ impl Drop for Listening {
 pub fn listen() -> Option<Listening> {
     static INSTALLED: OnceLock<Option<Arc<AtomicBool>>> = OnceLock::new();
     let flag = INSTALLED.get_or_init(|| {
-        let flag = Arc::new(AtomicBool::new(false));
+        // Stored before the handlers can run; kept (in this static) whether or not they could
+        // be installed, so the pointer never dangles.
+        static KEPT: OnceLock<Arc<AtomicBool>> = OnceLock::new();
+        let flag = KEPT
+            .get_or_init(|| Arc::new(AtomicBool::new(false)))
+            .clone();
         FLAG.store(Arc::as_ptr(&flag).cast_mut(), Ordering::SeqCst);
         let interrupt = !ignored(libc::SIGINT)
             && ctrlc::set_handler(|| stop(libc::SIGINT, || std::process::exit(128 + libc::SIGINT)))

@@ -5,7 +5,7 @@ use anyhow::{Result, bail};
 use splat_runtime::Camera;
 use splat_runtime::io::camera as camera_io;
 use splat_runtime::io::dataset::{self, Shot, Shots};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::str::FromStr;
 
 #[derive(clap::Args)]
@@ -26,18 +26,19 @@ pub struct CameraArgs {
 #[derive(clap::Args, Clone, Copy)]
 pub struct Downscale {
     /// A dataset's views N times smaller on each side (gsplat's `data_factor`): from the
-    /// copies in `images_N` beside `images` where the dataset has them (COLMAP, nerfstudio),
-    /// else each picture averaged over N x N blocks as it is read; the intrinsics scale with
-    /// the size.
+    /// copies in a folder `<folder>_N` beside a picture's folder where there are some
+    /// (COLMAP's and nerfstudio's `images_N`, `train_N` in a Blender dataset), else each
+    /// picture averaged over N x N blocks as it is read; the intrinsics scale with the size.
     #[arg(long = "downscale", value_name = "N", default_value_t = 1,
           value_parser = clap::value_parser!(u32).range(1..))]
     pub factor: u32,
 }
 
 impl Downscale {
-    /// The posed pictures of the dataset in `dir`, downscaled.
-    pub fn read(self, dir: &Path) -> Result<Shots> {
-        Ok(dataset::read_shots(dir)?.downscaled(self.factor)?)
+    /// `shots` downscaled.
+    pub fn apply(self, shots: Vec<Shot>) -> Result<Vec<Shot>> {
+        let down = shots.into_iter().map(|s| s.downscaled(self.factor));
+        Ok(down.collect::<Result<_, _>>()?)
     }
 
     /// How `shots` were made smaller, for a report: " (from images_4)", " (pictures
@@ -47,19 +48,21 @@ impl Downscale {
         let shots: Vec<&Shot> = shots.into_iter().collect();
         let all = || shots.iter().copied();
         let copies: Vec<&Shot> = all().filter(|s| s.downscale < f).collect();
-        let folder = |s: &Shot| {
-            let parent = s.path.parent().and_then(Path::file_name);
-            parent.map_or_else(String::new, |p| p.to_string_lossy().into_owned())
-        };
-        let averaged = format!("averaged over {f}x{f} blocks");
-        match (copies.first(), copies.len()) {
-            _ if f == 1 => String::new(),
-            (None, _) => format!(" (pictures {averaged})"),
-            (Some(c), n) if n == all().count() => format!(" (from {})", folder(c)),
-            (Some(c), n) => {
-                let rest = all().count() - n;
-                format!(" ({n} from {}, {rest} {averaged})", folder(c))
+        // The copies' folders, in order of first use.
+        let mut folders: Vec<String> = vec![];
+        for parent in copies.iter().filter_map(|s| s.path.parent()?.file_name()) {
+            let parent = parent.to_string_lossy().into_owned();
+            if !folders.contains(&parent) {
+                folders.push(parent);
             }
+        }
+        let folders = folders.join(" and ");
+        let averaged = format!("averaged over {f}x{f} blocks");
+        match copies.len() {
+            _ if f == 1 => String::new(),
+            0 => format!(" (pictures {averaged})"),
+            n if n == all().count() => format!(" (from {folders})"),
+            n => format!(" ({n} from {folders}, {} {averaged})", all().count() - n),
         }
     }
 }
@@ -154,7 +157,7 @@ impl CameraArgs {
             split: Split::Test,
             index: 0,
         });
-        let mut shots = pick.split.of(self.downscale.read(path)?);
+        let mut shots = pick.split.of(dataset::read_shots(path)?);
         let (n, name) = (shots.len(), pick.split.name());
         if pick.index >= n {
             let which = match n {
@@ -167,7 +170,9 @@ impl CameraArgs {
                 path.display()
             );
         }
-        let shot = shots.swap_remove(pick.index);
+        let shot = shots
+            .swap_remove(pick.index)
+            .downscaled(self.downscale.factor)?;
         Ok(Some(Given {
             camera: shot.camera,
             shot: Some(shot),

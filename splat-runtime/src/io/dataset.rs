@@ -128,7 +128,10 @@ impl Shot {
         })
     }
 
-    /// The picture's copy in `<folder>_<factor>` beside its folder, if there is one.
+    /// The picture's copy in `<folder>_<factor>` beside its folder, if there is one
+    /// (`images_4/x.jpg` for `images/x.jpg`). Only beside the picture's own folder: a COLMAP
+    /// name with folders (`images/cam0/x.jpg`) is averaged, and a sibling dataset (`lego_2`
+    /// beside `lego`) is never mistaken for copies.
     fn copy_at(&self, factor: u32) -> Option<PathBuf> {
         let folder = self.path.parent()?;
         let name = format!("{}_{factor}", folder.file_name()?.to_str()?);
@@ -139,23 +142,27 @@ impl Shot {
     /// The view: the picture decoded, downscaled and composited on `background`.
     pub fn load(&self, background: Vec3) -> Result<View, DatasetError> {
         let (image, coverage) = read_image(&self.path, background)?;
-        let decoded = (image.width, image.height);
-        let (image, coverage) = match self.downscale {
-            1 => (image, coverage),
-            f => box_averaged(&image, coverage.as_deref(), f),
-        };
-        let size = Vec2::new(image.width as f32, image.height as f32);
-        if size != self.camera.size {
-            let header = self.camera.size * self.downscale as f32;
+        // Checked before averaging: a picture narrower than a block has nothing to average.
+        let (f, camera) = (self.downscale, self.camera.size);
+        let (w, h) = (image.width, image.height);
+        if Vec2::new((w / f) as f32, (h / f) as f32) != camera {
+            let downscaled = match f {
+                1 => String::new(),
+                f => format!(" ({}x{} downscaled {f}x)", w / f, h / f),
+            };
             return Err(field(
                 &self.path,
                 "size",
                 format!(
-                    "decodes to {}x{} pixels, but its camera is {}x{} (its header's size when the dataset was read)",
-                    decoded.0, decoded.1, header.x, header.y
+                    "decodes to {w}x{h} pixels{downscaled}, but its camera is {}x{} (from its header's size when the dataset was read)",
+                    camera.x, camera.y
                 ),
             ));
         }
+        let (image, coverage) = match f {
+            1 => (image, coverage),
+            f => box_averaged(&image, coverage.as_deref(), f),
+        };
         Ok(View {
             name: self.path.display().to_string(),
             camera: self.camera,
@@ -1014,6 +1021,20 @@ mod tests {
             .to_string();
         assert!(
             err.contains("30x20 pixels cannot be downscaled 32x"),
+            "{err}"
+        );
+        // A picture that shrank after the dataset was read to less than a block.
+        let shot = read_shots(dir.path()).unwrap().downscaled(4).unwrap().train[1].clone();
+        let tiny = Image {
+            width: 2,
+            height: 2,
+            channels: 3,
+            data: vec![0.5; 2 * 2 * 3],
+        };
+        super::super::image::write_image(&dir.path().join("train/r_1.png"), &tiny).unwrap();
+        let err = shot.load(Vec3::ZERO).unwrap_err().to_string();
+        assert!(
+            err.contains("decodes to 2x2 pixels (0x0 downscaled 4x), but its camera is 7x5"),
             "{err}"
         );
     }
