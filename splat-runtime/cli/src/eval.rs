@@ -51,7 +51,8 @@ struct Measured {
 pub(crate) fn eval_cmd(args: &EvalArgs, methods: &[Method]) -> Result<()> {
     let method = methods::find(methods, &args.method)?;
     let cloud = ply::read(&args.scene)?;
-    let shots = (args.downscale).apply(args.split.of(dataset::read_shots(&args.dataset)?))?;
+    let shots = args.split.of(dataset::read_shots(&args.dataset)?);
+    let shots = dataset::downscaled(shots, args.downscale.factor)?;
     let taken = args.downscale.how(&shots);
     let split = args.split.name();
     if shots.is_empty() {

@@ -35,12 +35,6 @@ pub struct Downscale {
 }
 
 impl Downscale {
-    /// `shots` downscaled.
-    pub fn apply(self, shots: Vec<Shot>) -> Result<Vec<Shot>> {
-        let down = shots.into_iter().map(|s| s.downscaled(self.factor));
-        Ok(down.collect::<Result<_, _>>()?)
-    }
-
     /// How `shots` were made smaller, for a report: " (from images_4)", " (pictures
     /// averaged over 4x4 blocks)", both with counts, or nothing at full size.
     pub fn how<'a>(self, shots: impl IntoIterator<Item = &'a Shot>) -> String {

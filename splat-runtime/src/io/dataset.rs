@@ -173,6 +173,14 @@ impl Shot {
     }
 }
 
+/// Each of `shots` `factor` times smaller on each side ([`Shot::downscaled`]; their copies'
+/// headers read in parallel).
+pub fn downscaled(shots: Vec<Shot>, factor: u32) -> Result<Vec<Shot>, DatasetError> {
+    (shots.into_par_iter())
+        .map(|shot| shot.downscaled(factor))
+        .collect()
+}
+
 /// A dataset's posed pictures, read from its files without decoding a pixel.
 #[derive(Clone, Debug)]
 pub struct Shots {
@@ -198,16 +206,11 @@ impl Shots {
         })
     }
 
-    /// Every view `factor` times smaller on each side ([`Shot::downscaled`]).
+    /// Every view `factor` times smaller on each side ([`downscaled`]).
     pub fn downscaled(self, factor: u32) -> Result<Shots, DatasetError> {
-        let down = |shots: Vec<Shot>| {
-            (shots.into_par_iter())
-                .map(|shot| shot.downscaled(factor))
-                .collect::<Result<Vec<_>, _>>()
-        };
         Ok(Shots {
-            train: down(self.train)?,
-            test: down(self.test)?,
+            train: downscaled(self.train, factor)?,
+            test: downscaled(self.test, factor)?,
             points: self.points,
         })
     }
@@ -870,20 +873,35 @@ mod tests {
         }
     }
 
-    /// The posed pictures are read from the files' headers, their pixels only when loaded:
-    /// the same cameras as a full read, and a picture whose pixels are broken past its header
-    /// fails on loading, by name.
-    #[test]
-    fn shots_are_read_without_their_pixels() {
-        let dir = tempfile::tempdir().unwrap();
+    /// Two training views and a test view written in `dir` as a Blender dataset, read back.
+    fn written_blender(dir: &Path) -> Dataset {
         let eyes = [Vec3::new(3.0, 1.0, -2.0), Vec3::new(-2.5, -0.5, 2.0)];
         let data = Dataset {
             train: eyes.iter().map(|e| view(*e, Vec3::ZERO)).collect(),
             test: vec![view(Vec3::new(0.5, 2.0, 3.0), Vec3::ZERO)],
             points: vec![],
         };
-        write_blender(dir.path(), &data).unwrap();
-        let full = read(dir.path(), Vec3::ZERO).unwrap();
+        write_blender(dir, &data).unwrap();
+        read(dir, Vec3::ZERO).unwrap()
+    }
+
+    /// A `width` x `height` picture of one gray.
+    fn gray(width: u32, height: u32, value: f32) -> Image {
+        Image {
+            width,
+            height,
+            channels: 3,
+            data: vec![value; (width * height * 3) as usize],
+        }
+    }
+
+    /// The posed pictures are read from the files' headers, their pixels only when loaded:
+    /// the same cameras as a full read, and a picture whose pixels are broken past its header
+    /// fails on loading, by name.
+    #[test]
+    fn shots_are_read_without_their_pixels() {
+        let dir = tempfile::tempdir().unwrap();
+        let full = written_blender(dir.path());
         let shots = read_shots(dir.path()).unwrap();
         let cameras = |views: &[View]| views.iter().map(|v| v.camera).collect::<Vec<_>>();
         let shot_cameras = |shots: &[Shot]| shots.iter().map(|s| s.camera).collect::<Vec<_>>();
@@ -901,12 +919,7 @@ mod tests {
         assert!(err.contains("r_1.png"), "{err}");
         // A picture replaced by one of another size after the dataset was read.
         let shots = read_shots(dir.path()).unwrap();
-        let other = Image {
-            width: 12,
-            height: 8,
-            channels: 3,
-            data: vec![0.5; 12 * 8 * 3],
-        };
+        let other = gray(12, 8, 0.5);
         super::super::image::write_image(&dir.path().join("test/r_0.png"), &other).unwrap();
         let err = shots.test[0].load(Vec3::ZERO).unwrap_err().to_string();
         assert!(
@@ -922,14 +935,7 @@ mod tests {
     #[test]
     fn views_are_downscaled_by_box_averages_or_taken_from_their_copies() {
         let dir = tempfile::tempdir().unwrap();
-        let eyes = [Vec3::new(3.0, 1.0, -2.0), Vec3::new(-2.5, -0.5, 2.0)];
-        let data = Dataset {
-            train: eyes.iter().map(|e| view(*e, Vec3::ZERO)).collect(),
-            test: vec![view(Vec3::new(0.5, 2.0, 3.0), Vec3::ZERO)],
-            points: vec![],
-        };
-        write_blender(dir.path(), &data).unwrap();
-        let full = read(dir.path(), Vec3::ZERO).unwrap();
+        let full = written_blender(dir.path());
         let (big, f) = (&full.train[1], 4usize);
         let shot = read_shots(dir.path()).unwrap().downscaled(4).unwrap().train[1].clone();
         let small = shot.load(Vec3::ZERO).unwrap();
@@ -971,12 +977,7 @@ mod tests {
             assert!((a - b).abs() < 1e-6, "{a} vs {b}");
         }
         // A copy half the size in train_2 is taken as it is, for the view it copies only.
-        let copy = Image {
-            width: 15,
-            height: 10,
-            channels: 3,
-            data: vec![0.25; 15 * 10 * 3],
-        };
+        let copy = gray(15, 10, 0.25);
         let copy_path = dir.path().join("train_2/r_0.png");
         std::fs::create_dir(dir.path().join("train_2")).unwrap();
         super::super::image::write_image(&copy_path, &copy).unwrap();
@@ -997,12 +998,7 @@ mod tests {
         assert_eq!(averaged.downscale, 2);
         assert_eq!(averaged.load(Vec3::ZERO).unwrap().image.width, 15);
         // A copy of another size is refused by name.
-        let wrong = Image {
-            width: 12,
-            height: 8,
-            channels: 3,
-            data: vec![0.25; 12 * 8 * 3],
-        };
+        let wrong = gray(12, 8, 0.25);
         super::super::image::write_image(&copy_path, &wrong).unwrap();
         let err = read_shots(dir.path())
             .unwrap()
@@ -1025,12 +1021,7 @@ mod tests {
         );
         // A picture that shrank after the dataset was read to less than a block.
         let shot = read_shots(dir.path()).unwrap().downscaled(4).unwrap().train[1].clone();
-        let tiny = Image {
-            width: 2,
-            height: 2,
-            channels: 3,
-            data: vec![0.5; 2 * 2 * 3],
-        };
+        let tiny = gray(2, 2, 0.5);
         super::super::image::write_image(&dir.path().join("train/r_1.png"), &tiny).unwrap();
         let err = shot.load(Vec3::ZERO).unwrap_err().to_string();
         assert!(
