@@ -28,8 +28,9 @@ pub struct GpuLoss {
     terms_kernel: Kernel,
     spread_kernel: Kernel,
     gradient_kernel: Kernel,
-    /// Every target image, RGB f32, one after another, and the coverage of those that have
-    /// one; each one's offsets (words; coverage `u32::MAX` when opaque), size and background.
+    /// Every target image, one after another: 8-bit straight RGBA, a word per pixel, where
+    /// the view holds 8-bit values ([`View::rgba8`]: every picture read from a PNG or JPEG),
+    /// else RGB f32 words and, for those with one, its coverage in `coverage`.
     targets: wgpu::Buffer,
     coverage: wgpu::Buffer,
     views: Vec<Target>,
@@ -63,15 +64,18 @@ pub enum GpuTrainError {
 /// Where one target lives in the loss's buffers.
 struct Target {
     offset: u32,
+    /// The coverage's offset (`u32::MAX`: opaque or packed).
     coverage: u32,
+    /// Held as 8-bit RGBA words.
+    packed: bool,
     width: u32,
     height: u32,
     background: Vec3,
 }
 
 impl GpuLoss {
-    /// Uploads the views' images (RGB) and coverages once; the loss weighs D-SSIM by
-    /// `ssim_weight`.
+    /// Uploads the views' images and coverages once (8 bits per channel where that is what a
+    /// view holds, else f32); the loss weighs D-SSIM by `ssim_weight`.
     pub fn new(gpu: &Gpu, targets: &[&View], ssim_weight: f32) -> Result<GpuLoss, GpuTrainError> {
         let (mut words, mut alphas, mut views) = (vec![], vec![], vec![]);
         for (k, view) in targets.iter().enumerate() {
@@ -80,19 +84,25 @@ impl GpuLoss {
             if t.channels != 3 || small {
                 return Err(GpuTrainError::Target(k));
             }
+            let packed = view.rgba8();
+            let coverage = match (&view.coverage, &packed) {
+                (Some(a), None) => {
+                    alphas.extend(a.iter().map(|v| v.to_bits()));
+                    (alphas.len() - a.len()) as u32
+                }
+                _ => u32::MAX,
+            };
             views.push(Target {
                 offset: words.len() as u32,
-                coverage: view
-                    .coverage
-                    .as_ref()
-                    .map_or(u32::MAX, |_| alphas.len() as u32),
+                coverage,
+                packed: packed.is_some(),
                 width: t.width,
                 height: t.height,
                 background: view.background,
             });
-            words.extend(t.data.iter().map(|v| v.to_bits()));
-            if let Some(a) = &view.coverage {
-                alphas.extend(a.iter().map(|v| v.to_bits()));
+            match packed {
+                Some(rgba) => words.extend(rgba),
+                None => words.extend(t.data.iter().map(|v| v.to_bits())),
             }
         }
         let taps: Vec<u32> = window().iter().map(|g| (*g as f32).to_bits()).collect();
@@ -108,7 +118,7 @@ impl GpuLoss {
             rows: Grown::new(gpu, "SSIM row sums", 1)?,
             terms: Grown::new(gpu, "SSIM cotangents", 1)?,
             sums: Grown::new(gpu, "loss partial sums", 1)?,
-            info: gpu.uniform_buffer(16),
+            info: gpu.uniform_buffer(20),
             ssim_weight,
             last: None,
         })
@@ -147,7 +157,8 @@ impl GpuLoss {
         let (b, b0) = (background, t.background);
         let floats = [b.x, b.y, b.z, self.ssim_weight, b0.x, b0.y, b0.z, 0.0].map(f32::to_bits);
         let ints = [w, h, state_words, t.offset, vw, vh, valid, t.coverage];
-        gpu.write(&self.info, &[&ints[..], &floats].concat());
+        let format = [t.packed as u32, 0, 0, 0];
+        gpu.write(&self.info, &[&ints[..], &floats, &format].concat());
         encoder.clear_buffer(&self.sums, 0, None);
         let (state, targets) = (("pixel_state", pixel_state), ("targets", &self.targets));
         let (taps, info) = (("taps", &self.taps), ("info", &self.info));
@@ -623,7 +634,8 @@ mod tests {
     /// The device loss and gradient against the CPU's (f64) on a random frame composited on a
     /// colored background, the target (partly transparent, stored on another background)
     /// re-composited on it: value within 1e-5, gradient within 1e-4 of its largest word,
-    /// alpha's included.
+    /// alpha's included. A target of f32 values is held as f32, one of 8-bit values (as every
+    /// picture read from a PNG is) in a word per pixel.
     #[test]
     fn the_device_loss_and_gradient_match_the_cpu() {
         let Some(gpu) = crate::gpu::adapter_or_skip() else {
@@ -633,49 +645,70 @@ mod tests {
         let pixels = (w * h) as usize;
         let mut rng = fastrand::Rng::with_seed(2);
         let state: Vec<f32> = (0..pixels * 5).map(|_| rng.f32()).collect();
-        let coverage: Vec<f32> = (0..pixels).map(|_| rng.f32()).collect();
         let stored = Vec3::new(1.0, 0.9, 0.0);
-        let target = view(
-            image(w, h, (0..pixels * 3).map(|_| rng.f32()).collect()),
-            Some(coverage),
-            stored,
-        );
         let other = view(image(w, h, vec![0.5; pixels * 3]), None, Vec3::ZERO);
-        let bg = Vec3::new(0.2, 0.7, 0.4);
-        let mut loss = GpuLoss::new(&gpu, &[&other, &target], 0.2).unwrap();
+        // Random f32 values, and random 8-bit ones composited as a picture's are.
+        let coverage: Vec<f32> = (0..pixels).map(|_| rng.f32()).collect();
+        let colors = (0..pixels * 3).map(|_| rng.f32()).collect();
+        let float = view(image(w, h, colors), Some(coverage), stored);
+        let byte = |rng: &mut fastrand::Rng| rng.u8(..) as f32 / 255.0;
+        let coverage: Vec<f32> = (0..pixels).map(|_| byte(&mut rng)).collect();
+        let colors = (0..pixels * 3)
+            .map(|i| byte(&mut rng) * coverage[i / 3] + stored[i % 3] * (1.0 - coverage[i / 3]))
+            .collect();
+        let eight_bit = view(image(w, h, colors), Some(coverage), stored);
+        let mut loss = GpuLoss::new(&gpu, &[&other, &float, &eight_bit], 0.2).unwrap();
+        let packed: Vec<bool> = loss.views.iter().map(|t| t.packed).collect();
+        assert_eq!(packed, [false, false, true], "0.5 is no 8-bit value");
+        // 4 bytes per pixel for the packed target, 12 for the others (and 4 of coverage).
+        assert_eq!(
+            loss.targets.size(),
+            4 * (3 * pixels + 3 * pixels + pixels) as u64
+        );
+        assert_eq!(loss.coverage.size(), 4 * pixels as u64);
         let words = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<u32>>();
         let state_buf = gpu.buffer_from("state", &words(&state)).unwrap();
         let grad_buf = gpu.buffer("grad", pixels * 5).unwrap();
-        let mut enc = gpu.device.create_command_encoder(&Default::default());
-        loss.record(&gpu, &mut enc, (1, bg, (w, h)), &state_buf, 5, &grad_buf)
-            .unwrap();
-        gpu.queue.submit([enc.finish()]);
-        let (sums, len) = loss.sums().unwrap();
-        let got = loss.value(&gpu.read(sums, len).unwrap()).unwrap();
-        let grad: Vec<f32> = gpu
-            .read(&grad_buf, pixels * 5)
-            .unwrap()
-            .into_iter()
-            .map(f32::from_bits)
-            .collect();
+        let bg = Vec3::new(0.2, 0.7, 0.4);
+        for (k, target) in [(1, &float), (2, &eight_bit)] {
+            let mut enc = gpu.device.create_command_encoder(&Default::default());
+            loss.record(&gpu, &mut enc, (k, bg, (w, h)), &state_buf, 5, &grad_buf)
+                .unwrap();
+            gpu.queue.submit([enc.finish()]);
+            let (sums, len) = loss.sums().unwrap();
+            let got = loss.value(&gpu.read(sums, len).unwrap()).unwrap();
+            let grad: Vec<f32> = gpu
+                .read(&grad_buf, pixels * 5)
+                .unwrap()
+                .into_iter()
+                .map(f32::from_bits)
+                .collect();
 
-        let composited: Vec<f32> = state
-            .chunks_exact(5)
-            .flat_map(|s| [0, 1, 2].map(|c| s[c] + s[3] * bg[c]))
-            .collect();
-        let (want, d) = loss_and_gradient(&image(w, h, composited), &target.on(bg), 0.2).unwrap();
-        assert!((got.loss - want.loss).abs() < 1e-5, "{got:?} vs {want:?}");
-        assert!((got.ssim - want.ssim).abs() < 1e-5, "{got:?} vs {want:?}");
-        let largest = d.iter().fold(0.0f32, |m, v| m.max(v.abs()));
-        for p in 0..pixels {
-            let dc = &d[p * 3..p * 3 + 3];
-            let alpha = -(dc[0] * bg.x + dc[1] * bg.y + dc[2] * bg.z);
-            for (k, want) in dc.iter().chain([&alpha, &0.0]).enumerate() {
-                let g = grad[p * 5 + k];
-                assert!(
-                    (g - want).abs() <= 1e-4 * largest,
-                    "pixel {p} word {k}: {g} vs {want}"
-                );
+            let composited: Vec<f32> = state
+                .chunks_exact(5)
+                .flat_map(|s| [0, 1, 2].map(|c| s[c] + s[3] * bg[c]))
+                .collect();
+            let (want, d) =
+                loss_and_gradient(&image(w, h, composited), &target.on(bg), 0.2).unwrap();
+            assert!(
+                (got.loss - want.loss).abs() < 1e-5,
+                "{k}: {got:?} vs {want:?}"
+            );
+            assert!(
+                (got.ssim - want.ssim).abs() < 1e-5,
+                "{k}: {got:?} vs {want:?}"
+            );
+            let largest = d.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+            for p in 0..pixels {
+                let dc = &d[p * 3..p * 3 + 3];
+                let alpha = -(dc[0] * bg.x + dc[1] * bg.y + dc[2] * bg.z);
+                for (i, want) in dc.iter().chain([&alpha, &0.0]).enumerate() {
+                    let g = grad[p * 5 + i];
+                    assert!(
+                        (g - want).abs() <= 1e-4 * largest,
+                        "target {k} pixel {p} word {i}: {g} vs {want}"
+                    );
+                }
             }
         }
         let mut enc = gpu.device.create_command_encoder(&Default::default());

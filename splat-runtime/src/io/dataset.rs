@@ -16,6 +16,7 @@
 //! their pictures ([`Shots::downscaled`]). Every error names the file and the field.
 
 use super::camera::NotRotation;
+use super::picture::Picture;
 use super::{Outputs, colmap};
 use crate::pipeline::Image;
 use crate::types::{Camera, CameraModel};
@@ -141,10 +142,10 @@ impl Shot {
 
     /// The view: the picture decoded, downscaled and composited on `background`.
     pub fn load(&self, background: Vec3) -> Result<View, DatasetError> {
-        let (image, coverage) = read_image(&self.path, background)?;
+        let picture = Picture::read(&self.path)?;
         // Checked before averaging: a picture narrower than a block has nothing to average.
         let (f, camera) = (self.downscale, self.camera.size);
-        let (w, h) = (image.width, image.height);
+        let (w, h) = (picture.width, picture.height);
         if Vec2::new((w / f) as f32, (h / f) as f32) != camera {
             let downscaled = match f {
                 1 => String::new(),
@@ -160,8 +161,8 @@ impl Shot {
             ));
         }
         let (image, coverage) = match f {
-            1 => (image, coverage),
-            f => box_averaged(&image, coverage.as_deref(), f),
+            1 => picture.composited(background),
+            f => picture.downscaled(f).composited(background),
         };
         Ok(View {
             name: self.path.display().to_string(),
@@ -434,25 +435,8 @@ fn blender_angle(json_path: &Path, views: &[View]) -> Result<f32, DatasetError> 
 /// A view as an 8-bit RGBA PNG: its coverage as alpha, its color taken off its background
 /// (straight alpha, as Blender writes it).
 fn stage_rgba(outputs: &mut Outputs, path: &Path, view: &View) -> Result<(), DatasetError> {
-    let b = view.background.to_array();
-    let mut rgba = Vec::with_capacity(view.image.data.len() / 3 * 4);
-    for (p, rgb) in view.image.data.chunks_exact(3).enumerate() {
-        let a = view.coverage.as_ref().map_or(1.0, |c| c[p]);
-        for (c, b) in rgb.iter().zip(b) {
-            rgba.push(match a > 0.0 {
-                true => (c - (1.0 - a) * b) / a,
-                false => 0.0,
-            });
-        }
-        rgba.push(a);
-    }
-    let image = Image {
-        channels: 4,
-        data: rgba,
-        ..view.image
-    };
     // The image writer's error names the file.
-    super::image::stage_image(outputs, path, &image).map_err(DatasetError::Output)
+    super::image::stage_image(outputs, path, &view.straight()).map_err(DatasetError::Output)
 }
 
 fn read_json(path: &Path) -> Result<serde_json::Value, DatasetError> {
@@ -722,7 +706,7 @@ pub(super) fn image_size(path: &Path) -> Result<(u32, u32), DatasetError> {
     image::image_dimensions(path).map_err(|error| image_error(path, error))
 }
 
-fn image_error(path: &Path, error: image::ImageError) -> DatasetError {
+pub(super) fn image_error(path: &Path, error: image::ImageError) -> DatasetError {
     match error {
         image::ImageError::IoError(error) => DatasetError::Io {
             path: path.to_path_buf(),
@@ -733,63 +717,6 @@ fn image_error(path: &Path, error: image::ImageError) -> DatasetError {
             error,
         },
     }
-}
-
-/// `image` (RGB) and its `coverage` averaged over blocks of `factor` x `factor` pixels, the
-/// right and bottom pixels that fill no block dropped. The average of pictures composited on
-/// one background is the average picture composited on it, so [`View::on`] still holds.
-fn box_averaged(image: &Image, coverage: Option<&[f32]>, factor: u32) -> (Image, Option<Vec<f32>>) {
-    let (f, w) = (factor as usize, image.width as usize);
-    let (width, height) = (image.width / factor, image.height / factor);
-    let average = |values: &[f32], channels: usize| -> Vec<f32> {
-        let mut out = vec![0.0f32; width as usize * height as usize * channels];
-        let norm = 1.0 / (f * f) as f32;
-        for (y, row) in out.chunks_exact_mut(width as usize * channels).enumerate() {
-            for (x, px) in row.chunks_exact_mut(channels).enumerate() {
-                for dy in 0..f {
-                    let start = ((y * f + dy) * w + x * f) * channels;
-                    for (i, v) in values[start..start + f * channels].iter().enumerate() {
-                        px[i % channels] += v;
-                    }
-                }
-                px.iter_mut().for_each(|v| *v *= norm);
-            }
-        }
-        out
-    };
-    let image = Image {
-        width,
-        height,
-        channels: 3,
-        data: average(&image.data, 3),
-    };
-    let coverage = coverage
-        .map(|c| average(c, 1))
-        .filter(|c| c.iter().any(|a| *a < 1.0));
-    (image, coverage)
-}
-
-/// An image as RGB in [0, 1], alpha composited on `background`, and its alpha unless opaque.
-fn read_image(path: &Path, background: Vec3) -> Result<(Image, Option<Vec<f32>>), DatasetError> {
-    let img = image::open(path).map_err(|error| image_error(path, error))?;
-    let rgba = img.to_rgba32f();
-    let (width, height) = rgba.dimensions();
-    let mut data = Vec::with_capacity(width as usize * height as usize * 3);
-    let mut alpha = Vec::with_capacity(width as usize * height as usize);
-    for p in rgba.pixels() {
-        let a = p[3];
-        for (c, b) in p.0[..3].iter().zip(background.to_array()) {
-            data.push(c * a + b * (1.0 - a));
-        }
-        alpha.push(a);
-    }
-    let image = Image {
-        width,
-        height,
-        channels: 3,
-        data,
-    };
-    Ok((image, alpha.iter().any(|a| *a < 1.0).then_some(alpha)))
 }
 
 #[cfg(test)]
@@ -954,6 +881,10 @@ mod tests {
             }
             sum / (f * f) as f64
         };
+        // The means rounded to 8 bits, as the pictures are: the coverage within half a step,
+        // the composited color within one (half a step of the color, half of the coverage).
+        assert!(big.rgba8().is_some() && small.rgba8().is_some());
+        let step = 1.0 / 255.0;
         let big_coverage = big.coverage.as_ref().unwrap();
         let small_coverage = small.coverage.as_ref().unwrap();
         for y in 0..5 {
@@ -961,12 +892,12 @@ mod tests {
                 for c in 0..3 {
                     let got = small.image.data[(y * 7 + x) * 3 + c] as f64;
                     let want = block_mean(&big.image.data, 3, x, y, c);
-                    assert!((got - want).abs() < 1e-6, "({x}, {y}) {c}: {got} vs {want}");
+                    assert!((got - want).abs() < step, "({x}, {y}) {c}: {got} vs {want}");
                 }
                 let got = small_coverage[y * 7 + x] as f64;
                 let want = block_mean(big_coverage, 1, x, y, 0);
                 assert!(
-                    (got - want).abs() < 1e-6,
+                    (got - want).abs() < 0.5 * step + 1e-6,
                     "({x}, {y}) coverage: {got} vs {want}"
                 );
             }
@@ -1028,6 +959,46 @@ mod tests {
             err.contains("decodes to 2x2 pixels (0x0 downscaled 4x), but its camera is 7x5"),
             "{err}"
         );
+    }
+
+    /// A view read from an 8-bit RGBA picture gives back its bytes exactly, on any background
+    /// (colors of uncovered pixels as 0); one from a 16-bit picture has no 8-bit form.
+    #[test]
+    fn eight_bit_pictures_keep_their_bytes() {
+        let dir = tempfile::tempdir().unwrap();
+        let (w, h) = (9u32, 7u32);
+        let mut rng = fastrand::Rng::with_seed(5);
+        let mut bytes: Vec<u8> = (0..w * h * 4).map(|_| rng.u8(..)).collect();
+        bytes[3] = 0; // one uncovered pixel
+        bytes[7] = 255; // and one opaque
+        let path = dir.path().join("rgba.png");
+        image::RgbaImage::from_raw(w, h, bytes.clone())
+            .unwrap()
+            .save(&path)
+            .unwrap();
+        let camera = Camera {
+            size: Vec2::new(w as f32, h as f32),
+            ..Default::default()
+        };
+        let want: Vec<u32> = bytes
+            .chunks_exact(4)
+            .map(|p| match p[3] {
+                0 => 0,
+                _ => u32::from_le_bytes([p[0], p[1], p[2], p[3]]),
+            })
+            .collect();
+        for background in [Vec3::ZERO, Vec3::ONE, Vec3::new(0.3, 0.6, 0.9)] {
+            let view = Shot::new(path.clone(), camera).load(background).unwrap();
+            assert_eq!(view.rgba8().unwrap(), want, "on {background}");
+        }
+        let path = dir.path().join("rgb16.png");
+        let values: Vec<u16> = (0..w * h * 3).map(|_| rng.u16(..)).collect();
+        image::ImageBuffer::<image::Rgb<u16>, _>::from_raw(w, h, values)
+            .unwrap()
+            .save(&path)
+            .unwrap();
+        let view = Shot::new(path, camera).load(Vec3::ZERO).unwrap();
+        assert!(view.rgba8().is_none());
     }
 
     /// What the format cannot say is refused by file and frame.

@@ -6,6 +6,7 @@ pub mod camera;
 pub mod colmap;
 pub mod dataset;
 pub mod image;
+mod picture;
 pub mod ply;
 
 use std::io::Write;

@@ -3,7 +3,8 @@
 // window over the window positions inside the image ("valid"), C1 = 0.01², C2 = 0.03², means
 // over pixels (L1) and positions (SSIM) and the 3 channels. The render is composited on the
 // step's background first (x = color + T b), and so is the target where it has a coverage
-// (alpha): stored on its own background b0, it becomes target + (1 - alpha)(b - b0). Its
+// (alpha): stored on its own background b0, it becomes target + (1 - alpha)(b - b0); stored
+// as 8-bit straight RGBA, c alpha + b (1 - alpha). Its
 // gradient becomes the backward pass's output gradient: per pixel the color channels, then
 // alpha (-Σ g_c b_c), then depth (zero).
 //
@@ -29,10 +30,12 @@ struct LossInfo {
     background: vec4<f32>,
     // the target's own background b0 (rgb)
     base: vec4<f32>,
+    // 1: the target is 8-bit straight RGBA, a word per pixel (red in the low byte); 0: RGB f32
+    format: vec4<u32>,
 }
 
 @group(0) @binding(0) var<storage, read> pixel_state: array<f32>;
-@group(0) @binding(1) var<storage, read> targets: array<f32>;
+@group(0) @binding(1) var<storage, read> targets: array<u32>;
 @group(0) @binding(2) var<storage, read> taps: array<f32, 11>;
 @group(0) @binding(3) var<storage, read_write> terms: array<f32>;
 // Per row y and valid column x: 15 words (5 moments per channel) after `ssim_rows`, 9 (3
@@ -55,7 +58,11 @@ fn render(p: u32, c: u32) -> f32 {
 }
 
 fn target_at(p: u32, c: u32) -> f32 {
-    let t = targets[info.size.w + p * 3u + c];
+    if (info.format.x == 1u) {
+        let v = unpack4x8unorm(targets[info.size.w + p]);
+        return v[c] * v.w + info.background[c] * (1.0 - v.w);
+    }
+    let t = bitcast<f32>(targets[info.size.w + p * 3u + c]);
     if (info.valid.w == 0xffffffffu) {
         return t;
     }
