@@ -71,12 +71,11 @@ pub(crate) fn eval_cmd(args: &EvalArgs, methods: &[Method]) -> Result<()> {
     let bar = indicatif::ProgressBar::new(shots.len() as u64);
     let mut measured = Vec::with_capacity(shots.len());
     let mut outputs = Outputs::default();
-    let mut place = String::new();
-    for (k, shot) in shots.into_iter().enumerate() {
+    let cameras: Vec<_> = shots.iter().map(|s| s.camera).collect();
+    let mut shots = shots.into_iter();
+    let mut measure = |frame: splat_runtime::Frame| {
+        let (k, shot) = (measured.len(), shots.next().expect("a shot per camera"));
         let picture = shot.load(background)?.image;
-        let (frame, backend) =
-            render::render_method(method, &cloud, &shot.camera, &opts, gpu.as_ref(), false)?;
-        place = backend;
         let image = composite(frame.color, frame.alpha.as_ref(), background);
         let psnr = loss::psnr(&image, &picture)?;
         let ssim = loss::ssim(&image, &picture)?;
@@ -87,7 +86,15 @@ pub(crate) fn eval_cmd(args: &EvalArgs, methods: &[Method]) -> Result<()> {
         }
         measured.push(Measured { shot, psnr, ssim });
         bar.inc(1);
-    }
+        Ok(())
+    };
+    let place = render::render_views(
+        method,
+        &cloud,
+        &cameras,
+        (&opts, gpu.as_ref(), false),
+        &mut measure,
+    )?;
     bar.finish_and_clear();
 
     // Summed as `splat fit` sums its evaluation (`train::fit::Evaluation`), to the last bit.

@@ -4,14 +4,12 @@
 
 use crate::bench::Bench;
 use crate::fit::Fit;
-use crate::render::Render;
+use crate::render::{Frames, Render};
 use crate::tradeoff::{Outcome, Tradeoff};
 use anyhow::{Result, bail};
 use splat_runtime::io::ply::{FromStored, ToStored};
 use splat_runtime::train::Trainable;
-use splat_runtime::{
-    Camera, CameraModel, Effects, Frame, GeneratedSource, RenderOptions, SplatMethod,
-};
+use splat_runtime::{Camera, CameraModel, Effects, GeneratedSource, RenderOptions, SplatMethod};
 
 /// A method on the command line.
 pub struct Method {
@@ -35,7 +33,7 @@ pub struct Instance {
     pub(crate) generic_camera: bool,
     /// Whether it renders a rolling shutter (else global shutters only).
     pub(crate) rolling_shutter: bool,
-    pub(crate) render: fn(&Render) -> Result<(Frame, String)>,
+    pub(crate) render: fn(&Render, Frames) -> Result<String>,
     pub(crate) bench: fn(&Bench) -> Result<()>,
     pub(crate) tradeoff: fn(&Tradeoff) -> Result<Vec<Outcome>>,
     pub(crate) fit: Option<fn(&Fit) -> Result<()>>,
@@ -53,7 +51,7 @@ impl Instance {
             source: M::SOURCE,
             generic_camera: M::GENERIC_CAMERA,
             rolling_shutter: M::ROLLING_SHUTTER,
-            render: |r| r.run::<M>(),
+            render: |r, each| r.run::<M>(each),
             bench: |b| b.run::<M>(),
             tradeoff: |t| t.run::<M>(),
             fit: None,

@@ -5,7 +5,7 @@ use crate::{Backend, Model, pick_gpu, scene};
 use anyhow::{Result, bail};
 use plotters::prelude::RGBColor;
 use splat_runtime::glam::Vec3;
-use splat_runtime::gpu::{Gpu, GpuScene, HardwareRenderer};
+use splat_runtime::gpu::{Gpu, GpuRenderer, GpuScene, HardwareRenderer};
 use splat_runtime::io::ply::{FromStored, GaussianCloud};
 use splat_runtime::io::{Outputs, image as image_io, ply};
 use splat_runtime::pipeline::precision::Precision;
@@ -65,15 +65,19 @@ pub struct RenderArgs {
     height: u32,
 }
 
-/// Renders a scene with the chosen method on the GPU picked, or on the CPU.
+/// Renders a scene from a run of cameras with the chosen method, on the GPU picked or on the
+/// CPU.
 pub struct Render<'a> {
     cloud: &'a GaussianCloud,
-    camera: &'a Camera,
+    cameras: &'a [Camera],
     opts: &'a RenderOptions,
     gpu: Option<&'a Gpu>,
     /// The hardware-rasterized forward pass (GPU only).
     hardware: bool,
 }
+
+/// What receives each frame of a [`Render`], in the cameras' order.
+pub(crate) type Frames<'f> = &'f mut dyn FnMut(Frame) -> Result<()>;
 
 /// A precision by its name.
 fn parse_precision(name: &str) -> Result<Precision, String> {
@@ -85,8 +89,9 @@ fn parse_precision(name: &str) -> Result<Precision, String> {
 }
 
 impl Render<'_> {
-    /// The frame, and where it ran.
-    pub(crate) fn run<M: SplatMethod>(&self) -> Result<(Frame, String)>
+    /// Renders each camera in turn, handing its frame to `each` (on the GPU, the scene is
+    /// uploaded once and one renderer draws every frame); says where they ran.
+    pub(crate) fn run<M: SplatMethod>(&self, each: Frames) -> Result<String>
     where
         M::Params: FromStored,
     {
@@ -97,25 +102,34 @@ impl Render<'_> {
             }
             Some(gpu) if self.hardware => {
                 let mut renderer = HardwareRenderer::<M>::new(gpu, self.opts)?;
-                renderer.forward(&GpuScene::new(gpu, &params)?, self.camera)?;
-                let frame = renderer.download_frame()?;
-                (frame, format!("GPU (hardware rasterizer), {}", gpu.adapter))
+                let scene = GpuScene::new(gpu, &params)?;
+                for camera in self.cameras {
+                    renderer.forward(&scene, camera)?;
+                    each(renderer.download_frame()?)?;
+                }
+                format!("GPU (hardware rasterizer), {}", gpu.adapter)
             }
-            None => (
-                render::<M>(&params, self.camera, self.opts)?,
-                "CPU".to_string(),
-            ),
+            None => {
+                for camera in self.cameras {
+                    each(render::<M>(&params, camera, self.opts)?)?;
+                }
+                "CPU".to_string()
+            }
             Some(gpu) => {
-                let frame =
-                    splat_runtime::gpu::render::render::<M>(gpu, &params, self.camera, self.opts)?;
-                (frame, format!("GPU, {}", gpu.adapter))
+                let mut renderer = GpuRenderer::<M>::new(gpu, self.opts)?;
+                let scene = GpuScene::new(gpu, &params)?;
+                for camera in self.cameras {
+                    renderer.forward(&scene, camera)?;
+                    each(renderer.download_frame()?)?;
+                }
+                format!("GPU, {}", gpu.adapter)
             }
         })
     }
 }
 
-/// Renders `cloud` with `method` on `gpu`, or on the CPU without one; returns the frame and
-/// where it ran.
+/// Renders `cloud` with `method` from `camera` on `gpu`, or on the CPU without one; returns
+/// the frame and where it ran.
 pub(crate) fn render_method(
     method: &Method,
     cloud: &GaussianCloud,
@@ -124,14 +138,39 @@ pub(crate) fn render_method(
     gpu: Option<&Gpu>,
     hardware: bool,
 ) -> Result<(Frame, String)> {
-    let task = Render {
-        cloud,
-        camera,
-        opts,
-        gpu,
-        hardware,
-    };
-    (method.instance(cloud.sh_degree, camera).render)(&task)
+    let mut frame = None;
+    let cameras = std::slice::from_ref(camera);
+    let place = render_views(method, cloud, cameras, (opts, gpu, hardware), &mut |f| {
+        frame = Some(f);
+        Ok(())
+    })?;
+    Ok((frame.expect("a frame for the camera"), place))
+}
+
+/// [`render_method`] from each of `cameras` in turn, each frame handed to `each` as it is
+/// rendered: on the GPU, one renderer and one upload of the scene serve every run of cameras
+/// that one instance of the method renders (all of them but where rolling shutters come and
+/// go). Returns where they ran.
+pub(crate) fn render_views(
+    method: &Method,
+    cloud: &GaussianCloud,
+    cameras: &[Camera],
+    (opts, gpu, hardware): (&RenderOptions, Option<&Gpu>, bool),
+    each: Frames,
+) -> Result<String> {
+    let instance = |c: &Camera| method.instance(cloud.sh_degree, c);
+    let mut place = String::new();
+    for run in cameras.chunk_by(|a, b| std::ptr::eq(instance(a), instance(b))) {
+        let task = Render {
+            cloud,
+            cameras: run,
+            opts,
+            gpu,
+            hardware,
+        };
+        place = (instance(&run[0]).render)(&task, &mut *each)?;
+    }
+    Ok(place)
 }
 
 /// The gallery's label margins, pixels: the methods' names on the left, the camera models'
