@@ -971,6 +971,8 @@ fn resumable_options() -> FitOptions {
 /// order).
 #[test]
 fn a_run_resumed_from_its_checkpoint_takes_the_same_steps() {
+    use splat_runtime::Image;
+    use splat_runtime::io::dataset::{Dataset, View};
     use splat_runtime::train::Checkpoint;
     use splat_runtime::train::fit::fit_from;
     let dir = tempfile::tempdir().unwrap();
@@ -1029,6 +1031,40 @@ fn a_run_resumed_from_its_checkpoint_takes_the_same_steps() {
         };
         let err = fit_from::<Method>(&data, &mut other, 1.0, &sampled, |_| {}).unwrap_err();
         assert!(err.to_string().contains("strategy adc, not mcmc"), "{err}");
+        // So are other training views: one fewer (another dataset), or the same ones smaller
+        // (another --downscale).
+        let fewer = Dataset {
+            train: data.train[1..].to_vec(),
+            ..data.clone()
+        };
+        let err = fit_from::<Method>(&fewer, &mut other, 1.0, &opts, |_| {}).unwrap_err();
+        let (n, w, h) = (
+            data.train.len(),
+            data.train[0].image.width,
+            data.train[0].image.height,
+        );
+        let want = format!(
+            "run on {n} training views of {} pixels in all, not {}",
+            n as u32 * w * h,
+            n - 1
+        );
+        assert!(err.to_string().contains(&want), "{err}");
+        let smaller = Dataset {
+            train: (data.train.iter())
+                .map(|v| View {
+                    image: Image {
+                        width: w / 2,
+                        height: h / 2,
+                        channels: 3,
+                        data: v.image.data[..(w / 2 * h / 2 * 3) as usize].to_vec(),
+                    },
+                    ..v.clone()
+                })
+                .collect(),
+            ..data.clone()
+        };
+        let err = fit_from::<Method>(&smaller, &mut other, 1.0, &opts, |_| {}).unwrap_err();
+        assert!(err.to_string().contains("another --downscale"), "{err}");
     });
 }
 

@@ -2,7 +2,7 @@
 //! the primitives, Adam's moments, density control's statistics, the random generator), and
 //! their file format.
 //!
-//! The file is little-endian: the magic `SPLATCK3`, then `u64` counts and fields (see
+//! The file is little-endian: the magic `SPLATCK4`, then `u64` counts and fields (see
 //! [`Checkpoint::write_to`]), then the arrays. Every count is checked against the file's
 //! length before anything is allocated, so a damaged file is refused by name, never trusted.
 
@@ -11,7 +11,9 @@ use crate::method::SplatMethod;
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 
-const MAGIC: &[u8; 8] = b"SPLATCK3";
+const MAGIC: &[u8; 8] = b"SPLATCK4";
+/// The format before the training views' footprint: resumed without checking it.
+const UNSIZED: &[u8; 8] = b"SPLATCK3";
 /// Earlier formats (the first without the strategy, the second without the scene's extent):
 /// refused with a word on why.
 const OLDER: &[&[u8; 8]] = &[b"SPLATCK1", b"SPLATCK2"];
@@ -48,6 +50,17 @@ pub struct Checkpoint {
     /// The scene's extent the run trains with (position rates and density control's sizes
     /// scale with it), set by the loop as the strategy is.
     pub extent: f32,
+    /// The training views the run trains on: how many, and their pixels in all (a dataset
+    /// read at another `--downscale` differs), set by the loop as the strategy is; `None`
+    /// before, and from a checkpoint of the format before it (`SPLATCK3`).
+    pub views: Option<ViewsFootprint>,
+}
+
+/// How many training views a run has, and their pixels in all.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ViewsFootprint {
+    pub views: u64,
+    pub pixels: u64,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -57,7 +70,7 @@ pub enum CheckpointError {
         path: PathBuf,
         error: std::io::Error,
     },
-    #[error("{path} is not a splat checkpoint (it does not start with SPLATCK3)")]
+    #[error("{path} is not a splat checkpoint (it does not start with SPLATCK4)")]
     Magic { path: PathBuf },
     #[error(
         "{path} was written by an earlier splat (format {format}), which this one cannot resume: start the run again"
@@ -86,6 +99,7 @@ impl Checkpoint {
             seen: vec![],
             rng: seed,
             extent: 0.0,
+            views: None,
         }
     }
 
@@ -107,8 +121,9 @@ impl Checkpoint {
         crate::io::write_atomic(path, |w| self.write_to(w))
     }
 
-    /// The header (magic, method name, strategy name, then words, step, steps, primitives, Adam's step,
-    /// statistics count, generator state, the extent's bits as `u64`), then the parameters, both moments and the
+    /// The header (magic, method name, strategy name, then words, step, steps, primitives,
+    /// Adam's step, statistics count, generator state, the extent's bits as `u64`, the training
+    /// views and their pixels, 0 and 0 for none), then the parameters, both moments and the
     /// statistics.
     pub fn write_to(&self, w: &mut dyn Write) -> std::io::Result<()> {
         w.write_all(MAGIC)?;
@@ -125,6 +140,8 @@ impl Checkpoint {
             self.grad2d.len() as u64,
             self.rng,
             self.extent.to_bits() as u64,
+            self.views.map_or(0, |v| v.views),
+            self.views.map_or(0, |v| v.pixels),
         ] {
             w.write_all(&n.to_le_bytes())?;
         }
@@ -162,7 +179,8 @@ impl Checkpoint {
                 format: String::from_utf8_lossy(&old[..]).into_owned(),
             });
         }
-        if magic != Some(MAGIC) {
+        let sized = magic == Some(MAGIC);
+        if !sized && magic != Some(UNSIZED) {
             return Err(CheckpointError::Magic {
                 path: path.to_path_buf(),
             });
@@ -185,6 +203,14 @@ impl Checkpoint {
         let extent = u32::try_from(r.u64("extent")?)
             .map(f32::from_bits)
             .map_err(|_| damaged("the extent is not an f32".into()))?;
+        let views = match sized {
+            true => Some(ViewsFootprint {
+                views: r.u64("training views")?,
+                pixels: r.u64("training pixels")?,
+            }),
+            false => None,
+        }
+        .filter(|v| v.views > 0);
         if step > steps {
             return Err(damaged(format!(
                 "step {step} is past the run's {steps} steps"
@@ -229,6 +255,7 @@ impl Checkpoint {
             seen,
             rng,
             extent,
+            views,
         })
     }
 }
@@ -305,6 +332,10 @@ mod tests {
             seen: vec![3, 7],
             rng: u64::MAX - 3,
             extent: 4.5,
+            views: Some(ViewsFootprint {
+                views: 80,
+                pixels: 80 * 200 * 200,
+            }),
         }
     }
 
@@ -314,6 +345,26 @@ mod tests {
         sample().write_to(&mut bytes).unwrap();
         let back = Checkpoint::parse(&bytes, Path::new("c.bin")).unwrap();
         assert_eq!(back, sample());
+    }
+
+    /// A checkpoint of the format before the views' footprint (`SPLATCK3`) resumes, its
+    /// footprint unknown.
+    #[test]
+    fn a_checkpoint_of_the_previous_format_is_read() {
+        let mut bytes = vec![];
+        sample().write_to(&mut bytes).unwrap();
+        // The footprint follows the extent: after the magic, both names and 8 header words.
+        let at = 8 + (8 + 4) + (8 + 4) + 8 * 8;
+        bytes.drain(at..at + 16);
+        bytes[..8].copy_from_slice(b"SPLATCK3");
+        let back = Checkpoint::parse(&bytes, Path::new("c.bin")).unwrap();
+        assert_eq!(
+            back,
+            Checkpoint {
+                views: None,
+                ..sample()
+            }
+        );
     }
 
     /// Every truncation, a wrong magic, trailing bytes and a count far past the file's size

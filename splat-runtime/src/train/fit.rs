@@ -5,7 +5,7 @@
 //! the device.
 
 use super::adam::{Adam, Faults};
-use super::checkpoint::Checkpoint;
+use super::checkpoint::{Checkpoint, ViewsFootprint};
 use super::densify::{Densifier, DensifyOptions, Refinement, Shape, screen_gradient};
 use super::loss::{self, LossError, LossValue};
 use super::mcmc::{Mcmc, McmcOptions};
@@ -373,7 +373,7 @@ pub fn fit_from<M: Trainable>(
     mut progress: impl FnMut(&StepReport),
 ) -> Result<(), FitError> {
     let rates = rates_for::<M>(data, extent, opts)?;
-    adopt::<M>(state, extent, opts)?;
+    adopt::<M>(state, extent, &data.train, opts)?;
     let words = M::Params::LEN;
     let mut params = state.params::<M>();
     let mut flat = state.params.clone();
@@ -507,11 +507,12 @@ pub fn fit_from<M: Trainable>(
 }
 
 /// Makes `state` this run's: refuses a state of another method, run length or (once
-/// started) strategy or scene extent, or with a non-finite parameter, and records the
-/// strategy and the extent.
+/// started) strategy, scene extent or training views, or with a non-finite parameter, and
+/// records the strategy, the extent and the views.
 pub(crate) fn adopt<M: Trainable>(
     state: &mut Checkpoint,
     extent: f32,
+    train: &[View],
     opts: &FitOptions,
 ) -> Result<(), FitError> {
     if state.method != M::NAME || state.words != M::Params::LEN {
@@ -542,6 +543,18 @@ pub(crate) fn adopt<M: Trainable>(
             state.extent
         )));
     }
+    let views = ViewsFootprint {
+        views: train.len() as u64,
+        pixels: (train.iter())
+            .map(|v| v.image.width as u64 * v.image.height as u64)
+            .sum(),
+    };
+    if let Some(was) = state.views.filter(|was| state.step > 0 && *was != views) {
+        return Err(FitError::Unsupported(format!(
+            "the checkpoint is of a run on {} training views of {} pixels in all, not {} of {} (another dataset, or another --downscale)",
+            was.views, was.pixels, views.views, views.pixels
+        )));
+    }
     if let Some(k) = state.params.iter().position(|x| !x.is_finite()) {
         return Err(FitError::Unsupported(format!(
             "the scene to train is not finite: {} is {}",
@@ -551,6 +564,7 @@ pub(crate) fn adopt<M: Trainable>(
     }
     state.strategy = strategy.to_string();
     state.extent = extent;
+    state.views = Some(views);
     Ok(())
 }
 

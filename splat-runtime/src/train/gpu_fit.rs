@@ -73,7 +73,7 @@ pub fn fit_gpu_from<M: Trainable>(
     mut progress: impl FnMut(&StepReport),
 ) -> Result<(), FitError> {
     let rates = rates_for::<M>(data, extent, opts)?;
-    adopt::<M>(state, extent, opts)?;
+    adopt::<M>(state, extent, &data.train, opts)?;
     let words = M::Params::LEN;
     let source = screen_source::<M>().ok_or_else(|| {
         FitError::Unsupported(format!(
