@@ -6,7 +6,7 @@
 
 use splat_runtime::glam::{DQuat, Mat3, Vec2, Vec3, Vec4};
 use splat_runtime::io::colmap::read_colmap;
-use splat_runtime::io::dataset::{Dataset, DatasetError, View, read};
+use splat_runtime::io::dataset::{Dataset, DatasetError, View, read, read_shots};
 use splat_runtime::{Camera, CameraModel};
 use std::path::Path;
 
@@ -266,8 +266,10 @@ fn color(name: &str) -> [u8; 3] {
 fn write_pictures(dir: &Path, m: &Model, width: u32, height: u32) {
     std::fs::create_dir_all(dir).unwrap();
     for s in &m.shots {
+        let path = dir.join(&s.name);
+        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
         image::RgbImage::from_pixel(width, height, image::Rgb(color(&s.name)))
-            .save(dir.join(&s.name))
+            .save(path)
             .unwrap();
     }
 }
@@ -389,6 +391,32 @@ fn downscaled_pictures_scale_the_intrinsics() {
         text.contains("16x16") && text.contains("cameras.bin"),
         "{text}"
     );
+}
+
+/// Image names with folders (`cam0/view_00.png`, as a multi-camera rig gives them) find their
+/// copies at the same place in `images_2`; without copies they are averaged.
+#[test]
+fn copies_of_pictures_in_folders_are_found() {
+    let mut m = model();
+    for (k, s) in m.shots.iter_mut().enumerate() {
+        s.name = format!("cam{}/{}", k % 2, s.name);
+    }
+    let dir = dataset(&m, false);
+    let averaged = read_shots(dir.path()).unwrap().downscaled(2).unwrap();
+    assert!(averaged.train.iter().all(|s| s.downscale == 2));
+    write_pictures(&dir.path().join("images_2"), &m, W / 2, H / 2);
+    let shots = read_shots(dir.path()).unwrap().downscaled(2).unwrap();
+    for shot in shots.train.iter().chain(&shots.test) {
+        assert_eq!(shot.downscale, 1, "{}", shot.path.display());
+        let place = shot.path.strip_prefix(dir.path().join("images_2")).unwrap();
+        assert!(
+            m.shots.iter().any(|s| Path::new(&s.name) == place),
+            "{place:?}"
+        );
+    }
+    let data = shots.load(Vec3::ZERO).unwrap();
+    let sizes = data.train.iter().map(|v| (v.image.width, v.image.height));
+    assert!(sizes.into_iter().all(|size| size == (W / 2, H / 2)));
 }
 
 /// The error of reading `m` (binary or text) after `spoil` changed the dataset folder.

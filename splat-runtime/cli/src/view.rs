@@ -27,7 +27,8 @@ pub struct CameraArgs {
 pub struct Downscale {
     /// A dataset's views N times smaller on each side (gsplat's `data_factor`): from the
     /// copies in a folder `<folder>_N` beside a picture's folder where there are some
-    /// (COLMAP's and nerfstudio's `images_N`, `train_N` in a Blender dataset), else each
+    /// (COLMAP's and nerfstudio's `images_N`, `cam0/x.jpg` in `images_N/cam0`; `train_N` in
+    /// a Blender dataset), else each
     /// picture averaged over N x N blocks as it is read; the intrinsics scale with the size.
     #[arg(long = "downscale", value_name = "N", default_value_t = 1,
           value_parser = clap::value_parser!(u32).range(1..))]
@@ -44,10 +45,10 @@ impl Downscale {
         let copies: Vec<&Shot> = all().filter(|s| s.downscale < f).collect();
         // The copies' folders, in order of first use.
         let mut folders: Vec<String> = vec![];
-        for parent in copies.iter().filter_map(|s| s.path.parent()?.file_name()) {
-            let parent = parent.to_string_lossy().into_owned();
-            if !folders.contains(&parent) {
-                folders.push(parent);
+        for folder in copies.iter().filter_map(|s| s.folder.file_name()) {
+            let folder = folder.to_string_lossy().into_owned();
+            if !folders.contains(&folder) {
+                folders.push(folder);
             }
         }
         let folders = folders.join(" and ");

@@ -232,7 +232,7 @@ impl Registered {
                 ),
             )
         })?;
-        Ok(Shot::new(path, camera))
+        Ok(Shot::in_folder(folder.to_path_buf(), path, camera))
     }
 }
 

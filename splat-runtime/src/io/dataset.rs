@@ -69,15 +69,27 @@ pub struct Shot {
     /// The picture is box-averaged by this factor on load ([`Shot::downscaled`]; 1: used as
     /// stored).
     pub downscale: u32,
+    /// The dataset's picture folder that `path` lies in: COLMAP's `images` (whose names may
+    /// have folders of their own), the picture's own folder in the other layouts. Copies made
+    /// smaller lie at the same place in `<folder>_<factor>`.
+    pub folder: PathBuf,
 }
 
 impl Shot {
     /// A shot of the picture at `path`, used at its size, seen by `camera`.
     pub fn new(path: PathBuf, camera: Camera) -> Shot {
+        let folder = path.parent().unwrap_or(Path::new("")).to_path_buf();
+        Shot::in_folder(folder, path, camera)
+    }
+
+    /// [`Shot::new`] for a picture somewhere inside the dataset's picture folder `folder`
+    /// ([`Shot::folder`]).
+    pub fn in_folder(folder: PathBuf, path: PathBuf, camera: Camera) -> Shot {
         Shot {
             path,
             camera,
             downscale: 1,
+            folder,
         }
     }
 
@@ -92,7 +104,7 @@ impl Shot {
         }
         let full = self.camera.size;
         let want = full / factor as f32;
-        if let Some(copy) = self.copy_at(factor) {
+        if let Some((copies, copy)) = self.copy_at(factor) {
             let (width, height) = image_size(&copy)?;
             let size = Vec2::new(width as f32, height as f32);
             let camera = rescaled(&self.camera, width, height)
@@ -106,7 +118,7 @@ impl Shot {
                     );
                     field(&copy, "size", problem)
                 })?;
-            return Ok(Shot::new(copy, camera));
+            return Ok(Shot::in_folder(copies, copy, camera));
         }
         let size = want.floor();
         if size.min_element() < 1.0 {
@@ -129,15 +141,17 @@ impl Shot {
         })
     }
 
-    /// The picture's copy in `<folder>_<factor>` beside its folder, if there is one
-    /// (`images_4/x.jpg` for `images/x.jpg`). Only beside the picture's own folder: a COLMAP
-    /// name with folders (`images/cam0/x.jpg`) is averaged, and a sibling dataset (`lego_2`
-    /// beside `lego`) is never mistaken for copies.
-    fn copy_at(&self, factor: u32) -> Option<PathBuf> {
-        let folder = self.path.parent()?;
-        let name = format!("{}_{factor}", folder.file_name()?.to_str()?);
-        let copy = folder.with_file_name(name).join(self.path.file_name()?);
-        copy.is_file().then_some(copy)
+    /// The picture's copy at its place in `<folder>_<factor>` beside its picture folder
+    /// ([`Shot::folder`]), if there is one: `images_4/x.jpg` for `images/x.jpg`, and
+    /// `images_4/cam0/x.jpg` for COLMAP's `images/cam0/x.jpg`. Only there: a sibling dataset
+    /// (`lego_2` beside `lego`) is never mistaken for copies.
+    /// Returns the copies' folder and the copy.
+    fn copy_at(&self, factor: u32) -> Option<(PathBuf, PathBuf)> {
+        let name = format!("{}_{factor}", self.folder.file_name()?.to_str()?);
+        let place = self.path.strip_prefix(&self.folder).ok()?;
+        let copies = self.folder.with_file_name(name);
+        let copy = copies.join(place);
+        copy.is_file().then_some((copies, copy))
     }
 
     /// The view: the picture decoded, downscaled and composited on `background`.
