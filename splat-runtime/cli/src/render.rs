@@ -96,6 +96,10 @@ impl Render<'_> {
         M::Params: FromStored,
     {
         let params: Vec<M::Params> = self.cloud.params();
+        // Every camera's frame as `draw` renders it, in order.
+        let mut frames = |draw: &mut dyn FnMut(&Camera) -> Result<Frame>| {
+            self.cameras.iter().try_for_each(|c| each(draw(c)?))
+        };
         Ok(match self.gpu {
             None if self.hardware => {
                 bail!("--hardware rasterizes with the GPU: use --backend gpu or auto")
@@ -103,25 +107,23 @@ impl Render<'_> {
             Some(gpu) if self.hardware => {
                 let mut renderer = HardwareRenderer::<M>::new(gpu, self.opts)?;
                 let scene = GpuScene::new(gpu, &params)?;
-                for camera in self.cameras {
+                frames(&mut |camera| {
                     renderer.forward(&scene, camera)?;
-                    each(renderer.download_frame()?)?;
-                }
+                    Ok(renderer.download_frame()?)
+                })?;
                 format!("GPU (hardware rasterizer), {}", gpu.adapter)
             }
             None => {
-                for camera in self.cameras {
-                    each(render::<M>(&params, camera, self.opts)?)?;
-                }
+                frames(&mut |camera| Ok(render::<M>(&params, camera, self.opts)?))?;
                 "CPU".to_string()
             }
             Some(gpu) => {
                 let mut renderer = GpuRenderer::<M>::new(gpu, self.opts)?;
                 let scene = GpuScene::new(gpu, &params)?;
-                for camera in self.cameras {
+                frames(&mut |camera| {
                     renderer.forward(&scene, camera)?;
-                    each(renderer.download_frame()?)?;
-                }
+                    Ok(renderer.download_frame()?)
+                })?;
                 format!("GPU, {}", gpu.adapter)
             }
         })

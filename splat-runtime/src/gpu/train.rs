@@ -29,8 +29,8 @@ pub struct GpuLoss {
     spread_kernel: Kernel,
     gradient_kernel: Kernel,
     /// Every target image, one after another: 8-bit straight RGBA, a word per pixel, where
-    /// the view holds 8-bit values ([`View::rgba8`]: every picture read from a PNG or JPEG),
-    /// else RGB f32 words and, for those with one, its coverage in `coverage`.
+    /// the view holds 8-bit values ([`View::rgba8`]: every 8-bit picture, as PNGs and JPEGs
+    /// usually are), else RGB f32 words and, for those with one, its coverage in `coverage`.
     targets: wgpu::Buffer,
     coverage: wgpu::Buffer,
     views: Vec<Target>,

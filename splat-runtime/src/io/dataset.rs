@@ -149,6 +149,11 @@ impl Shot {
     fn copy_at(&self, factor: u32) -> Option<(PathBuf, PathBuf)> {
         let name = format!("{}_{factor}", self.folder.file_name()?.to_str()?);
         let place = self.path.strip_prefix(&self.folder).ok()?;
+        // A name such as `../x.jpg` has no place among the copies.
+        let plain = |c: std::path::Component| matches!(c, std::path::Component::Normal(_));
+        if !place.components().all(plain) {
+            return None;
+        }
         let copies = self.folder.with_file_name(name);
         let copy = copies.join(place);
         copy.is_file().then_some((copies, copy))

@@ -1,7 +1,7 @@
 //! A dataset picture's pixels: decoded as straight RGBA, averaged over blocks when a view is
 //! taken smaller, and composited on a background into a [`View`]'s image. A view read from an
-//! 8-bit picture (every PNG and JPEG dataset) keeps 8-bit values, averaged or not, so the GPU
-//! trainer can hold it in 4 bytes per pixel instead of 16 ([`View::rgba8`]).
+//! 8-bit picture (as PNGs and JPEGs usually are) keeps 8-bit values, averaged or not, so the
+//! GPU trainer can hold it in 4 bytes per pixel instead of 12 or 16 ([`View::rgba8`]).
 
 use super::dataset::{DatasetError, View, image_error};
 use crate::pipeline::Image;
@@ -151,8 +151,11 @@ impl View {
     /// high one), when that is exactly what it holds: 8-bit colors and coverages composited on
     /// its background as [`Picture::composited`] does, which every view read from an 8-bit
     /// picture is (averaged or not). `None` for any other view (from a 16-bit or float picture,
-    /// a render), whose values 8 bits would round.
+    /// a render, not RGB), whose values 8 bits would round.
     pub fn rgba8(&self) -> Option<Vec<u32>> {
+        if self.image.channels != 3 {
+            return None;
+        }
         let eight_bit = |v: f32| {
             let k = (v * 255.0).round();
             ((0.0..=255.0).contains(&k) && unorm8(k as u8) == v).then_some(k as u32)

@@ -70,7 +70,7 @@ pub enum CheckpointError {
         path: PathBuf,
         error: std::io::Error,
     },
-    #[error("{path} is not a splat checkpoint (it does not start with SPLATCK4)")]
+    #[error("{path} is not a splat checkpoint (it does not start with SPLATCK4 or SPLATCK3)")]
     Magic { path: PathBuf },
     #[error(
         "{path} was written by an earlier splat (format {format}), which this one cannot resume: start the run again"
@@ -209,8 +209,14 @@ impl Checkpoint {
                 pixels: r.u64("training pixels")?,
             }),
             false => None,
-        }
-        .filter(|v| v.views > 0);
+        };
+        // No views (written before the run's first step) has no pixels either.
+        let views = match views {
+            Some(ViewsFootprint { views: 0, pixels }) if pixels != 0 => {
+                return Err(damaged(format!("{pixels} pixels in no training views")));
+            }
+            v => v.filter(|v| v.views > 0),
+        };
         if step > steps {
             return Err(damaged(format!(
                 "step {step} is past the run's {steps} steps"
@@ -390,6 +396,12 @@ mod tests {
         huge[at..at + 8].copy_from_slice(&(1u64 << 60).to_le_bytes());
         let e = Checkpoint::parse(&huge, path).unwrap_err().to_string();
         assert!(e.contains("damaged"), "{e}");
+        // Pixels in no views (the views' count follows the extent, after 8 header words).
+        let mut pixels = bytes.clone();
+        let at = 8 + 8 + 4 + 8 + 4 + 8 * 8;
+        pixels[at..at + 8].copy_from_slice(&0u64.to_le_bytes());
+        let e = Checkpoint::parse(&pixels, path).unwrap_err().to_string();
+        assert!(e.contains("pixels in no training views"), "{e}");
         let e = Checkpoint::parse(b"PLY\n....", path)
             .unwrap_err()
             .to_string();
