@@ -144,8 +144,8 @@ impl Shot {
     /// The picture's copy at its place in `<folder>_<factor>` beside its picture folder
     /// ([`Shot::folder`]), if there is one: `images_4/x.jpg` for `images/x.jpg`, and
     /// `images_4/cam0/x.jpg` for COLMAP's `images/cam0/x.jpg`. Only there: a sibling dataset
-    /// (`lego_2` beside `lego`) is never mistaken for copies.
-    /// Returns the copies' folder and the copy.
+    /// (`lego_2` beside `lego`) is never mistaken for copies. Returns the copies' folder and
+    /// the copy.
     fn copy_at(&self, factor: u32) -> Option<(PathBuf, PathBuf)> {
         let name = format!("{}_{factor}", self.folder.file_name()?.to_str()?);
         let place = self.path.strip_prefix(&self.folder).ok()?;

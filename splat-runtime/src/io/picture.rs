@@ -50,8 +50,14 @@ impl Picture {
             ImageLuma8(_) | ImageLumaA8(_) | ImageRgb8(_) | ImageRgba8(_)
         );
         let rgba = match eight_bit {
-            true => img.to_rgba8().into_raw().into_iter().map(unorm8).collect(),
-            false => img.to_rgba32f().into_raw(),
+            // Converted in place where the picture already is RGBA (no copy of its pixels).
+            true => img
+                .into_rgba8()
+                .into_raw()
+                .into_iter()
+                .map(unorm8)
+                .collect(),
+            false => img.into_rgba32f().into_raw(),
         };
         Ok(Picture {
             width,
