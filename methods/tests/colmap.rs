@@ -1,8 +1,8 @@
 //! COLMAP datasets: a small sparse model written in both COLMAP formats (binary and text) from
-//! known cameras (pinhole, simple pinhole, distortion-free OPENCV and OPENCV_FISHEYE) and
-//! known points, with small pictures, read back with the same poses, intrinsics and points;
-//! every 8th view by name is held out; downscaled pictures scale the intrinsics; bad models
-//! are refused with errors naming the file and the element.
+//! known cameras (pinhole, simple pinhole, distortion-free OPENCV and OPENCV_FISHEYE; lenses
+//! with distortion are `lens.rs`'s) and known points, with small pictures, read back with the
+//! same poses, intrinsics and points; every 8th view by name is held out; downscaled pictures
+//! scale the intrinsics; bad models are refused with errors naming the file and the element.
 
 use splat_runtime::glam::{DQuat, Mat3, Vec2, Vec3, Vec4};
 use splat_runtime::io::colmap::read_colmap;
@@ -10,23 +10,23 @@ use splat_runtime::io::dataset::{Dataset, DatasetError, View, read, read_shots};
 use splat_runtime::{Camera, CameraModel};
 use std::path::Path;
 
-const W: u32 = 32;
-const H: u32 = 24;
+pub(super) const W: u32 = 32;
+pub(super) const H: u32 = 24;
 const FISHEYE_K: [f64; 4] = [0.05, -0.01, 0.002, -0.0005];
 
 /// A camera of the model: COLMAP id, model id and name, and parameters in COLMAP's order.
-struct Cam {
-    id: i32,
-    model: i32,
-    name: &'static str,
-    params: Vec<f64>,
+pub(super) struct Cam {
+    pub id: i32,
+    pub model: i32,
+    pub name: &'static str,
+    pub params: Vec<f64>,
 }
 
 /// An image of the model: its pose is `pose`'s rotation and translation.
-struct Shot {
+pub(super) struct Shot {
     id: i32,
-    camera: i32,
-    name: String,
+    pub camera: i32,
+    pub name: String,
     pose: Camera,
 }
 
@@ -36,9 +36,9 @@ struct Pt {
     rgb: [u8; 3],
 }
 
-struct Model {
-    cameras: Vec<Cam>,
-    shots: Vec<Shot>,
+pub(super) struct Model {
+    pub cameras: Vec<Cam>,
+    pub shots: Vec<Shot>,
     points: Vec<Pt>,
 }
 
@@ -113,7 +113,7 @@ fn look_at(eye: Vec3) -> Camera {
 }
 
 /// Ten images named out of order (the ids too), on the four cameras; 20 points with colors.
-fn model() -> Model {
+pub(super) fn model() -> Model {
     let shots = [3, 7, 0, 9, 5, 1, 8, 2, 6, 4]
         .into_iter()
         .map(|k: usize| {
@@ -275,7 +275,7 @@ fn write_pictures(dir: &Path, m: &Model, width: u32, height: u32) {
 }
 
 /// A dataset folder holding `m` (binary or text) in `sparse/0` and its pictures in `images`.
-fn dataset(m: &Model, binary: bool) -> tempfile::TempDir {
+pub(super) fn dataset(m: &Model, binary: bool) -> tempfile::TempDir {
     let dir = tempfile::tempdir().unwrap();
     let sparse = dir.path().join("sparse/0");
     if binary {
@@ -463,24 +463,36 @@ fn bad_binary_models_are_refused_by_file_and_element() {
         &["images.bin: image 45 refers to camera 9, which is not in cameras.bin"],
     );
 
-    let mut distorted = model();
-    distorted.cameras[3].params[4] = 0.01;
-    let err = error_after(&distorted, true, |_| {});
+    let mut fov = model();
+    fov.cameras[3].model = 7;
+    let err = error_after(&fov, true, |_| {});
     assert_mentions(
         &err,
-        &["cameras.bin", "camera 7", "OPENCV (4)", "image_undistorter"],
+        &["cameras.bin", "camera 7", "FOV (7)", "image_undistorter"],
     );
 
-    let mut full = model();
-    full.cameras[0].model = 6;
-    let err = error_after(&full, true, |_| {});
+    let mut prism = model();
+    prism.cameras[0].model = 10;
+    let err = error_after(&prism, true, |_| {});
     assert_mentions(
         &err,
         &[
             "cameras.bin",
             "camera 1",
-            "FULL_OPENCV (6)",
+            "THIN_PRISM_FISHEYE (10)",
             "image_undistorter",
+        ],
+    );
+
+    // A lens that folds (k1 < 0) before the rays of a picture far off its principal point.
+    let mut blind = model();
+    blind.cameras[3].params = vec![29.0, 29.5, -60.0, 11.5, -0.1, 0.0, 0.0, 0.0];
+    let err = error_after(&blind, true, |_| {});
+    assert_mentions(
+        &err,
+        &[
+            "camera 7's lens (in cameras.bin) leaves no pixel of the 32x24 picture",
+            ".png",
         ],
     );
 
@@ -545,15 +557,15 @@ fn bad_text_models_are_refused_by_file_element_and_line() {
         &["images.txt: image 47 refers to camera 4, which is not in cameras.txt"],
     );
 
-    let mut distorted = model();
-    distorted.cameras[3].params[6] = -0.2;
-    let err = error_after(&distorted, false, |_| {});
+    let mut fov = model();
+    fov.cameras[3].name = "FOV";
+    let err = error_after(&fov, false, |_| {});
     assert_mentions(
         &err,
         &[
             "cameras.txt",
             "camera 7 (line 6)",
-            "OPENCV",
+            "FOV (7)",
             "image_undistorter",
         ],
     );

@@ -15,6 +15,7 @@ mod gpu_parity;
 mod gradients;
 mod hard_cases;
 mod hardware;
+mod lens;
 mod linear;
 mod precision;
 mod reference;

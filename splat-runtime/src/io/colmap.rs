@@ -3,14 +3,17 @@
 //! (`.txt`) format, and the pictures in `images/` under the names the model gives them.
 //!
 //! COLMAP's poses are world-to-camera in OpenCV axes, our [`Camera`] convention, so they are
-//! taken as they are. SIMPLE_PINHOLE and PINHOLE cameras (and SIMPLE_RADIAL, RADIAL and
-//! OPENCV ones whose distortion is zero) are pinhole cameras; OPENCV_FISHEYE is our
-//! Kannala-Brandt camera. Other distortion is refused: COLMAP's `image_undistorter` removes it.
+//! taken as they are. SIMPLE_PINHOLE and PINHOLE cameras are pinhole cameras; OPENCV_FISHEYE,
+//! SIMPLE_RADIAL_FISHEYE and RADIAL_FISHEYE are our Kannala-Brandt camera (fisheye pictures
+//! train as they are). The distortion of SIMPLE_RADIAL, RADIAL, OPENCV and FULL_OPENCV cameras
+//! is taken out of their pictures on load ([`super::undistort`]). FOV and the thin-prism models
+//! are refused: COLMAP's `image_undistorter` removes their distortion.
 //!
 //! The files are untrusted: every count in a binary file is checked against the bytes left
 //! before anything is allocated, and every error names the file and the element.
 
 use super::dataset::{Dataset, DatasetError, Point, Shot, Shots, field, image_size, rescaled};
+use super::undistort::Lens;
 use crate::types::{Camera, CameraModel};
 use glam::{DMat3, DQuat, DVec3, DVec4, Mat3, Vec2, Vec3, Vec4};
 use rayon::prelude::*;
@@ -95,11 +98,12 @@ struct Sparse {
     format: Format,
 }
 
-/// An image of the model: its name, its camera's id and that camera posed.
+/// An image of the model: its name, its camera's id and that camera posed, with its lens.
 struct Registered {
     name: String,
     camera_id: i32,
     camera: Camera,
+    lens: Option<Lens>,
 }
 
 /// An image record before its camera is looked up.
@@ -139,8 +143,8 @@ impl Sparse {
         format!("{stem}.{ext}")
     }
 
-    /// The cameras by id: intrinsics at their calibrated size, identity pose.
-    fn cameras(&self) -> Result<HashMap<i32, Camera>, DatasetError> {
+    /// The cameras by id: intrinsics at their calibrated size, identity pose, and their lenses.
+    fn cameras(&self) -> Result<HashMap<i32, Intrinsics>, DatasetError> {
         let path = self.file("cameras");
         let list = match self.format {
             Format::Binary => binary_file(
@@ -163,7 +167,10 @@ impl Sparse {
 
     /// The images, each with its camera posed; refused when one names a camera not in
     /// `cameras`.
-    fn registered(&self, cameras: &HashMap<i32, Camera>) -> Result<Vec<Registered>, DatasetError> {
+    fn registered(
+        &self,
+        cameras: &HashMap<i32, Intrinsics>,
+    ) -> Result<Vec<Registered>, DatasetError> {
         let path = self.file("images");
         let list = match self.format {
             Format::Binary => binary_file(
@@ -177,7 +184,7 @@ impl Sparse {
         };
         list.into_iter()
             .map(|(id, posed)| {
-                let intrinsics = cameras.get(&posed.camera_id).ok_or_else(|| {
+                let (intrinsics, lens) = cameras.get(&posed.camera_id).ok_or_else(|| {
                     let (camera, file) = (posed.camera_id, self.name("cameras"));
                     field(
                         &path,
@@ -193,6 +200,7 @@ impl Sparse {
                         translation: posed.translation,
                         ..*intrinsics
                     },
+                    lens: *lens,
                 })
             })
             .collect()
@@ -232,7 +240,12 @@ impl Registered {
                 ),
             )
         })?;
-        Ok(Shot::in_folder(folder.to_path_buf(), path, camera))
+        let shot = Shot::in_folder(folder.to_path_buf(), path.clone(), camera);
+        let Some(lens) = self.lens else {
+            return Ok(shot);
+        };
+        let lens_of = format!("camera {}'s lens (in {cameras})", self.camera_id);
+        shot.through(lens).map_err(|p| field(&path, lens_of, p))
     }
 }
 
@@ -240,9 +253,10 @@ impl Registered {
 fn param_count(model: i32) -> Result<usize, String> {
     match model {
         0 => Ok(3),
-        1 | 2 => Ok(4),
-        3 => Ok(5),
+        1 | 2 | 8 => Ok(4),
+        3 | 9 => Ok(5),
         4 | 5 => Ok(8),
+        6 => Ok(12),
         _ => Err(
             match usize::try_from(model).ok().and_then(|m| MODELS.get(m)) {
                 Some(name) => {
@@ -254,11 +268,15 @@ fn param_count(model: i32) -> Result<usize, String> {
     }
 }
 
+/// A camera's intrinsics (at its calibrated size, with an identity pose) and the lens whose
+/// distortion is taken out of its pictures, if any.
+type Intrinsics = (Camera, Option<Lens>);
+
 /// The intrinsics of a camera of COLMAP `model` (an index into [`MODELS`]) and `params` (in
-/// COLMAP's order), at its calibrated size, with an identity pose.
-fn intrinsics(model: i32, width: u64, height: u64, params: &[f64]) -> Result<Camera, String> {
+/// COLMAP's order) at its calibrated size.
+fn intrinsics(model: i32, width: u64, height: u64, params: &[f64]) -> Result<Intrinsics, String> {
     let want = param_count(model)?;
-    // A supported model: 0 to 5.
+    // A supported model.
     let name = MODELS[model as usize];
     if params.len() != want {
         return Err(format!(
@@ -267,9 +285,9 @@ fn intrinsics(model: i32, width: u64, height: u64, params: &[f64]) -> Result<Cam
         ));
     }
     let p = |i: usize| params[i] as f32;
-    // Models 0, 2, 3 share one focal length; 1, 4, 5 have two.
-    let (focal, principal, rest) = match model {
-        0 | 2 | 3 => (Vec2::splat(p(0)), Vec2::new(p(1), p(2)), &params[3..]),
+    // The models with one focal length; the others have two.
+    let (focal, principal, k) = match model {
+        0 | 2 | 3 | 8 | 9 => (Vec2::splat(p(0)), Vec2::new(p(1), p(2)), &params[3..]),
         _ => (Vec2::new(p(0), p(1)), Vec2::new(p(2), p(3)), &params[4..]),
     };
     if !(focal.is_finite() && principal.is_finite() && focal.min_element() > 0.0) {
@@ -277,26 +295,35 @@ fn intrinsics(model: i32, width: u64, height: u64, params: &[f64]) -> Result<Cam
             "has the focal length {focal} and principal point {principal}: not finite and positive"
         ));
     }
-    let (camera_model, distortion) = if model == 5 {
-        (
-            CameraModel::KannalaBrandt,
-            DVec4::from_slice(rest).as_vec4(),
-        )
-    } else if rest.iter().all(|k| *k == 0.0) {
-        (CameraModel::Pinhole, Vec4::ZERO)
-    } else {
-        return Err(format!(
-            "has the distortion {rest:?} of its model {name} ({model}): {UNDISTORT}"
-        ));
+    let at = |i: usize| k.get(i).copied().unwrap_or(0.0);
+    let lens = match model {
+        // SIMPLE_RADIAL: k; RADIAL: k1 k2; OPENCV: k1 k2 p1 p2; FULL_OPENCV: k1 k2 p1 p2 k3 k4
+        // k5 k6.
+        2..=4 | 6 => Lens {
+            numerator: [at(0), at(1), at(4), 0.0],
+            denominator: [at(5), at(6), at(7)],
+            tangential: [at(2), at(3)],
+        },
+        _ => Lens::default(),
     };
-    Ok(Camera {
+    // OPENCV_FISHEYE: k1 k2 k3 k4; SIMPLE_RADIAL_FISHEYE: k; RADIAL_FISHEYE: k1 k2, all the
+    // Kannala-Brandt polynomial in the angle.
+    let (camera_model, distortion) = match model {
+        5 | 8 | 9 => (
+            CameraModel::KannalaBrandt,
+            DVec4::new(at(0), at(1), at(2), at(3)).as_vec4(),
+        ),
+        _ => (CameraModel::Pinhole, Vec4::ZERO),
+    };
+    let camera = Camera {
         focal,
         principal,
         size: size(width, height)?,
         model: camera_model,
         distortion,
         ..Default::default()
-    })
+    };
+    Ok((camera, (!lens.is_identity()).then_some(lens)))
 }
 
 /// An image size, refused when zero or too large to be exact in `f32`.
@@ -465,7 +492,7 @@ fn binary_file<I: Display, T>(
     Ok(records)
 }
 
-fn binary_camera(r: &mut Bin) -> Result<Camera, String> {
+fn binary_camera(r: &mut Bin) -> Result<Intrinsics, String> {
     let model = r.i32()?;
     let (width, height) = (r.u64()?, r.u64()?);
     let mut params = vec![0.0; param_count(model)?];
@@ -590,7 +617,7 @@ fn is_data(line: &str) -> bool {
     !line.is_empty() && !line.starts_with('#')
 }
 
-fn text_camera(f: &mut Fields) -> Result<Camera, String> {
+fn text_camera(f: &mut Fields) -> Result<Intrinsics, String> {
     let name: String = f.next("model")?;
     let model = MODELS
         .iter()

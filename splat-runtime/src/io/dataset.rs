@@ -4,9 +4,10 @@
 //!   `camera_angle_x` (horizontal field of view, radians) and `frames[]` of `file_path`
 //!   (relative; `.png` added when it has no extension) and `transform_matrix`.
 //! - nerfstudio: one `transforms.json` with intrinsics `fl_x fl_y cx cy w h` given globally or
-//!   per frame, and `camera_model` `PINHOLE`, `OPENCV` (without distortion) or
-//!   `OPENCV_FISHEYE` (`k1..k4`: our Kannala-Brandt camera, so fisheye images train as they
-//!   are); every 8th frame is held out for testing.
+//!   per frame, and `camera_model` `PINHOLE`, `OPENCV` (`k1..k4 p1 p2`, the distortion taken
+//!   out of the pictures on load, [`super::undistort`]) or `OPENCV_FISHEYE` (`k1..k4`: our
+//!   Kannala-Brandt camera, so fisheye images train as they are); every 8th frame is held
+//!   out for testing.
 //!
 //! The third is a COLMAP sparse model (`sparse/0/` or `sparse/`, binary or text) with its
 //! pictures in `images/`, read by [`colmap::read_colmap`]; it also gives the dataset an
@@ -17,10 +18,11 @@
 
 use super::camera::NotRotation;
 use super::picture::Picture;
+use super::undistort::{Lens, Undistortion};
 use super::{Outputs, colmap};
 use crate::pipeline::Image;
 use crate::types::{Camera, CameraModel};
-use glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
+use glam::{DVec4, Mat3, Mat4, Vec2, Vec3, Vec4};
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
@@ -64,7 +66,8 @@ impl View {
 #[derive(Clone, Debug)]
 pub struct Shot {
     pub path: PathBuf,
-    /// The view's camera: fitted to the picture's size, divided by `downscale`.
+    /// The view's camera: fitted to the picture's size, divided by `downscale` (and cut from
+    /// the picture through its lens, [`Shot::undistortion`]).
     pub camera: Camera,
     /// The picture is box-averaged by this factor on load ([`Shot::downscaled`]; 1: used as
     /// stored).
@@ -73,6 +76,9 @@ pub struct Shot {
     /// have folders of their own), the picture's own folder in the other layouts. Copies made
     /// smaller lie at the same place in `<folder>_<factor>`.
     pub folder: PathBuf,
+    /// The lens distortion taken out of the picture on load, and where the view lies in it
+    /// (`None`: the picture, after any downscale, is the view).
+    pub undistortion: Option<Undistortion>,
 }
 
 impl Shot {
@@ -90,18 +96,52 @@ impl Shot {
             camera,
             downscale: 1,
             folder,
+            undistortion: None,
         }
+    }
+
+    /// This shot with `lens`'s distortion taken out of its picture on load, its camera the
+    /// pinhole view cut from it ([`Undistortion::new`], whose error this returns).
+    pub fn through(self, lens: Lens) -> Result<Shot, String> {
+        let cut = Undistortion::new(self.picture_camera(), lens)?;
+        Ok(Shot {
+            camera: cut.view(),
+            undistortion: Some(cut),
+            ..self
+        })
+    }
+
+    /// The camera of the picture as it is read (after any downscale): the view's camera unless
+    /// the view is cut from it through a lens.
+    fn picture_camera(&self) -> Camera {
+        self.undistortion.map_or(self.camera, |cut| cut.picture)
     }
 
     /// The view `factor` times smaller on each side, as gsplat's `data_factor`: from the copy
     /// of the picture in the sibling folder `<folder>_<factor>` where there is one (COLMAP's
     /// and nerfstudio's `images_4`; it must be that size, give or take a pixel of rounding),
     /// else box-averaged over `factor` x `factor` blocks on load, the right and bottom pixels
-    /// that fill no block dropped. The intrinsics scale with the size.
+    /// that fill no block dropped. The intrinsics scale with the size; a view cut from its
+    /// picture through a lens is cut again from the smaller picture.
     pub fn downscaled(self, factor: u32) -> Result<Shot, DatasetError> {
         if factor <= 1 {
             return Ok(self);
         }
+        let Some(cut) = self.undistortion else {
+            return self.picture_downscaled(factor);
+        };
+        let picture = Shot {
+            camera: cut.picture,
+            undistortion: None,
+            ..self
+        };
+        let small = picture.picture_downscaled(factor)?;
+        let path = small.path.clone();
+        small.through(cut.lens).map_err(|p| field(&path, "lens", p))
+    }
+
+    /// [`Shot::downscaled`] for a shot whose view is its picture.
+    fn picture_downscaled(self, factor: u32) -> Result<Shot, DatasetError> {
         let full = self.camera.size;
         let want = full / factor as f32;
         if let Some((copies, copy)) = self.copy_at(factor) {
@@ -163,7 +203,7 @@ impl Shot {
     pub fn load(&self, background: Vec3) -> Result<View, DatasetError> {
         let picture = Picture::read(&self.path)?;
         // Checked before averaging: a picture narrower than a block has nothing to average.
-        let (f, camera) = (self.downscale, self.camera.size);
+        let (f, camera) = (self.downscale, self.picture_camera().size);
         let (w, h) = (picture.width, picture.height);
         if Vec2::new((w / f) as f32, (h / f) as f32) != camera {
             let downscaled = match f {
@@ -179,10 +219,17 @@ impl Shot {
                 ),
             ));
         }
-        let (image, coverage) = match f {
-            1 => picture.composited(background),
-            f => picture.downscaled(f).composited(background),
+        let picture = match f {
+            1 => picture,
+            f => picture.downscaled(f),
         };
+        let picture = match &self.undistortion {
+            None => picture,
+            Some(cut) => cut
+                .apply(&picture)
+                .map_err(|p| field(&self.path, "lens", p))?,
+        };
+        let (image, coverage) = picture.composited(background);
         Ok(View {
             name: self.path.display().to_string(),
             camera: self.camera,
@@ -551,30 +598,37 @@ fn nerfstudio_shots(dir: &Path) -> Result<Shots, DatasetError> {
             .or_else(|| json.get("camera_model"))
             .map_or(Some("PINHOLE"), |m| m.as_str())
             .ok_or_else(|| field(&path, named("camera_model"), "must be a string"))?;
-        let coefficient = |name: &str| Ok::<f32, DatasetError>(number(name)?.unwrap_or(0.0) as f32);
-        let (camera_model, distortion) = match model {
-            "PINHOLE" => (CameraModel::Pinhole, Vec4::ZERO),
-            "OPENCV" => {
-                for name in ["k1", "k2", "p1", "p2"] {
-                    if coefficient(name)? != 0.0 {
-                        return Err(field(
-                            &path,
-                            named(name),
-                            "is not zero: OPENCV distortion is not supported (undistort the images, or calibrate as OPENCV_FISHEYE)",
-                        ));
-                    }
-                }
-                (CameraModel::Pinhole, Vec4::ZERO)
-            }
-            "OPENCV_FISHEYE" => (
-                CameraModel::KannalaBrandt,
-                Vec4::new(
+        let coefficient = |name: &str| Ok::<f64, DatasetError>(number(name)?.unwrap_or(0.0));
+        let (camera_model, distortion, lens) = match model {
+            "PINHOLE" => (CameraModel::Pinhole, Vec4::ZERO, Lens::default()),
+            // nerfstudio's radial polynomial runs to k4 r⁸.
+            "OPENCV" => (
+                CameraModel::Pinhole,
+                Vec4::ZERO,
+                Lens {
+                    numerator: [
+                        coefficient("k1")?,
+                        coefficient("k2")?,
+                        coefficient("k3")?,
+                        coefficient("k4")?,
+                    ],
+                    tangential: [coefficient("p1")?, coefficient("p2")?],
+                    ..Lens::default()
+                },
+            ),
+            "OPENCV_FISHEYE" => {
+                let k = [
                     coefficient("k1")?,
                     coefficient("k2")?,
                     coefficient("k3")?,
                     coefficient("k4")?,
-                ),
-            ),
+                ];
+                (
+                    CameraModel::KannalaBrandt,
+                    DVec4::from_array(k).as_vec4(),
+                    Lens::default(),
+                )
+            }
             other => {
                 return Err(field(
                     &path,
@@ -591,7 +645,13 @@ fn nerfstudio_shots(dir: &Path) -> Result<Shots, DatasetError> {
             ..posed_camera(&c2w, focal, (width, height))
                 .map_err(|problem| field(&path, at("transform_matrix"), problem))?
         };
-        shots.push(Shot::new(image_path, camera));
+        let shot = Shot::new(image_path, camera);
+        shots.push(match lens.is_identity() {
+            true => shot,
+            false => shot
+                .through(lens)
+                .map_err(|p| field(&path, format!("the OPENCV lens of {}", at("file_path")), p))?,
+        });
     }
     Ok(Shots::every_8th_held_out(shots, Vec::new()))
 }
@@ -1096,6 +1156,8 @@ mod tests {
         use serde_json::json;
         let none = json!({});
         assert_eq!(nerfstudio(none.clone(), none.clone()), "read 1 view");
+        let opencv = json!({"camera_model": "OPENCV", "k1": 0.05, "k4": -0.01, "p1": 0.002});
+        assert_eq!(nerfstudio(opencv, none.clone()), "read 1 view");
         let cases = [
             (
                 json!({"fl_x": 0.0}),
@@ -1136,6 +1198,12 @@ mod tests {
                 none.clone(),
                 json!({"transform_matrix": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 3], [0.1, 0, 0, 1]]}),
                 "frames[0].transform_matrix must end with the row [0, 0, 0, 1]",
+            ),
+            (
+                // A lens that folds (k1 < 0) before the rays of a picture far off its centre.
+                json!({"camera_model": "OPENCV", "k1": -0.1}),
+                json!({"cx": -60.0}),
+                "the OPENCV lens of frames[0].file_path leaves no pixel of the 30x20 picture",
             ),
         ];
         for (fields, frame, want) in cases {

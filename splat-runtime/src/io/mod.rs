@@ -8,6 +8,7 @@ pub mod dataset;
 pub mod image;
 mod picture;
 pub mod ply;
+pub mod undistort;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};

@@ -68,39 +68,16 @@ impl Picture {
     }
 
     /// The picture averaged over blocks of `factor` x `factor` pixels, the right and bottom
-    /// pixels that fill no block dropped: each block's coverage is its mean, its color the
-    /// coverage-weighted mean (so composited on any background, the block is the mean of its
-    /// pixels composited on it). An 8-bit picture's averages are rounded to 8 bits, as a copy
-    /// made smaller by an image program would hold them.
+    /// pixels that fill no block dropped: each block is its pixels' [`Picture::blend`].
     pub fn downscaled(&self, factor: u32) -> Picture {
         let (f, w) = (factor as usize, self.width as usize);
         let (width, height) = (self.width / factor, self.height / factor);
         let mut rgba = vec![0.0f32; width as usize * height as usize * 4];
-        let quantized = |v: f32| match self.eight_bit {
-            true => unorm8((v.clamp(0.0, 1.0) * 255.0).round() as u8),
-            false => v,
-        };
         (rgba.par_chunks_exact_mut(width as usize * 4).enumerate()).for_each(|(y, row)| {
             for (x, px) in row.chunks_exact_mut(4).enumerate() {
-                // Sums of c a per channel, then of a.
-                let mut sums = [0.0f32; 4];
-                for dy in 0..f {
-                    let start = ((y * f + dy) * w + x * f) * 4;
-                    for p in self.rgba[start..start + f * 4].chunks_exact(4) {
-                        for c in 0..3 {
-                            sums[c] += p[c] * p[3];
-                        }
-                        sums[3] += p[3];
-                    }
-                }
-                let a = quantized(sums[3] / (f * f) as f32);
-                for c in 0..3 {
-                    px[c] = match sums[3] > 0.0 {
-                        true => quantized(sums[c] / sums[3]),
-                        false => 0.0,
-                    };
-                }
-                px[3] = a;
+                let rows = (y * f..(y + 1) * f).map(|sy| sy * w);
+                let block = rows.flat_map(|start| (x * f..(x + 1) * f).map(move |sx| start + sx));
+                px.copy_from_slice(&self.blend(block.map(|p| (p, 1.0))));
             }
         });
         Picture {
@@ -109,6 +86,33 @@ impl Picture {
             rgba,
             eight_bit: self.eight_bit,
         }
+    }
+
+    /// The weighted mean of pixels (each its index and weight), as straight RGBA: its coverage
+    /// is the coverages' mean, its color the mean weighted by coverage too (so composited on any
+    /// background, it is the mean of the pixels composited on it). An 8-bit picture's means
+    /// are rounded to 8 bits, as a copy made by an image program would hold them.
+    pub fn blend(&self, pixels: impl IntoIterator<Item = (usize, f32)>) -> [f32; 4] {
+        let rounded = |v: f32| match self.eight_bit {
+            true => unorm8((v.clamp(0.0, 1.0) * 255.0).round() as u8),
+            false => v,
+        };
+        // Sums of w a c per channel, of w a, and of w.
+        let (mut sums, mut weight) = ([0.0f32; 4], 0.0f32);
+        for (p, w) in pixels {
+            let px = &self.rgba[p * 4..p * 4 + 4];
+            let wa = w * px[3];
+            for c in 0..3 {
+                sums[c] += px[c] * wa;
+            }
+            sums[3] += wa;
+            weight += w;
+        }
+        let color = |c: usize| match sums[3] > 0.0 {
+            true => rounded(sums[c] / sums[3]),
+            false => 0.0,
+        };
+        [color(0), color(1), color(2), rounded(sums[3] / weight)]
     }
 
     /// RGB composited on `background`, and the coverage unless the picture is opaque.
