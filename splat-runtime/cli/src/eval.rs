@@ -4,7 +4,7 @@
 //! scene trained by `splat fit` or by another program (any INRIA 3DGS PLY).
 
 use crate::methods::{self, Method};
-use crate::view::{Downscale, Split};
+use crate::view::{Downscale, Split, undistorted};
 use crate::{Backend, render};
 use anyhow::{Context, Result};
 use splat_runtime::RenderOptions;
@@ -53,7 +53,7 @@ pub(crate) fn eval_cmd(args: &EvalArgs, methods: &[Method]) -> Result<()> {
     let cloud = ply::read(&args.scene)?;
     let shots = args.split.of(dataset::read_shots(&args.dataset)?);
     let shots = dataset::downscaled(shots, args.downscale.factor)?;
-    let taken = args.downscale.how(&shots);
+    let taken = args.downscale.how(&shots) + &undistorted(&shots);
     let split = args.split.name();
     if shots.is_empty() {
         anyhow::bail!("{}: no {split} views", args.dataset.display());

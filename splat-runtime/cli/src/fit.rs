@@ -5,7 +5,7 @@
 
 use crate::interrupt::Listening;
 use crate::methods::{self, Method};
-use crate::view::Downscale;
+use crate::view::{Downscale, undistorted};
 use crate::{plot, scene};
 use anyhow::{Context, Result, anyhow, bail};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -185,7 +185,8 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
     let (data, name, defaults, taken) = match &args.dataset {
         Some(dir) => {
             let shots = dataset::read_shots(dir)?.downscaled(args.downscale.factor)?;
-            let taken = args.downscale.how(shots.train.iter().chain(&shots.test));
+            let all = || shots.train.iter().chain(&shots.test);
+            let taken = args.downscale.how(all()) + &undistorted(all());
             let name = dir.display().to_string();
             (shots.load(background)?, name, DATASET_DEFAULTS, taken)
         }

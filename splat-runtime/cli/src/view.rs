@@ -5,6 +5,7 @@ use anyhow::{Result, bail};
 use splat_runtime::Camera;
 use splat_runtime::io::camera as camera_io;
 use splat_runtime::io::dataset::{self, Shot, Shots};
+use splat_runtime::io::undistort::Undistortion;
 use std::path::PathBuf;
 use std::str::FromStr;
 
@@ -59,6 +60,29 @@ impl Downscale {
             n if n == all().count() => format!(" (from {folders})"),
             n => format!(" ({n} from {folders}, {} {averaged})", all().count() - n),
         }
+    }
+}
+
+/// Which of `shots` are cut from their pictures through a lens, for a report: " (the lens
+/// distortion of 80 pictures taken out, 200x200 cropped to 190x190)", the sizes when they are
+/// the same for all; nothing when none is.
+pub fn undistorted<'a>(shots: impl IntoIterator<Item = &'a Shot>) -> String {
+    let cuts: Vec<_> = shots.into_iter().filter_map(|s| s.undistortion).collect();
+    let Some(first) = cuts.first() else {
+        return String::new();
+    };
+    let sizes = |c: &Undistortion| (c.picture.size, c.size);
+    let n = cuts.len();
+    let plural = if n == 1 { "picture" } else { "pictures" };
+    match cuts.iter().all(|c| sizes(c) == sizes(first)) {
+        true => {
+            let (from, to) = (first.picture.size, first.size);
+            format!(
+                " (the lens distortion of {n} {plural} taken out, {}x{} cropped to {}x{})",
+                from.x, from.y, to.x, to.y
+            )
+        }
+        false => format!(" (the lens distortion of {n} {plural} taken out)"),
     }
 }
 

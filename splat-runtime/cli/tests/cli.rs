@@ -1480,6 +1480,17 @@ fn fit_starts_from_a_colmap_datasets_points() {
         stdout.contains("starting from 10 of the dataset's 40 points"),
         "{stdout}"
     );
+
+    // A lens with distortion: the views are cut from the pictures, and fit says so.
+    let cameras = dir.path().join("data/sparse/0/cameras.txt");
+    std::fs::write(cameras, "1 SIMPLE_RADIAL 16 16 20 8 8 0.2\n").unwrap();
+    let stdout = ok(&splat(&args, dir.path()));
+    assert!(
+        stdout.contains(
+            "views of 14x14 (the lens distortion of 3 pictures taken out, 16x16 cropped to 14x14)"
+        ),
+        "{stdout}"
+    );
 }
 
 /// `bench --backend gpu` times device-resident frames; with `--shader-checks` it says the
