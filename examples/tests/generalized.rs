@@ -356,15 +356,10 @@ fn fits_views_of_a_known_scene(model: CameraModel) {
             tile_size: 8,
             ..Default::default()
         };
-        View {
-            name: "view".into(),
-            image: splat_runtime::render::<Method>(&truth, &cam, &opts)
-                .unwrap()
-                .color,
-            camera: cam,
-            coverage: None,
-            background: Vec3::ZERO,
-        }
+        let image = splat_runtime::render::<Method>(&truth, &cam, &opts)
+            .unwrap()
+            .color;
+        View::new("view".into(), cam, image, None, Vec3::ZERO)
     };
     let data = Dataset {
         train: (0..8)

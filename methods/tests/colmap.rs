@@ -334,8 +334,8 @@ fn check(data: &Dataset, m: &Model, scale: f32) {
         assert_eq!(got.size, want.size * scale);
         assert_eq!((got.model, got.distortion), (want.model, want.distortion));
         let rgb = color(&shot.name).map(|c| c as f32 / 255.0);
-        assert_eq!(view.image.data[..3], rgb);
-        assert_eq!(view.image.width as f32, W as f32 * scale);
+        assert_eq!(view.image().data[..3], rgb);
+        assert_eq!(view.size().0 as f32, W as f32 * scale);
     }
 
     assert_eq!(data.points.len(), m.points.len());
@@ -415,7 +415,7 @@ fn copies_of_pictures_in_folders_are_found() {
         );
     }
     let data = shots.load(Vec3::ZERO).unwrap();
-    let sizes = data.train.iter().map(|v| (v.image.width, v.image.height));
+    let sizes = data.train.iter().map(|v| v.size());
     assert!(sizes.into_iter().all(|size| size == (W / 2, H / 2)));
 }
 
@@ -491,7 +491,7 @@ fn bad_binary_models_are_refused_by_file_and_element() {
     assert_mentions(
         &err,
         &[
-            "camera 7's lens (in cameras.bin) leaves no pixel of the 32x24 picture",
+            "camera 7's lens (in cameras.bin) finds no rectangle of the 32x24 picture's pixels",
             ".png",
         ],
     );

@@ -402,15 +402,10 @@ fn three_dgs_fits_equiangular_views() {
             model: CameraModel::Equiangular,
             ..look_at(eye(i, 9, 0.6 * (i % 3) as f32 - 0.6))
         };
-        View {
-            name: format!("frame_{i:03}"),
-            image: render::<Method>(&scene, &camera, &opts.render)
-                .unwrap()
-                .color,
-            camera,
-            coverage: None,
-            background: Vec3::ZERO,
-        }
+        let image = render::<Method>(&scene, &camera, &opts.render)
+            .unwrap()
+            .color;
+        View::new(format!("frame_{i:03}"), camera, image, None, Vec3::ZERO)
     };
     let data = Dataset {
         train: (0..9).filter(|i| i % 8 != 0).map(view).collect(),
@@ -924,12 +919,12 @@ fn random_backgrounds_recomposite_the_targets_and_train() {
     let black = read_blender(dir.path(), Vec3::ZERO).unwrap();
     let white = read_blender(dir.path(), Vec3::ONE).unwrap();
     for (b, w) in black.train.iter().zip(&white.train) {
-        assert!(b.coverage.is_some(), "the views are partly transparent");
+        assert!(b.coverage().is_some(), "the views are partly transparent");
         let moved = b.on(Vec3::ONE);
         let worst = moved
             .data
             .iter()
-            .zip(&w.image.data)
+            .zip(&w.image().data)
             .fold(0.0f32, |m, (a, b)| m.max((a - b).abs()));
         assert!(worst < 1e-6, "{worst}");
     }
@@ -1038,11 +1033,7 @@ fn a_run_resumed_from_its_checkpoint_takes_the_same_steps() {
             ..data.clone()
         };
         let err = fit_from::<Method>(&fewer, &mut other, 1.0, &opts, |_| {}).unwrap_err();
-        let (n, w, h) = (
-            data.train.len(),
-            data.train[0].image.width,
-            data.train[0].image.height,
-        );
+        let (n, (w, h)) = (data.train.len(), data.train[0].size());
         let want = format!(
             "run on {n} training views of {} pixels in all, not {}",
             n as u32 * w * h,
@@ -1051,14 +1042,14 @@ fn a_run_resumed_from_its_checkpoint_takes_the_same_steps() {
         assert!(err.to_string().contains(&want), "{err}");
         let smaller = Dataset {
             train: (data.train.iter())
-                .map(|v| View {
-                    image: Image {
+                .map(|v| {
+                    let image = Image {
                         width: w / 2,
                         height: h / 2,
                         channels: 3,
-                        data: v.image.data[..(w / 2 * h / 2 * 3) as usize].to_vec(),
-                    },
-                    ..v.clone()
+                        data: v.image().data[..(w / 2 * h / 2 * 3) as usize].to_vec(),
+                    };
+                    View::new(v.name.clone(), v.camera, image, None, v.background)
                 })
                 .collect(),
             ..data.clone()

@@ -3,10 +3,11 @@
 //! normalized image plane, placed where COLMAP's own distortion formulas (written out here,
 //! inverted in f64) put it; the views read back must show that scene at their pinhole rays,
 //! within what 8-bit pictures and bilinear sampling allow, and keep only pixels whose rays the
-//! picture saw.
+//! picture saw. nerfstudio's OPENCV lens is read the same way, and COLMAP's radial fisheyes
+//! as our Kannala-Brandt camera.
 
 use super::colmap::{Cam, H, Model, W, dataset, model};
-use splat_runtime::glam::{DVec2, Vec3};
+use splat_runtime::glam::{DVec2, Vec2, Vec3, Vec4};
 use splat_runtime::io::dataset::{View, read_shots};
 use splat_runtime::{Camera, CameraModel};
 use std::path::Path;
@@ -38,7 +39,7 @@ fn lensed() -> Vec<Cam> {
             model: 6,
             name: "FULL_OPENCV",
             params: vec![
-                20.5, 20.0, 16.2, 11.8, 0.06, 0.01, -0.002, 0.003, 0.001, 0.02, -0.004, 0.001,
+                20.5, 20.0, 16.2, 11.8, 0.06, 0.01, -0.002, 0.003, 0.05, 0.02, 0.1, -0.1,
             ],
         },
     ]
@@ -79,16 +80,16 @@ fn distorted(cam: &Cam, n: DVec2) -> DVec2 {
     }
 }
 
-/// The normalized point that `cam`'s lens puts at `d`, by fixed-point iteration in f64.
-fn undistorted(cam: &Cam, d: DVec2) -> DVec2 {
+/// Where a lens puts a point of the normalized image plane.
+type LensFn<'a> = &'a dyn Fn(DVec2) -> DVec2;
+
+/// The normalized point that `lens` puts at `d`, by fixed-point iteration in f64.
+fn undistorted(lens: LensFn, d: DVec2) -> DVec2 {
     let mut n = d;
     for _ in 0..200 {
-        n -= distorted(cam, n) - d;
+        n -= lens(n) - d;
     }
-    assert!(
-        (distorted(cam, n) - d).length() < 1e-12,
-        "{d} did not invert"
-    );
+    assert!((lens(n) - d).length() < 1e-12, "{d} did not invert");
     n
 }
 
@@ -102,18 +103,50 @@ fn scene(n: DVec2) -> [f64; 3] {
     ]
 }
 
-/// The 8-bit picture `cam` takes of [`scene`], `width` x `height` pixels.
-fn photograph(cam: &Cam, width: u32, height: u32) -> image::RgbImage {
-    let (f, c) = pinhole(cam);
+/// The 8-bit picture of [`scene`] taken through `lens` by a camera of focal lengths `f` and
+/// principal point `c` at W x H pixels, `width` x `height` pixels.
+fn photograph(lens: LensFn, (f, c): (DVec2, DVec2), width: u32, height: u32) -> image::RgbImage {
     let scale = DVec2::new(
         f64::from(width) / f64::from(W),
         f64::from(height) / f64::from(H),
     );
     image::RgbImage::from_fn(width, height, |x, y| {
         let at = DVec2::new(f64::from(x), f64::from(y)) + 0.5;
-        let rgb = scene(undistorted(cam, (at / scale - c) / f));
+        let rgb = scene(undistorted(lens, (at / scale - c) / f));
         image::Rgb(rgb.map(|v| (v * 255.0).round() as u8))
     })
+}
+
+/// `view` is cut from a picture of `size` pixels, seen with focal lengths `f` and principal
+/// point `c` through `lens`, with the picture's focal lengths at whole pixels; every ray of
+/// its pixels falls between the picture's pixel centres, and no side could take one more row
+/// or column of the picture.
+fn assert_cut(view: &View, lens: LensFn, (f, c): (DVec2, DVec2), size: (u32, u32)) {
+    let got = view.camera;
+    assert_eq!(got.model, CameraModel::Pinhole);
+    assert_eq!(got.focal, f.as_vec2());
+    let (w, h) = view.size();
+    assert_eq!(got.size.as_uvec2().to_array(), [w, h]);
+    let offset = c.as_vec2() - got.principal;
+    assert_eq!(offset, offset.round(), "whole pixels");
+    let (ox, oy) = (offset.x as u32, offset.y as u32);
+    let seen = |x: u32, y: u32| {
+        let ray = (DVec2::new(f64::from(x), f64::from(y)) + 0.5 - c) / f;
+        let at = lens(ray) * f + c;
+        let last = DVec2::new(f64::from(size.0), f64::from(size.1)) - 0.5;
+        at.cmpge(DVec2::splat(0.5)).all() && at.cmple(last).all()
+    };
+    for y in oy..oy + h {
+        for x in ox..ox + w {
+            assert!(seen(x, y), "{}: pixel ({x}, {y}) is not seen", view.name);
+        }
+    }
+    let column = |x: u32| (oy..oy + h).all(|y| seen(x, y));
+    let row = |y: u32| (ox..ox + w).all(|x| seen(x, y));
+    assert!(ox == 0 || !column(ox - 1), "{}: left", view.name);
+    assert!(ox + w == size.0 || !column(ox + w), "{}: right", view.name);
+    assert!(oy == 0 || !row(oy - 1), "{}: top", view.name);
+    assert!(oy + h == size.1 || !row(oy + h), "{}: bottom", view.name);
 }
 
 /// The camera `view` was read with, and its largest difference from [`scene`] at its pixels'
@@ -122,8 +155,9 @@ fn scene_error(view: &View) -> f64 {
     let cam = view.camera;
     let (f, c) = (cam.focal.as_dvec2(), cam.principal.as_dvec2());
     let mut worst = 0.0f64;
-    for (p, rgb) in view.image.data.chunks_exact(3).enumerate() {
-        let (x, y) = (p as u32 % view.image.width, p as u32 / view.image.width);
+    let image = view.image();
+    for (p, rgb) in image.data.chunks_exact(3).enumerate() {
+        let (x, y) = (p as u32 % image.width, p as u32 / image.width);
         let n = (DVec2::new(f64::from(x), f64::from(y)) + 0.5 - c) / f;
         for (got, want) in rgb.iter().zip(scene(n)) {
             worst = worst.max((f64::from(*got) - want).abs());
@@ -140,7 +174,9 @@ fn lensed_dataset(binary: bool) -> (Model, tempfile::TempDir) {
     for shot in &m.shots {
         let cam = m.cameras.iter().find(|c| c.id == shot.camera).unwrap();
         let path = dir.path().join("images").join(&shot.name);
-        photograph(cam, W, H).save(path).unwrap();
+        photograph(&|n| distorted(cam, n), pinhole(cam), W, H)
+            .save(path)
+            .unwrap();
     }
     (m, dir)
 }
@@ -170,25 +206,8 @@ fn distorted_pictures_read_as_pinhole_views() {
         for view in data.train.iter().chain(&data.test) {
             let cam = camera_of(&m, view);
             let (f, c) = pinhole(cam);
-            let got = view.camera;
-            assert_eq!(got.model, CameraModel::Pinhole);
-            assert_eq!(got.focal.as_dvec2(), f.as_vec2().as_dvec2());
-            let size = (view.image.width, view.image.height);
-            assert_eq!(got.size.as_uvec2().to_array(), [size.0, size.1]);
-            // The view's pixel (0, 0) is the picture's `offset`.
-            let offset = (c.as_vec2() - got.principal).round();
-            assert_eq!(offset, c.as_vec2() - got.principal, "whole pixels");
-            let offset = offset.as_dvec2();
-            for y in 0..size.1 {
-                for x in 0..size.0 {
-                    let ray = (DVec2::new(f64::from(x), f64::from(y)) + 0.5 + offset - c) / f;
-                    let at = distorted(cam, ray) * f + c;
-                    // Between the picture's pixel centres.
-                    let inside = at.cmpge(DVec2::splat(0.5)).all()
-                        && at.cmple(DVec2::new(f64::from(W), f64::from(H)) - 0.5).all();
-                    assert!(inside, "{}: pixel ({x}, {y}) is not seen", cam.name);
-                }
-            }
+            assert_cut(view, &|n| distorted(cam, n), (f, c), (W, H));
+            let size = view.size();
             match cam.name {
                 "SIMPLE_RADIAL" => assert!(size.0 < W && size.1 < H, "{size:?}"),
                 "RADIAL" => assert_eq!(size, (W, H)),
@@ -198,14 +217,12 @@ fn distorted_pictures_read_as_pinhole_views() {
             let error = scene_error(view);
             assert!(error < bound, "{}: {error} from the scene", cam.name);
             // What a reader that took the picture as a pinhole view would give.
-            let raw = View {
-                camera: Camera {
-                    principal: c.as_vec2(),
-                    ..got
-                },
-                image: image_of(Path::new(&view.name)),
-                ..view.clone()
+            let camera = Camera {
+                principal: c.as_vec2(),
+                ..view.camera
             };
+            let picture = image_of(Path::new(&view.name));
+            let raw = View::new(view.name.clone(), camera, picture, None, Vec3::ZERO);
             ignored = ignored.max(scene_error(&raw));
         }
         assert!(ignored > 5.0 * bound, "the lenses matter: {ignored}");
@@ -217,10 +234,135 @@ fn distorted_pictures_read_as_pinhole_views() {
         let half = shots.downscaled(2).unwrap().load(Vec3::ZERO).unwrap();
         let bound = 1.5 / 255.0 + 5.0 * interpolation;
         for view in half.train.iter().chain(&half.test) {
-            let (f, _) = pinhole(camera_of(&m, view));
-            assert_eq!(view.camera.focal, (f / 2.0).as_vec2());
+            let cam = camera_of(&m, view);
+            let (f, c) = pinhole(cam);
+            assert_cut(
+                view,
+                &|n| distorted(cam, n),
+                (f / 2.0, c / 2.0),
+                (W / 2, H / 2),
+            );
             let error = scene_error(view);
             assert!(error < bound, "{}: {error} from the scene", view.name);
+        }
+
+        // Copies half the size in images_2 are cut through the same lenses: no block means,
+        // two 8-bit roundings.
+        for shot in &m.shots {
+            let cam = m.cameras.iter().find(|c| c.id == shot.camera).unwrap();
+            let path = dir.path().join("images_2").join(&shot.name);
+            std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+            photograph(&|n| distorted(cam, n), pinhole(cam), W / 2, H / 2)
+                .save(path)
+                .unwrap();
+        }
+        let copies = read_shots(dir.path()).unwrap().downscaled(2).unwrap();
+        assert!(copies.train.iter().all(|s| s.downscale == 1));
+        let bound = 1.0 / 255.0 + 4.0 * interpolation;
+        for view in copies.load(Vec3::ZERO).unwrap().train {
+            let cam = camera_of(&m, &view);
+            let (f, c) = pinhole(cam);
+            assert_cut(
+                &view,
+                &|n| distorted(cam, n),
+                (f / 2.0, c / 2.0),
+                (W / 2, H / 2),
+            );
+            let error = scene_error(&view);
+            assert!(error < bound, "{}: {error} from the scene", view.name);
+        }
+    }
+}
+
+/// nerfstudio's OPENCV lens: its radial polynomial runs to k4 r⁸, with the tangential p1, p2.
+/// Its views show the scene within the bound of `distorted_pictures_read_as_pinhole_views`.
+#[test]
+fn nerfstudio_opencv_pictures_read_as_pinhole_views() {
+    let [k1, k2, k3, k4, p1, p2] = [0.04, -0.01, 0.02, 0.05, 0.003, -0.002];
+    let lens = |n: DVec2| {
+        let r2 = n.length_squared();
+        let radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * (k3 + r2 * k4)));
+        let xy = n.x * n.y;
+        n * radial
+            + DVec2::new(
+                2.0 * p1 * xy + p2 * (r2 + 2.0 * n.x * n.x),
+                p1 * (r2 + 2.0 * n.y * n.y) + 2.0 * p2 * xy,
+            )
+    };
+    let (f, c) = (DVec2::new(20.0, 20.5), DVec2::new(16.25, 11.75));
+    let dir = tempfile::tempdir().unwrap();
+    let frames: Vec<_> = (0..3)
+        .map(|k| {
+            let name = format!("frame_{k}.png");
+            photograph(&lens, (f, c), W, H)
+                .save(dir.path().join(&name))
+                .unwrap();
+            let x = 0.3 * k as f64;
+            serde_json::json!({
+                "file_path": name,
+                "transform_matrix": [[1, 0, 0, x], [0, 1, 0, 0], [0, 0, 1, 3], [0, 0, 0, 1]],
+            })
+        })
+        .collect();
+    let transforms = serde_json::json!({
+        "camera_model": "OPENCV", "fl_x": f.x, "fl_y": f.y, "cx": c.x, "cy": c.y, "w": W, "h": H,
+        "k1": k1, "k2": k2, "k3": k3, "k4": k4, "p1": p1, "p2": p2,
+        "frames": frames,
+    });
+    std::fs::write(dir.path().join("transforms.json"), transforms.to_string()).unwrap();
+    let data = read_shots(dir.path()).unwrap().load(Vec3::ZERO).unwrap();
+    let bound = 1.0 / 255.0 + 1.2e-3 * 1.3 * 1.3;
+    for view in data.train.iter().chain(&data.test) {
+        assert_cut(view, &lens, (f, c), (W, H));
+        let error = scene_error(view);
+        assert!(error < bound, "{}: {error} from the scene", view.name);
+    }
+}
+
+/// COLMAP's SIMPLE_RADIAL_FISHEYE and RADIAL_FISHEYE are the Kannala-Brandt polynomial in the
+/// angle, k1 (and k2) of it: their pictures are views as they are.
+#[test]
+fn colmap_radial_fisheyes_read_as_kannala_brandt() {
+    let mut m = model();
+    m.cameras = vec![
+        Cam {
+            id: 1,
+            model: 8,
+            name: "SIMPLE_RADIAL_FISHEYE",
+            params: vec![14.0, 16.0, 12.0, 0.05],
+        },
+        Cam {
+            id: 2,
+            model: 9,
+            name: "RADIAL_FISHEYE",
+            params: vec![15.0, 16.5, 11.5, 0.04, -0.01],
+        },
+    ];
+    for (k, shot) in m.shots.iter_mut().enumerate() {
+        shot.camera = 1 + k as i32 % 2;
+    }
+    for binary in [true, false] {
+        let dir = dataset(&m, binary);
+        let shots = read_shots(dir.path()).unwrap();
+        for shot in shots.train.iter().chain(&shots.test) {
+            let name = shot.path.file_name().unwrap();
+            let id = m.shots.iter().find(|s| *s.name == *name).unwrap().camera;
+            let want = match id {
+                1 => (
+                    Vec2::splat(14.0),
+                    Vec2::new(16.0, 12.0),
+                    Vec4::new(0.05, 0.0, 0.0, 0.0),
+                ),
+                _ => (
+                    Vec2::splat(15.0),
+                    Vec2::new(16.5, 11.5),
+                    Vec4::new(0.04, -0.01, 0.0, 0.0),
+                ),
+            };
+            let got = shot.camera;
+            assert_eq!(got.model, CameraModel::KannalaBrandt);
+            assert_eq!((got.focal, got.principal, got.distortion), want);
+            assert!(shot.undistortion.is_none());
         }
     }
 }

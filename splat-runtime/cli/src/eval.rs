@@ -75,7 +75,7 @@ pub(crate) fn eval_cmd(args: &EvalArgs, methods: &[Method]) -> Result<()> {
     let mut shots = shots.into_iter();
     let mut measure = |frame: splat_runtime::Frame| {
         let (k, shot) = (measured.len(), shots.next().expect("a shot per camera"));
-        let picture = shot.load(background)?.image;
+        let picture = shot.load(background)?.into_image();
         let image = composite(frame.color, frame.alpha.as_ref(), background);
         let psnr = loss::psnr(&image, &picture)?;
         let ssim = loss::ssim(&image, &picture)?;

@@ -255,7 +255,7 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
     }
     // Refused here, by file, rather than at the first step or evaluation that meets them.
     for view in data.train.iter().chain(&data.test) {
-        let (w, h) = (view.image.width, view.image.height);
+        let (w, h) = view.size();
         let side = WINDOW as u32..=MAX_SIDE;
         if !(side.contains(&w) && side.contains(&h)) {
             bail!(
@@ -266,12 +266,11 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
     }
     let first = &data.train[0];
     methods::check_camera(method, methods, &first.camera)?;
+    let (width, height) = first.size();
     println!(
-        "{name}: {} training and {} test views of {}x{}{taken}, read in {:.1} s",
+        "{name}: {} training and {} test views of {width}x{height}{taken}, read in {:.1} s",
         data.train.len(),
         data.test.len(),
-        first.image.width,
-        first.image.height,
         t.elapsed().as_secs_f64()
     );
     // The cameras' spread sets the scene's extent (3DGS scales position rates by it).

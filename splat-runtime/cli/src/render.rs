@@ -311,7 +311,7 @@ pub(crate) fn render_cmd(args: &RenderArgs, methods: &[Method]) -> Result<()> {
     // The view's picture, on black as the renderer composites: read before anything is
     // written, so a broken one fails the command with nothing written.
     let picture = match &shot {
-        Some(shot) => Some((shot.load(Vec3::ZERO)?.image, shot.path.display())),
+        Some(shot) => Some((shot.load(Vec3::ZERO)?.into_image(), shot.path.display())),
         None => None,
     };
     let load = t0.elapsed();

@@ -223,18 +223,22 @@ pub fn dataset(
         let camera = looking_from(eye, width, height, CameraModel::Pinhole);
         let frame = render::<gs3d::Method>(&params, &camera, &opts)?;
         // Rendered on black: the color is the one composited on black.
-        let view = View {
-            name: format!("built-in view {k}"),
+        let coverage = frame.alpha.map(|a| a.data);
+        let on_black = View::new(
+            String::new(),
             camera,
-            image: frame.color,
-            coverage: frame.alpha.map(|a| a.data),
-            background: Vec3::ZERO,
-        };
-        let view = View {
-            image: view.on(background).into_owned(),
+            frame.color,
+            coverage.clone(),
+            Vec3::ZERO,
+        );
+        let image = on_black.on(background).into_owned();
+        let view = View::new(
+            format!("built-in view {k}"),
+            camera,
+            image,
+            coverage,
             background,
-            ..view
-        };
+        );
         match k % 8 {
             0 => data.test.push(view),
             _ => data.train.push(view),

@@ -79,31 +79,40 @@ impl GpuLoss {
     pub fn new(gpu: &Gpu, targets: &[&View], ssim_weight: f32) -> Result<GpuLoss, GpuTrainError> {
         let (mut words, mut alphas, mut views) = (vec![], vec![], vec![]);
         for (k, view) in targets.iter().enumerate() {
-            let t = &view.image;
-            let small = (t.width as usize) < WINDOW || (t.height as usize) < WINDOW;
-            if t.channels != 3 || small {
+            let (width, height) = view.size();
+            if (width as usize) < WINDOW || (height as usize) < WINDOW {
                 return Err(GpuTrainError::Target(k));
             }
+            let offset = words.len() as u32;
             let packed = view.rgba8();
-            let coverage = match (&view.coverage, &packed) {
-                (Some(a), None) => {
-                    alphas.extend(a.iter().map(|v| v.to_bits()));
-                    (alphas.len() - a.len()) as u32
+            let coverage = match &packed {
+                Some(rgba) => {
+                    words.extend_from_slice(rgba);
+                    u32::MAX
                 }
-                _ => u32::MAX,
+                None => {
+                    let t = view.image();
+                    if t.channels != 3 {
+                        return Err(GpuTrainError::Target(k));
+                    }
+                    words.extend(t.data.iter().map(|v| v.to_bits()));
+                    match view.coverage() {
+                        Some(a) => {
+                            alphas.extend(a.iter().map(|v| v.to_bits()));
+                            (alphas.len() - a.len()) as u32
+                        }
+                        None => u32::MAX,
+                    }
+                }
             };
             views.push(Target {
-                offset: words.len() as u32,
+                offset,
                 coverage,
                 packed: packed.is_some(),
-                width: t.width,
-                height: t.height,
+                width,
+                height,
                 background: view.background,
             });
-            match packed {
-                Some(rgba) => words.extend(rgba),
-                None => words.extend(t.data.iter().map(|v| v.to_bits())),
-            }
         }
         let taps: Vec<u32> = window().iter().map(|g| (*g as f32).to_bits()).collect();
         Ok(GpuLoss {
@@ -622,13 +631,13 @@ mod tests {
     }
 
     fn view(image: Image, coverage: Option<Vec<f32>>, background: Vec3) -> View {
-        View {
-            name: "target".into(),
-            camera: Default::default(),
+        View::new(
+            "target".into(),
+            Default::default(),
             image,
             coverage,
             background,
-        }
+        )
     }
 
     /// The device loss and gradient against the CPU's (f64) on a random frame composited on a

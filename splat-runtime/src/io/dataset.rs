@@ -18,48 +18,13 @@
 
 use super::camera::NotRotation;
 use super::picture::Picture;
+pub use super::picture::View;
 use super::undistort::{Lens, Undistortion};
 use super::{Outputs, colmap};
-use crate::pipeline::Image;
 use crate::types::{Camera, CameraModel};
 use glam::{DVec4, Mat3, Mat4, Vec2, Vec3, Vec4};
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
-
-/// One posed image.
-#[derive(Clone, Debug)]
-pub struct View {
-    /// The image's path, for reports.
-    pub name: String,
-    pub camera: Camera,
-    /// RGB, composited on `background`.
-    pub image: Image,
-    /// Per pixel, the coverage (alpha) of an RGBA image that is not opaque everywhere.
-    pub coverage: Option<Vec<f32>>,
-    pub background: Vec3,
-}
-
-impl View {
-    /// The image composited on `background` instead (the same image when it is opaque or the
-    /// background is the same).
-    pub fn on(&self, background: Vec3) -> std::borrow::Cow<'_, Image> {
-        let Some(alpha) = self
-            .coverage
-            .as_ref()
-            .filter(|_| background != self.background)
-        else {
-            return std::borrow::Cow::Borrowed(&self.image);
-        };
-        let shift = (background - self.background).to_array();
-        let mut image = self.image.clone();
-        for (px, a) in image.data.chunks_exact_mut(3).zip(alpha) {
-            for (c, d) in px.iter_mut().zip(shift) {
-                *c += (1.0 - a) * d;
-            }
-        }
-        std::borrow::Cow::Owned(image)
-    }
-}
 
 /// A posed picture before its pixels are read: the file, and the camera fitted to its size
 /// (from the file's header). What rendering a view of a dataset needs.
@@ -199,7 +164,8 @@ impl Shot {
         copy.is_file().then_some((copies, copy))
     }
 
-    /// The view: the picture decoded, downscaled and composited on `background`.
+    /// The view: the picture decoded, downscaled, cut through its lens and composited on
+    /// `background`.
     pub fn load(&self, background: Vec3) -> Result<View, DatasetError> {
         let picture = Picture::read(&self.path)?;
         // Checked before averaging: a picture narrower than a block has nothing to average.
@@ -229,14 +195,7 @@ impl Shot {
                 .apply(&picture)
                 .map_err(|p| field(&self.path, "lens", p))?,
         };
-        let (image, coverage) = picture.composited(background);
-        Ok(View {
-            name: self.path.display().to_string(),
-            camera: self.camera,
-            image,
-            coverage,
-            background,
-        })
+        Ok(picture.view(self.path.display().to_string(), self.camera, background))
     }
 }
 
@@ -801,6 +760,7 @@ pub(super) fn image_error(path: &Path, error: image::ImageError) -> DatasetError
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::pipeline::Image;
 
     /// A pinhole camera at `eye` looking at the origin, 30 x 20 pixels.
     fn looking_from(eye: Vec3) -> Camera {
@@ -826,18 +786,14 @@ mod tests {
             let straight = Vec3::new((p % 30) as f32 / 29.0, (p / 30) as f32 / 19.0, 0.5);
             data.extend((straight * *a + background * (1.0 - a)).to_array());
         }
-        View {
-            name: format!("view from {eye}"),
-            camera: looking_from(eye),
-            image: Image {
-                width: 30,
-                height: 20,
-                channels: 3,
-                data,
-            },
-            coverage: Some(coverage),
-            background,
-        }
+        let image = Image {
+            width: 30,
+            height: 20,
+            channels: 3,
+            data,
+        };
+        let name = format!("view from {eye}");
+        View::new(name, looking_from(eye), image, Some(coverage), background)
     }
 
     /// Written as Blender and read back (on another background): the same poses and focal
@@ -873,7 +829,7 @@ mod tests {
                 assert!((x - y).abs() < 1e-5, "{a:?} {b:?}");
             }
             let on_black = want.on(Vec3::ZERO);
-            let worst = (on_black.data.iter().zip(&got.image.data))
+            let worst = (on_black.data.iter().zip(&got.image().data))
                 .fold(0.0f32, |m, (x, y)| m.max((x - y).abs()));
             assert!(worst < 1.5 / 255.0, "{worst}");
         }
@@ -946,7 +902,7 @@ mod tests {
         let shot = read_shots(dir.path()).unwrap().downscaled(4).unwrap().train[1].clone();
         let small = shot.load(Vec3::ZERO).unwrap();
         // 30 x 20 over 4: 7 x 5, the last two columns dropped.
-        assert_eq!((small.image.width, small.image.height), (7, 5));
+        assert_eq!(small.size(), (7, 5));
         assert_eq!(small.camera.size, Vec2::new(7.0, 5.0));
         assert_eq!(small.camera.focal, big.camera.focal / 4.0);
         assert_eq!(small.camera.principal, big.camera.principal / 4.0);
@@ -964,17 +920,18 @@ mod tests {
         // the composited color within one (half a step of the color, half of the coverage).
         assert!(big.rgba8().is_some() && small.rgba8().is_some());
         let step = 1.0 / 255.0;
-        let big_coverage = big.coverage.as_ref().unwrap();
-        let small_coverage = small.coverage.as_ref().unwrap();
+        let big_coverage = big.coverage().unwrap();
+        let small_coverage = small.coverage().unwrap();
+        let (big_image, small_image) = (big.image(), small.image());
         for y in 0..5 {
             for x in 0..7 {
                 for c in 0..3 {
-                    let got = small.image.data[(y * 7 + x) * 3 + c] as f64;
-                    let want = block_mean(&big.image.data, 3, x, y, c);
+                    let got = small_image.data[(y * 7 + x) * 3 + c] as f64;
+                    let want = block_mean(&big_image.data, 3, x, y, c);
                     assert!((got - want).abs() < step, "({x}, {y}) {c}: {got} vs {want}");
                 }
                 let got = small_coverage[y * 7 + x] as f64;
-                let want = block_mean(big_coverage, 1, x, y, 0);
+                let want = block_mean(&big_coverage, 1, x, y, 0);
                 assert!(
                     (got - want).abs() < 0.5 * step + 1e-6,
                     "({x}, {y}) coverage: {got} vs {want}"
@@ -983,7 +940,7 @@ mod tests {
         }
         // Averaging commutes with compositing: loaded on white is the black one moved to white.
         let white = shot.load(Vec3::ONE).unwrap();
-        for (a, b) in white.image.data.iter().zip(&small.on(Vec3::ONE).data) {
+        for (a, b) in white.image().data.iter().zip(&small.on(Vec3::ONE).data) {
             assert!((a - b).abs() < 1e-6, "{a} vs {b}");
         }
         // A copy half the size in train_2 is taken as it is, for the view it copies only.
@@ -1000,13 +957,13 @@ mod tests {
             taken
                 .load(Vec3::ZERO)
                 .unwrap()
-                .image
+                .image()
                 .data
                 .iter()
                 .all(|v| (v - 0.25).abs() < 0.01)
         );
         assert_eq!(averaged.downscale, 2);
-        assert_eq!(averaged.load(Vec3::ZERO).unwrap().image.width, 15);
+        assert_eq!(averaged.load(Vec3::ZERO).unwrap().size().0, 15);
         // A copy of another size is refused by name.
         let wrong = gray(12, 8, 0.25);
         super::super::image::write_image(&copy_path, &wrong).unwrap();
@@ -1128,7 +1085,7 @@ mod tests {
     /// over good ones (a `frame` field overrides its frame's), read back.
     fn nerfstudio(fields: serde_json::Value, frame: serde_json::Value) -> String {
         let dir = tempfile::tempdir().unwrap();
-        let picture = view(Vec3::new(3.0, 1.0, -2.0), Vec3::ZERO).image;
+        let picture = view(Vec3::new(3.0, 1.0, -2.0), Vec3::ZERO).into_image();
         super::super::image::write_image(&dir.path().join("a.png"), &picture).unwrap();
         let mut json = serde_json::json!({
             "fl_x": 24.0, "fl_y": 24.0, "cx": 15.0, "cy": 10.0, "w": 30, "h": 20,
@@ -1203,7 +1160,7 @@ mod tests {
                 // A lens that folds (k1 < 0) before the rays of a picture far off its centre.
                 json!({"camera_model": "OPENCV", "k1": -0.1}),
                 json!({"cx": -60.0}),
-                "the OPENCV lens of frames[0].file_path leaves no pixel of the 30x20 picture",
+                "the OPENCV lens of frames[0].file_path finds no rectangle of the 30x20 picture's pixels",
             ),
         ];
         for (fields, frame, want) in cases {

@@ -1,13 +1,56 @@
 //! A dataset picture's pixels: decoded as straight RGBA, averaged over blocks when a view is
-//! taken smaller, and composited on a background into a [`View`]'s image. A view read from an
-//! 8-bit picture (as PNGs and JPEGs usually are) keeps 8-bit values, averaged or not, so the
-//! GPU trainer can hold it in 4 bytes per pixel instead of 12 or 16 ([`View::rgba8`]).
+//! taken smaller, and held by a [`View`] composited on a background. A view read from an
+//! 8-bit picture (as PNGs and JPEGs usually are) keeps 8-bit values, averaged or not, and holds
+//! them in 4 bytes per pixel instead of 12 or 16 ([`View::rgba8`], what the GPU trainer
+//! uploads); the f32 image the CPU reads is made from them when asked for, the same bit for
+//! bit.
 
-use super::dataset::{DatasetError, View, image_error};
+use super::dataset::{DatasetError, image_error};
 use crate::pipeline::Image;
+use crate::types::Camera;
 use glam::Vec3;
 use rayon::prelude::*;
+use std::borrow::Cow;
 use std::path::Path;
+
+/// One posed image.
+#[derive(Clone, Debug)]
+pub struct View {
+    /// The image's path, for reports.
+    pub name: String,
+    pub camera: Camera,
+    /// What the pixels are composited on.
+    pub background: Vec3,
+    pixels: Pixels,
+}
+
+/// How a view holds its pixels.
+#[derive(Clone, Debug)]
+enum Pixels {
+    /// RGB composited on the background, and the coverage (alpha) of a picture that is not
+    /// opaque everywhere.
+    Composited {
+        image: Image,
+        coverage: Option<Vec<f32>>,
+    },
+    /// 8-bit straight RGBA, a word per pixel (red in the low byte, alpha in the high one; the
+    /// color 0 where the alpha is), composited when read.
+    Rgba8 {
+        width: u32,
+        height: u32,
+        words: Vec<u32>,
+    },
+}
+
+/// The byte of an 8-bit value ([`unorm8`]'s inverse).
+fn byte(v: f32) -> u32 {
+    (v.clamp(0.0, 1.0) * 255.0).round() as u32
+}
+
+/// The channel `c` (3: alpha) of an 8-bit RGBA word, in [0, 1].
+fn channel(word: u32, c: usize) -> f32 {
+    unorm8((word >> (8 * c)) as u8)
+}
 
 /// A picture as straight (not premultiplied) RGBA in [0, 1].
 pub(super) struct Picture {
@@ -115,75 +158,196 @@ impl Picture {
         [color(0), color(1), color(2), rounded(sums[3] / weight)]
     }
 
-    /// RGB composited on `background`, and the coverage unless the picture is opaque.
-    pub fn composited(&self, background: Vec3) -> (Image, Option<Vec<f32>>) {
-        let b = background.to_array();
-        let mut data = Vec::with_capacity(self.rgba.len() / 4 * 3);
-        let mut alpha = Vec::with_capacity(self.rgba.len() / 4);
-        for p in self.rgba.chunks_exact(4) {
-            data.extend((0..3).map(|c| composited(p[c], p[3], b[c])));
-            alpha.push(p[3]);
-        }
-        let image = Image {
-            width: self.width,
-            height: self.height,
-            channels: 3,
-            data,
+    /// The view of this picture seen by `camera`, composited on `background` (8-bit words for
+    /// an 8-bit picture).
+    pub fn view(self, name: String, camera: Camera, background: Vec3) -> View {
+        let pixels = match self.eight_bit {
+            true => Pixels::Rgba8 {
+                width: self.width,
+                height: self.height,
+                words: (self.rgba.par_chunks_exact(4))
+                    .map(|p| match byte(p[3]) {
+                        0 => 0,
+                        a => (0..3).fold(a << 24, |w, c| w | byte(p[c]) << (8 * c)),
+                    })
+                    .collect(),
+            },
+            false => {
+                let b = background.to_array();
+                let mut data = Vec::with_capacity(self.rgba.len() / 4 * 3);
+                let mut alpha = Vec::with_capacity(self.rgba.len() / 4);
+                for p in self.rgba.chunks_exact(4) {
+                    data.extend((0..3).map(|c| composited(p[c], p[3], b[c])));
+                    alpha.push(p[3]);
+                }
+                let image = Image {
+                    width: self.width,
+                    height: self.height,
+                    channels: 3,
+                    data,
+                };
+                Pixels::Composited {
+                    image,
+                    coverage: alpha.iter().any(|a| *a < 1.0).then_some(alpha),
+                }
+            }
         };
-        (image, alpha.iter().any(|a| *a < 1.0).then_some(alpha))
+        View {
+            name,
+            camera,
+            background,
+            pixels,
+        }
     }
 }
 
 impl View {
-    /// The coverage of pixel `p` (1 where the view has none).
-    fn alpha(&self, p: usize) -> f32 {
-        self.coverage.as_ref().map_or(1.0, |c| c[p])
+    /// A view of `image` (RGB composited on `background`, with the coverage of a picture not
+    /// opaque everywhere), held as it is given.
+    pub fn new(
+        name: String,
+        camera: Camera,
+        image: Image,
+        coverage: Option<Vec<f32>>,
+        background: Vec3,
+    ) -> View {
+        View {
+            name,
+            camera,
+            background,
+            pixels: Pixels::Composited { image, coverage },
+        }
+    }
+
+    /// Width and height in pixels.
+    pub fn size(&self) -> (u32, u32) {
+        match &self.pixels {
+            Pixels::Composited { image, .. } => (image.width, image.height),
+            Pixels::Rgba8 { width, height, .. } => (*width, *height),
+        }
+    }
+
+    /// The image, composited on the view's background.
+    pub fn image(&self) -> Cow<'_, Image> {
+        self.on(self.background)
+    }
+
+    /// [`View::image`], without a copy where the view holds it.
+    pub fn into_image(self) -> Image {
+        match self.pixels {
+            Pixels::Composited { image, .. } => image,
+            _ => self.image().into_owned(),
+        }
+    }
+
+    /// The image composited on `background` instead (the same image when it is opaque or the
+    /// background is the same).
+    pub fn on(&self, background: Vec3) -> Cow<'_, Image> {
+        let b = background.to_array();
+        match &self.pixels {
+            Pixels::Rgba8 {
+                width,
+                height,
+                words,
+            } => {
+                let data = (words.par_iter())
+                    .flat_map_iter(|w| {
+                        (0..3).map(|c| composited(channel(*w, c), channel(*w, 3), b[c]))
+                    })
+                    .collect();
+                Cow::Owned(Image {
+                    width: *width,
+                    height: *height,
+                    channels: 3,
+                    data,
+                })
+            }
+            Pixels::Composited { image, coverage } => {
+                let Some(alpha) = coverage.as_ref().filter(|_| background != self.background)
+                else {
+                    return Cow::Borrowed(image);
+                };
+                let shift = (background - self.background).to_array();
+                let mut image = image.clone();
+                for (px, a) in image.data.chunks_exact_mut(3).zip(alpha) {
+                    for (c, d) in px.iter_mut().zip(shift) {
+                        *c += (1.0 - a) * d;
+                    }
+                }
+                Cow::Owned(image)
+            }
+        }
+    }
+
+    /// Per pixel, the coverage of a picture that is not opaque everywhere.
+    pub fn coverage(&self) -> Option<Cow<'_, [f32]>> {
+        match &self.pixels {
+            Pixels::Composited { coverage, .. } => coverage.as_deref().map(Cow::Borrowed),
+            Pixels::Rgba8 { words, .. } => (words.iter().any(|w| w >> 24 < 255))
+                .then(|| Cow::Owned(words.iter().map(|w| channel(*w, 3)).collect())),
+        }
     }
 
     /// The view as straight RGBA: its colors taken off its background, its coverage as alpha
     /// (as an RGBA picture holds them).
     pub(super) fn straight(&self) -> Image {
-        let b = self.background.to_array();
-        let mut rgba = Vec::with_capacity(self.image.data.len() / 3 * 4);
-        for (p, rgb) in self.image.data.chunks_exact(3).enumerate() {
-            let a = self.alpha(p);
-            rgba.extend((0..3).map(|c| straight(rgb[c], a, b[c])));
-            rgba.push(a);
-        }
+        let (width, height) = self.size();
+        let data = match &self.pixels {
+            Pixels::Rgba8 { words, .. } => (words.iter())
+                .flat_map(|w| (0..4).map(|c| channel(*w, c)))
+                .collect(),
+            Pixels::Composited { image, coverage } => {
+                let b = self.background.to_array();
+                let alpha = |p: usize| coverage.as_ref().map_or(1.0, |c| c[p]);
+                let mut rgba = Vec::with_capacity(image.data.len() / 3 * 4);
+                for (p, rgb) in image.data.chunks_exact(3).enumerate() {
+                    let a = alpha(p);
+                    rgba.extend((0..3).map(|c| straight(rgb[c], a, b[c])));
+                    rgba.push(a);
+                }
+                rgba
+            }
+        };
         Image {
+            width,
+            height,
             channels: 4,
-            data: rgba,
-            ..self.image
+            data,
         }
     }
 
     /// The view as 8-bit straight RGBA, one word per pixel (red in the low byte, alpha in the
-    /// high one), when that is exactly what it holds: 8-bit colors and coverages composited on
-    /// its background as [`Picture::composited`] does, which every view read from an 8-bit
-    /// picture is (averaged or not). `None` for any other view (from a 16-bit or float picture,
-    /// a render, not RGB), whose values 8 bits would round.
-    pub fn rgba8(&self) -> Option<Vec<u32>> {
-        if self.image.channels != 3 {
+    /// high one, the color 0 where the alpha is), when that is exactly what it holds: every
+    /// view read from an 8-bit picture (averaged or not), and a view given 8-bit colors and
+    /// coverages composited on its background as a picture's are. `None` for any other view
+    /// (from a 16-bit or float picture, a render, not RGB), whose values 8 bits would round.
+    pub fn rgba8(&self) -> Option<Cow<'_, [u32]>> {
+        let (image, coverage) = match &self.pixels {
+            Pixels::Rgba8 { words, .. } => return Some(Cow::Borrowed(words)),
+            Pixels::Composited { image, coverage } => (image, coverage),
+        };
+        if image.channels != 3 {
             return None;
         }
         let eight_bit = |v: f32| {
-            let k = (v * 255.0).round();
-            ((0.0..=255.0).contains(&k) && unorm8(k as u8) == v).then_some(k as u32)
+            let k = byte(v);
+            (unorm8(k as u8) == v).then_some(k)
         };
         let b = self.background.to_array();
-        (self.image.data.par_chunks_exact(3).enumerate())
+        (image.data.par_chunks_exact(3).enumerate())
             .map(|(p, rgb)| {
-                let a = self.alpha(p);
+                let a = coverage.as_ref().map_or(1.0, |c| c[p]);
                 let mut word = eight_bit(a)? << 24;
                 for c in 0..3 {
-                    let k = (straight(rgb[c], a, b[c]).clamp(0.0, 1.0) * 255.0).round() as u8;
-                    if composited(unorm8(k), a, b[c]) != rgb[c] {
+                    let k = byte(straight(rgb[c], a, b[c]));
+                    if composited(unorm8(k as u8), a, b[c]) != rgb[c] {
                         return None;
                     }
-                    word |= (k as u32) << (8 * c);
+                    word |= k << (8 * c);
                 }
                 Some(word)
             })
-            .collect()
+            .collect::<Option<Vec<u32>>>()
+            .map(Cow::Owned)
     }
 }

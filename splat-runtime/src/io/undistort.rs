@@ -1,6 +1,7 @@
 //! Lens distortion taken out of a picture as it is read, so a photograph from a camera with
 //! distortion (COLMAP's SIMPLE_RADIAL, RADIAL, OPENCV and FULL_OPENCV cameras, nerfstudio's
-//! OPENCV) trains as a pinhole view, as gsplat undistorts such pictures on load.
+//! OPENCV) trains as a pinhole view. gsplat undistorts such pictures on load too, with OpenCV,
+//! which picks new focal lengths; here the picture's are kept.
 //!
 //! The view keeps the picture's focal lengths and principal point: its pixels are the
 //! picture's pixel grid, cropped to the pixels whose rays the picture saw (the lens puts them
@@ -54,8 +55,8 @@ impl Lens {
             )
     }
 
-    /// The radius, up to `limit`, within which the lens's radial map `r -> r · radial(r²)`
-    /// grows (with a positive denominator). Beyond it the polynomial folds rays back into the
+    /// The radius within which the lens's radial map `r -> r · radial(r²)` grows (with a
+    /// positive denominator), searched up to `limit` (infinite when it grows that far). Beyond it the polynomial folds rays back into the
     /// picture at places that saw other rays, so no view pixel lies there.
     fn unfolded_radius(&self, limit: f64) -> f64 {
         const STEPS: u32 = 4096;
@@ -89,11 +90,14 @@ pub struct Undistortion {
 }
 
 impl Undistortion {
-    /// The pinhole view of the picture that `picture` saw through `lens`: the picture's pixel
-    /// grid with every side cropped, a pixel at a time, while it has a pixel whose ray the
-    /// picture did not see. Lenses map a rectangle about the principal point inside the
-    /// picture when its border is inside, so the border alone is checked (and
-    /// [`Undistortion::apply`] refuses a view pixel outside). An error when no pixel is left.
+    /// The pinhole view of the picture that `picture` saw through `lens`: a rectangle of the
+    /// picture's pixel grid whose every ray the picture saw. Every side with an unseen pixel
+    /// is cropped by a pixel at a time until none has one, then each side grows back while its
+    /// next row or column is seen (a side cut for an unseen corner its neighbour also had).
+    /// Only the border is checked: a lens that does not fold maps the rectangle's inside
+    /// between its border's images ([`Undistortion::apply`] refuses a pixel that falls
+    /// outside). An error when no rectangle is left, as for a principal point far off the
+    /// picture.
     pub fn new(picture: Camera, lens: Lens) -> Result<Undistortion, String> {
         let (size, f, c) = (
             picture.size.as_dvec2(),
@@ -109,25 +113,50 @@ impl Undistortion {
             size: picture.size.as_uvec2(),
             unfolded: lens.unfolded_radius(corners.into_iter().fold(0.0, f64::max)),
         };
-        let (mut lo, mut hi) = (UVec2::ZERO, cut.size);
+        let full = cut.size;
+        // The rectangle [lo, hi), and whether its column x or row y is seen over its extent.
+        let (mut lo, mut hi) = (UVec2::ZERO, full);
         let seen = |x: u32, y: u32| cut.source(UVec2::new(x, y)).is_some();
-        while lo.x < hi.x && lo.y < hi.y {
-            let left = (lo.y..hi.y).any(|y| !seen(lo.x, y));
-            let right = (lo.y..hi.y).any(|y| !seen(hi.x - 1, y));
-            let top = (lo.x..hi.x).any(|x| !seen(x, lo.y));
-            let bottom = (lo.x..hi.x).any(|x| !seen(x, hi.y - 1));
+        let column = |x: u32, lo: UVec2, hi: UVec2| (lo.y..hi.y).all(|y| seen(x, y));
+        let row = |y: u32, lo: UVec2, hi: UVec2| (lo.x..hi.x).all(|x| seen(x, y));
+        loop {
+            if !(lo.x < hi.x && lo.y < hi.y) {
+                return Err(format!(
+                    "finds no rectangle of the {}x{} picture's pixels whose rays it puts inside the picture",
+                    full.x, full.y
+                ));
+            }
+            let left = !column(lo.x, lo, hi);
+            let right = !column(hi.x - 1, lo, hi);
+            let top = !row(lo.y, lo, hi);
+            let bottom = !row(hi.y - 1, lo, hi);
             if !(left || right || top || bottom) {
-                cut.offset = lo;
-                cut.size = hi - lo;
-                return Ok(cut);
+                break;
             }
             lo += UVec2::new(left.into(), top.into());
             hi -= UVec2::new(right.into(), bottom.into());
         }
-        Err(format!(
-            "leaves no pixel of the {}x{} picture: it maps every ray of the picture's pinhole view outside the picture",
-            picture.size.x, picture.size.y
-        ))
+        loop {
+            let before = (lo, hi);
+            if lo.x > 0 && column(lo.x - 1, lo, hi) {
+                lo.x -= 1;
+            }
+            if hi.x < full.x && column(hi.x, lo, hi) {
+                hi.x += 1;
+            }
+            if lo.y > 0 && row(lo.y - 1, lo, hi) {
+                lo.y -= 1;
+            }
+            if hi.y < full.y && row(hi.y, lo, hi) {
+                hi.y += 1;
+            }
+            if (lo, hi) == before {
+                break;
+            }
+        }
+        cut.offset = lo;
+        cut.size = hi - lo;
+        Ok(cut)
     }
 
     /// The view's camera: the picture's, with the principal point moved to the crop.
@@ -157,7 +186,7 @@ impl Undistortion {
 
     /// The view's pixels: `picture` (of `self.picture`'s size) sampled through the lens at
     /// each view pixel's source, bilinearly. An error names a view pixel the picture did not
-    /// see (a lens whose seen region is not star-shaped about the principal point).
+    /// see (from a lens that is not one-to-one over the view: its tangential terms fold it).
     pub(super) fn apply(&self, picture: &Picture) -> Result<Picture, String> {
         let (w, h) = (picture.width, picture.height);
         debug_assert_eq!(Vec2::new(w as f32, h as f32), self.picture.size);

@@ -289,8 +289,9 @@ impl Evaluation {
             ..Default::default()
         };
         for (img, v) in images.iter().zip(views) {
-            e.psnr += loss::psnr(img, &v.image)? / views.len() as f64;
-            e.ssim += loss::ssim(img, &v.image)? / views.len() as f64;
+            let picture = v.image();
+            e.psnr += loss::psnr(img, &picture)? / views.len() as f64;
+            e.ssim += loss::ssim(img, &picture)? / views.len() as f64;
         }
         Ok(e)
     }
@@ -546,7 +547,7 @@ pub(crate) fn adopt<M: Trainable>(
     let views = ViewsFootprint {
         views: train.len() as u64,
         pixels: (train.iter())
-            .map(|v| v.image.width as u64 * v.image.height as u64)
+            .map(|v| v.size().0 as u64 * v.size().1 as u64)
             .sum(),
     };
     if let Some(was) = state.views.filter(|was| state.step > 0 && *was != views) {
