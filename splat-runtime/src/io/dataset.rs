@@ -998,7 +998,8 @@ mod tests {
     }
 
     /// A view read from an 8-bit RGBA picture gives back its bytes exactly, on any background
-    /// (colors of uncovered pixels as 0); one from a 16-bit picture has no 8-bit form.
+    /// (colors of uncovered pixels as 0), and its image is them composited, bit for bit, on its
+    /// background or another; one from a 16-bit picture has no 8-bit form.
     #[test]
     fn eight_bit_pictures_keep_their_bytes() {
         let dir = tempfile::tempdir().unwrap();
@@ -1023,9 +1024,27 @@ mod tests {
                 _ => u32::from_le_bytes([p[0], p[1], p[2], p[3]]),
             })
             .collect();
+        // The f32 image made from the words: each byte / 255, composited as c a + b (1 - a).
+        let composited = |b: Vec3| -> Vec<f32> {
+            let unorm = |k: u8| k as f32 / 255.0;
+            (bytes.chunks_exact(4))
+                .flat_map(|p| (0..3).map(move |c| (p, c)))
+                .map(|(p, c)| unorm(p[c]) * unorm(p[3]) + b[c] * (1.0 - unorm(p[3])))
+                .collect()
+        };
+        let mut scratch = Image {
+            width: 0,
+            height: 0,
+            channels: 3,
+            data: vec![],
+        };
         for background in [Vec3::ZERO, Vec3::ONE, Vec3::new(0.3, 0.6, 0.9)] {
             let view = Shot::new(path.clone(), camera).load(background).unwrap();
             assert_eq!(view.rgba8().unwrap(), want, "on {background}");
+            assert_eq!(view.image().data, composited(background));
+            // On another background, into a reused image.
+            let other = Vec3::new(0.8, 0.1, 0.5);
+            assert_eq!(view.on_into(other, &mut scratch).data, composited(other));
         }
         let path = dir.path().join("rgb16.png");
         let values: Vec<u16> = (0..w * h * 3).map(|_| rng.u16(..)).collect();

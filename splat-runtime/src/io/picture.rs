@@ -243,38 +243,73 @@ impl View {
     /// The image composited on `background` instead (the same image when it is opaque or the
     /// background is the same).
     pub fn on(&self, background: Vec3) -> Cow<'_, Image> {
+        let mut scratch = Image {
+            width: 0,
+            height: 0,
+            channels: 3,
+            data: vec![],
+        };
+        match self.held_or_composited(background, &mut scratch) {
+            Some(held) => Cow::Borrowed(held),
+            None => Cow::Owned(scratch),
+        }
+    }
+
+    /// [`View::on`] into `scratch` (its memory reused) where the view does not hold the image:
+    /// what a loop over views asks for at every step, without an allocation per step.
+    pub fn on_into<'a>(&'a self, background: Vec3, scratch: &'a mut Image) -> &'a Image {
+        match self.held_or_composited(background, scratch) {
+            Some(held) => held,
+            None => scratch,
+        }
+    }
+
+    /// The image the view holds, if it is the one on `background`; else `None`, the image
+    /// composited into `scratch`.
+    fn held_or_composited(&self, background: Vec3, scratch: &mut Image) -> Option<&Image> {
         let b = background.to_array();
+        let (width, height) = self.size();
+        let fill = |scratch: &mut Image| {
+            scratch.width = width;
+            scratch.height = height;
+            scratch.channels = 3;
+            scratch
+                .data
+                .resize(width as usize * height as usize * 3, 0.0);
+        };
+        // In blocks of pixels, in parallel.
+        const BLOCK: usize = 4096;
         match &self.pixels {
-            Pixels::Rgba8 {
-                width,
-                height,
-                words,
-            } => {
-                let data = (words.par_iter())
-                    .flat_map_iter(|w| {
-                        (0..3).map(|c| composited(channel(*w, c), channel(*w, 3), b[c]))
-                    })
-                    .collect();
-                Cow::Owned(Image {
-                    width: *width,
-                    height: *height,
-                    channels: 3,
-                    data,
-                })
+            Pixels::Rgba8 { words, .. } => {
+                fill(scratch);
+                let blocks = scratch
+                    .data
+                    .par_chunks_mut(3 * BLOCK)
+                    .zip(words.par_chunks(BLOCK));
+                blocks.for_each(|(out, words)| {
+                    for (px, w) in out.chunks_exact_mut(3).zip(words) {
+                        let a = channel(*w, 3);
+                        for (c, v) in px.iter_mut().enumerate() {
+                            *v = composited(channel(*w, c), a, b[c]);
+                        }
+                    }
+                });
+                None
             }
             Pixels::Composited { image, coverage } => {
                 let Some(alpha) = coverage.as_ref().filter(|_| background != self.background)
                 else {
-                    return Cow::Borrowed(image);
+                    return Some(image);
                 };
+                fill(scratch);
                 let shift = (background - self.background).to_array();
-                let mut image = image.clone();
-                for (px, a) in image.data.chunks_exact_mut(3).zip(alpha) {
-                    for (c, d) in px.iter_mut().zip(shift) {
-                        *c += (1.0 - a) * d;
+                let pixels = image.data.chunks_exact(3).zip(alpha);
+                for (out, (px, a)) in scratch.data.chunks_exact_mut(3).zip(pixels) {
+                    for c in 0..3 {
+                        out[c] = px[c] + (1.0 - a) * shift[c];
                     }
                 }
-                Cow::Owned(image)
+                None
             }
         }
     }

@@ -385,6 +385,13 @@ pub fn fit_from<M: Trainable>(
     let mcmc = opts.mcmc::<M>()?;
     let mut rng = fastrand::Rng::with_seed(state.rng);
     let render_opts = for_training(&opts.render);
+    // The step's target, where a view does not hold it (8-bit views, another background).
+    let mut target = Image {
+        width: 0,
+        height: 0,
+        channels: 3,
+        data: vec![],
+    };
     for step in state.step..opts.steps {
         let started = Instant::now();
         let view = &data.train[rng.usize(..data.train.len())];
@@ -399,8 +406,11 @@ pub fn fit_from<M: Trainable>(
         };
         let clock = Instant::now();
         let image = composite(frame.color, frame.alpha.as_ref(), background);
-        let (value, d_color) =
-            loss::loss_and_gradient(&image, &view.on(background), opts.ssim_weight)?;
+        let (value, d_color) = loss::loss_and_gradient(
+            &image,
+            view.on_into(background, &mut target),
+            opts.ssim_weight,
+        )?;
         // The background term (1 - alpha) b: its gradient flows into alpha.
         let b = background.to_array();
         let d_alpha = d_color
