@@ -76,7 +76,7 @@ pub fn undistorted<'a>(shots: impl IntoIterator<Item = &'a Shot>) -> String {
     let plural = if n == 1 { "picture" } else { "pictures" };
     match cuts.iter().all(|c| sizes(c) == sizes(first)) {
         true => {
-            let (from, to) = (first.picture.size, first.size);
+            let (from, to) = sizes(first);
             format!(
                 " (the lens distortion of {n} {plural} taken out, {}x{} cropped to {}x{})",
                 from.x, from.y, to.x, to.y

@@ -47,6 +47,11 @@ fn byte(v: f32) -> u32 {
     (v.clamp(0.0, 1.0) * 255.0).round() as u32
 }
 
+/// The coverage of pixel `p` (1 where a view has none).
+fn alpha(coverage: &Option<Vec<f32>>, p: usize) -> f32 {
+    coverage.as_ref().map_or(1.0, |c| c[p])
+}
+
 /// The channel `c` (3: alpha) of an 8-bit RGBA word, in [0, 1].
 fn channel(word: u32, c: usize) -> f32 {
     unorm8((word >> (8 * c)) as u8)
@@ -137,7 +142,7 @@ impl Picture {
     /// are rounded to 8 bits, as a copy made by an image program would hold them.
     pub fn blend(&self, pixels: impl IntoIterator<Item = (usize, f32)>) -> [f32; 4] {
         let rounded = |v: f32| match self.eight_bit {
-            true => unorm8((v.clamp(0.0, 1.0) * 255.0).round() as u8),
+            true => unorm8(byte(v) as u8),
             false => v,
         };
         // Sums of w a c per channel, of w a, and of w.
@@ -333,10 +338,9 @@ impl View {
                 .collect(),
             Pixels::Composited { image, coverage } => {
                 let b = self.background.to_array();
-                let alpha = |p: usize| coverage.as_ref().map_or(1.0, |c| c[p]);
                 let mut rgba = Vec::with_capacity(image.data.len() / 3 * 4);
                 for (p, rgb) in image.data.chunks_exact(3).enumerate() {
-                    let a = alpha(p);
+                    let a = alpha(coverage, p);
                     rgba.extend((0..3).map(|c| straight(rgb[c], a, b[c])));
                     rgba.push(a);
                 }
@@ -371,7 +375,7 @@ impl View {
         let b = self.background.to_array();
         (image.data.par_chunks_exact(3).enumerate())
             .map(|(p, rgb)| {
-                let a = coverage.as_ref().map_or(1.0, |c| c[p]);
+                let a = alpha(coverage, p);
                 let mut word = eight_bit(a)? << 24;
                 for c in 0..3 {
                     let k = byte(straight(rgb[c], a, b[c]));

@@ -7,8 +7,8 @@
 //! picture's pixel grid, cropped to the pixels whose rays the picture saw (the lens puts them
 //! between the picture's pixel centres). Each of them is mapped through the lens into the
 //! picture and interpolated there bilinearly ([`Picture::blend`]: colors weighted by coverage,
-//! 8-bit pictures kept 8-bit). The crop is found from the camera
-//! alone, before any pixel is read.
+//! 8-bit pictures kept 8-bit). The crop is found from the camera alone, before any pixel is
+//! read.
 
 use super::picture::Picture;
 use crate::types::Camera;
@@ -56,8 +56,9 @@ impl Lens {
     }
 
     /// The radius within which the lens's radial map `r -> r · radial(r²)` grows (with a
-    /// positive denominator), searched up to `limit` (infinite when it grows that far). Beyond it the polynomial folds rays back into the
-    /// picture at places that saw other rays, so no view pixel lies there.
+    /// positive denominator), searched up to `limit` (infinite when it grows that far).
+    /// Beyond it the polynomial folds rays back into the picture at places that saw other
+    /// rays, so no view pixel lies there.
     fn unfolded_radius(&self, limit: f64) -> f64 {
         const STEPS: u32 = 4096;
         let mut last = 0.0;
