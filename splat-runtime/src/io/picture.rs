@@ -58,13 +58,21 @@ fn channel(word: u32, c: usize) -> f32 {
 }
 
 /// A picture as straight (not premultiplied) RGBA in [0, 1].
+#[derive(Debug, PartialEq)]
 pub(super) struct Picture {
     pub width: u32,
     pub height: u32,
-    /// 4 words per pixel, row by row.
-    pub rgba: Vec<f32>,
-    /// Every value is an 8-bit one ([`unorm8`]).
-    pub eight_bit: bool,
+    samples: Samples,
+}
+
+/// A picture's values, 4 per pixel, row by row.
+#[derive(Debug, PartialEq)]
+enum Samples {
+    /// 8-bit values ([`unorm8`]), as PNGs and JPEGs usually hold them: a quarter of the memory
+    /// of f32, and packed into a view's words as they are.
+    Bytes(Vec<u8>),
+    /// Any other depth (16-bit, float).
+    Floats(Vec<f32>),
 }
 
 /// An 8-bit value in [0, 1], as pictures are decoded and [`View::rgba8`] recovers them.
@@ -87,68 +95,108 @@ fn straight(v: f32, a: f32, b: f32) -> f32 {
 }
 
 impl Picture {
-    /// The picture at `path`, decoded. 8-bit pictures are converted by [`unorm8`], others
-    /// (16-bit, float) by the image crate.
+    /// The picture at `path`, decoded. 8-bit pictures keep their bytes; others (16-bit,
+    /// float) are converted to f32 by the image crate.
     pub fn read(path: &Path) -> Result<Picture, DatasetError> {
         use image::DynamicImage::*;
         let img = image::open(path).map_err(|error| image_error(path, error))?;
         let (width, height) = (img.width(), img.height());
-        let eight_bit = matches!(
-            img,
-            ImageLuma8(_) | ImageLumaA8(_) | ImageRgb8(_) | ImageRgba8(_)
-        );
-        let rgba = match eight_bit {
-            // Converted in place where the picture already is RGBA (no copy of its pixels).
-            true => img
-                .into_rgba8()
-                .into_raw()
-                .into_iter()
-                .map(unorm8)
-                .collect(),
-            false => img.into_rgba32f().into_raw(),
+        let samples = match img {
+            // Taken as they are where the picture already is RGBA (no copy of its pixels).
+            ImageLuma8(_) | ImageLumaA8(_) | ImageRgb8(_) | ImageRgba8(_) => {
+                Samples::Bytes(img.into_rgba8().into_raw())
+            }
+            img => Samples::Floats(img.into_rgba32f().into_raw()),
         };
         Ok(Picture {
             width,
             height,
-            rgba,
-            eight_bit,
+            samples,
         })
+    }
+
+    /// An 8-bit picture of `width` x `height` pixels from its RGBA bytes, row by row.
+    #[cfg(test)]
+    pub fn from_bytes(width: u32, height: u32, rgba: Vec<u8>) -> Picture {
+        assert_eq!(rgba.len(), width as usize * height as usize * 4);
+        Picture {
+            width,
+            height,
+            samples: Samples::Bytes(rgba),
+        }
+    }
+
+    /// A picture of `width` x `height` pixels of the same depth as this one, each made by
+    /// `pixel(x, y)` (in parallel by rows; the first error met is returned) and rounded to
+    /// 8 bits where this picture is 8-bit, as a copy made by an image program would hold it.
+    pub fn made<E: Send>(
+        &self,
+        (width, height): (u32, u32),
+        pixel: impl Fn(usize, usize) -> Result<[f32; 4], E> + Sync,
+    ) -> Result<Picture, E> {
+        fn fill<T: Send, E: Send>(
+            width: u32,
+            height: u32,
+            pixel: impl Fn(usize, usize) -> Result<[f32; 4], E> + Sync,
+            value: impl Fn(f32) -> T + Sync,
+        ) -> Result<Vec<T>, E>
+        where
+            T: Copy + Default,
+        {
+            let mut values = vec![T::default(); width as usize * height as usize * 4];
+            (values.par_chunks_exact_mut(width as usize * 4).enumerate()).try_for_each(
+                |(y, row)| {
+                    for (x, px) in row.chunks_exact_mut(4).enumerate() {
+                        for (out, v) in px.iter_mut().zip(pixel(x, y)?) {
+                            *out = value(v);
+                        }
+                    }
+                    Ok(())
+                },
+            )?;
+            Ok(values)
+        }
+        let samples = match self.samples {
+            Samples::Bytes(_) => Samples::Bytes(fill(width, height, pixel, |v| byte(v) as u8)?),
+            Samples::Floats(_) => Samples::Floats(fill(width, height, pixel, |v| v)?),
+        };
+        Ok(Picture {
+            width,
+            height,
+            samples,
+        })
+    }
+
+    /// Pixel `p`'s straight RGBA.
+    fn pixel(&self, p: usize) -> [f32; 4] {
+        let at = p * 4..p * 4 + 4;
+        match &self.samples {
+            Samples::Bytes(v) => std::array::from_fn(|c| unorm8(v[at.start + c])),
+            Samples::Floats(v) => v[at].try_into().unwrap(),
+        }
     }
 
     /// The picture averaged over blocks of `factor` x `factor` pixels, the right and bottom
     /// pixels that fill no block dropped: each block is its pixels' [`Picture::blend`].
     pub fn downscaled(&self, factor: u32) -> Picture {
         let (f, w) = (factor as usize, self.width as usize);
-        let (width, height) = (self.width / factor, self.height / factor);
-        let mut rgba = vec![0.0f32; width as usize * height as usize * 4];
-        (rgba.par_chunks_exact_mut(width as usize * 4).enumerate()).for_each(|(y, row)| {
-            for (x, px) in row.chunks_exact_mut(4).enumerate() {
-                let rows = (y * f..(y + 1) * f).map(|sy| sy * w);
-                let block = rows.flat_map(|start| (x * f..(x + 1) * f).map(move |sx| start + sx));
-                px.copy_from_slice(&self.blend(block.map(|p| (p, 1.0))));
-            }
-        });
-        Picture {
-            width,
-            height,
-            rgba,
-            eight_bit: self.eight_bit,
-        }
+        let size = (self.width / factor, self.height / factor);
+        let block = |x: usize, y: usize| {
+            let rows = (y * f..(y + 1) * f).map(|sy| sy * w);
+            let block = rows.flat_map(|start| (x * f..(x + 1) * f).map(move |sx| start + sx));
+            Ok::<_, ()>(self.blend(block.map(|p| (p, 1.0))))
+        };
+        self.made(size, block).unwrap()
     }
 
     /// The weighted mean of pixels (each its index and weight), as straight RGBA: its coverage
     /// is the coverages' mean, its color the mean weighted by coverage too (so composited on any
-    /// background, it is the mean of the pixels composited on it). An 8-bit picture's means
-    /// are rounded to 8 bits, as a copy made by an image program would hold them.
+    /// background, it is the mean of the pixels composited on it).
     pub fn blend(&self, pixels: impl IntoIterator<Item = (usize, f32)>) -> [f32; 4] {
-        let rounded = |v: f32| match self.eight_bit {
-            true => unorm8(byte(v) as u8),
-            false => v,
-        };
         // Sums of w a c per channel, of w a, and of w.
         let (mut sums, mut weight) = ([0.0f32; 4], 0.0f32);
         for (p, w) in pixels {
-            let px = &self.rgba[p * 4..p * 4 + 4];
+            let px = self.pixel(p);
             let wa = w * px[3];
             for c in 0..3 {
                 sums[c] += px[c] * wa;
@@ -157,31 +205,31 @@ impl Picture {
             weight += w;
         }
         let color = |c: usize| match sums[3] > 0.0 {
-            true => rounded(sums[c] / sums[3]),
+            true => sums[c] / sums[3],
             false => 0.0,
         };
-        [color(0), color(1), color(2), rounded(sums[3] / weight)]
+        [color(0), color(1), color(2), sums[3] / weight]
     }
 
     /// The view of this picture seen by `camera`, composited on `background` (8-bit words for
     /// an 8-bit picture).
     pub fn view(self, name: String, camera: Camera, background: Vec3) -> View {
-        let pixels = match self.eight_bit {
-            true => Pixels::Rgba8 {
+        let pixels = match self.samples {
+            Samples::Bytes(bytes) => Pixels::Rgba8 {
                 width: self.width,
                 height: self.height,
-                words: (self.rgba.par_chunks_exact(4))
-                    .map(|p| match byte(p[3]) {
+                words: (bytes.par_chunks_exact(4))
+                    .map(|p| match p[3] {
                         0 => 0,
-                        a => (0..3).fold(a << 24, |w, c| w | byte(p[c]) << (8 * c)),
+                        _ => u32::from_le_bytes(p.try_into().unwrap()),
                     })
                     .collect(),
             },
-            false => {
+            Samples::Floats(rgba) => {
                 let b = background.to_array();
-                let mut data = Vec::with_capacity(self.rgba.len() / 4 * 3);
-                let mut alpha = Vec::with_capacity(self.rgba.len() / 4);
-                for p in self.rgba.chunks_exact(4) {
+                let mut data = Vec::with_capacity(rgba.len() / 4 * 3);
+                let mut alpha = Vec::with_capacity(rgba.len() / 4);
+                for p in rgba.chunks_exact(4) {
                     data.extend((0..3).map(|c| composited(p[c], p[3], b[c])));
                     alpha.push(p[3]);
                 }

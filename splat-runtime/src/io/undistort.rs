@@ -13,7 +13,6 @@
 use super::picture::Picture;
 use crate::types::Camera;
 use glam::{DVec2, UVec2, Vec2};
-use rayon::prelude::*;
 
 /// OpenCV's lens model, on points `(x/z, y/z)` of the normalized image plane: a rational
 /// radial factor and Brown-Conrady tangential terms. A point `p` at `r² = |p|²` is seen at
@@ -191,39 +190,26 @@ impl Undistortion {
     pub(super) fn apply(&self, picture: &Picture) -> Result<Picture, String> {
         let (w, h) = (picture.width, picture.height);
         debug_assert_eq!(Vec2::new(w as f32, h as f32), self.picture.size);
-        let mut rgba = vec![0.0f32; self.size.x as usize * self.size.y as usize * 4];
-        let rows = rgba
-            .par_chunks_exact_mut(self.size.x as usize * 4)
-            .enumerate();
-        rows.try_for_each(|(y, row)| {
-            for (x, px) in row.chunks_exact_mut(4).enumerate() {
-                let p = self.offset + UVec2::new(x as u32, y as u32);
-                let at = self.source(p).ok_or_else(|| {
-                    format!("maps its pixel ({x}, {y}) outside the picture through its lens")
-                })?;
-                // Pixel centres at + 0.5. At the last centre the next pixel's weight is 0.
-                let t = at - 0.5;
-                let (x0, fx) = (t.x.floor(), (t.x - t.x.floor()) as f32);
-                let (y0, fy) = (t.y.floor(), (t.y - t.y.floor()) as f32);
-                let index = |dx: f64, dy: f64| {
-                    let sx = (x0 + dx).clamp(0.0, f64::from(w - 1)) as usize;
-                    let sy = (y0 + dy).clamp(0.0, f64::from(h - 1)) as usize;
-                    sy * w as usize + sx
-                };
-                px.copy_from_slice(&picture.blend([
-                    (index(0.0, 0.0), (1.0 - fx) * (1.0 - fy)),
-                    (index(1.0, 0.0), fx * (1.0 - fy)),
-                    (index(0.0, 1.0), (1.0 - fx) * fy),
-                    (index(1.0, 1.0), fx * fy),
-                ]));
-            }
-            Ok::<(), String>(())
-        })?;
-        Ok(Picture {
-            width: self.size.x,
-            height: self.size.y,
-            rgba,
-            eight_bit: picture.eight_bit,
+        picture.made((self.size.x, self.size.y), |x, y| {
+            let p = self.offset + UVec2::new(x as u32, y as u32);
+            let at = self.source(p).ok_or_else(|| {
+                format!("maps its pixel ({x}, {y}) outside the picture through its lens")
+            })?;
+            // Pixel centres at + 0.5. At the last centre the next pixel's weight is 0.
+            let t = at - 0.5;
+            let (x0, fx) = (t.x.floor(), (t.x - t.x.floor()) as f32);
+            let (y0, fy) = (t.y.floor(), (t.y - t.y.floor()) as f32);
+            let index = |dx: f64, dy: f64| {
+                let sx = (x0 + dx).clamp(0.0, f64::from(w - 1)) as usize;
+                let sy = (y0 + dy).clamp(0.0, f64::from(h - 1)) as usize;
+                sy * w as usize + sx
+            };
+            Ok(picture.blend([
+                (index(0.0, 0.0), (1.0 - fx) * (1.0 - fy)),
+                (index(1.0, 0.0), fx * (1.0 - fy)),
+                (index(0.0, 1.0), (1.0 - fx) * fy),
+                (index(1.0, 1.0), fx * fy),
+            ]))
         })
     }
 }
@@ -247,14 +233,12 @@ mod tests {
         let cut = Undistortion::new(camera(), Lens::default()).unwrap();
         assert_eq!((cut.offset, cut.size), (UVec2::ZERO, UVec2::new(32, 24)));
         assert_eq!(cut.view(), camera());
-        let rgba = (0..32 * 24 * 4).map(|k| super::super::picture::unorm8((k * 7 % 256) as u8));
-        let picture = Picture {
-            width: 32,
-            height: 24,
-            rgba: rgba.collect(),
-            eight_bit: true,
-        };
-        assert_eq!(cut.apply(&picture).unwrap().rgba, picture.rgba);
+        let picture = Picture::from_bytes(
+            32,
+            24,
+            (0..32 * 24 * 4).map(|k| (k * 7 % 256) as u8).collect(),
+        );
+        assert_eq!(cut.apply(&picture).unwrap(), picture);
     }
 
     /// `r (1 + k1 r²)` with k1 < 0 grows up to r = 1 / sqrt(-3 k1), then folds back; with
