@@ -134,15 +134,12 @@ impl Picture {
         (width, height): (u32, u32),
         pixel: impl Fn(usize, usize) -> Result<[f32; 4], E> + Sync,
     ) -> Result<Picture, E> {
-        fn fill<T: Send, E: Send>(
+        fn fill<T: Copy + Default + Send, E: Send>(
             width: u32,
             height: u32,
             pixel: impl Fn(usize, usize) -> Result<[f32; 4], E> + Sync,
             value: impl Fn(f32) -> T + Sync,
-        ) -> Result<Vec<T>, E>
-        where
-            T: Copy + Default,
-        {
+        ) -> Result<Vec<T>, E> {
             let mut values = vec![T::default(); width as usize * height as usize * 4];
             (values.par_chunks_exact_mut(width as usize * 4).enumerate()).try_for_each(
                 |(y, row)| {
