@@ -6,7 +6,7 @@
 use crate::interrupt::Listening;
 use crate::methods::{self, Method};
 use crate::view::{Downscale, undistorted};
-use crate::{plot, scene};
+use crate::{memory, plot, scene};
 use anyhow::{Context, Result, anyhow, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use plotters::prelude::*;
@@ -184,10 +184,15 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
     let t = Instant::now();
     let (data, name, defaults, taken) = match &args.dataset {
         Some(dir) => {
-            let shots = dataset::read_shots(dir)?.downscaled(args.downscale.factor)?;
+            let name = dir.display().to_string();
+            let shots = dataset::read_shots(dir)?;
+            if let Some(room) = memory::available() {
+                let threads = rayon::current_num_threads();
+                memory::check_room(&name, &shots, args.downscale.factor, room, threads)?;
+            }
+            let shots = shots.downscaled(args.downscale.factor)?;
             let all = || shots.train.iter().chain(&shots.test);
             let taken = args.downscale.how(all()) + &undistorted(all());
-            let name = dir.display().to_string();
             (shots.load(background)?, name, DATASET_DEFAULTS, taken)
         }
         None if args.downscale.factor != 1 => {

@@ -20,6 +20,7 @@ mod bench;
 mod eval;
 mod fit;
 mod interrupt;
+mod memory;
 mod methods;
 mod plot;
 mod render;

@@ -18,7 +18,7 @@
 
 use super::camera::NotRotation;
 use super::picture::Picture;
-pub use super::picture::View;
+pub use super::picture::{Footprint, View};
 use super::undistort::{Lens, Undistortion};
 use super::{Outputs, colmap};
 use crate::types::{Camera, CameraModel};
@@ -229,6 +229,22 @@ impl Shots {
             train: load(&self.train)?,
             test: load(&self.test)?,
             points: self.points,
+        })
+    }
+
+    /// What loading every view takes in host memory, from the pictures' headers (read in
+    /// parallel): the bytes the views hold, summed, and the most one picture takes to decode.
+    pub fn footprint(&self) -> Result<Footprint, DatasetError> {
+        let shots: Vec<&Shot> = self.train.iter().chain(&self.test).collect();
+        let each = (shots.par_iter())
+            .map(|shot| {
+                let size = shot.camera.size;
+                Picture::footprint(&shot.path, size.x as u64 * size.y as u64)
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(Footprint {
+            held: each.iter().map(|f| f.held).sum(),
+            decoding: each.iter().map(|f| f.decoding).max().unwrap_or(0),
         })
     }
 
@@ -1054,6 +1070,69 @@ mod tests {
             .unwrap();
         let view = Shot::new(path, camera).load(Vec3::ZERO).unwrap();
         assert!(view.rgba8().is_none());
+    }
+
+    /// A dataset's footprint, read from headers, is what its loaded views hold: 4 bytes per
+    /// pixel of 8-bit pictures (PNG, with alpha or not, and JPEG), 16 of others, taken smaller
+    /// or not; an opaque 16-bit picture's view holds no coverage, 4 bytes per pixel less.
+    #[test]
+    fn a_footprint_is_what_the_views_hold() {
+        let dir = tempfile::tempdir().unwrap();
+        let (w, h) = (12u32, 8u32);
+        let mut rng = fastrand::Rng::with_seed(3);
+        let mut bytes = |n: u32| -> Vec<u8> { (0..w * h * n).map(|_| rng.u8(..)).collect() };
+        let path = |name: &str| dir.path().join(name);
+        image::RgbImage::from_raw(w, h, bytes(3))
+            .unwrap()
+            .save(path("rgb.png"))
+            .unwrap();
+        image::RgbImage::from_raw(w, h, bytes(3))
+            .unwrap()
+            .save(path("rgb.jpg"))
+            .unwrap();
+        image::RgbaImage::from_raw(w, h, bytes(4))
+            .unwrap()
+            .save(path("rgba.png"))
+            .unwrap();
+        let deep: Vec<u16> = (0..w * h * 4).map(|k| (k * 997 % 65536) as u16).collect();
+        image::ImageBuffer::<image::Rgba<u16>, _>::from_raw(w, h, deep)
+            .unwrap()
+            .save(path("rgba16.png"))
+            .unwrap();
+        let camera = Camera {
+            size: Vec2::new(w as f32, h as f32),
+            ..Default::default()
+        };
+        let shots = |names: &[&str]| Shots {
+            train: names.iter().map(|n| Shot::new(path(n), camera)).collect(),
+            test: vec![],
+            points: vec![],
+        };
+        let held = |shots: Shots| -> u64 {
+            let data = shots.load(Vec3::ZERO).unwrap();
+            data.train.iter().map(View::held_bytes).sum()
+        };
+        for shots in [
+            shots(&["rgb.png", "rgb.jpg", "rgba.png", "rgba16.png"]),
+            shots(&["rgb.png", "rgba16.png"]).downscaled(2).unwrap(),
+        ] {
+            let footprint = shots.footprint().unwrap();
+            assert!(footprint.decoding > footprint.held / shots.train.len() as u64);
+            assert_eq!(footprint.held, held(shots));
+        }
+        let opaque = path("rgb16.png");
+        let deep: Vec<u16> = (0..w * h * 3).map(|k| (k * 991 % 65536) as u16).collect();
+        image::ImageBuffer::<image::Rgb<u16>, _>::from_raw(w, h, deep)
+            .unwrap()
+            .save(&opaque)
+            .unwrap();
+        let footprint = shots(&["rgb16.png"]).footprint().unwrap();
+        assert_eq!(
+            footprint.held,
+            held(shots(&["rgb16.png"])) + 4 * (w * h) as u64
+        );
+        let missing = shots(&["none.png"]).footprint().unwrap_err().to_string();
+        assert!(missing.contains("none.png"), "{missing}");
     }
 
     /// What the format cannot say is refused by file and frame.

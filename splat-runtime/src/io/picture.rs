@@ -65,6 +65,24 @@ pub(super) struct Picture {
     samples: Samples,
 }
 
+/// Host memory, in bytes, that loading one picture into a view takes.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Footprint {
+    /// Held by the view, for as long as it lives.
+    pub held: u64,
+    /// The most held at once while the picture is decoded and made the view, the view's
+    /// own bytes included.
+    pub decoding: u64,
+}
+
+impl Footprint {
+    /// The most held at once by a dataset's views while `threads` pictures are decoded at a
+    /// time ([`Footprint::decoding`] of the largest).
+    pub fn peak(&self, threads: usize) -> u64 {
+        self.held + threads as u64 * self.decoding
+    }
+}
+
 /// A picture's values, 4 per pixel, row by row.
 #[derive(Debug, PartialEq)]
 enum Samples {
@@ -112,6 +130,34 @@ impl Picture {
             width,
             height,
             samples,
+        })
+    }
+
+    /// What loading the picture at `path` into a view of `view_pixels` pixels takes in host
+    /// memory, from its header alone (no pixel is decoded).
+    pub fn footprint(path: &Path, view_pixels: u64) -> Result<Footprint, DatasetError> {
+        use image::ColorType::*;
+        let error = |error| image_error(path, error);
+        let reader = image::ImageReader::open(path).map_err(|e| error(e.into()))?;
+        let decoder = (reader.with_guessed_format())
+            .map_err(|e| error(e.into()))?
+            .into_decoder()
+            .map_err(error)?;
+        let (w, h) = image::ImageDecoder::dimensions(&decoder);
+        let color = image::ImageDecoder::color_type(&decoder);
+        // Per pixel: the bytes held, as [`Picture`] and [`View`] hold them (12 of f32 RGB
+        // and 4 of coverage where the picture is not 8-bit).
+        let per_pixel: u64 = match color {
+            L8 | La8 | Rgb8 | Rgba8 => 4,
+            _ => 16,
+        };
+        let picture = u64::from(w) * u64::from(h);
+        let held = per_pixel * view_pixels;
+        Ok(Footprint {
+            held,
+            // The decoder's own pixels, converted to RGBA, cut or averaged to the view, then
+            // the view.
+            decoding: (u64::from(color.bytes_per_pixel()) + per_pixel) * picture + 2 * held,
         })
     }
 
@@ -266,6 +312,17 @@ impl View {
             camera,
             background,
             pixels: Pixels::Composited { image, coverage },
+        }
+    }
+
+    /// The bytes its pixels take in memory ([`Footprint::held`]).
+    pub fn held_bytes(&self) -> u64 {
+        let floats = |v: &[f32]| std::mem::size_of_val(v) as u64;
+        match &self.pixels {
+            Pixels::Composited { image, coverage } => {
+                floats(&image.data) + coverage.as_deref().map_or(0, floats)
+            }
+            Pixels::Rgba8 { words, .. } => std::mem::size_of_val(&words[..]) as u64,
         }
     }
 

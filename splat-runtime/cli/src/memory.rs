@@ -1,0 +1,190 @@
+//! Whether a dataset's views fit in the host memory left, checked from the pictures' headers
+//! before any is decoded: a dataset too big is refused with the `--downscale` that fits,
+//! instead of loading for minutes and being killed by the kernel.
+
+use anyhow::{Result, bail};
+use splat_runtime::io::dataset::{Footprint, Shots};
+use std::path::Path;
+
+/// The largest `--downscale` suggested.
+const LARGEST_FACTOR: u32 = 32;
+
+/// Refuses `shots` (at full size) when loading them `factor` times smaller would take more
+/// than `room` bytes, with `threads` pictures decoded at a time; the error names the smallest
+/// larger factor that fits.
+pub fn check_room(name: &str, shots: &Shots, factor: u32, room: u64, threads: usize) -> Result<()> {
+    let views = shots.train.len() + shots.test.len();
+    let threads = threads.clamp(1, views.max(1));
+    let footprint = |f: u32| -> Result<Footprint> { Ok(shots.clone().downscaled(f)?.footprint()?) };
+    let need = footprint(factor)?;
+    if need.peak(threads) <= room {
+        return Ok(());
+    }
+    let mut suggestion = format!("not even --downscale {factor} fits");
+    for f in factor + 1..=LARGEST_FACTOR {
+        // A factor that leaves a picture without a pixel is no suggestion.
+        let Ok(smaller) = footprint(f) else { break };
+        suggestion = format!("not even --downscale {f} fits");
+        if smaller.peak(threads) <= room {
+            let peak = bytes(smaller.peak(threads));
+            suggestion = format!("--downscale {f} would take about {peak}");
+            break;
+        }
+    }
+    bail!(
+        "{name}: loading its {views} views takes about {} of memory ({} held by the views for the run, up to {} for each of the {threads} pictures decoded at a time), and {} is available: {suggestion}",
+        bytes(need.peak(threads)),
+        bytes(need.held),
+        bytes(need.decoding),
+        bytes(room),
+    )
+}
+
+/// A size for people: "12.3 GB", "450.0 MB", "36.9 kB".
+fn bytes(n: u64) -> String {
+    let (scale, unit) = match n {
+        n if n >= 1_000_000_000 => (1e9, "GB"),
+        n if n >= 1_000_000 => (1e6, "MB"),
+        _ => (1e3, "kB"),
+    };
+    format!("{:.1} {unit}", n as f64 / scale)
+}
+
+/// The bytes this process can still take from the host: the kernel's estimate of what is
+/// available without swapping, plus free swap, and no more than its control groups' memory
+/// limits leave. `None` where the system says nothing (not Linux).
+pub fn available() -> Option<u64> {
+    let meminfo = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let field = |name: &str| -> Option<u64> {
+        let line = meminfo
+            .lines()
+            .find_map(|l| l.strip_prefix(name)?.strip_prefix(':'))?;
+        let kilobytes: u64 = line.trim().strip_suffix("kB")?.trim().parse().ok()?;
+        Some(kilobytes * 1024)
+    };
+    let system = field("MemAvailable")? + field("SwapFree").unwrap_or(0);
+    Some(cgroup_room().map_or(system, |room| room.min(system)))
+}
+
+/// The least room this process's control groups leave under their memory limits (cgroup v2,
+/// or v1's memory controller); `None` where none sets one.
+fn cgroup_room() -> Option<u64> {
+    let cgroups = std::fs::read_to_string("/proc/self/cgroup").ok()?;
+    let mut least = None;
+    // Lines are `id:controllers:path`; v2's has no controllers.
+    for line in cgroups.lines() {
+        let mut fields = line.splitn(3, ':').skip(1);
+        let (Some(controllers), Some(own)) = (fields.next(), fields.next()) else {
+            continue;
+        };
+        let (root, files) = match controllers {
+            "" => ("/sys/fs/cgroup", ["memory.max", "memory.current"]),
+            c if c.split(',').any(|c| c == "memory") => (
+                "/sys/fs/cgroup/memory",
+                ["memory.limit_in_bytes", "memory.usage_in_bytes"],
+            ),
+            _ => continue,
+        };
+        let room = room_under(Path::new(root), own, files);
+        least = lesser(least, room);
+    }
+    least
+}
+
+/// The least room the group at `own` under `root`, or any of its ancestors (a limit
+/// anywhere above binds too), leaves: its limit less its use, as `files` name them.
+fn room_under(root: &Path, own: &str, [limit, usage]: [&str; 2]) -> Option<u64> {
+    let read = |dir: &Path, file: &str| -> Option<u64> {
+        // v2 writes "max" where there is no limit, which parses as none.
+        std::fs::read_to_string(dir.join(file))
+            .ok()?
+            .trim()
+            .parse()
+            .ok()
+    };
+    let mut dir = root.join(own.trim_start_matches('/'));
+    let mut least: Option<u64> = None;
+    loop {
+        if let (Some(max), Some(used)) = (read(&dir, limit), read(&dir, usage)) {
+            least = lesser(least, Some(max.saturating_sub(used)));
+        }
+        if dir == root || !dir.pop() {
+            return least;
+        }
+    }
+}
+
+/// The lesser of two bounds, either of which may be missing.
+fn lesser(a: Option<u64>, b: Option<u64>) -> Option<u64> {
+    match (a, b) {
+        (Some(a), Some(b)) => Some(a.min(b)),
+        (a, b) => a.or(b),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use splat_runtime::glam::Vec2;
+    use splat_runtime::io::dataset::Shot;
+    use splat_runtime::types::Camera;
+
+    /// 3 views of 64 x 48 8-bit pictures hold 4 bytes per pixel.
+    fn shots(dir: &Path) -> Shots {
+        let (w, h) = (64, 48);
+        let shot = |k: usize| {
+            let path = dir.join(format!("{k}.png"));
+            image::RgbImage::new(w, h).save(&path).unwrap();
+            let camera = Camera {
+                size: Vec2::new(w as f32, h as f32),
+                ..Default::default()
+            };
+            Shot::new(path, camera)
+        };
+        Shots {
+            train: (0..2).map(shot).collect(),
+            test: vec![shot(2)],
+            points: vec![],
+        }
+    }
+
+    #[test]
+    fn a_dataset_is_refused_with_the_downscale_that_fits() {
+        let dir = tempfile::tempdir().unwrap();
+        let shots = shots(dir.path());
+        let peak = |f| {
+            shots
+                .clone()
+                .downscaled(f)
+                .unwrap()
+                .footprint()
+                .unwrap()
+                .peak(2)
+        };
+        let (full, half, third) = (peak(1), peak(2), peak(3));
+        assert!(full > half && half > third, "{full} {half} {third}");
+        check_room("d", &shots, 1, full, 2).unwrap();
+        let err = check_room("d", &shots, 1, half, 2).unwrap_err().to_string();
+        let held = bytes(3 * 64 * 48 * 4);
+        let want = format!(
+            "d: loading its 3 views takes about {} of memory ({held} held by the views for the run",
+            bytes(full)
+        );
+        assert!(err.starts_with(&want), "{err}");
+        assert!(err.ends_with(&format!("--downscale 2 would take about {}", bytes(half))));
+        // Asked for 2 already, with room for 3.
+        let err = check_room("d", &shots, 2, third, 2)
+            .unwrap_err()
+            .to_string();
+        assert!(err.ends_with(&format!("--downscale 3 would take about {}", bytes(third))));
+        // Factors are tried up to 32.
+        let err = check_room("d", &shots, 1, 10, 2).unwrap_err().to_string();
+        assert!(err.ends_with("not even --downscale 32 fits"), "{err}");
+    }
+
+    #[test]
+    fn this_machine_says_how_much_memory_is_left() {
+        let room = available().expect("Linux says what memory is available");
+        assert!(room > 0);
+    }
+}
