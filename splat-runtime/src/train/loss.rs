@@ -8,6 +8,7 @@
 
 use crate::pipeline::Image;
 use rayon::prelude::*;
+use std::ops::Range;
 
 /// Side of the SSIM window.
 pub const WINDOW: usize = 11;
@@ -44,95 +45,10 @@ pub(crate) fn window() -> [f64; WINDOW] {
     g.map(|v| v / sum)
 }
 
-/// One channel of an image as f64 rows.
-struct Plane {
-    w: usize,
-    h: usize,
-    v: Vec<f64>,
-}
-
-impl Plane {
-    fn of(img: &Image, channel: usize) -> Plane {
-        let c = img.channels;
-        Plane {
-            w: img.width as usize,
-            h: img.height as usize,
-            v: img
-                .data
-                .iter()
-                .skip(channel)
-                .step_by(c)
-                .map(|x| *x as f64)
-                .collect(),
-        }
-    }
-
-    fn map2(&self, other: &Plane, f: impl Fn(f64, f64) -> f64) -> Plane {
-        Plane {
-            w: self.w,
-            h: self.h,
-            v: self
-                .v
-                .iter()
-                .zip(&other.v)
-                .map(|(a, b)| f(*a, *b))
-                .collect(),
-        }
-    }
-
-    /// The Gaussian-weighted mean over every window inside the plane ("valid"): a plane of
-    /// (w - 10) x (h - 10).
-    fn filter_valid(&self, g: &[f64; WINDOW]) -> Plane {
-        let (ow, oh) = (self.w + 1 - WINDOW, self.h + 1 - WINDOW);
-        let mut rows = vec![0.0; ow * self.h];
-        for y in 0..self.h {
-            for x in 0..ow {
-                let src = &self.v[y * self.w + x..y * self.w + x + WINDOW];
-                rows[y * ow + x] = src.iter().zip(g).map(|(a, b)| a * b).sum();
-            }
-        }
-        let mut out = vec![0.0; ow * oh];
-        for y in 0..oh {
-            for x in 0..ow {
-                out[y * ow + x] = (0..WINDOW).map(|k| rows[(y + k) * ow + x] * g[k]).sum();
-            }
-        }
-        Plane {
-            w: ow,
-            h: oh,
-            v: out,
-        }
-    }
-
-    /// The transpose of [`Plane::filter_valid`]: spreads each window's value back over its
-    /// pixels, giving a (w + 10) x (h + 10) plane.
-    fn filter_transposed(&self, g: &[f64; WINDOW]) -> Plane {
-        let (ow, oh) = (self.w + WINDOW - 1, self.h + WINDOW - 1);
-        let mut cols = vec![0.0; self.w * oh];
-        for y in 0..self.h {
-            for x in 0..self.w {
-                let v = self.v[y * self.w + x];
-                for (k, gk) in g.iter().enumerate() {
-                    cols[(y + k) * self.w + x] += v * gk;
-                }
-            }
-        }
-        let mut out = vec![0.0; ow * oh];
-        for y in 0..oh {
-            for x in 0..self.w {
-                let v = cols[y * self.w + x];
-                for (k, gk) in g.iter().enumerate() {
-                    out[y * ow + x + k] += v * gk;
-                }
-            }
-        }
-        Plane {
-            w: ow,
-            h: oh,
-            v: out,
-        }
-    }
-}
+/// Rows of pixels one task of the SSIM filter takes: with the window rows above them that
+/// reach them (recomputed by both bands), about a sixth more work than whole-image planes,
+/// for working memory of a band instead of many whole planes.
+const BAND: usize = 64;
 
 fn check(render: &Image, target: &Image) -> Result<(), LossError> {
     let shape = |i: &Image| (i.width, i.height, i.channels);
@@ -148,60 +64,197 @@ fn check(render: &Image, target: &Image) -> Result<(), LossError> {
     Ok(())
 }
 
-/// Mean SSIM of one channel, and (when `scale` is given) its gradient with respect to `x`
-/// times `scale`, per pixel of the channel.
-fn ssim_channel(x: &Plane, y: &Plane, scale: Option<f64>) -> (f64, Option<Vec<f64>>) {
-    let g = window();
-    let (mx, my) = (x.filter_valid(&g), y.filter_valid(&g));
-    let exx = x.map2(x, |a, _| a * a).filter_valid(&g);
-    let eyy = y.map2(y, |a, _| a * a).filter_valid(&g);
-    let exy = x.map2(y, |a, b| a * b).filter_valid(&g);
-    let n = mx.v.len();
-    let mut sum = 0.0;
-    // Cotangents of the filtered quantities mx, exx, exy, per window position.
-    let (mut d_mx, mut d_exx, mut d_exy) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
-    for i in 0..n {
-        let (m1, m2) = (mx.v[i], my.v[i]);
-        let (vx, vy, cxy) = (exx.v[i] - m1 * m1, eyy.v[i] - m2 * m2, exy.v[i] - m1 * m2);
-        let (a, b) = (2.0 * m1 * m2 + C1, 2.0 * cxy + C2);
-        let (c, d) = (m1 * m1 + m2 * m2 + C1, vx + vy + C2);
-        let s = a * b / (c * d);
-        sum += s;
-        // ds/dm1 through A, B (cxy), C and D (vx); ds/dexx through D; ds/dexy through B.
-        d_mx[i] = (2.0 * m2 * b - 2.0 * m2 * a) / (c * d) - s * (2.0 * m1 / c - 2.0 * m1 / d);
-        d_exx[i] = -s / d;
-        d_exy[i] = 2.0 * a / (c * d);
+/// SSIM of `x` against `y` summed over window positions and channels and, with `grad`, its
+/// gradient with respect to `x` times a scale added into the slice (laid out like `x.data`).
+/// Bands of `band` pixel rows run in parallel, each summed in order.
+fn ssim_sum(x: &Image, y: &Image, grad: Option<(&mut [f32], f64)>, band: usize) -> f64 {
+    let (row, h) = (x.width as usize * x.channels, x.height as usize);
+    let rows = |b: usize| b * band..((b + 1) * band).min(h);
+    let sums: Vec<f64> = match grad {
+        Some((grad, scale)) => (grad.par_chunks_mut(band * row).enumerate())
+            .map(|(b, g)| ssim_band(x, y, rows(b), Some((g, scale))))
+            .collect(),
+        None => (0..h.div_ceil(band))
+            .into_par_iter()
+            .map(|b| ssim_band(x, y, rows(b), None))
+            .collect(),
+    };
+    sums.iter().sum()
+}
+
+/// [`ssim_sum`] for the band of pixel rows `p0..p1`: the SSIM of the window positions whose
+/// top row is in the band, and the gradient of every window's SSIM at the band's pixels
+/// (`grad`: the band's rows). In code compiled for AVX2 + FMA where the CPU has them (the
+/// same bits: nothing is fused).
+fn ssim_band(x: &Image, y: &Image, band: Range<usize>, grad: Option<(&mut [f32], f64)>) -> f64 {
+    #[cfg(target_arch = "x86_64")]
+    if crate::lanes::has_avx2() {
+        // SAFETY: the CPU supports the features the function is compiled for.
+        return unsafe { ssim_band_avx2(x, y, band, grad) };
     }
-    let grad = scale.map(|scale| {
-        let k = scale / n as f64;
-        let spread = |v: Vec<f64>| {
-            Plane {
-                w: mx.w,
-                h: mx.h,
-                v: v.into_iter().map(|d| d * k).collect(),
+    ssim_band_body(x, y, band, grad)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn ssim_band_avx2(
+    x: &Image,
+    y: &Image,
+    band: Range<usize>,
+    grad: Option<(&mut [f32], f64)>,
+) -> f64 {
+    ssim_band_body(x, y, band, grad)
+}
+
+/// [`ssim_band`]'s work. Every quantity is a plane of its own (moments x, y, xx, yy, xy;
+/// cotangents of the means of x, xx, xy), so that each loop runs along a row, in lanes.
+#[inline(always)]
+fn ssim_band_body(
+    x: &Image,
+    y: &Image,
+    Range { start: p0, end: p1 }: Range<usize>,
+    mut grad: Option<(&mut [f32], f64)>,
+) -> f64 {
+    let (w, h, c) = (x.width as usize, x.height as usize, x.channels);
+    let (vw, vh) = (w + 1 - WINDOW, h + 1 - WINDOW);
+    // Window rows: those whose top row is in the band, and for the gradient the ones above
+    // that reach into it.
+    let reach = if grad.is_some() { WINDOW - 1 } else { 0 };
+    let (w0, w1) = (p0.saturating_sub(reach), p1.min(vh));
+    if w0 >= w1 {
+        return 0.0;
+    }
+    let (windows, rows) = (w1 - w0, w1 - w0 + WINDOW - 1);
+    let g = window();
+    let scale = grad.as_ref().map_or(0.0, |(_, s)| s / (vw * vh) as f64);
+    fn planes<const N: usize>(len: usize) -> [Vec<f64>; N] {
+        std::array::from_fn(|_| vec![0.0; len])
+    }
+    // Per moment: a row's products; the rows filtered along x; each window's moment.
+    let (mut products, mut across, mut moments) =
+        (planes::<5>(w), planes::<5>(rows * vw), planes::<5>(vw));
+    // Per cotangent: its value at each window; gathered down (with WINDOW - 1 zeros on
+    // either side), then across.
+    let (mut cotangents, mut down, mut full) = (
+        planes::<3>(windows * vw),
+        planes::<3>(vw + 2 * (WINDOW - 1)),
+        planes::<3>(w),
+    );
+    let mut ssim = vec![0.0f64; vw];
+    let mut sum = 0.0;
+    for ch in 0..c {
+        let at = |img: &Image, p: usize| img.data[p * c + ch] as f64;
+        for r in 0..rows {
+            let pixels = (w0 + r) * w..(w0 + r + 1) * w;
+            let [a, b, aa, bb, ab] = &mut products;
+            for (((((a, b), aa), bb), ab), p) in (a.iter_mut().zip(b.iter_mut()))
+                .zip(aa.iter_mut())
+                .zip(bb.iter_mut())
+                .zip(ab.iter_mut())
+                .zip(pixels)
+            {
+                (*a, *b) = (at(x, p), at(y, p));
+                (*aa, *bb, *ab) = (*a * *a, *b * *b, *a * *b);
             }
-            .filter_transposed(&g)
+            for (out, src) in across.iter_mut().zip(&products) {
+                let taps = (0..WINDOW).map(|i| (g[i], &src[i..]));
+                weighted(&mut out[r * vw..(r + 1) * vw], taps);
+            }
+        }
+        for wr in 0..windows {
+            for (out, src) in moments.iter_mut().zip(&across) {
+                weighted(out, (0..WINDOW).map(|j| (g[j], &src[(wr + j) * vw..])));
+            }
+            let at_window = wr * vw..(wr + 1) * vw;
+            let [d_m, d_xx, d_xy] = &mut cotangents;
+            let d_m = &mut d_m[at_window.clone()];
+            let d_xx = &mut d_xx[at_window.clone()];
+            let d_xy = &mut d_xy[at_window];
+            let [m1, m2, xx, yy, xy] = &moments;
+            for i in 0..vw {
+                let (m1, m2) = (m1[i], m2[i]);
+                let (vx, vy, cxy) = (xx[i] - m1 * m1, yy[i] - m2 * m2, xy[i] - m1 * m2);
+                let (a, b) = (2.0 * m1 * m2 + C1, 2.0 * cxy + C2);
+                let (cc, dd) = (m1 * m1 + m2 * m2 + C1, vx + vy + C2);
+                let s = a * b / (cc * dd);
+                ssim[i] = s;
+                // ds/dm1 through A, B (cxy), C and D (vx); ds/dxx through D; ds/dxy
+                // through B.
+                d_m[i] = ((2.0 * m2 * b - 2.0 * m2 * a) / (cc * dd)
+                    - s * (2.0 * m1 / cc - 2.0 * m1 / dd))
+                    * scale;
+                d_xx[i] = -s / dd * scale;
+                d_xy[i] = 2.0 * a / (cc * dd) * scale;
+            }
+            if w0 + wr >= p0 {
+                sum += ssim.iter().sum::<f64>();
+            }
+        }
+        let Some((grad, _)) = grad.as_mut() else {
+            continue;
         };
-        let (gm, gxx, gxy) = (spread(d_mx), spread(d_exx), spread(d_exy));
-        (0..x.v.len())
-            .map(|p| gm.v[p] + 2.0 * x.v[p] * gxx.v[p] + y.v[p] * gxy.v[p])
-            .collect()
-    });
-    (sum / n as f64, grad)
+        // The transposed filter: each pixel gathers the cotangents of the windows over it,
+        // down then across.
+        let pad = WINDOW - 1;
+        for p in p0..p1 {
+            for (out, src) in down.iter_mut().zip(&cotangents) {
+                // The windows whose top row is p - j, for those in the band's window rows.
+                let over = (0..WINDOW).filter_map(|j| {
+                    let wy = p.checked_sub(j).filter(|wy| (w0..w1).contains(wy))?;
+                    Some((g[j], &src[(wy - w0) * vw..]))
+                });
+                weighted(&mut out[pad..pad + vw], over);
+            }
+            for (out, src) in full.iter_mut().zip(&down) {
+                // Pixel i gathers the window starting at i - t with weight g[t].
+                weighted(out, (0..WINDOW).map(|t| (g[t], &src[pad - t..])));
+            }
+            let row = &mut grad[(p - p0) * w * c..(p - p0 + 1) * w * c];
+            let pixel = row.chunks_exact_mut(c).zip(p * w..);
+            for (i, (px, q)) in pixel.enumerate() {
+                let d = full[0][i] + 2.0 * at(x, q) * full[1][i] + at(y, q) * full[2][i];
+                px[ch] += d as f32;
+            }
+        }
+    }
+    sum
+}
+
+/// Lanes of [`weighted`].
+const LANES: usize = 8;
+
+/// `out[x] = Σ g row[x]` over the `(g, row)` taps in order (each row at least as long as
+/// `out`; none: 0), a run of lanes at a time so that the sums stay in registers.
+#[inline(always)]
+fn weighted<'a>(out: &mut [f64], taps: impl Iterator<Item = (f64, &'a [f64])>) {
+    let mut list: [(f64, &[f64]); WINDOW] = [(0.0, &[]); WINDOW];
+    let mut n = 0;
+    for (tap, (g, row)) in list.iter_mut().zip(taps) {
+        *tap = (g, &row[..out.len()]);
+        n += 1;
+    }
+    let taps = &list[..n];
+    let done = out.len() - out.len() % LANES;
+    for (k, run) in out.chunks_exact_mut(LANES).enumerate() {
+        let mut sum = [0.0f64; LANES];
+        for (g, row) in taps {
+            let row = &row[k * LANES..(k + 1) * LANES];
+            for (s, v) in sum.iter_mut().zip(row) {
+                *s += g * v;
+            }
+        }
+        run.copy_from_slice(&sum);
+    }
+    for (x, o) in out.iter_mut().enumerate().skip(done) {
+        *o = taps.iter().fold(0.0, |s, (g, row)| s + g * row[x]);
+    }
 }
 
 /// Mean SSIM of `a` against `b` over positions and channels.
 pub fn ssim(a: &Image, b: &Image) -> Result<f64, LossError> {
     check(a, b)?;
-    let c = a.channels;
-    // Channels in parallel, summed in order.
-    let total: f64 = (0..c)
-        .into_par_iter()
-        .map(|ch| ssim_channel(&Plane::of(a, ch), &Plane::of(b, ch), None).0)
-        .collect::<Vec<_>>()
-        .iter()
-        .sum();
-    Ok(total / c as f64)
+    let windows = (a.width as usize + 1 - WINDOW) * (a.height as usize + 1 - WINDOW);
+    Ok(ssim_sum(a, b, None, BAND) / (windows * a.channels) as f64)
 }
 
 /// Peak signal-to-noise ratio of `a` against `b` for values in [0, 1] (`a` clamped, as an
@@ -252,19 +305,9 @@ pub fn loss_and_gradient(
     let c = render.channels;
     // d(1 - mean SSIM) = -d(sum over channels of the channel means) / c.
     let scale = -ssim_weight / c as f64;
-    // Channels in parallel; their sums and gradients added in order.
-    let channels: Vec<(f64, Option<Vec<f64>>)> = (0..c)
-        .into_par_iter()
-        .map(|ch| ssim_channel(&Plane::of(render, ch), &Plane::of(target, ch), Some(scale)))
-        .collect();
-    let mut total = 0.0;
-    for (ch, (s, d)) in channels.into_iter().enumerate() {
-        total += s;
-        for (p, d) in d.into_iter().flatten().enumerate() {
-            grad[p * c + ch] += d as f32;
-        }
-    }
-    let ssim = total / c as f64;
+    let sum = ssim_sum(render, target, Some((&mut grad, scale)), BAND);
+    let windows = (render.width as usize + 1 - WINDOW) * (render.height as usize + 1 - WINDOW);
+    let ssim = sum / (windows * c) as f64;
     let value = LossValue {
         loss: (1.0 - ssim_weight) * l1 + ssim_weight * (1.0 - ssim),
         l1,
@@ -358,6 +401,32 @@ mod tests {
         }
         println!("worst gradient error {worst:.2e} of the largest");
         assert!(worst < 1e-5, "{worst}");
+    }
+
+    /// Bands of any height give the same SSIM and, bit for bit, the same gradient: each band
+    /// recomputes the windows above it that reach into it exactly as their own band does.
+    #[test]
+    fn bands_of_any_height_give_the_same_ssim_and_gradient() {
+        let (x, y) = (image(23, 31, 3, 8), image(23, 31, 3, 9));
+        let run = |band: usize| {
+            let mut grad = vec![0.0f32; x.data.len()];
+            let sum = ssim_sum(&x, &y, Some((&mut grad, -0.3)), band);
+            (sum, grad, ssim_sum(&x, &y, None, band))
+        };
+        let (sum, grad, value) = run(64);
+        assert!((sum - value).abs() < 1e-12 * sum.abs());
+        for band in [1, 2, 5, 10, 11, 30] {
+            let (s, g, v) = run(band);
+            assert!(
+                (s - sum).abs() < 1e-12 * sum.abs(),
+                "band {band}: {s} vs {sum}"
+            );
+            assert!(
+                (v - sum).abs() < 1e-12 * sum.abs(),
+                "band {band}: {v} vs {sum}"
+            );
+            assert!(g == grad, "band {band}");
+        }
     }
 
     #[test]
