@@ -151,6 +151,14 @@ impl Gpu {
         &self.limits
     }
 
+    /// This device with storage bindings of at most `bytes` (its own if larger): for tests
+    /// of what outgrows the limit.
+    #[cfg(test)]
+    pub(crate) fn set_binding_limit(&mut self, bytes: u64) {
+        let own = &mut self.limits.max_storage_buffer_binding_size;
+        *own = (*own).min(bytes);
+    }
+
     /// Bytes of workgroup memory a shader may use.
     pub fn workgroup_storage(&self) -> u32 {
         self.limits.max_compute_workgroup_storage_size

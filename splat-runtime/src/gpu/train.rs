@@ -28,12 +28,11 @@ pub struct GpuLoss {
     terms_kernel: Kernel,
     spread_kernel: Kernel,
     gradient_kernel: Kernel,
-    /// Every target image, one after another: 8-bit straight RGBA, a word per pixel, where
-    /// the view holds 8-bit values ([`View::rgba8`]: every 8-bit picture, as PNGs and JPEGs
-    /// usually are), else RGB f32 words and, for those with one, its coverage in `coverage`.
-    targets: wgpu::Buffer,
-    coverage: wgpu::Buffer,
+    /// Every target image, each in buffers of its own (so the views together may outgrow the
+    /// device's largest binding).
     views: Vec<Target>,
+    /// Bound as the coverage of a target without one.
+    no_coverage: wgpu::Buffer,
     taps: wgpu::Buffer,
     /// The row-filtered moments, then the column-spread cotangents (`loss.wgsl`).
     rows: Grown,
@@ -61,11 +60,14 @@ pub enum GpuTrainError {
     NoLoss,
 }
 
-/// Where one target lives in the loss's buffers.
+/// One target image on the device.
 struct Target {
-    offset: u32,
-    /// The coverage's offset (`u32::MAX`: opaque or packed).
-    coverage: u32,
+    /// 8-bit straight RGBA, a word per pixel, where the view holds 8-bit values
+    /// ([`View::rgba8`]: every 8-bit picture, as PNGs and JPEGs usually are), else RGB f32
+    /// words.
+    words: wgpu::Buffer,
+    /// Per pixel, for an RGB f32 target whose picture is not opaque everywhere.
+    coverage: Option<wgpu::Buffer>,
     /// Held as 8-bit RGBA words.
     packed: bool,
     width: u32,
@@ -74,39 +76,37 @@ struct Target {
 }
 
 impl GpuLoss {
-    /// Uploads the views' images and coverages once (8 bits per channel where that is what a
-    /// view holds, else f32); the loss weighs D-SSIM by `ssim_weight`.
+    /// Uploads the views' images and coverages once, each to buffers of its own (8 bits per
+    /// channel where that is what a view holds, else f32); the loss weighs D-SSIM by
+    /// `ssim_weight`.
     pub fn new(gpu: &Gpu, targets: &[&View], ssim_weight: f32) -> Result<GpuLoss, GpuTrainError> {
-        let (mut words, mut alphas, mut views) = (vec![], vec![], vec![]);
+        let mut views = Vec::with_capacity(targets.len());
         for (k, view) in targets.iter().enumerate() {
             let (width, height) = view.size();
             if (width as usize) < WINDOW || (height as usize) < WINDOW {
                 return Err(GpuTrainError::Target(k));
             }
-            let offset = words.len() as u32;
             let packed = view.rgba8();
-            let coverage = match &packed {
-                Some(rgba) => {
-                    words.extend_from_slice(rgba);
-                    u32::MAX
-                }
+            let (words, coverage) = match &packed {
+                Some(rgba) => (gpu.buffer_from("target image", rgba)?, None),
                 None => {
                     let t = view.image();
                     if t.channels != 3 {
                         return Err(GpuTrainError::Target(k));
                     }
-                    words.extend(t.data.iter().map(|v| v.to_bits()));
-                    match view.coverage() {
-                        Some(a) => {
-                            alphas.extend(a.iter().map(|v| v.to_bits()));
-                            (alphas.len() - a.len()) as u32
-                        }
-                        None => u32::MAX,
-                    }
+                    let words: Vec<u32> = t.data.iter().map(|v| v.to_bits()).collect();
+                    let coverage = view.coverage().map(|a| {
+                        let bits: Vec<u32> = a.iter().map(|v| v.to_bits()).collect();
+                        gpu.buffer_from("target coverage", &bits)
+                    });
+                    (
+                        gpu.buffer_from("target image", &words)?,
+                        coverage.transpose()?,
+                    )
                 }
             };
             views.push(Target {
-                offset,
+                words,
                 coverage,
                 packed: packed.is_some(),
                 width,
@@ -120,9 +120,8 @@ impl GpuLoss {
             terms_kernel: gpu.kernel(LOSS, "ssim_terms")?,
             spread_kernel: gpu.kernel(LOSS, "ssim_spread")?,
             gradient_kernel: gpu.kernel(LOSS, "loss_gradient")?,
-            targets: gpu.buffer_from("target images", &words)?,
-            coverage: gpu.buffer_from("target coverage", &alphas)?,
             views,
+            no_coverage: gpu.buffer_from("no target coverage", &[])?,
             taps: gpu.buffer_from("SSIM window", &taps)?,
             rows: Grown::new(gpu, "SSIM row sums", 1)?,
             terms: Grown::new(gpu, "SSIM cotangents", 1)?,
@@ -165,18 +164,28 @@ impl GpuLoss {
         self.sums.ensure(gpu, 2 * groups as usize)?;
         let (b, b0) = (background, t.background);
         let floats = [b.x, b.y, b.z, self.ssim_weight, b0.x, b0.y, b0.z, 0.0].map(f32::to_bits);
-        let ints = [w, h, state_words, t.offset, vw, vh, valid, t.coverage];
+        let ints = [
+            w,
+            h,
+            state_words,
+            0,
+            vw,
+            vh,
+            valid,
+            t.coverage.is_some() as u32,
+        ];
         let format = [t.packed as u32, 0, 0, 0];
         gpu.write(&self.info, &[&ints[..], &floats, &format].concat());
         encoder.clear_buffer(&self.sums, 0, None);
-        let (state, targets) = (("pixel_state", pixel_state), ("targets", &self.targets));
+        let (state, target) = (("pixel_state", pixel_state), ("target_image", &t.words));
         let (taps, info) = (("taps", &self.taps), ("info", &self.info));
         let (rows, terms) = (("rows", &*self.rows), ("terms", &*self.terms));
-        let (sums, coverage) = (("sums", &*self.sums), ("coverage", &self.coverage));
+        let coverage = ("coverage", t.coverage.as_ref().unwrap_or(&self.no_coverage));
+        let sums = ("sums", &*self.sums);
         let passes = [
             (
                 &self.rows_kernel,
-                vec![state, targets, taps, rows, info, coverage],
+                vec![state, target, taps, rows, info, coverage],
                 row_cells,
             ),
             (
@@ -193,7 +202,7 @@ impl GpuLoss {
                 &self.gradient_kernel,
                 vec![
                     state,
-                    targets,
+                    target,
                     taps,
                     rows,
                     sums,
@@ -666,15 +675,27 @@ mod tests {
             .map(|i| byte(&mut rng) * coverage[i / 3] + stored[i % 3] * (1.0 - coverage[i / 3]))
             .collect();
         let eight_bit = view(image(w, h, colors), Some(coverage), stored);
+        // Together they are larger than a binding may be: each is held on its own.
+        let mut small = crate::gpu::adapter_or_skip().unwrap();
+        small.set_binding_limit(12 * pixels as u64);
+        GpuLoss::new(&small, &[&other, &float, &eight_bit], 0.2).unwrap();
         let mut loss = GpuLoss::new(&gpu, &[&other, &float, &eight_bit], 0.2).unwrap();
         let packed: Vec<bool> = loss.views.iter().map(|t| t.packed).collect();
         assert_eq!(packed, [false, false, true], "0.5 is no 8-bit value");
-        // 4 bytes per pixel for the packed target, 12 for the others (and 4 of coverage).
+        // Each in buffers of its own: 4 bytes per pixel for the packed target, 12 for the
+        // others, and 4 of coverage for the one that has it.
+        let sizes: Vec<(u64, Option<u64>)> = (loss.views.iter())
+            .map(|t| (t.words.size(), t.coverage.as_ref().map(|c| c.size())))
+            .collect();
+        let bytes = |n: usize| 4 * (n * pixels) as u64;
         assert_eq!(
-            loss.targets.size(),
-            4 * (3 * pixels + 3 * pixels + pixels) as u64
+            sizes,
+            [
+                (bytes(3), None),
+                (bytes(3), Some(bytes(1))),
+                (bytes(1), None)
+            ]
         );
-        assert_eq!(loss.coverage.size(), 4 * pixels as u64);
         let words = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<u32>>();
         let state_buf = gpu.buffer_from("state", &words(&state)).unwrap();
         let grad_buf = gpu.buffer("grad", pixels * 5).unwrap();

@@ -1,8 +1,9 @@
 //! The photometric loss of 3DGS and gsplat's trainer, with its gradient: `(1 - λ) L1 + λ (1 -
 //! SSIM)`, SSIM with an 11 x 11 Gaussian window (σ = 1.5), C1 = 0.01², C2 = 0.03², over the
 //! window positions that lie inside the image ("valid" padding, as gsplat's trainer calls
-//! `fused_ssim`), averaged over positions and channels. Evaluated in f64 on the CPU; the
-//! Gaussian filter is separable, and the gradient runs the transposed filter ("full").
+//! `fused_ssim`), averaged over positions and channels. Evaluated in f64 on the CPU, in bands
+//! of rows in parallel; the Gaussian filter is separable, and the gradient runs the transposed
+//! filter ("full").
 //!
 //! Also PSNR and SSIM for evaluation.
 
@@ -45,9 +46,9 @@ pub(crate) fn window() -> [f64; WINDOW] {
     g.map(|v| v / sum)
 }
 
-/// Rows of pixels one task of the SSIM filter takes: with the window rows above them that
-/// reach them (recomputed by both bands), about a sixth more work than whole-image planes,
-/// for working memory of a band instead of many whole planes.
+/// Rows of pixels one task of the SSIM filter takes. For the gradient it also computes the
+/// 10 window rows above them that reach into them (as the band above does too): a sixth
+/// more work than whole-image planes, for a band's working memory instead of many planes.
 const BAND: usize = 64;
 
 fn check(render: &Image, target: &Image) -> Result<(), LossError> {

@@ -21,10 +21,10 @@
 
 struct LossInfo {
     // width, height, pixel state words per pixel (3 colors, T, the depth sum if kept; f32),
-    // target offset
+    // unused
     size: vec4<u32>,
-    // valid window positions: width, height, count; the target's coverage offset (or
-    // 0xffffffff: opaque)
+    // valid window positions: width, height, count; 1 where the target has a coverage (0:
+    // opaque)
     valid: vec4<u32>,
     // the step's background rgb, λ
     background: vec4<f32>,
@@ -35,7 +35,7 @@ struct LossInfo {
 }
 
 @group(0) @binding(0) var<storage, read> pixel_state: array<f32>;
-@group(0) @binding(1) var<storage, read> targets: array<u32>;
+@group(0) @binding(1) var<storage, read> target_image: array<u32>;
 @group(0) @binding(2) var<storage, read> taps: array<f32, 11>;
 @group(0) @binding(3) var<storage, read_write> terms: array<f32>;
 // Per row y and valid column x: 15 words (5 moments per channel) after `ssim_rows`, 9 (3
@@ -59,14 +59,14 @@ fn render(p: u32, c: u32) -> f32 {
 
 fn target_at(p: u32, c: u32) -> f32 {
     if (info.format.x == 1u) {
-        let v = unpack4x8unorm(targets[info.size.w + p]);
+        let v = unpack4x8unorm(target_image[p]);
         return v[c] * v.w + info.background[c] * (1.0 - v.w);
     }
-    let t = bitcast<f32>(targets[info.size.w + p * 3u + c]);
-    if (info.valid.w == 0xffffffffu) {
+    let t = bitcast<f32>(target_image[p * 3u + c]);
+    if (info.valid.w == 0u) {
         return t;
     }
-    return t + (1.0 - coverage[info.valid.w + p]) * (info.background[c] - info.base[c]);
+    return t + (1.0 - coverage[p]) * (info.background[c] - info.base[c]);
 }
 
 // Sums `v` over the workgroup into sums[2 * group + slot]. (A dispatch past 65,535 groups is
