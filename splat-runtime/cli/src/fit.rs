@@ -171,6 +171,30 @@ const FAULTS_AFTER_SHOWN: usize = FAULTS_SHOWN + 1;
 const CHECKPOINT: &str = "checkpoint.bin";
 const METRICS: &str = "metrics.csv";
 
+/// Refuses knobs out of their range before the dataset is read (which can take minutes).
+fn check_knobs(args: &FitArgs) -> Result<()> {
+    let positive = |v: f32| v > 0.0 && v.is_finite();
+    if args.points == Some(0) {
+        bail!("--points must be at least 1");
+    }
+    if let Some(e) = args.init_extent.filter(|e| !positive(*e)) {
+        bail!("--init-extent must be a positive number, not {e}");
+    }
+    if let Some(s) = args.init_size.filter(|s| !positive(*s)) {
+        bail!("--init-size must be a positive number, not {s}");
+    }
+    if args.no_opacity_reset && !matches!(args.strategy, StrategyArg::Adc) {
+        bail!("--no-opacity-reset is for --strategy adc, the only one that resets opacities");
+    }
+    if !positive(args.global_scale) {
+        bail!(
+            "--global-scale must be a positive number, not {}",
+            args.global_scale
+        );
+    }
+    Ok(())
+}
+
 pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
     let method = methods::find(methods, &args.method)?;
     let Some(train) = method.full().fit else {
@@ -180,6 +204,7 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
         );
     };
     crate::check_out_folder(&args.out)?;
+    check_knobs(args)?;
     let background = if args.white { Vec3::ONE } else { Vec3::ZERO };
     let t = Instant::now();
     let (data, name, defaults, taken) = match &args.dataset {
@@ -235,26 +260,6 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
     let points = args.points.unwrap_or(defaults.points);
     let max_primitives = args.max_primitives.or(defaults.max_primitives);
     let init_extent = args.init_extent.unwrap_or(defaults.init_extent);
-    if points == 0 {
-        bail!("--points must be at least 1");
-    }
-    if !(init_extent > 0.0 && init_extent.is_finite()) {
-        bail!("--init-extent must be a positive number, not {init_extent}");
-    }
-    if let Some(s) = args.init_size
-        && !(s > 0.0 && s.is_finite())
-    {
-        bail!("--init-size must be a positive number, not {s}");
-    }
-    if args.no_opacity_reset && !matches!(args.strategy, StrategyArg::Adc) {
-        bail!("--no-opacity-reset is for --strategy adc, the only one that resets opacities");
-    }
-    if !(args.global_scale > 0.0 && args.global_scale.is_finite()) {
-        bail!(
-            "--global-scale must be a positive number, not {}",
-            args.global_scale
-        );
-    }
     if data.train.is_empty() {
         bail!("{name}: no training views");
     }

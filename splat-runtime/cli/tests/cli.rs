@@ -1147,17 +1147,23 @@ fn fit_refuses_a_missing_or_broken_dataset_by_name() {
         "--out file/run: file is a file",
         &out,
     );
+    // Refused before the dataset is read (this one does not exist).
     for (flag, value) in [
         ("--global-scale", "0"),
         ("--init-extent", "nan"),
         ("--init-size", "0"),
     ] {
         fails(
-            &splat(&["fit", "good", "--steps", "2", flag, value], dir.path()),
+            &splat(&["fit", "missing", "--steps", "2", flag, value], dir.path()),
             &format!("{flag} must be a positive number, not"),
             &out,
         );
     }
+    fails(
+        &splat(&["fit", "missing", "--points", "0"], dir.path()),
+        "--points must be at least 1",
+        &out,
+    );
     for color in ["0.5,0.5", "0.5,2,0.5", "gray"] {
         fails(
             &splat(&["fit", "good", "--init-color", color], dir.path()),
