@@ -218,7 +218,14 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
             let shots = shots.downscaled(args.downscale.factor)?;
             let all = || shots.train.iter().chain(&shots.test);
             let taken = args.downscale.how(all()) + &undistorted(all());
-            (shots.load(background)?, name, DATASET_DEFAULTS, taken)
+            let views = shots.train.len() + shots.test.len();
+            let bar = ProgressBar::new(views as u64).with_style(
+                ProgressStyle::with_template("{bar:40} {pos}/{len} pictures decoded, {elapsed}")
+                    .expect("a valid template"),
+            );
+            let data = shots.load_counted(background, &|| bar.inc(1))?;
+            bar.finish_and_clear();
+            (data, name, DATASET_DEFAULTS, taken)
         }
         None if args.downscale.factor != 1 => {
             bail!("--downscale applies to a dataset's pictures, and none was given")

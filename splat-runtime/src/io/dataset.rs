@@ -220,9 +220,22 @@ impl Shots {
     /// Every picture decoded (in parallel, so with several broken ones, which the error names
     /// may vary) and composited on `background`.
     pub fn load(self, background: Vec3) -> Result<Dataset, DatasetError> {
+        self.load_counted(background, &|| {})
+    }
+
+    /// [`Shots::load`], calling `loaded` as each picture is done (for a progress bar).
+    pub fn load_counted(
+        self,
+        background: Vec3,
+        loaded: &(dyn Fn() + Sync),
+    ) -> Result<Dataset, DatasetError> {
         let load = |shots: &[Shot]| {
             (shots.par_iter())
-                .map(|shot| shot.load(background))
+                .map(|shot| {
+                    let view = shot.load(background);
+                    loaded();
+                    view
+                })
                 .collect::<Result<Vec<_>, _>>()
         };
         Ok(Dataset {
