@@ -210,16 +210,15 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
     let (data, name, defaults, taken) = match &args.dataset {
         Some(dir) => {
             let name = dir.display().to_string();
-            let shots = dataset::read_shots(dir)?;
+            let full = dataset::read_shots(dir)?;
+            let shots = full.clone().downscaled(args.downscale.factor)?;
             if let Some(room) = memory::available() {
-                let threads = rayon::current_num_threads();
-                memory::check_room(&name, &shots, args.downscale.factor, room, threads)?;
+                let (factor, threads) = (args.downscale.factor, rayon::current_num_threads());
+                memory::check_room(&name, (&full, &shots), factor, room, threads)?;
             }
-            let shots = shots.downscaled(args.downscale.factor)?;
             let all = || shots.train.iter().chain(&shots.test);
             let taken = args.downscale.how(all()) + &undistorted(all());
-            let views = shots.train.len() + shots.test.len();
-            let bar = ProgressBar::new(views as u64).with_style(
+            let bar = ProgressBar::new(all().count() as u64).with_style(
                 ProgressStyle::with_template("{bar:40} {pos}/{len} pictures decoded, {elapsed}")
                     .expect("a valid template"),
             );

@@ -9,14 +9,20 @@ use std::path::Path;
 /// The largest `--downscale` suggested.
 const LARGEST_FACTOR: u32 = 32;
 
-/// Refuses `shots` (at full size) when loading them `factor` times smaller would take more
-/// than `room` bytes, with `threads` pictures decoded at a time; the error names the smallest
-/// larger factor that fits.
-pub fn check_room(name: &str, shots: &Shots, factor: u32, room: u64, threads: usize) -> Result<()> {
-    let views = shots.train.len() + shots.test.len();
+/// Refuses `chosen`, the dataset's shots `full` taken `factor` times smaller, when loading
+/// them would take more than `room` bytes, with `threads` pictures decoded at a time; the
+/// error names the smallest larger factor that fits.
+pub fn check_room(
+    name: &str,
+    (full, chosen): (&Shots, &Shots),
+    factor: u32,
+    room: u64,
+    threads: usize,
+) -> Result<()> {
+    let views = chosen.train.len() + chosen.test.len();
     let threads = threads.clamp(1, views.max(1));
-    let footprint = |f: u32| -> Result<Footprint> { Ok(shots.clone().downscaled(f)?.footprint()?) };
-    let need = footprint(factor)?;
+    let footprint = |f: u32| -> Result<Footprint> { Ok(full.clone().downscaled(f)?.footprint()?) };
+    let need = chosen.footprint()?;
     if need.peak(threads) <= room {
         return Ok(());
     }
@@ -163,8 +169,10 @@ mod tests {
         };
         let (full, half, third) = (peak(1), peak(2), peak(3));
         assert!(full > half && half > third, "{full} {half} {third}");
-        check_room("d", &shots, 1, full, 2).unwrap();
-        let err = check_room("d", &shots, 1, half, 2).unwrap_err().to_string();
+        check_room("d", (&shots, &shots), 1, full, 2).unwrap();
+        let err = check_room("d", (&shots, &shots), 1, half, 2)
+            .unwrap_err()
+            .to_string();
         let held = bytes(3 * 64 * 48 * 4);
         let want = format!(
             "d: loading its 3 views takes about {} of memory ({held} held by the views for the run",
@@ -173,12 +181,15 @@ mod tests {
         assert!(err.starts_with(&want), "{err}");
         assert!(err.ends_with(&format!("--downscale 2 would take about {}", bytes(half))));
         // Asked for 2 already, with room for 3.
-        let err = check_room("d", &shots, 2, third, 2)
+        let halved = shots.clone().downscaled(2).unwrap();
+        let err = check_room("d", (&shots, &halved), 2, third, 2)
             .unwrap_err()
             .to_string();
         assert!(err.ends_with(&format!("--downscale 3 would take about {}", bytes(third))));
         // Factors are tried up to 32.
-        let err = check_room("d", &shots, 1, 10, 2).unwrap_err().to_string();
+        let err = check_room("d", (&shots, &shots), 1, 10, 2)
+            .unwrap_err()
+            .to_string();
         assert!(err.ends_with("not even --downscale 32 fits"), "{err}");
     }
 

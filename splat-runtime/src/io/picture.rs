@@ -93,6 +93,12 @@ enum Samples {
     Floats(Vec<f32>),
 }
 
+/// Whether pictures of `color` are held as their bytes ([`Samples::Bytes`]).
+fn eight_bit(color: image::ColorType) -> bool {
+    use image::ColorType::*;
+    matches!(color, L8 | La8 | Rgb8 | Rgba8)
+}
+
 /// An 8-bit value in [0, 1], as pictures are decoded and [`View::rgba8`] recovers them.
 pub(super) fn unorm8(v: u8) -> f32 {
     v as f32 / 255.0
@@ -116,15 +122,12 @@ impl Picture {
     /// The picture at `path`, decoded. 8-bit pictures keep their bytes; others (16-bit,
     /// float) are converted to f32 by the image crate.
     pub fn read(path: &Path) -> Result<Picture, DatasetError> {
-        use image::DynamicImage::*;
         let img = image::open(path).map_err(|error| image_error(path, error))?;
         let (width, height) = (img.width(), img.height());
-        let samples = match img {
+        let samples = match eight_bit(img.color()) {
             // Taken as they are where the picture already is RGBA (no copy of its pixels).
-            ImageLuma8(_) | ImageLumaA8(_) | ImageRgb8(_) | ImageRgba8(_) => {
-                Samples::Bytes(img.into_rgba8().into_raw())
-            }
-            img => Samples::Floats(img.into_rgba32f().into_raw()),
+            true => Samples::Bytes(img.into_rgba8().into_raw()),
+            false => Samples::Floats(img.into_rgba32f().into_raw()),
         };
         Ok(Picture {
             width,
@@ -136,7 +139,6 @@ impl Picture {
     /// What loading the picture at `path` into a view of `view_pixels` pixels takes in host
     /// memory, from its header alone (no pixel is decoded).
     pub fn footprint(path: &Path, view_pixels: u64) -> Result<Footprint, DatasetError> {
-        use image::ColorType::*;
         let error = |error| image_error(path, error);
         let reader = image::ImageReader::open(path).map_err(|e| error(e.into()))?;
         let decoder = (reader.with_guessed_format())
@@ -147,10 +149,7 @@ impl Picture {
         let color = image::ImageDecoder::color_type(&decoder);
         // Per pixel: the bytes held, as [`Picture`] and [`View`] hold them (12 of f32 RGB
         // and 4 of coverage where the picture is not 8-bit).
-        let per_pixel: u64 = match color {
-            L8 | La8 | Rgb8 | Rgba8 => 4,
-            _ => 16,
-        };
+        let per_pixel: u64 = if eight_bit(color) { 4 } else { 16 };
         let picture = u64::from(w) * u64::from(h);
         let held = per_pixel * view_pixels;
         Ok(Footprint {
