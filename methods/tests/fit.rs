@@ -417,8 +417,8 @@ fn three_dgs_fits_equiangular_views() {
 
 /// Density control on hand-made statistics: a small primitive under a strong screen-space pull
 /// is cloned, a large one split into two drawn from it (scales / 1.6), a faint one pruned,
-/// a quiet one kept; the cap on the count holds; the opacity reset lowers opacities to twice
-/// the pruning threshold.
+/// a quiet one kept; the cap on the count holds and spends its room on the strongest pull; the
+/// opacity reset lowers opacities to twice the pruning threshold.
 #[test]
 fn density_control_clones_splits_prunes_and_resets_as_3dgs_does() {
     use splat_runtime::train::densify::Densifier;
@@ -469,6 +469,22 @@ fn density_control_clones_splits_prunes_and_resets_as_3dgs_does() {
     d.observe((0..params.len()).map(|i| (i, strong)));
     let r = d.refine::<Method>(&mut params, 800, 1.0, &mut rng);
     assert_eq!((r.cloned, r.split, params.len()), (0, 0, 5));
+    // Room for one more: the most strongly pulled primitive grows, wherever it comes.
+    let one_more = DensifyOptions {
+        max_primitives: 6,
+        ..Default::default()
+    };
+    let mut d = Densifier::new(one_more, params.len());
+    d.observe((0..params.len()).map(|i| (i, strong * (1.0 + i as f32 / 8.0))));
+    let r = d.refine::<Method>(&mut params, 800, 1.0, &mut rng);
+    assert_eq!((r.cloned, r.split), (1, 0));
+    let kept = [Some(0), Some(1), Some(2), Some(3), Some(4)];
+    assert_eq!(
+        r.origin,
+        [&kept[..], &[None]].concat(),
+        "the last one is cloned"
+    );
+    params.truncate(5);
 
     // The reset moves the opacity alone: a rotation off the unit sphere and the log scales
     // keep their words (and so their Adam moments).

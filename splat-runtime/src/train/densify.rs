@@ -216,19 +216,17 @@ impl Densifier {
         let n = params.len();
         let mut r = Refinement::default();
         let mut grown: Vec<(M::Params, Option<usize>)> = Vec::with_capacity(n);
-        let mut room = o.max_primitives.saturating_sub(n);
+        let grows = self.strongest_pulls(o.grow_grad2d, o.max_primitives.saturating_sub(n));
         for (i, p) in params.iter().enumerate() {
             let shape = M::shape(p);
-            let pulled = self.grad2d[i] / self.count[i].max(1) as f32 > o.grow_grad2d;
             let small = shape.scale.max_element() <= o.grow_scale3d * extent;
-            match (pulled && room > 0, small) {
+            match (grows[i], small) {
                 (false, _) => grown.push((*p, Some(i))),
                 // Small under a strong pull: a copy where it is (the next steps' gradients
                 // move the two apart).
                 (true, true) => {
                     grown.extend([(*p, Some(i)), (*p, None)]);
                     r.cloned += 1;
-                    room -= 1;
                 }
                 // Large: two smaller ones drawn from it, in its place.
                 (true, false) => {
@@ -242,7 +240,6 @@ impl Densifier {
                         grown.push((M::with_shape(p, &child), None));
                     }
                     r.split += 1;
-                    room -= 1;
                 }
             }
         }
@@ -261,6 +258,27 @@ impl Densifier {
         self.grad2d = vec![0.0; params.len()];
         self.count = vec![0; params.len()];
         r
+    }
+
+    /// Which primitives grow: those whose mean screen-space gradient passes `threshold`, and
+    /// when there is room for fewer than that (each growth adds one primitive), the `room`
+    /// most strongly pulled of them, so that a cap on the count spends it where the image
+    /// asks most, not on whichever primitives come first.
+    fn strongest_pulls(&self, threshold: f32, room: usize) -> Vec<bool> {
+        let mean = |i: usize| self.grad2d[i] / self.count[i].max(1) as f32;
+        let mut pulled: Vec<usize> = (0..self.grad2d.len())
+            .filter(|&i| mean(i) > threshold)
+            .collect();
+        if pulled.len() > room {
+            // Ties go to the lower index, so that the choice is the same on every run.
+            pulled.sort_unstable_by(|&a, &b| mean(b).total_cmp(&mean(a)).then(a.cmp(&b)));
+            pulled.truncate(room);
+        }
+        let mut grows = vec![false; self.grad2d.len()];
+        for i in pulled {
+            grows[i] = true;
+        }
+        grows
     }
 
     /// Lowers every opacity above `2 * prune_opacity` to it.
