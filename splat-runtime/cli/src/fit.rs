@@ -17,7 +17,9 @@ use splat_runtime::io::dataset::{self, Dataset};
 use splat_runtime::io::image::stage_image;
 use splat_runtime::io::ply::{self, GaussianCloud, ToStored};
 use splat_runtime::pipeline::MAX_SIDE;
-use splat_runtime::train::fit::{Evaluation, FitOptions, StepReport, fit_from, render_views};
+use splat_runtime::train::fit::{
+    CPU_STEP_BYTES_PER_PIXEL, Evaluation, FitOptions, StepReport, fit_from, render_views,
+};
 use splat_runtime::train::gpu_fit::{fit_gpu_from, render_views_gpu};
 use splat_runtime::train::loss::{LossValue, WINDOW};
 use splat_runtime::train::{
@@ -205,6 +207,8 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
     };
     crate::check_out_folder(&args.out)?;
     check_knobs(args)?;
+    // Picked first: the memory a run needs depends on where it trains.
+    let gpu = crate::pick_gpu(args.backend)?;
     let background = if args.white { Vec3::ONE } else { Vec3::ZERO };
     let t = Instant::now();
     let (data, name, defaults, taken) = match &args.dataset {
@@ -213,8 +217,11 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
             let full = dataset::read_shots(dir)?;
             let shots = full.clone().downscaled(args.downscale.factor)?;
             if let Some(room) = memory::available() {
-                let (factor, threads) = (args.downscale.factor, rayon::current_num_threads());
-                memory::check_room(&name, (&full, &shots), factor, room, threads)?;
+                let demand = memory::Demand {
+                    threads: rayon::current_num_threads(),
+                    step: gpu.is_none().then_some(CPU_STEP_BYTES_PER_PIXEL),
+                };
+                memory::check_room(&name, (&full, &shots), args.downscale.factor, room, demand)?;
             }
             let all = || shots.train.iter().chain(&shots.test);
             let taken = args.downscale.how(all()) + &undistorted(all());
@@ -327,6 +334,7 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
         .with_context(|| format!("creating {}", args.out.join("test").display()))?;
     train(&Fit {
         args,
+        gpu,
         data: &data,
         resume,
         points,
@@ -340,6 +348,8 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
 /// A training run, for any method.
 pub struct Fit<'a> {
     args: &'a FitArgs,
+    /// Where it trains: a GPU, or the CPU.
+    gpu: Option<Gpu>,
     data: &'a Dataset,
     /// The checkpoint to go on from, if any.
     resume: Option<Checkpoint>,
@@ -360,6 +370,7 @@ impl Fit<'_> {
     {
         let Fit {
             args,
+            ref gpu,
             data,
             ref resume,
             points,
@@ -372,7 +383,6 @@ impl Fit<'_> {
         if args.explain {
             explain::<M>(data, opts);
         }
-        let gpu = crate::pick_gpu(args.backend)?;
         let test_images = |params: &[M::Params]| match &gpu {
             Some(gpu) => render_views_gpu::<M>(gpu, params, &data.test, opts),
             None => render_views::<M>(params, &data.test, opts),

@@ -1,6 +1,6 @@
-//! Whether a dataset's views fit in the host memory left, checked from the pictures' headers
-//! before any is decoded: a dataset too big is refused with the `--downscale` that fits,
-//! instead of loading for minutes and being killed by the kernel.
+//! Whether a dataset's views, and training on them, fit in the host memory left, checked
+//! from the pictures' headers before any is decoded: a dataset too big is refused with the
+//! `--downscale` that fits, instead of loading for minutes and being killed by the kernel.
 
 use anyhow::{Result, bail};
 use splat_runtime::io::dataset::{Footprint, Shots};
@@ -9,21 +9,42 @@ use std::path::Path;
 /// The largest `--downscale` suggested.
 const LARGEST_FACTOR: u32 = 32;
 
-/// Refuses `chosen`, the dataset's shots `full` taken `factor` times smaller, when loading
-/// them would take more than `room` bytes, with `threads` pictures decoded at a time; the
-/// error names the smallest larger factor that fits.
+/// What a run takes of host memory at its peak.
+#[derive(Clone, Copy, Debug)]
+pub struct Demand {
+    /// Pictures decoded at a time while loading.
+    pub threads: usize,
+    /// Bytes per pixel of its view that a training step takes on the host; `None` where
+    /// training runs on a GPU.
+    pub step: Option<u64>,
+}
+
+impl Demand {
+    /// The peak for views of footprint `f`: loading them, or training on them.
+    fn of(&self, f: &Footprint) -> u64 {
+        let training = self.step.map_or(0, |s| f.training(s));
+        f.peak(self.threads).max(training)
+    }
+}
+
+/// Refuses `chosen`, the dataset's shots `full` taken `factor` times smaller, when loading or
+/// training on them would take more than `room` bytes; the error names the smallest larger
+/// factor that fits.
 pub fn check_room(
     name: &str,
     (full, chosen): (&Shots, &Shots),
     factor: u32,
     room: u64,
-    threads: usize,
+    demand: Demand,
 ) -> Result<()> {
     let views = chosen.train.len() + chosen.test.len();
-    let threads = threads.clamp(1, views.max(1));
+    let demand = Demand {
+        threads: demand.threads.clamp(1, views.max(1)),
+        ..demand
+    };
     let footprint = |f: u32| -> Result<Footprint> { Ok(full.clone().downscaled(f)?.footprint()?) };
     let need = chosen.footprint()?;
-    if need.peak(threads) <= room {
+    if demand.of(&need) <= room {
         return Ok(());
     }
     let mut suggestion = format!("not even --downscale {factor} fits");
@@ -31,19 +52,28 @@ pub fn check_room(
         // A factor that leaves a picture without a pixel is no suggestion.
         let Ok(smaller) = footprint(f) else { break };
         suggestion = format!("not even --downscale {f} fits");
-        if smaller.peak(threads) <= room {
-            let peak = bytes(smaller.peak(threads));
+        if demand.of(&smaller) <= room {
+            let peak = bytes(demand.of(&smaller));
             suggestion = format!("--downscale {f} would take about {peak}");
             break;
         }
     }
-    bail!(
-        "{name}: loading its {views} views takes about {} of memory ({} held by the views for the run, up to {} for each of the {threads} pictures decoded at a time), and {} is available: {suggestion}",
-        bytes(need.peak(threads)),
-        bytes(need.held),
-        bytes(need.decoding),
-        bytes(room),
-    )
+    let (held, room) = (bytes(need.held), bytes(room));
+    let threads = demand.threads;
+    let why = match demand.step {
+        Some(step) if need.training(step) > need.peak(threads) => format!(
+            "training on its {views} views on the CPU takes about {} of memory ({held} held by the views, {} for a step on the largest, of {} pixels)",
+            bytes(need.training(step)),
+            bytes(step * need.largest),
+            need.largest,
+        ),
+        _ => format!(
+            "loading its {views} views takes about {} of memory ({held} held by the views for the run, up to {} for each of the {threads} pictures decoded at a time)",
+            bytes(need.peak(threads)),
+            bytes(need.decoding),
+        ),
+    };
+    bail!("{name}: {why}, and {room} is available: {suggestion}")
 }
 
 /// A size for people: "12.3 GB", "450.0 MB", "36.9 kB".
@@ -133,6 +163,7 @@ mod tests {
     use super::*;
     use splat_runtime::glam::Vec2;
     use splat_runtime::io::dataset::Shot;
+    use splat_runtime::train::fit::CPU_STEP_BYTES_PER_PIXEL;
     use splat_runtime::types::Camera;
 
     /// 3 views of 64 x 48 8-bit pictures hold 4 bytes per pixel.
@@ -154,6 +185,12 @@ mod tests {
         }
     }
 
+    /// Loading with 2 pictures decoded at a time, training on a GPU.
+    const LOADING: Demand = Demand {
+        threads: 2,
+        step: None,
+    };
+
     #[test]
     fn a_dataset_is_refused_with_the_downscale_that_fits() {
         let dir = tempfile::tempdir().unwrap();
@@ -169,8 +206,8 @@ mod tests {
         };
         let (full, half, third) = (peak(1), peak(2), peak(3));
         assert!(full > half && half > third, "{full} {half} {third}");
-        check_room("d", (&shots, &shots), 1, full, 2).unwrap();
-        let err = check_room("d", (&shots, &shots), 1, half, 2)
+        check_room("d", (&shots, &shots), 1, full, LOADING).unwrap();
+        let err = check_room("d", (&shots, &shots), 1, half, LOADING)
             .unwrap_err()
             .to_string();
         let held = bytes(3 * 64 * 48 * 4);
@@ -182,15 +219,51 @@ mod tests {
         assert!(err.ends_with(&format!("--downscale 2 would take about {}", bytes(half))));
         // Asked for 2 already, with room for 3.
         let halved = shots.clone().downscaled(2).unwrap();
-        let err = check_room("d", (&shots, &halved), 2, third, 2)
+        let err = check_room("d", (&shots, &halved), 2, third, LOADING)
             .unwrap_err()
             .to_string();
         assert!(err.ends_with(&format!("--downscale 3 would take about {}", bytes(third))));
         // Factors are tried up to 32.
-        let err = check_room("d", (&shots, &shots), 1, 10, 2)
+        let err = check_room("d", (&shots, &shots), 1, 10, LOADING)
             .unwrap_err()
             .to_string();
         assert!(err.ends_with("not even --downscale 32 fits"), "{err}");
+    }
+
+    /// Training on the CPU adds a step's buffers on the largest view to the views: where that
+    /// is more than loading takes, it is what is checked, and what the error explains.
+    #[test]
+    fn training_on_the_cpu_counts_a_step_on_the_largest_view() {
+        let dir = tempfile::tempdir().unwrap();
+        let shots = shots(dir.path());
+        let need = shots.footprint().unwrap();
+        let (held, pixels) = (3 * 64 * 48 * 4, 64 * 48);
+        assert_eq!((need.held, need.largest), (held, pixels));
+        let cpu = Demand {
+            step: Some(CPU_STEP_BYTES_PER_PIXEL),
+            ..LOADING
+        };
+        let training = held + CPU_STEP_BYTES_PER_PIXEL * pixels;
+        assert!(training > need.peak(2), "the step is what binds here");
+        check_room("d", (&shots, &shots), 1, training, cpu).unwrap();
+        // Room to load, not to train: refused on the CPU, not on a GPU.
+        check_room("d", (&shots, &shots), 1, training - 1, LOADING).unwrap();
+        let err = check_room("d", (&shots, &shots), 1, training - 1, cpu)
+            .unwrap_err()
+            .to_string();
+        let step = bytes(CPU_STEP_BYTES_PER_PIXEL * pixels);
+        let want = format!(
+            "d: training on its 3 views on the CPU takes about {} of memory ({} held by the views, {step} for a step on the largest, of 3072 pixels)",
+            bytes(training),
+            bytes(held),
+        );
+        assert!(err.starts_with(&want), "{err}");
+        let halved = shots.clone().downscaled(2).unwrap().footprint().unwrap();
+        let peak = bytes(cpu.of(&halved));
+        assert!(
+            err.ends_with(&format!("--downscale 2 would take about {peak}")),
+            "{err}"
+        );
     }
 
     #[test]

@@ -258,6 +258,7 @@ impl Shots {
         Ok(Footprint {
             held: each.iter().map(|f| f.held).sum(),
             decoding: each.iter().map(|f| f.decoding).max().unwrap_or(0),
+            largest: each.iter().map(|f| f.largest).max().unwrap_or(0),
         })
     }
 
@@ -1131,6 +1132,8 @@ mod tests {
         ] {
             let footprint = shots.footprint().unwrap();
             assert!(footprint.decoding > footprint.held / shots.train.len() as u64);
+            let size = shots.train[0].camera.size;
+            assert_eq!(footprint.largest, (size.x * size.y) as u64);
             assert_eq!(footprint.held, held(shots));
         }
         let opaque = path("rgb16.png");

@@ -73,6 +73,8 @@ pub struct Footprint {
     /// The most held at once while the picture is decoded and made the view, the view's
     /// own bytes included.
     pub decoding: u64,
+    /// The view's pixels (of a dataset's views, the largest's).
+    pub largest: u64,
 }
 
 impl Footprint {
@@ -80,6 +82,12 @@ impl Footprint {
     /// time ([`Footprint::decoding`] of the largest).
     pub fn peak(&self, threads: usize) -> u64 {
         self.held + threads as u64 * self.decoding
+    }
+
+    /// The most held at once while training: the views, and a step's buffers on the largest
+    /// at `step` bytes per pixel.
+    pub fn training(&self, step: u64) -> u64 {
+        self.held + step * self.largest
     }
 }
 
@@ -157,6 +165,7 @@ impl Picture {
             // The decoder's own pixels, converted to RGBA, cut or averaged to the view, then
             // the view.
             decoding: (u64::from(color.bytes_per_pixel()) + per_pixel) * picture + 2 * held,
+            largest: view_pixels,
         })
     }
 
