@@ -577,6 +577,23 @@ fn bad_text_models_are_refused_by_file_element_and_line() {
     });
     assert_mentions(&err, &["points3D.txt", "point 1003 (line 5)", "non-finite"]);
 
+    // One line per image, without the 2D points' lines: every other image would be lost.
+    let err = error_after(&model(), false, |dir| {
+        let path = dir.join("sparse/0/images.txt");
+        let text = std::fs::read_to_string(&path).unwrap();
+        let firsts: Vec<&str> = text.lines().filter(|l| l.ends_with(".png")).collect();
+        std::fs::write(&path, firsts.join("\n")).unwrap();
+    });
+    assert_mentions(
+        &err,
+        &[
+            "images.txt",
+            "line 2",
+            "2D points",
+            "of the image on line 1",
+        ],
+    );
+
     let err = error_after(&model(), false, |dir| {
         std::fs::write(dir.join("sparse/0/cameras.txt"), "1 PINHOLE 32 24 30 31\n").unwrap();
     });

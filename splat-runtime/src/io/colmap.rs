@@ -292,7 +292,7 @@ fn intrinsics(model: i32, width: u64, height: u64, params: &[f64]) -> Result<Int
     };
     if !(focal.is_finite() && principal.is_finite() && focal.min_element() > 0.0) {
         return Err(format!(
-            "has the focal length {focal} and principal point {principal}: not finite and positive"
+            "has the focal length {focal} and principal point {principal}: the focal length must be finite and positive, the principal point finite"
         ));
     }
     let at = |i: usize| k.get(i).copied().unwrap_or(0.0);
@@ -562,13 +562,16 @@ impl Fields<'_> {
     }
 }
 
-/// The records of a text model file, one per line that `records` picks (with its number
-/// from 1): each its id and the rest (read by `body`). Errors name the file, the record and
-/// the line.
+/// The lines of a text model file that hold its records, each with its number from 1, or the
+/// number of a line that breaks the file's layout and what is wrong with it.
+type Records<'a> = Result<Vec<(usize, &'a str)>, (usize, String)>;
+
+/// The records of a text model file, one per line that `records` picks: each its id and the
+/// rest (read by `body`). Errors name the file, the record and the line.
 fn text_file<I: FromStr + Display, T>(
     path: &Path,
     element: &str,
-    records: fn(&str) -> Vec<(usize, &str)>,
+    records: fn(&str) -> Records<'_>,
     body: impl Fn(&mut Fields) -> Result<T, String>,
 ) -> Result<Vec<(I, T)>, DatasetError> {
     let text = std::fs::read_to_string(path).map_err(|error| DatasetError::Io {
@@ -576,6 +579,7 @@ fn text_file<I: FromStr + Display, T>(
         error,
     })?;
     records(&text)
+        .map_err(|(n, p)| field(path, format!("line {n}"), p))?
         .into_iter()
         .map(|(n, line)| {
             let mut fields = Fields(line.split_whitespace().peekable());
@@ -590,22 +594,42 @@ fn text_file<I: FromStr + Display, T>(
 }
 
 /// The lines of a text model file that are not blank or `#` comments.
-fn data_lines(text: &str) -> Vec<(usize, &str)> {
-    numbered(text).filter(|(_, l)| is_data(l)).collect()
+fn data_lines(text: &str) -> Records<'_> {
+    Ok(numbered(text).filter(|(_, l)| is_data(l)).collect())
 }
 
-/// The first lines of the two each image has in `images.txt` (the second lists its 2D points
-/// and may be blank).
-fn image_lines(text: &str) -> Vec<(usize, &str)> {
+/// The first lines of the two each image has in `images.txt`. The second lists its 2D points
+/// (may be blank, or missing after the last image) and is checked to be that: a file with one
+/// line per image would otherwise lose every other image.
+fn image_lines(text: &str) -> Records<'_> {
     let mut lines = numbered(text);
     let mut records = vec![];
     while let Some((n, line)) = lines.next() {
         if is_data(line) {
             records.push((n, line));
-            lines.next();
+            if let Some((m, points)) = lines.next().filter(|(_, l)| !is_points_2d(l)) {
+                let points = points.trim();
+                return Err((
+                    m,
+                    format!(
+                        "should list the 2D points (x y point3D_id ...) of the image on line {n}, but is `{points}`"
+                    ),
+                ));
+            }
         }
     }
-    records
+    Ok(records)
+}
+
+/// Whether `line` is an image's 2D points in `images.txt`: `x y point3D_id` triples.
+fn is_points_2d(line: &str) -> bool {
+    let fields: Vec<&str> = line.split_whitespace().collect();
+    fields.len().is_multiple_of(3)
+        && fields.chunks_exact(3).all(|p| {
+            p[0].parse::<f64>().is_ok()
+                && p[1].parse::<f64>().is_ok()
+                && p[2].parse::<i64>().is_ok()
+        })
 }
 
 fn numbered(text: &str) -> impl Iterator<Item = (usize, &str)> {
