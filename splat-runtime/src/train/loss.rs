@@ -51,7 +51,9 @@ pub(crate) fn window() -> [f64; WINDOW] {
 /// more work than whole-image planes, for a band's working memory instead of many planes.
 const BAND: usize = 64;
 
-fn check(render: &Image, target: &Image) -> Result<(), LossError> {
+/// That `render` and `target` have the same size and channels (any size: PSNR needs no
+/// window).
+fn check_shape(render: &Image, target: &Image) -> Result<(), LossError> {
     let shape = |i: &Image| (i.width, i.height, i.channels);
     if shape(render) != shape(target) {
         return Err(LossError::Shape {
@@ -59,6 +61,12 @@ fn check(render: &Image, target: &Image) -> Result<(), LossError> {
             want: shape(target),
         });
     }
+    Ok(())
+}
+
+/// That `render` and `target` have the same shape, one SSIM's window fits.
+fn check(render: &Image, target: &Image) -> Result<(), LossError> {
+    check_shape(render, target)?;
     if (render.width as usize) < WINDOW || (render.height as usize) < WINDOW {
         return Err(LossError::TooSmall(render.width, render.height));
     }
@@ -261,7 +269,7 @@ pub fn ssim(a: &Image, b: &Image) -> Result<f64, LossError> {
 /// Peak signal-to-noise ratio of `a` against `b` for values in [0, 1] (`a` clamped, as an
 /// image saved to 8 bits would be).
 pub fn psnr(a: &Image, b: &Image) -> Result<f64, LossError> {
-    check(a, b)?;
+    check_shape(a, b)?;
     let mse = a
         .data
         .iter()
@@ -430,6 +438,7 @@ mod tests {
         }
     }
 
+    /// Too small for SSIM's window: refused by SSIM and the loss, not by PSNR.
     #[test]
     fn mismatched_or_tiny_images_are_refused() {
         let a = image(20, 16, 3, 1);
@@ -437,9 +446,12 @@ mod tests {
             loss_and_gradient(&a, &image(20, 15, 3, 1), 0.2),
             Err(LossError::Shape { .. })
         ));
-        assert_eq!(
-            ssim(&image(10, 30, 1, 1), &image(10, 30, 1, 2)),
-            Err(LossError::TooSmall(10, 30))
-        );
+        assert!(matches!(
+            psnr(&a, &image(20, 15, 3, 1)),
+            Err(LossError::Shape { .. })
+        ));
+        let (x, y) = (image(10, 30, 1, 1), image(10, 30, 1, 2));
+        assert_eq!(ssim(&x, &y), Err(LossError::TooSmall(10, 30)));
+        assert!(psnr(&x, &y).unwrap().is_finite());
     }
 }
