@@ -130,7 +130,16 @@ impl Picture {
     /// The picture at `path`, decoded. 8-bit pictures keep their bytes; others (16-bit,
     /// float) are converted to f32 by the image crate.
     pub fn read(path: &Path) -> Result<Picture, DatasetError> {
-        let img = image::open(path).map_err(|error| image_error(path, error))?;
+        let error = |error| image_error(path, error);
+        let mut reader = (image::ImageReader::open(path).map_err(|e| error(e.into()))?)
+            .with_guessed_format()
+            .map_err(|e| error(e.into()))?;
+        // The decoder's own default (512 MiB) refuses a 12000 x 12000 RGBA picture; `fit`
+        // has checked from the headers that the pictures fit in memory.
+        let mut limits = image::Limits::default();
+        limits.max_alloc = Some(Self::MAX_DECODE_BYTES);
+        reader.limits(limits);
+        let img = reader.decode().map_err(error)?;
         let (width, height) = (img.width(), img.height());
         let samples = match eight_bit(img.color()) {
             // Taken as they are where the picture already is RGBA (no copy of its pixels).
@@ -143,6 +152,10 @@ impl Picture {
             samples,
         })
     }
+
+    /// The most memory decoding one picture may take (a 16384 x 16384 16-bit RGBA picture
+    /// takes 2 GiB): a bound against a header that claims absurd sizes.
+    const MAX_DECODE_BYTES: u64 = 4 << 30;
 
     /// What loading the picture at `path` into a view of `view_pixels` pixels takes in host
     /// memory, from its header alone (no pixel is decoded).
