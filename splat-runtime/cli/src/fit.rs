@@ -25,7 +25,7 @@ use splat_runtime::train::loss::{LossValue, WINDOW};
 use splat_runtime::train::{
     Checkpoint, DensifyOptions, McmcOptions, StepTimes, Strategy, Trainable, init,
 };
-use splat_runtime::{Effects, GradientSet, RenderOptions, param_groups};
+use splat_runtime::{Effects, Flat, GradientSet, RenderOptions, param_groups};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -165,13 +165,32 @@ const BUILT_IN_DEFAULTS: Defaults = Defaults {
     init_extent: 0.5,
 };
 
-/// The checkpoint's and the metrics' names in the output folder.
 /// Steps whose [`Faults`](splat_runtime::train::adam::Faults) are printed; later ones are
 /// counted.
 const FAULTS_SHOWN: usize = 10;
 const FAULTS_AFTER_SHOWN: usize = FAULTS_SHOWN + 1;
+
+/// The names of the files a run writes into its output folder (and `test/` for renders).
 const CHECKPOINT: &str = "checkpoint.bin";
 const METRICS: &str = "metrics.csv";
+const SCENE: &str = "scene.ply";
+const CURVE: &str = "curve.png";
+
+/// Refuses an output folder where one of the run's files is a folder: found now, not after
+/// hours of training.
+fn check_out_files(out: &Path) -> Result<()> {
+    for name in [CHECKPOINT, METRICS, SCENE, CURVE] {
+        let path = out.join(name);
+        if path.is_dir() {
+            bail!(
+                "--out {}: {} is a folder, and the run writes its {name} there",
+                out.display(),
+                path.display()
+            );
+        }
+    }
+    Ok(())
+}
 
 /// Refuses knobs out of their range before the dataset is read (which can take minutes).
 fn check_knobs(args: &FitArgs) -> Result<()> {
@@ -206,6 +225,7 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
         );
     };
     crate::check_out_folder(&args.out)?;
+    check_out_files(&args.out)?;
     check_knobs(args)?;
     // Picked first: the memory a run needs depends on where it trains.
     let gpu = crate::pick_gpu(args.backend)?;
@@ -408,7 +428,7 @@ impl Fit<'_> {
                     size: args.init_size,
                     color: args.init_color,
                 };
-                let mut params = start::<M>(data, points, mid, half, first, args.seed);
+                let mut params = start::<M>(data, points, mid, half, first, args.seed)?;
                 if let Some(Strategy::Mcmc(_)) = opts.densify {
                     McmcOptions::prepare::<M>(&mut params);
                 }
@@ -561,7 +581,7 @@ impl Fit<'_> {
         );
         print_step_times(&times, opts.steps - first, gpu.as_ref());
         let out = &args.out;
-        let ply_path = out.join("scene.ply");
+        let ply_path = out.join(SCENE);
         let cloud = GaussianCloud {
             sh_degree: 3,
             gaussians: params.iter().map(ToStored::to_stored).collect(),
@@ -576,7 +596,7 @@ impl Fit<'_> {
                 .with_context(|| format!("writing {}", path.display()))?;
         }
         log.stage_csv(&mut outputs, &metrics)?;
-        log.plot(&mut outputs, &out.join("curve.png"))?;
+        log.plot(&mut outputs, &out.join(CURVE))?;
         outputs.commit()?;
         crate::wrote(out);
         Ok(())
@@ -688,9 +708,16 @@ fn start<M: Trainable>(
     half: f32,
     first: init::Start,
     seed: u64,
-) -> Vec<M::Params> {
+) -> Result<Vec<M::Params>> {
+    let count = match data.points.len() {
+        0 => points,
+        n => points.min(n),
+    };
+    if let Some(room) = memory::available() {
+        memory::check_start(count, M::Params::LEN, room)?;
+    }
     if data.points.is_empty() {
-        return init::in_cube::<M>(points, mid, half, first, seed);
+        return Ok(init::in_cube::<M>(points, mid, half, first, seed));
     }
     let params = init::from_points::<M>(&data.points, points, first);
     println!(
@@ -698,7 +725,7 @@ fn start<M: Trainable>(
         params.len(),
         data.points.len()
     );
-    params
+    Ok(params)
 }
 
 /// What a run measured: the training loss at every step, the test views' PSNR and SSIM at the

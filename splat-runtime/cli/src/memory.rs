@@ -76,9 +76,31 @@ pub fn check_room(
     bail!("{name}: {why}, and {room} is available: {suggestion}")
 }
 
-/// A size for people: "12.3 GB", "450.0 MB", "36.9 kB".
+/// Copies of each primitive's words that training holds: the primitives, their words as the
+/// optimizer sees them, the step's gradient of each, Adam's two moments, and one more for the
+/// frame's per-primitive data.
+const PRIMITIVE_COPIES: u64 = 6;
+
+/// Refuses to start training from `primitives` primitives of `words` 4-byte words each when
+/// holding them would take more than `room` bytes.
+pub fn check_start(primitives: usize, words: usize, room: u64) -> Result<()> {
+    let need = (primitives as u64)
+        .saturating_mul(words as u64 * 4)
+        .saturating_mul(PRIMITIVE_COPIES);
+    if need > room {
+        bail!(
+            "--points {primitives}: training {primitives} primitives of {words} words takes about {} of memory, and {} is available",
+            bytes(need),
+            bytes(room)
+        );
+    }
+    Ok(())
+}
+
+/// A size for people: "1.4 TB", "12.3 GB", "450.0 MB", "36.9 kB".
 fn bytes(n: u64) -> String {
     let (scale, unit) = match n {
+        n if n >= 1_000_000_000_000 => (1e12, "TB"),
         n if n >= 1_000_000_000 => (1e9, "GB"),
         n if n >= 1_000_000 => (1e6, "MB"),
         _ => (1e3, "kB"),
@@ -263,6 +285,18 @@ mod tests {
         assert!(
             err.ends_with(&format!("--downscale 2 would take about {peak}")),
             "{err}"
+        );
+    }
+
+    #[test]
+    fn a_start_that_cannot_be_held_is_refused() {
+        check_start(1000, 59, 1000 * 59 * 4 * PRIMITIVE_COPIES).unwrap();
+        let err = check_start(99_999_999_999, 59, 20_000_000_000)
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            err,
+            "--points 99999999999: training 99999999999 primitives of 59 words takes about 141.6 TB of memory, and 20.0 GB is available"
         );
     }
 

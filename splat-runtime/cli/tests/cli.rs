@@ -1147,6 +1147,13 @@ fn fit_refuses_a_missing_or_broken_dataset_by_name() {
         "--out file/run: file is a file",
         &out,
     );
+    // Found before training, not when the results are written at its end.
+    std::fs::create_dir_all(dir.path().join("run/scene.ply")).unwrap();
+    fails(
+        &splat(&["fit", "good", "--out", "run"], dir.path()),
+        "--out run: run/scene.ply is a folder, and the run writes its scene.ply there",
+        &out,
+    );
     // Refused before the dataset is read (this one does not exist).
     for (flag, value) in [
         ("--global-scale", "0"),
