@@ -69,7 +69,8 @@ pub enum CameraError {
     Coefficients(CameraModel),
     #[error("camera image size {0}x{1} is out of range (1..={MAX_SIDE} per side)")]
     Size(u32, u32),
-    #[error("camera {0} must be finite and positive")]
+    /// What is wrong with the intrinsics: "focal lengths fx, fy must be finite and positive".
+    #[error("camera {0}")]
     Intrinsics(&'static str),
     #[error("camera {0} must be finite with last row [0, 0, 0, 1]")]
     Pose(&'static str),
@@ -117,17 +118,21 @@ impl CameraFile {
         }
         let k = self.k.unwrap_or_default();
         if !k.iter().all(|v| v.is_finite()) {
-            return Err(CameraError::Intrinsics("coefficients k"));
+            return Err(CameraError::Intrinsics("coefficients k must be finite"));
         }
         let side = |v: u32| (1..=MAX_SIDE).contains(&v);
         if !side(self.width) || !side(self.height) {
             return Err(CameraError::Size(self.width, self.height));
         }
         if !(self.fx.is_finite() && self.fy.is_finite() && self.fx > 0.0 && self.fy > 0.0) {
-            return Err(CameraError::Intrinsics("focal lengths fx, fy"));
+            return Err(CameraError::Intrinsics(
+                "focal lengths fx, fy must be finite and positive",
+            ));
         }
         if !(self.cx.is_finite() && self.cy.is_finite()) {
-            return Err(CameraError::Intrinsics("principal point cx, cy"));
+            return Err(CameraError::Intrinsics(
+                "principal point cx, cy must be finite",
+            ));
         }
         let (rotation, translation) = rigid(&self.world_to_camera, "world_to_camera")?;
         let camera = Camera {
@@ -142,7 +147,9 @@ impl CameraFile {
             model,
         };
         if !(camera.shutter_turn.is_finite() && camera.shutter_shift.is_finite()) {
-            return Err(CameraError::Intrinsics("rolling shutter turn and shift"));
+            return Err(CameraError::Intrinsics(
+                "rolling shutter turn and shift must be finite",
+            ));
         }
         match &self.world_to_camera_last_row {
             None => Ok(camera),

@@ -337,7 +337,7 @@ pub enum DatasetError {
         path: PathBuf,
         error: image::ImageError,
     },
-    #[error("{path} is {got:?} pixels, the first image of {file} is {want:?}")]
+    #[error("{path} is {}x{} pixels, the first image of {file} is {}x{}", got.0, got.1, want.0, want.1)]
     Size {
         path: PathBuf,
         file: PathBuf,

@@ -94,7 +94,8 @@ pub enum RenderError {
     PMax,
     #[error("blend thresholds {0:?} are not supported: t_min and alpha_min must be in [0, 1)")]
     Blend(shade::Blend),
-    #[error("camera {0} must be finite and positive")]
+    /// What is wrong with the camera: "focal lengths must be finite and positive".
+    #[error("camera {0}")]
     Camera(&'static str),
     #[error(
         "method `{method}` projects with a pinhole camera only (it never calls `cam.project_point` or `cam.pixel_ray`); the camera is {model}"
@@ -256,19 +257,21 @@ pub(crate) fn check<M: SplatMethod>(
         });
     }
     if !(camera.focal.is_finite() && camera.focal.min_element() > 0.0) {
-        return Err(RenderError::Camera("focal lengths"));
+        return Err(RenderError::Camera(
+            "focal lengths must be finite and positive",
+        ));
     }
     if !camera.principal.is_finite() {
-        return Err(RenderError::Camera("principal point"));
+        return Err(RenderError::Camera("principal point must be finite"));
     }
     if !(camera.rotation.is_finite() && camera.translation.is_finite()) {
-        return Err(RenderError::Camera("pose"));
+        return Err(RenderError::Camera("pose must be finite"));
     }
     if !camera.distortion.is_finite() {
-        return Err(RenderError::Camera("distortion"));
+        return Err(RenderError::Camera("distortion must be finite"));
     }
     if !(camera.shutter_turn.is_finite() && camera.shutter_shift.is_finite()) {
-        return Err(RenderError::Camera("rolling shutter motion"));
+        return Err(RenderError::Camera("rolling shutter motion must be finite"));
     }
     if camera.has_rolling_shutter() && !M::ROLLING_SHUTTER {
         return Err(RenderError::RollingShutter(M::NAME));
