@@ -1,7 +1,8 @@
 //! Posed images for training, in three layouts, read by [`read`] from a folder. Two have
 //! camera-to-world `transform_matrix` rows in OpenGL axes (x right, y up, z backwards):
 //! - Blender / NeRF-synthetic: `transforms_train.json` and `transforms_test.json`, each with
-//!   `camera_angle_x` (horizontal field of view, radians) and `frames[]` of `file_path`
+//!   `camera_angle_x` (horizontal field of view, radians; or instant-ngp's pinhole `fl_x`
+//!   `fl_y` `cx` `cy` `w` `h` in pixels, which win where given) and `frames[]` of `file_path`
 //!   (relative; `.png` added when it has no extension) and `transform_matrix`.
 //! - nerfstudio: one `transforms.json` with intrinsics `fl_x fl_y cx cy w h` given globally or
 //!   per frame, and `camera_model` `PINHOLE`, `OPENCV` (`k1..k4 p1 p2`, the distortion taken
@@ -645,18 +646,95 @@ fn nerfstudio_shots(dir: &Path) -> Result<Shots, DatasetError> {
     Ok(Shots::every_8th_held_out(shots, Vec::new()))
 }
 
+/// The intrinsics instant-ngp writes into a Blender split beside (or instead of)
+/// `camera_angle_x`.
+const INTRINSICS: [&str; 6] = ["fl_x", "fl_y", "cx", "cy", "w", "h"];
+
+/// A Blender split's pinhole: its focal length (in pixels where `fl_x` is given, else from
+/// `camera_angle_x` and each picture's width), principal point (the picture's centre unless
+/// `cx cy` say otherwise) and size (checked against the pictures where `w h` are given).
+struct BlenderPinhole {
+    focal: Focal,
+    principal: Option<Vec2>,
+    size: Option<(u32, u32)>,
+}
+
+enum Focal {
+    Pixels(Vec2),
+    AngleX(f64),
+}
+
+fn blender_pinhole(path: &Path, json: &serde_json::Value) -> Result<BlenderPinhole, DatasetError> {
+    let number = |name: &str| match json.get(name) {
+        None => Ok(None),
+        Some(v) => (v.as_f64().filter(|x| x.is_finite()).map(Some))
+            .ok_or_else(|| field(path, name, "must be a finite number")),
+    };
+    let positive = |name: &str| match number(name)? {
+        Some(v) if v <= 0.0 => Err(field(path, name, format!("must be positive, not {v}"))),
+        v => Ok(v),
+    };
+    // A lens is nerfstudio's: silently reading its pictures as pinholes would train on a
+    // wrong camera.
+    let lens = ["camera_model", "k1", "k2", "k3", "k4", "p1", "p2"];
+    if let Some(name) = lens.iter().find(|n| json.get(**n).is_some()) {
+        return Err(field(
+            path,
+            *name,
+            "describes a lens, and a Blender dataset's cameras are pinholes (a nerfstudio transforms.json reads lenses)",
+        ));
+    }
+    let focal = match (positive("fl_x")?, positive("fl_y")?) {
+        (Some(x), y) => Focal::Pixels(Vec2::new(x as f32, y.unwrap_or(x) as f32)),
+        (None, Some(_)) => return Err(field(path, "fl_y", "is given without fl_x")),
+        (None, None) => match json.get("camera_angle_x") {
+            None => {
+                return Err(field(
+                    path,
+                    "camera_angle_x",
+                    "is missing (and no fl_x gives the focal length in pixels)",
+                ));
+            }
+            Some(a) => (a.as_f64())
+                .filter(|a| a.is_finite() && *a > 0.0 && *a < std::f64::consts::PI)
+                .map(Focal::AngleX)
+                .ok_or_else(|| {
+                    field(
+                        path,
+                        "camera_angle_x",
+                        "must be an angle in (0, pi) radians",
+                    )
+                })?,
+        },
+    };
+    let principal = match (number("cx")?, number("cy")?) {
+        (Some(x), Some(y)) => Some(Vec2::new(x as f32, y as f32)),
+        (None, None) => None,
+        _ => return Err(field(path, "cx and cy", "must be given together")),
+    };
+    let side = |name: &str| match positive(name)? {
+        Some(v) if v.fract() != 0.0 || v > u32::MAX as f64 => Err(field(
+            path,
+            name,
+            format!("must be a whole number of pixels, not {v}"),
+        )),
+        v => Ok(v.map(|v| v as u32)),
+    };
+    let size = match (side("w")?, side("h")?) {
+        (Some(w), Some(h)) => Some((w, h)),
+        (None, None) => None,
+        _ => return Err(field(path, "w and h", "must be given together")),
+    };
+    Ok(BlenderPinhole {
+        focal,
+        principal,
+        size,
+    })
+}
+
 fn split_shots(path: &Path) -> Result<Vec<Shot>, DatasetError> {
     let json = read_json(path)?;
-    let angle = json["camera_angle_x"]
-        .as_f64()
-        .filter(|a| a.is_finite() && *a > 0.0 && *a < std::f64::consts::PI)
-        .ok_or_else(|| {
-            field(
-                path,
-                "camera_angle_x",
-                "must be an angle in (0, pi) radians",
-            )
-        })?;
+    let pinhole = blender_pinhole(path, &json)?;
     let frames = json["frames"]
         .as_array()
         .ok_or_else(|| field(path, "frames", "must be an array"))?;
@@ -682,6 +760,13 @@ fn split_shots(path: &Path) -> Result<Vec<Shot>, DatasetError> {
                 "must be 4 rows of 4 finite numbers",
             )
         })?;
+        if let Some(name) = INTRINSICS.iter().find(|n| frame.get(**n).is_some()) {
+            return Err(field(
+                path,
+                at(name),
+                "is given per frame: a Blender dataset's intrinsics are the split's (a nerfstudio transforms.json has them per frame)",
+            ));
+        }
         let dims = image_size(&image_path)?;
         if let Some(want) = size.filter(|s| *s != dims) {
             return Err(DatasetError::Size {
@@ -692,9 +777,27 @@ fn split_shots(path: &Path) -> Result<Vec<Shot>, DatasetError> {
             });
         }
         size = Some(dims);
-        let focal = 0.5 * dims.0 as f32 / (0.5 * angle as f32).tan();
-        let camera = posed_camera(&c2w, Vec2::splat(focal), dims)
+        if let Some(want) = pinhole.size.filter(|s| *s != dims) {
+            return Err(field(
+                path,
+                "w and h",
+                format!(
+                    "say {}x{} pixels, but {} is {}x{}",
+                    want.0,
+                    want.1,
+                    image_path.display(),
+                    dims.0,
+                    dims.1
+                ),
+            ));
+        }
+        let focal = match pinhole.focal {
+            Focal::Pixels(f) => f,
+            Focal::AngleX(angle) => Vec2::splat(0.5 * dims.0 as f32 / (0.5 * angle as f32).tan()),
+        };
+        let mut camera = posed_camera(&c2w, focal, dims)
             .map_err(|problem| field(path, at("transform_matrix"), problem))?;
+        camera.principal = pinhole.principal.unwrap_or(camera.principal);
         shots.push(Shot::new(image_path, camera));
     }
     Ok(shots)
@@ -862,6 +965,64 @@ mod tests {
             let worst = (on_black.data.iter().zip(&got.image().data))
                 .fold(0.0f32, |m, (x, y)| m.max((x - y).abs()));
             assert!(worst < 1.5 / 255.0, "{worst}");
+        }
+    }
+
+    /// instant-ngp's intrinsics in a Blender split are read (focal lengths, principal point,
+    /// size checked against the pictures); a lens, per-frame intrinsics, or a size that is not
+    /// the pictures' are refused.
+    #[test]
+    fn instant_ngp_intrinsics_in_a_blender_split_are_read() {
+        let dir = tempfile::tempdir().unwrap();
+        let data = written_blender(dir.path());
+        let (w, h) = data.train[0].size();
+        let path = dir.path().join("transforms_train.json");
+        let original: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        let edited = |edit: &dyn Fn(&mut serde_json::Value)| {
+            let mut json = original.clone();
+            edit(&mut json);
+            std::fs::write(&path, json.to_string()).unwrap();
+            read(dir.path(), Vec3::ZERO).map_err(|e| e.to_string())
+        };
+        let got = edited(&|j| {
+            j.as_object_mut().unwrap().remove("camera_angle_x");
+            for (k, v) in [("fl_x", 30.0), ("fl_y", 31.0), ("cx", 10.0), ("cy", 12.0)] {
+                j[k] = v.into();
+            }
+            (j["w"], j["h"]) = (w.into(), h.into());
+        })
+        .unwrap();
+        for view in &got.train {
+            assert_eq!(view.camera.focal, Vec2::new(30.0, 31.0));
+            assert_eq!(view.camera.principal, Vec2::new(10.0, 12.0));
+        }
+        // The test split keeps its field of view.
+        assert_eq!(got.test[0].camera.focal, data.test[0].camera.focal);
+        let refused = [
+            (edited(&|j| j["k1"] = 0.1.into()), "k1 describes a lens"),
+            (
+                edited(&|j| j["frames"][1]["fl_x"] = 30.0.into()),
+                "frames[1].fl_x is given per frame",
+            ),
+            (
+                edited(&|j| (j["w"], j["h"]) = ((w + 1).into(), h.into())),
+                &format!("w and h say {}x{h} pixels", w + 1),
+            ),
+            (
+                edited(&|j| {
+                    j.as_object_mut().unwrap().remove("camera_angle_x");
+                }),
+                "camera_angle_x is missing (and no fl_x",
+            ),
+            (
+                edited(&|j| j["cx"] = 3.0.into()),
+                "cx and cy must be given together",
+            ),
+        ];
+        for (got, want) in refused {
+            let err = got.unwrap_err();
+            assert!(err.contains(want), "`{want}` not in: {err}");
         }
     }
 
