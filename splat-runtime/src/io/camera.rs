@@ -244,11 +244,28 @@ pub fn with_last_row_pose(
     })
 }
 
+/// The largest camera file read: a camera is a few hundred bytes, and a stream that never
+/// ends (`/dev/zero`) is not read whole.
+const MAX_CAMERA_FILE: u64 = 1 << 20;
+
 pub fn read(path: &Path) -> Result<Camera, CameraError> {
-    let text = std::fs::read_to_string(path).map_err(|error| CameraError::Io {
+    let io = |error| CameraError::Io {
         path: path.display().to_string(),
         error,
-    })?;
+    };
+    let mut text = String::new();
+    let file = std::fs::File::open(path).map_err(io)?;
+    std::io::Read::read_to_string(
+        &mut std::io::Read::take(file, MAX_CAMERA_FILE + 1),
+        &mut text,
+    )
+    .map_err(io)?;
+    if text.len() as u64 > MAX_CAMERA_FILE {
+        return Err(io(std::io::Error::other(format!(
+            "it runs past {} MiB, and a camera file is a few hundred bytes",
+            MAX_CAMERA_FILE >> 20
+        ))));
+    }
     let file: CameraFile = serde_json::from_str(&text).map_err(|error| CameraError::Json {
         path: path.display().to_string(),
         error,

@@ -5,7 +5,7 @@
 
 use glam::{Vec3, Vec4};
 use std::collections::HashMap;
-use std::io::{BufRead, Write};
+use std::io::{BufRead, Read, Write};
 use std::path::Path;
 
 /// One Gaussian as stored: raw (pre-activation) values.
@@ -99,18 +99,29 @@ pub fn read(path: &Path) -> Result<GaussianCloud, PlyError> {
     })
 }
 
-/// Parses a PLY stream (header, then the vertex data).
+/// The longest header line read: a stream without line breaks (`/dev/zero`) is not read
+/// whole in search of one.
+const MAX_HEADER_LINE: u64 = 16 << 20;
+
+/// Parses a PLY stream (header, then the vertex data; anything after the vertices is not
+/// read).
 pub fn parse(r: &mut impl BufRead) -> Result<GaussianCloud, PlyError> {
     let mut line = String::new();
     let mut next_line = |r: &mut dyn BufRead| -> Result<String, PlyError> {
         line.clear();
-        let n = r
+        let n = (Read::take(&mut *r, MAX_HEADER_LINE))
             .read_line(&mut line)
             .map_err(|e| PlyError::Header(e.to_string()))?;
         if n == 0 {
             return Err(PlyError::Header(
                 "the header ends before `end_header`".into(),
             ));
+        }
+        if n as u64 == MAX_HEADER_LINE && !line.ends_with('\n') {
+            return Err(PlyError::Header(format!(
+                "a header line runs past {} MiB",
+                MAX_HEADER_LINE >> 20
+            )));
         }
         Ok(line.trim_end().to_string())
     };
@@ -225,7 +236,8 @@ pub fn parse(r: &mut impl BufRead) -> Result<GaussianCloud, PlyError> {
         .collect();
     let stride: usize = props.iter().map(|(_, k)| k.size()).sum();
     let mut data = Vec::new();
-    r.read_to_end(&mut data)
+    (Read::take(&mut *r, count as u64 * stride as u64))
+        .read_to_end(&mut data)
         .map_err(|e| PlyError::Header(e.to_string()))?;
     let found = data.len() / stride.max(1);
     if found < count {
@@ -442,5 +454,22 @@ mod tests {
         write_to(&mut bytes, &nan).unwrap();
         let e = parse(&mut bytes.as_slice()).unwrap_err().to_string();
         assert!(e.contains("vertex 2") && e.contains("`y`"), "{e}");
+    }
+
+    /// A stream that never ends is read no further than the header's lines and vertices say.
+    #[test]
+    fn endless_streams_are_read_only_as_far_as_needed() {
+        let zeros = || std::io::BufReader::new(std::io::repeat(0));
+        let e = parse(&mut zeros()).unwrap_err().to_string();
+        assert!(e.contains("not a PLY"), "{e}");
+        let after_magic = std::io::Read::chain(&b"ply\n"[..], std::io::repeat(0));
+        let e = (parse(&mut std::io::BufReader::new(after_magic)).unwrap_err()).to_string();
+        assert!(e.contains("a header line runs past 16 MiB"), "{e}");
+        // A whole cloud followed by endless bytes: its vertices, and nothing more, are read.
+        let c = cloud(1);
+        let mut bytes = vec![];
+        write_to(&mut bytes, &c).unwrap();
+        let endless = std::io::Read::chain(bytes.as_slice(), std::io::repeat(7));
+        assert_eq!(parse(&mut std::io::BufReader::new(endless)).unwrap(), c);
     }
 }
