@@ -48,6 +48,10 @@ pub struct BenchArgs {
     shader_checks: bool,
 }
 
+/// The most threads a pool is timed with (a thread costs its stack and the kernel's bookkeeping,
+/// and past the cores only adds switching).
+const MAX_THREADS: usize = 1024;
+
 pub fn bench_cmd(args: &BenchArgs, methods: &[Method]) -> Result<()> {
     let method = methods::find(methods, &args.method)?;
     if args.iters == 0 {
@@ -55,6 +59,9 @@ pub fn bench_cmd(args: &BenchArgs, methods: &[Method]) -> Result<()> {
     }
     if let Some(&t) = args.threads.iter().find(|&&t| t == 0) {
         bail!("--threads {t}: a thread count must be at least 1");
+    }
+    if let Some(&t) = args.threads.iter().find(|&&t| t > MAX_THREADS) {
+        bail!("--threads {t}: at most {MAX_THREADS} threads");
     }
     let (cloud, camera) = crate::scene::given_or_built_in(
         args.scene.as_deref(),

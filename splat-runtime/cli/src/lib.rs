@@ -240,6 +240,9 @@ fn dispatch(cli: Cli, methods: &[Method]) -> Result<()> {
                     "--width and --height must be at least {window}: `splat fit` compares views by SSIM over {window}x{window} windows"
                 );
             }
+            if let Some(room) = memory::available() {
+                memory::check_rendered_views(views, width, height, room)?;
+            }
             let background = if white { Vec3::ONE } else { Vec3::ZERO };
             let data = scene::dataset(views, width, height, background)?;
             dataset::write_blender(&out, &data)?;

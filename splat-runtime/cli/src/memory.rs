@@ -4,6 +4,7 @@
 
 use anyhow::{Result, bail};
 use splat_runtime::io::dataset::{Footprint, Shots};
+use splat_runtime::train::fit::CPU_STEP_BYTES_PER_PIXEL;
 use std::path::Path;
 
 /// The largest `--downscale` suggested.
@@ -90,6 +91,28 @@ pub fn check_start(primitives: usize, words: usize, room: u64) -> Result<()> {
     if need > room {
         bail!(
             "--points {primitives}: training {primitives} primitives of {words} words takes about {} of memory, and {} is available",
+            bytes(need),
+            bytes(room)
+        );
+    }
+    Ok(())
+}
+
+/// Bytes per pixel a rendered view holds until `splat dataset` writes them all: f32 RGB
+/// and coverage.
+const RENDERED_VIEW_BYTES_PER_PIXEL: u64 = 16;
+
+/// Refuses to render `views` views of `width` x `height` pixels for a dataset when holding
+/// them (and rendering one more) would take more than `room` bytes.
+pub fn check_rendered_views(views: usize, width: u32, height: u32, room: u64) -> Result<()> {
+    let pixels = u64::from(width) * u64::from(height);
+    let need = (views as u64)
+        .saturating_mul(pixels)
+        .saturating_mul(RENDERED_VIEW_BYTES_PER_PIXEL)
+        .saturating_add(pixels * CPU_STEP_BYTES_PER_PIXEL);
+    if need > room {
+        bail!(
+            "--views {views} of {width}x{height}: the views are held until the dataset is written, about {} of memory, and {} is available",
             bytes(need),
             bytes(room)
         );
@@ -185,7 +208,6 @@ mod tests {
     use super::*;
     use splat_runtime::glam::Vec2;
     use splat_runtime::io::dataset::Shot;
-    use splat_runtime::train::fit::CPU_STEP_BYTES_PER_PIXEL;
     use splat_runtime::types::Camera;
 
     /// 3 views of 64 x 48 8-bit pictures hold 4 bytes per pixel.
@@ -297,6 +319,18 @@ mod tests {
         assert_eq!(
             err,
             "--points 99999999999: training 99999999999 primitives of 59 words takes about 141.6 TB of memory, and 20.0 GB is available"
+        );
+    }
+
+    #[test]
+    fn a_dataset_too_big_to_hold_is_not_rendered() {
+        check_rendered_views(80, 200, 200, 1 << 30).unwrap();
+        let err = check_rendered_views(1_000_000_000, 11, 11, 1 << 30)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.starts_with("--views 1000000000 of 11x11: the views are held until the dataset is written, about 1.9 TB of memory"),
+            "{err}"
         );
     }
 
