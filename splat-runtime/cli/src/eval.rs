@@ -61,6 +61,12 @@ pub(crate) fn eval_cmd(args: &EvalArgs, methods: &[Method]) -> Result<()> {
     for shot in &shots {
         methods::check_camera(method, methods, &shot.camera)?;
     }
+    if let Some(out) = &args.out {
+        let pictures: Vec<&std::path::Path> = shots.iter().map(|s| s.path.as_path()).collect();
+        for k in 0..shots.len() {
+            crate::check_not_a_picture(&out.join(split).join(crate::render_name(k)), &pictures)?;
+        }
+    }
     let background = if args.white { Vec3::ONE } else { Vec3::ZERO };
     // As `splat fit` renders its test views: alpha for the background, the default knobs.
     let opts = RenderOptions {
@@ -80,7 +86,7 @@ pub(crate) fn eval_cmd(args: &EvalArgs, methods: &[Method]) -> Result<()> {
         let psnr = loss::psnr(&image, &picture)?;
         let ssim = loss::ssim(&image, &picture)?;
         if let Some(out) = &args.out {
-            let path = out.join(split).join(format!("{k:03}.png"));
+            let path = out.join(split).join(crate::render_name(k));
             stage_image(&mut outputs, &path, &image)
                 .with_context(|| format!("writing {}", path.display()))?;
         }
@@ -139,6 +145,7 @@ pub(crate) fn eval_cmd(args: &EvalArgs, methods: &[Method]) -> Result<()> {
         }))
         .with_context(|| format!("writing {}", csv.display()))?;
         outputs.commit()?;
+        crate::remove_stale_renders(&out.join(split), measured.len())?;
         crate::wrote(out);
     }
     Ok(())

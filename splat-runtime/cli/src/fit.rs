@@ -244,6 +244,11 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
                 memory::check_room(&name, (&full, &shots), args.downscale.factor, room, demand)?;
             }
             let all = || shots.train.iter().chain(&shots.test);
+            let pictures: Vec<&Path> = all().map(|s| s.path.as_path()).collect();
+            for k in 0..shots.test.len() {
+                let render = args.out.join("test").join(crate::render_name(k));
+                crate::check_not_a_picture(&render, &pictures)?;
+            }
             let taken = args.downscale.how(all()) + &undistorted(all());
             let bar = ProgressBar::new(all().count() as u64).with_style(
                 ProgressStyle::with_template("{bar:40} {pos}/{len} pictures decoded, {elapsed}")
@@ -591,13 +596,14 @@ impl Fit<'_> {
         (outputs.stage(&ply_path, |w| ply::write_to(w, &cloud)))
             .with_context(|| format!("writing {}", ply_path.display()))?;
         for (k, image) in images.iter().enumerate() {
-            let path = out.join("test").join(format!("{k:03}.png"));
+            let path = out.join("test").join(crate::render_name(k));
             stage_image(&mut outputs, &path, image)
                 .with_context(|| format!("writing {}", path.display()))?;
         }
         log.stage_csv(&mut outputs, &metrics)?;
         log.plot(&mut outputs, &out.join(CURVE))?;
         outputs.commit()?;
+        crate::remove_stale_renders(&out.join("test"), images.len())?;
         crate::wrote(out);
         Ok(())
     }

@@ -288,6 +288,64 @@ pub(crate) fn check_out_folder(dir: &std::path::Path) -> Result<()> {
     Ok(())
 }
 
+/// The name of the `k`th render of a run's views in its output folder.
+pub(crate) fn render_name(k: usize) -> String {
+    format!("{k:03}.png")
+}
+
+/// Removes from `dir` the renders numbered `count` and on that an earlier run with more views
+/// left: beside this run's they would pass for its own.
+pub(crate) fn remove_stale_renders(dir: &std::path::Path, count: usize) -> Result<()> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Ok(());
+    };
+    let mut removed = 0;
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let Some(k) = (name.to_str())
+            .and_then(|n| n.strip_suffix(".png"))
+            .filter(|n| n.len() >= 3 && n.bytes().all(|b| b.is_ascii_digit()))
+            .and_then(|n| n.parse::<usize>().ok())
+        else {
+            continue;
+        };
+        if k >= count && render_name(k) == name.to_string_lossy() {
+            let path = entry.path();
+            std::fs::remove_file(&path)
+                .with_context(|| format!("removing an earlier run's {}", path.display()))?;
+            removed += 1;
+        }
+    }
+    if removed > 0 {
+        println!(
+            "removed {removed} renders of an earlier run's views from {} (this run has {count})",
+            dir.display()
+        );
+    }
+    Ok(())
+}
+
+/// Refuses to write a render to any of `pictures` (a dataset's own, when `--out` points into
+/// the dataset): they are the truth the renders are measured against.
+pub(crate) fn check_not_a_picture(
+    render: &std::path::Path,
+    pictures: &[&std::path::Path],
+) -> Result<()> {
+    let same = |a: &std::path::Path, b: &std::path::Path| match (a.canonicalize(), b.canonicalize())
+    {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    };
+    if let Some(p) = pictures.iter().find(|p| same(render, p)) {
+        anyhow::bail!(
+            "--out: {} would replace the dataset's picture {}: choose a folder outside the dataset",
+            render.display(),
+            p.display()
+        );
+    }
+    Ok(())
+}
+
 /// Says where an output went, as a full path (the default names land where `splat` runs).
 pub(crate) fn wrote(path: &std::path::Path) {
     let full = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());

@@ -1389,11 +1389,22 @@ fn eval_measures_a_scene_as_fit_did() {
         args.extend(extra);
         splat(&args, dir.path())
     };
+    // An earlier run's render of a third test view goes; other files stay.
+    std::fs::create_dir_all(dir.path().join("eval/test")).unwrap();
+    for name in ["002.png", "notes.png"] {
+        std::fs::write(dir.path().join("eval/test").join(name), b"earlier").unwrap();
+    }
     let stdout = ok(&eval(&["--backend", "cpu", "--out", "eval"]));
     assert!(
         stdout.contains(&format!("mean PSNR {fit_psnr} dB")),
         "fit measured {fit_psnr} dB:\n{stdout}"
     );
+    assert!(
+        stdout.contains("removed 1 renders of an earlier run's views"),
+        "{stdout}"
+    );
+    assert!(!dir.path().join("eval/test/002.png").exists());
+    assert!(dir.path().join("eval/test/notes.png").exists());
     assert!(stdout.contains("2 test views"), "{stdout}");
     for k in 0..2 {
         let render = format!("{k:03}.png");
@@ -1428,6 +1439,31 @@ fn eval_measures_a_scene_as_fit_did() {
         "nothing.ply",
         &dir.path().join("bad"),
     );
+
+    // A dataset whose test pictures are named as renders are: --out into it is refused,
+    // before anything is rendered over its truth.
+    let planet = dir.path().join("planet");
+    std::fs::rename(planet.join("test/r_0.png"), planet.join("test/000.png")).unwrap();
+    let transforms = planet.join("transforms_test.json");
+    let text = std::fs::read_to_string(&transforms).unwrap();
+    std::fs::write(&transforms, text.replace("./test/r_0\"", "./test/000\"")).unwrap();
+    let truth = std::fs::read(planet.join("test/000.png")).unwrap();
+    let into = [
+        "eval",
+        "planet",
+        "--scene",
+        "fit/scene.ply",
+        "--out",
+        "planet",
+    ];
+    let out = splat(&into, dir.path());
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("would replace the dataset's picture"),
+        "{stderr}"
+    );
+    assert_eq!(std::fs::read(planet.join("test/000.png")).unwrap(), truth);
 }
 
 /// A COLMAP dataset in text format: 3 views of 16x16 by a pinhole camera looking down +z
