@@ -997,9 +997,14 @@ fn fit_resumes_from_its_checkpoint() {
     assert_eq!(fit.rows, 21);
     let steps: Vec<usize> = fit.psnr.iter().map(|p| p.0).collect();
     assert_eq!(steps, [0, 10, 20]);
-    // A start above the cap runs, as a fresh one would: the cap only stops growth.
-    let capped = [&args[..], &["--resume", "--max-primitives", "1"]].concat();
-    let stdout = ok(&splat(&capped, dir.path()));
+    // A start above the cap runs: the cap only stops growth.
+    let capped = [
+        "fit", "data", "--points", "50", "--out", "capped", "--steps", "2",
+    ];
+    let stdout = ok(&splat(
+        &[&capped[..], &["--max-primitives", "1"]].concat(),
+        dir.path(),
+    ));
     assert!(
         stdout.contains("more than --max-primitives 1: the cap only stops growth"),
         "{stdout}"
@@ -1029,6 +1034,17 @@ fn fit_resumes_from_its_checkpoint() {
         "a run with --strategy adc, not adc without opacity resets",
     );
     refused(&["--global-scale", "0.5"], "a run with scene extent");
+    // Settings that change the steps: resumed with others, the run would train another way.
+    let was = "a run on background 0 0 0, at most 4000000 primitives";
+    refused(&["--white"], &format!("{was}, not on background 1 1 1,"));
+    refused(
+        &["--max-primitives", "1"],
+        &format!("{was}, not on background 0 0 0, at most 1 primitives"),
+    );
+    refused(
+        &["--freeze", "sh"],
+        "not on background 0 0 0, at most 4000000 primitives, with sh frozen",
+    );
     std::fs::write(out.join("checkpoint.bin"), "SPLATCK3 and then nothing").unwrap();
     refused(&[], "out/checkpoint.bin is damaged");
     for older in ["SPLATCK1", "SPLATCK2"] {

@@ -2,7 +2,7 @@
 //! the primitives, Adam's moments, density control's statistics, the random generator), and
 //! their file format.
 //!
-//! The file is little-endian: the magic `SPLATCK4`, then `u64` counts and fields (see
+//! The file is little-endian: the magic `SPLATCK5`, then `u64` counts and fields (see
 //! [`Checkpoint::write_to`]), then the arrays. Every count is checked against the file's
 //! length before anything is allocated, so a damaged file is refused by name, never trusted.
 
@@ -11,8 +11,11 @@ use crate::method::SplatMethod;
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 
-const MAGIC: &[u8; 8] = b"SPLATCK4";
-/// The format before the training views' footprint: resumed without checking it.
+const MAGIC: &[u8; 8] = b"SPLATCK5";
+/// The format before the run's settings: resumed without checking them.
+const UNSET: &[u8; 8] = b"SPLATCK4";
+/// The format before the training views' footprint (and the settings): resumed without
+/// checking either.
 const UNSIZED: &[u8; 8] = b"SPLATCK3";
 /// Earlier formats (the first without the strategy, the second without the scene's extent):
 /// refused with a word on why.
@@ -35,6 +38,9 @@ pub struct Checkpoint {
     /// How the primitive set changed (`Strategy::name`), set by the loop when it saves:
     /// resuming with another strategy would silently take other steps.
     pub strategy: String,
+    /// The run's other settings that change its steps ([`super::fit::settings`]), set by the
+    /// loop as the strategy is; empty before, and from a checkpoint of a format before them.
+    pub settings: String,
     pub step: usize,
     /// The run's length: the learning-rate schedule depends on it.
     pub steps: usize,
@@ -70,7 +76,9 @@ pub enum CheckpointError {
         path: PathBuf,
         error: std::io::Error,
     },
-    #[error("{path} is not a splat checkpoint (it does not start with SPLATCK4 or SPLATCK3)")]
+    #[error(
+        "{path} is not a splat checkpoint (it does not start with SPLATCK5, SPLATCK4 or SPLATCK3)"
+    )]
     Magic { path: PathBuf },
     #[error(
         "{path} was written by an earlier splat (format {format}), which this one cannot resume: start the run again"
@@ -87,6 +95,7 @@ impl Checkpoint {
             method: M::NAME.to_string(),
             words: M::Params::LEN,
             strategy: String::new(),
+            settings: String::new(),
             step: 0,
             steps,
             params: super::fit::flatten::<M>(params),
@@ -121,13 +130,13 @@ impl Checkpoint {
         crate::io::write_atomic(path, |w| self.write_to(w))
     }
 
-    /// The header (magic, method name, strategy name, then words, step, steps, primitives,
+    /// The header (magic, method name, strategy name, settings, then words, step, steps, primitives,
     /// Adam's step, statistics count, generator state, the extent's bits as `u64`, the training
     /// views and their pixels, 0 and 0 for none), then the parameters, both moments and the
     /// statistics.
     pub fn write_to(&self, w: &mut dyn Write) -> std::io::Result<()> {
         w.write_all(MAGIC)?;
-        for name in [&self.method, &self.strategy] {
+        for name in [&self.method, &self.strategy, &self.settings] {
             w.write_all(&(name.len() as u64).to_le_bytes())?;
             w.write_all(name.as_bytes())?;
         }
@@ -179,8 +188,8 @@ impl Checkpoint {
                 format: String::from_utf8_lossy(&old[..]).into_owned(),
             });
         }
-        let sized = magic == Some(MAGIC);
-        if !sized && magic != Some(UNSIZED) {
+        let (set, sized) = (magic == Some(MAGIC), magic != Some(UNSIZED));
+        if !set && magic != Some(UNSET) && magic != Some(UNSIZED) {
             return Err(CheckpointError::Magic {
                 path: path.to_path_buf(),
             });
@@ -193,6 +202,10 @@ impl Checkpoint {
         };
         let method = name("method name")?;
         let strategy = name("strategy name")?;
+        let settings = match set {
+            true => name("settings")?,
+            false => String::new(),
+        };
         let words = r.count("words")?;
         let step = r.count("step")?;
         let steps = r.count("steps")?;
@@ -249,6 +262,7 @@ impl Checkpoint {
             method,
             words,
             strategy,
+            settings,
             step,
             steps,
             params,
@@ -326,6 +340,7 @@ mod tests {
             method: "3dgs".into(),
             words: 2,
             strategy: "mcmc".into(),
+            settings: "on black".into(),
             step: 5,
             steps: 10,
             params: vec![1.0, -2.0, 3.5, f32::MIN_POSITIVE],
@@ -353,14 +368,26 @@ mod tests {
         assert_eq!(back, sample());
     }
 
-    /// A checkpoint of the format before the views' footprint (`SPLATCK3`) resumes, its
-    /// footprint unknown.
+    /// Checkpoints of the formats before the settings (`SPLATCK4`) and before the views'
+    /// footprint (`SPLATCK3`) resume, what they lack unknown.
     #[test]
-    fn a_checkpoint_of_the_previous_format_is_read() {
+    fn checkpoints_of_the_previous_formats_are_read() {
         let mut bytes = vec![];
         sample().write_to(&mut bytes).unwrap();
-        // The footprint follows the extent: after the magic, both names and 8 header words.
-        let at = 8 + (8 + 4) + (8 + 4) + 8 * 8;
+        // The settings follow the two names: after the magic, "3dgs" and "mcmc".
+        let settings = 8 + (8 + 4) + (8 + 4);
+        bytes.drain(settings..settings + 8 + "on black".len());
+        bytes[..8].copy_from_slice(b"SPLATCK4");
+        let unset = Checkpoint {
+            settings: String::new(),
+            ..sample()
+        };
+        assert_eq!(
+            Checkpoint::parse(&bytes, Path::new("c.bin")).unwrap(),
+            unset
+        );
+        // The footprint follows the extent, 8 header words on.
+        let at = settings + 8 * 8;
         bytes.drain(at..at + 16);
         bytes[..8].copy_from_slice(b"SPLATCK3");
         let back = Checkpoint::parse(&bytes, Path::new("c.bin")).unwrap();
@@ -368,7 +395,7 @@ mod tests {
             back,
             Checkpoint {
                 views: None,
-                ..sample()
+                ..unset
             }
         );
     }
@@ -391,14 +418,16 @@ mod tests {
         let e = Checkpoint::parse(&long, path).unwrap_err().to_string();
         assert!(e.contains("1 bytes follow"), "{e}");
         let mut huge = bytes.clone();
-        // The primitive count (after magic, the names' lengths and names, words, step, steps).
-        let at = 8 + 8 + 4 + 8 + 4 + 3 * 8;
+        // The primitive count (after magic, the names' and settings' lengths and texts, words,
+        // step, steps).
+        let names = 8 + (8 + 4) + (8 + 4) + (8 + 8);
+        let at = names + 3 * 8;
         huge[at..at + 8].copy_from_slice(&(1u64 << 60).to_le_bytes());
         let e = Checkpoint::parse(&huge, path).unwrap_err().to_string();
         assert!(e.contains("damaged"), "{e}");
         // Pixels in no views (the views' count follows the extent, after 8 header words).
         let mut pixels = bytes.clone();
-        let at = 8 + 8 + 4 + 8 + 4 + 8 * 8;
+        let at = names + 8 * 8;
         pixels[at..at + 8].copy_from_slice(&0u64.to_le_bytes());
         let e = Checkpoint::parse(&pixels, path).unwrap_err().to_string();
         assert!(e.contains("pixels in no training views"), "{e}");

@@ -556,6 +556,13 @@ pub(crate) fn adopt<M: Trainable>(
             state.strategy
         )));
     }
+    let settings = settings::<M>(opts);
+    if state.step > 0 && !state.settings.is_empty() && state.settings != settings {
+        return Err(FitError::Unsupported(format!(
+            "the checkpoint is of a run {}, not {settings} (go on with the run's own settings)",
+            state.settings
+        )));
+    }
     if state.step > 0 && state.extent.to_bits() != extent.to_bits() {
         return Err(FitError::Unsupported(format!(
             "the checkpoint is of a run with scene extent {}, not {extent} (the cameras' spread times --global-scale: the position rates and density control's sizes follow it)",
@@ -582,6 +589,7 @@ pub(crate) fn adopt<M: Trainable>(
         )));
     }
     state.strategy = strategy.to_string();
+    state.settings = settings;
     state.extent = extent;
     state.views = Some(views);
     Ok(())
@@ -630,6 +638,33 @@ pub(crate) fn rates_for<M: Trainable>(
 
 /// The parameter groups of `M` that a run of `opts` does not train (`opts.render.gradients`
 /// leaves them out).
+/// The settings of a run that change its steps beyond its method, length, strategy, extent
+/// and views (which a checkpoint records apart): the background, whether it is random, the
+/// cap on primitives, the frozen groups. A run resumed with others would train another way.
+pub fn settings<M: SplatMethod>(opts: &FitOptions) -> String {
+    let b = opts.background;
+    let frozen: Vec<String> = frozen_groups::<M>(opts).into_iter().map(|g| g.0).collect();
+    format!(
+        "on background {} {} {}{}{}{}",
+        b.x,
+        b.y,
+        b.z,
+        if opts.random_background {
+            " (random where the views are transparent)"
+        } else {
+            ""
+        },
+        match &opts.densify {
+            Some(s) => format!(", at most {} primitives", s.max_primitives()),
+            None => String::new(),
+        },
+        match frozen.is_empty() {
+            true => String::new(),
+            false => format!(", with {} frozen", frozen.join(", ")),
+        },
+    )
+}
+
 pub fn frozen_groups<M: SplatMethod>(opts: &FitOptions) -> Vec<(String, std::ops::Range<usize>)> {
     param_groups::<M>()
         .into_iter()
