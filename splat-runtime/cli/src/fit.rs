@@ -54,12 +54,12 @@ pub struct FitArgs {
     /// The random points' cube: its half-side in units of the scene's extent (the cameras'
     /// largest distance from their centre, times 1.1 and --global-scale), as gsplat's
     /// `init_extent` [default: 3; 0.5 on the built-in dataset].
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     init_extent: Option<f32>,
     /// Start every primitive at this size (the dataset's world units) instead of
     /// the root mean square distance to its 3 nearest neighbours, as 3DGS sizes them
     /// (shared/bench/gsplat_train.py starts at 0.02).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     init_size: Option<f32>,
     /// Start every primitive with this color, `R,G,B` in [0, 1] as the images store it,
     /// instead of its point's (random ones: a random color; gsplat_train.py starts at
@@ -70,7 +70,7 @@ pub struct FitArgs {
     /// density control's size thresholds and the random points' cube scale with it. Objects
     /// that fill little of the cameras' sphere train better with less than 1 (a resumed run
     /// must pass the same value).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 1.0)]
     global_scale: f32,
     /// Composite the images on white instead of black.
     #[arg(long)]
@@ -290,7 +290,16 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
             );
             Some(c)
         }
-        false => None,
+        false => {
+            let earlier = args.out.join(CHECKPOINT);
+            if earlier.exists() {
+                println!(
+                    "note: {} is an earlier run's; this run replaces it (--resume goes on from it instead)",
+                    earlier.display()
+                );
+            }
+            None
+        }
     };
     let steps = (args.steps)
         .or(resume.as_ref().map(|c| c.steps))
@@ -306,9 +315,13 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
         let (w, h) = view.size();
         let side = WINDOW as u32..=MAX_SIDE;
         if !(side.contains(&w) && side.contains(&h)) {
+            // The view, not the picture, where a --downscale or an undistortion made it.
+            let what = match taken.is_empty() {
+                true => format!("{} is", view.name),
+                false => format!("the view of {} is", view.name),
+            };
             bail!(
-                "{} is {w}x{h} pixels: training takes views of {WINDOW} (the loss's SSIM window) to {MAX_SIDE} pixels a side",
-                view.name
+                "{what} {w}x{h} pixels{taken}: training takes views of {WINDOW} (the loss's SSIM window) to {MAX_SIDE} pixels a side"
             );
         }
     }
