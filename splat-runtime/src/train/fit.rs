@@ -636,8 +636,6 @@ pub(crate) fn rates_for<M: Trainable>(
     Ok(rates)
 }
 
-/// The parameter groups of `M` that a run of `opts` does not train (`opts.render.gradients`
-/// leaves them out).
 /// The settings of a run that change its steps beyond its method, length, strategy, extent
 /// and views (which a checkpoint records apart): the background, whether it is random, the
 /// cap on primitives, the frozen groups. A run resumed with others would train another way.
@@ -665,6 +663,8 @@ pub fn settings<M: SplatMethod>(opts: &FitOptions) -> String {
     )
 }
 
+/// The parameter groups of `M` that a run of `opts` does not train (`opts.render.gradients`
+/// leaves them out).
 pub fn frozen_groups<M: SplatMethod>(opts: &FitOptions) -> Vec<(String, std::ops::Range<usize>)> {
     param_groups::<M>()
         .into_iter()
