@@ -62,10 +62,8 @@ pub(crate) fn eval_cmd(args: &EvalArgs, methods: &[Method]) -> Result<()> {
         methods::check_camera(method, methods, &shot.camera)?;
     }
     if let Some(out) = &args.out {
-        let pictures: Vec<&std::path::Path> = shots.iter().map(|s| s.path.as_path()).collect();
-        for k in 0..shots.len() {
-            crate::check_not_a_picture(&out.join(split).join(crate::render_name(k)), &pictures)?;
-        }
+        let pictures = shots.iter().map(|s| s.path.as_path());
+        crate::check_renders_spare(&out.join(split), shots.len(), pictures)?;
     }
     let background = if args.white { Vec3::ONE } else { Vec3::ZERO };
     // As `splat fit` renders its test views: alpha for the background, the default knobs.

@@ -244,11 +244,8 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
                 memory::check_room(&name, (&full, &shots), args.downscale.factor, room, demand)?;
             }
             let all = || shots.train.iter().chain(&shots.test);
-            let pictures: Vec<&Path> = all().map(|s| s.path.as_path()).collect();
-            for k in 0..shots.test.len() {
-                let render = args.out.join("test").join(crate::render_name(k));
-                crate::check_not_a_picture(&render, &pictures)?;
-            }
+            let pictures = all().map(|s| s.path.as_path());
+            crate::check_renders_spare(&args.out.join("test"), shots.test.len(), pictures)?;
             let taken = args.downscale.how(all()) + &undistorted(all());
             let bar = ProgressBar::new(all().count() as u64).with_style(
                 ProgressStyle::with_template("{bar:40} {pos}/{len} pictures decoded, {elapsed}")

@@ -304,11 +304,11 @@ pub(crate) fn remove_stale_renders(dir: &std::path::Path, count: usize) -> Resul
         let name = entry.file_name();
         let Some(k) = (name.to_str())
             .and_then(|n| n.strip_suffix(".png"))
-            .filter(|n| n.len() >= 3 && n.bytes().all(|b| b.is_ascii_digit()))
             .and_then(|n| n.parse::<usize>().ok())
         else {
             continue;
         };
+        // Only the names renders take ("+7.png" and "7.png" parse too).
         if k >= count && render_name(k) == name.to_string_lossy() {
             let path = entry.path();
             std::fs::remove_file(&path)
@@ -325,23 +325,30 @@ pub(crate) fn remove_stale_renders(dir: &std::path::Path, count: usize) -> Resul
     Ok(())
 }
 
-/// Refuses to write a render to any of `pictures` (a dataset's own, when `--out` points into
-/// the dataset): they are the truth the renders are measured against.
-pub(crate) fn check_not_a_picture(
-    render: &std::path::Path,
-    pictures: &[&std::path::Path],
+/// Refuses to write the `count` renders in `dir` ([`render_name`]) over any of `pictures` (a
+/// dataset's own, when `--out` points into the dataset): they are the truth the renders are
+/// measured against.
+pub(crate) fn check_renders_spare<'a>(
+    dir: &std::path::Path,
+    count: usize,
+    pictures: impl IntoIterator<Item = &'a std::path::Path>,
 ) -> Result<()> {
-    let same = |a: &std::path::Path, b: &std::path::Path| match (a.canonicalize(), b.canonicalize())
-    {
-        (Ok(a), Ok(b)) => a == b,
-        _ => false,
-    };
-    if let Some(p) = pictures.iter().find(|p| same(render, p)) {
-        anyhow::bail!(
-            "--out: {} would replace the dataset's picture {}: choose a folder outside the dataset",
-            render.display(),
-            p.display()
-        );
+    // Where the folder does not exist yet, no render can land on a picture.
+    if !dir.is_dir() {
+        return Ok(());
+    }
+    let truth: std::collections::HashSet<_> = (pictures.into_iter())
+        .filter_map(|p| p.canonicalize().ok())
+        .collect();
+    for k in 0..count {
+        let render = dir.join(render_name(k));
+        if let Some(picture) = render.canonicalize().ok().filter(|r| truth.contains(r)) {
+            anyhow::bail!(
+                "--out: {} would replace the dataset's picture {}: choose a folder outside the dataset",
+                render.display(),
+                picture.display()
+            );
+        }
     }
     Ok(())
 }

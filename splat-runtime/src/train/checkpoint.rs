@@ -130,10 +130,10 @@ impl Checkpoint {
         crate::io::write_atomic(path, |w| self.write_to(w))
     }
 
-    /// The header (magic, method name, strategy name, settings, then words, step, steps, primitives,
-    /// Adam's step, statistics count, generator state, the extent's bits as `u64`, the training
-    /// views and their pixels, 0 and 0 for none), then the parameters, both moments and the
-    /// statistics.
+    /// The header (magic, method name, strategy name, settings, then words, step, steps,
+    /// primitives, Adam's step, statistics count, generator state, the extent's bits as `u64`,
+    /// the training views and their pixels, 0 and 0 for none), then the parameters, both
+    /// moments and the statistics.
     pub fn write_to(&self, w: &mut dyn Write) -> std::io::Result<()> {
         w.write_all(MAGIC)?;
         for name in [&self.method, &self.strategy, &self.settings] {

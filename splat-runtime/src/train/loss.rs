@@ -64,7 +64,7 @@ fn check_shape(render: &Image, target: &Image) -> Result<(), LossError> {
     Ok(())
 }
 
-/// That `render` and `target` have the same shape, one SSIM's window fits.
+/// That `render` and `target` have the same shape, and that SSIM's window fits in them.
 fn check(render: &Image, target: &Image) -> Result<(), LossError> {
     check_shape(render, target)?;
     if (render.width as usize) < WINDOW || (render.height as usize) < WINDOW {
