@@ -25,6 +25,10 @@ mod cameras {
         cam.pixel_ray(pixel)
     }
 
+    pub fn can_project(cam: &Camera, p: Vec3) -> bool {
+        cam.can_project(p)
+    }
+
     /// The gradients of the pixel's two coordinates by the camera-space point (`jacobian`).
     pub fn projection_jacobian(cam: &Camera, p: Vec3) -> (Vec3, Vec3) {
         let (_, j) = jacobian(|q| cam.project_point(q), p);
@@ -140,6 +144,35 @@ fn the_fisheye_sees_behind_the_image_plane() {
     let px = cameras::project_point(&cam, p);
     assert!(px.is_finite() && px.x > cam.principal.x);
     assert!(cameras::pixel_ray(&cam, px).cross(p.normalize()).length() < 1e-4);
+}
+
+/// The fisheye projects up to its polynomial's fold, the first angle where r'(θ) vanishes,
+/// compiled as in the runtime: with one fold (r = θ - 0.25 θ³, fold at 1.1547 rad), with
+/// none before the 3-rad limit (the equidistant r = θ), and with the slope negative between
+/// two folds, at θ² = 1.5 and 3, and positive again past them (r' = (1 - θ² / 1.5) (1 - θ² / 3)).
+#[test]
+fn the_fisheye_projects_up_to_its_fold() {
+    let cases = [
+        (Vec4::new(-0.25, 0.0, 0.0, 0.0), 1.1547f32),
+        (Vec4::ZERO, 3.0),
+        (Vec4::new(-1.0 / 3.0, 0.2 / 4.5, 0.0, 0.0), 1.2247),
+    ];
+    for (distortion, fold) in cases {
+        let cam = Camera {
+            distortion,
+            ..camera(CameraModel::KannalaBrandt)
+        };
+        for theta in [0.0, 0.5, fold - 2e-3, fold + 2e-3, 2.0, 2.9, 3.1] {
+            let p = Vec3::new(theta.sin() * 0.6, theta.sin() * 0.8, theta.cos()) * 2.0;
+            let want = theta < fold;
+            assert_eq!(cam.can_project(p), want, "{distortion}: {theta} rad");
+            assert_eq!(
+                cameras::can_project(&cam, p),
+                want,
+                "compiled, {distortion}: {theta}"
+            );
+        }
+    }
 }
 
 /// A camera turning and moving during its readout.

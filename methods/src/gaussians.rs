@@ -100,7 +100,7 @@ macro_rules! gaussians_3d {
                 let radius = (2.0 * max_power.max(0.0) * lambda).sqrt().ceil();
                 let center = cam.project_point(mean);
                 Projected {
-                    visible: t.z > NEAR && det > 0.0 && opacity >= ALPHA_MIN,
+                    visible: t.z > NEAR && cam.can_project(t) && det > 0.0 && opacity >= ALPHA_MIN,
                     depth: t.z,
                     bbox_min: center - radius,
                     bbox_max: center + radius,

@@ -10,6 +10,7 @@ mod colmap;
 mod ewa_cameras;
 mod exact;
 mod extremes;
+mod fisheye_fold;
 mod fit;
 mod gpu_parity;
 mod gradients;

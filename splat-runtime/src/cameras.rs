@@ -112,9 +112,26 @@ pub mod kannala_brandt {
         (dir * theta.sin()).extend(theta.cos())
     }
 
-    /// Up to 3 rad (172°) off axis: the polynomial folds back near 180°.
-    pub fn can_project(_cam: &Camera, p: Vec3) -> bool {
-        (p.x * p.x + p.y * p.y).sqrt().atan2(p.z) < 3.0
+    /// Where r(θ) still rises: below 3 rad (172°; r / √(x² + y²) grows without bound toward
+    /// 180°) and before the polynomial's fold, the first angle where its slope
+    /// r'(θ) = 1 + 3 k1 θ² + 5 k2 θ⁴ + 7 k3 θ⁶ + 9 k4 θ⁸ reaches zero. Past the fold a point
+    /// lands on a pixel that a nearer ray reaches too: a ghost inside the picture. The slope is
+    /// checked at every sixteenth of 3 rad below the point's angle (the same for every point of
+    /// a camera: computed once where the compiler sees that) and at the angle itself, so a fold
+    /// is found wherever the slope stays negative for longer than 0.19 rad (a single fold
+    /// always).
+    pub fn can_project(cam: &Camera, p: Vec3) -> bool {
+        let theta = (p.x * p.x + p.y * p.y).sqrt().atan2(p.z);
+        let k = cam.distortion;
+        let mut rising = theta < 3.0;
+        for i in 0..17 {
+            let t = select(i < 16, 0.1875 * (i + 1) as f32, theta);
+            let t2 = t * t;
+            let slope =
+                1.0 + t2 * (3.0 * k.x + t2 * (5.0 * k.y + t2 * (7.0 * k.z + t2 * 9.0 * k.w)));
+            rising = rising && (slope > 0.0 || t > theta);
+        }
+        rising
     }
 }
 

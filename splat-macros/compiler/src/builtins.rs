@@ -92,7 +92,7 @@ pub fn camera_helper(method: &str) -> Option<String> {
 
 /// Camera methods that read the camera model: a kernel calling them works with every model.
 pub fn model_aware(method: &str) -> bool {
-    method == "project_point" || method == "pixel_ray" || method.starts_with("is_")
+    MODEL_FUNCTIONS.contains(&method) || method.starts_with("is_")
 }
 
 /// Camera methods that read the rolling shutter: a kernel calling them models it.
