@@ -1045,6 +1045,15 @@ fn fit_resumes_from_its_checkpoint() {
         &["--freeze", "sh"],
         "not on background 0 0 0, at most 4000000 primitives, with sh frozen",
     );
+    // One bit changed in the parameters, past the header.
+    let mut checkpoint = std::fs::read(out.join("checkpoint.bin")).unwrap();
+    let at = checkpoint.len() / 2;
+    checkpoint[at] ^= 1;
+    std::fs::write(out.join("checkpoint.bin"), checkpoint).unwrap();
+    refused(
+        &[],
+        "out/checkpoint.bin is damaged: its bytes do not match the checksum",
+    );
     std::fs::write(out.join("checkpoint.bin"), "SPLATCK3 and then nothing").unwrap();
     refused(&[], "out/checkpoint.bin is damaged");
     for older in ["SPLATCK1", "SPLATCK2"] {

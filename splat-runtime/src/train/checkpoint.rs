@@ -2,16 +2,19 @@
 //! the primitives, Adam's moments, density control's statistics, the random generator), and
 //! their file format.
 //!
-//! The file is little-endian: the magic `SPLATCK5`, then `u64` counts and fields (see
-//! [`Checkpoint::write_to`]), then the arrays. Every count is checked against the file's
-//! length before anything is allocated, so a damaged file is refused by name, never trusted.
+//! The file is little-endian: the magic `SPLATCK6`, then `u64` counts and fields (see
+//! [`Checkpoint::write_to`]), then the arrays, then the CRC-32 of all that. The checksum is
+//! checked first, and every count against the file's length before anything is allocated, so
+//! a damaged file is refused by name, never trusted.
 
 use crate::flat::Flat;
 use crate::method::SplatMethod;
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 
-const MAGIC: &[u8; 8] = b"SPLATCK5";
+const MAGIC: &[u8; 8] = b"SPLATCK6";
+/// The format before the checksum: resumed unchecked.
+const UNSUMMED: &[u8; 8] = b"SPLATCK5";
 /// The format before the run's settings: resumed without checking them.
 const UNSET: &[u8; 8] = b"SPLATCK4";
 /// The format before the training views' footprint (and the settings): resumed without
@@ -77,7 +80,7 @@ pub enum CheckpointError {
         error: std::io::Error,
     },
     #[error(
-        "{path} is not a splat checkpoint (it does not start with SPLATCK5, SPLATCK4 or SPLATCK3)"
+        "{path} is not a splat checkpoint (it does not start with SPLATCK6, SPLATCK5, SPLATCK4 or SPLATCK3)"
     )]
     Magic { path: PathBuf },
     #[error(
@@ -133,8 +136,19 @@ impl Checkpoint {
     /// The header (magic, method name, strategy name, settings, then words, step, steps,
     /// primitives, Adam's step, statistics count, generator state, the extent's bits as `u64`,
     /// the training views and their pixels, 0 and 0 for none), then the parameters, both
-    /// moments and the statistics.
+    /// moments and the statistics, then the CRC-32 of every byte before it.
     pub fn write_to(&self, w: &mut dyn Write) -> std::io::Result<()> {
+        let mut summed = Summed {
+            w,
+            crc: crc32fast::Hasher::new(),
+        };
+        self.write_fields(&mut summed)?;
+        let crc = summed.crc.finalize();
+        summed.w.write_all(&crc.to_le_bytes())
+    }
+
+    /// What [`write_to`](Self::write_to) writes before the checksum.
+    fn write_fields(&self, w: &mut dyn Write) -> std::io::Result<()> {
         w.write_all(MAGIC)?;
         for name in [&self.method, &self.strategy, &self.settings] {
             w.write_all(&(name.len() as u64).to_le_bytes())?;
@@ -188,12 +202,30 @@ impl Checkpoint {
                 format: String::from_utf8_lossy(&old[..]).into_owned(),
             });
         }
-        let (set, sized) = (magic == Some(MAGIC), magic != Some(UNSIZED));
+        let summed = magic == Some(MAGIC);
+        let set = summed || magic == Some(UNSUMMED);
+        let sized = magic != Some(UNSIZED);
         if !set && magic != Some(UNSET) && magic != Some(UNSIZED) {
             return Err(CheckpointError::Magic {
                 path: path.to_path_buf(),
             });
         }
+        let bytes = match summed {
+            true => {
+                let (fields, crc) = bytes
+                    .split_last_chunk::<4>()
+                    .ok_or_else(|| damaged("it ends before its checksum".into()))?;
+                if crc32fast::hash(fields) != u32::from_le_bytes(*crc) {
+                    return Err(damaged(
+                        "its bytes do not match the checksum written with them (the file changed \
+                         after it was written, or was cut short)"
+                            .into(),
+                    ));
+                }
+                fields
+            }
+            false => bytes,
+        };
         let mut r = Reader { bytes, at: 8, path };
         let mut name = |what: &str| -> Result<String, CheckpointError> {
             let len = r.count(&format!("the {what}'s length"))?;
@@ -280,6 +312,24 @@ impl Checkpoint {
     }
 }
 
+/// A writer that sums what passes through it.
+struct Summed<'a> {
+    w: &'a mut dyn Write,
+    crc: crc32fast::Hasher,
+}
+
+impl Write for Summed<'_> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.w.write(buf)?;
+        self.crc.update(&buf[..n]);
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.w.flush()
+    }
+}
+
 fn write_f32s(w: &mut dyn Write, values: &[f32]) -> std::io::Result<()> {
     let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
     w.write_all(&bytes)
@@ -360,6 +410,20 @@ mod tests {
         }
     }
 
+    /// `sample()`'s file without its checksum (the fields), and `fields` with theirs.
+    fn fields() -> Vec<u8> {
+        let mut bytes = vec![];
+        sample().write_to(&mut bytes).unwrap();
+        bytes.truncate(bytes.len() - 4);
+        bytes
+    }
+
+    fn summed(mut fields: Vec<u8>) -> Vec<u8> {
+        let crc = crc32fast::hash(&fields);
+        fields.extend(crc.to_le_bytes());
+        fields
+    }
+
     #[test]
     fn a_checkpoint_survives_its_file() {
         let mut bytes = vec![];
@@ -368,12 +432,17 @@ mod tests {
         assert_eq!(back, sample());
     }
 
-    /// Checkpoints of the formats before the settings (`SPLATCK4`) and before the views'
-    /// footprint (`SPLATCK3`) resume, what they lack unknown.
+    /// Checkpoints of the formats before the checksum (`SPLATCK5`), before the settings
+    /// (`SPLATCK4`) and before the views' footprint (`SPLATCK3`) resume, what they lack
+    /// unknown.
     #[test]
     fn checkpoints_of_the_previous_formats_are_read() {
-        let mut bytes = vec![];
-        sample().write_to(&mut bytes).unwrap();
+        let mut bytes = fields();
+        bytes[..8].copy_from_slice(b"SPLATCK5");
+        assert_eq!(
+            Checkpoint::parse(&bytes, Path::new("c.bin")).unwrap(),
+            sample()
+        );
         // The settings follow the two names: after the magic, "3dgs" and "mcmc".
         let settings = 8 + (8 + 4) + (8 + 4);
         bytes.drain(settings..settings + 8 + "on black".len());
@@ -400,10 +469,10 @@ mod tests {
         );
     }
 
-    /// Every truncation, a wrong magic, trailing bytes and a count far past the file's size
-    /// are refused with the file's name (no panic, no huge allocation).
+    /// Every truncation and every changed byte are refused with the file's name, by the
+    /// magic or the checksum.
     #[test]
-    fn damaged_checkpoints_are_refused_by_name() {
+    fn changed_checkpoints_are_refused_by_name() {
         let mut bytes = vec![];
         sample().write_to(&mut bytes).unwrap();
         let path = Path::new("run/checkpoint.bin");
@@ -413,9 +482,30 @@ mod tests {
                 .to_string();
             assert!(e.starts_with("run/checkpoint.bin "), "{e}");
         }
+        for at in 0..bytes.len() {
+            let mut changed = bytes.clone();
+            changed[at] ^= 0x10;
+            let e = Checkpoint::parse(&changed, path).unwrap_err().to_string();
+            let why = if at < 8 { "not a splat" } else { "checksum" };
+            assert!(
+                e.starts_with("run/checkpoint.bin ") && e.contains(why),
+                "{e}"
+            );
+        }
+    }
+
+    /// Checksummed and still wrong (written so by a fault, or by hand): trailing bytes and a
+    /// count far past the file's size are refused with the file's name (no panic, no huge
+    /// allocation).
+    #[test]
+    fn damaged_checkpoints_are_refused_by_name() {
+        let bytes = fields();
+        let path = Path::new("run/checkpoint.bin");
         let mut long = bytes.clone();
         long.push(0);
-        let e = Checkpoint::parse(&long, path).unwrap_err().to_string();
+        let e = Checkpoint::parse(&summed(long), path)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("1 bytes follow"), "{e}");
         let mut huge = bytes.clone();
         // The primitive count (after magic, the names' and settings' lengths and texts, words,
@@ -423,13 +513,17 @@ mod tests {
         let names = 8 + (8 + 4) + (8 + 4) + (8 + 8);
         let at = names + 3 * 8;
         huge[at..at + 8].copy_from_slice(&(1u64 << 60).to_le_bytes());
-        let e = Checkpoint::parse(&huge, path).unwrap_err().to_string();
-        assert!(e.contains("damaged"), "{e}");
+        let e = Checkpoint::parse(&summed(huge), path)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("damaged") && !e.contains("checksum"), "{e}");
         // Pixels in no views (the views' count follows the extent, after 8 header words).
         let mut pixels = bytes.clone();
         let at = names + 8 * 8;
         pixels[at..at + 8].copy_from_slice(&0u64.to_le_bytes());
-        let e = Checkpoint::parse(&pixels, path).unwrap_err().to_string();
+        let e = Checkpoint::parse(&summed(pixels), path)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("pixels in no training views"), "{e}");
         let e = Checkpoint::parse(b"PLY\n....", path)
             .unwrap_err()
