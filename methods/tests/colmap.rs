@@ -359,6 +359,19 @@ fn binary_and_text_models_read_back_as_written() {
     }
 }
 
+/// Text files saved by an editor that starts them with a byte-order mark read the same.
+#[test]
+fn text_models_with_a_byte_order_mark_read_back() {
+    let m = model();
+    let dir = dataset(&m, false);
+    for file in ["cameras.txt", "images.txt", "points3D.txt"] {
+        let path = dir.path().join("sparse/0").join(file);
+        let text = std::fs::read_to_string(&path).unwrap();
+        std::fs::write(&path, format!("\u{feff}{text}")).unwrap();
+    }
+    check(&read(dir.path(), Vec3::ZERO).unwrap(), &m, 1.0);
+}
+
 /// A model straight in `sparse/` is found too.
 #[test]
 fn a_model_in_sparse_is_found() {

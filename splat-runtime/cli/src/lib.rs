@@ -207,6 +207,13 @@ fn dispatch(cli: Cli, methods: &[Method]) -> Result<()> {
         Command::Bench(args) => bench::bench_cmd(&args, methods),
         Command::Tradeoff(args) => tradeoff::tradeoff_cmd(&args, methods),
         Command::Scene { out, camera_out } => {
+            let ply = out.extension().and_then(|e| e.to_str());
+            if !ply.is_some_and(|e| e.eq_ignore_ascii_case("ply")) {
+                anyhow::bail!(
+                    "--out `{}`: the scene is written as an INRIA PLY, name it .ply",
+                    out.display()
+                );
+            }
             // The scene and its camera appear together or not at all.
             let mut outputs = Outputs::default();
             let cloud = scene::planet();

@@ -194,12 +194,15 @@ pub fn tradeoff_cmd(args: &TradeoffArgs, methods: &[Method]) -> Result<()> {
         ),
     };
     println!(
-        "{}: {} primitives (SH degree {}), {w}x{h} {} camera, {backend}, median of {} frames",
+        "{}: {} primitives (SH degree {}), {w}x{h} {} camera, {backend}, {}",
         method.name,
         cloud.gaussians.len(),
         cloud.sh_degree,
         camera.model,
-        args.iters
+        match args.iters {
+            1 => "one frame".to_string(),
+            n => format!("median of {n} frames"),
+        }
     );
     println!("reference: the f32 render with no P_max, t_min 0 and no extra alpha skip");
     let settings = match &gpu {
@@ -581,11 +584,11 @@ fn compare(knob: &'static str, value: String, o: &Outcome, reference: &Outcome) 
 fn gradient_errors(got: &[f64], want: &[f64]) -> (f64, Vec<Option<f64>>) {
     let n = want.len().max(1) as f64;
     let rms = (want.iter().map(|w| w * w).sum::<f64>() / n).sqrt();
+    // Summed from +0: `sum` starts from -0, and an empty scene's error printed as -0.
     let sq = got
         .iter()
         .zip(want)
-        .map(|(g, w)| (g - w) * (g - w))
-        .sum::<f64>();
+        .fold(0.0, |sum, (g, w)| sum + (g - w) * (g - w));
     let rmse = match rms > 0.0 {
         true => (sq / n).sqrt() / rms,
         false => (sq / n).sqrt(),
@@ -787,4 +790,18 @@ fn panel(
         .draw()
         .map_err(&err)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Exact gradients, and none at all (an empty scene), are 0 off, not -0.
+    #[test]
+    fn no_error_is_plus_zero() {
+        for (got, want) in [(&[][..], &[][..]), (&[1.0, -2.0][..], &[1.0, -2.0][..])] {
+            let (rmse, _) = gradient_errors(got, want);
+            assert_eq!(format!("{rmse:.6e}"), "0.000000e0");
+        }
+    }
 }

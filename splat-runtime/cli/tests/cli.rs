@@ -325,6 +325,11 @@ fn bad_scenes_are_refused_clearly() {
     ok(&splat(&["scene", "--out", "good.ply"], dir.path()));
     let good = std::fs::read(dir.path().join("good.ply")).unwrap();
     let out = dir.path().join("out.png");
+    fails(
+        &splat(&["scene", "--out", "out.png"], dir.path()),
+        "--out `out.png`: the scene is written as an INRIA PLY, name it .ply",
+        &out,
+    );
     let render = |scene: &str| {
         splat(
             &["render", "--scene", scene, "--out", "out.png"],

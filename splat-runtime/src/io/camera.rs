@@ -266,10 +266,11 @@ pub fn read(path: &Path) -> Result<Camera, CameraError> {
             MAX_CAMERA_FILE >> 20
         ))));
     }
-    let file: CameraFile = serde_json::from_str(&text).map_err(|error| CameraError::Json {
-        path: path.display().to_string(),
-        error,
-    })?;
+    let file: CameraFile =
+        serde_json::from_str(super::without_bom(&text)).map_err(|error| CameraError::Json {
+            path: path.display().to_string(),
+            error,
+        })?;
     file.to_camera().map_err(|error| CameraError::In {
         path: path.display().to_string(),
         error: Box::new(error),
@@ -355,6 +356,23 @@ mod tests {
         );
         let file: CameraFile = serde_json::from_str(&half_turn).unwrap();
         assert!(matches!(file.to_camera(), Err(CameraError::ShutterTurn(_))));
+    }
+
+    /// A file an editor started with a byte-order mark reads as without it.
+    #[test]
+    fn a_byte_order_mark_is_skipped() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("c.json");
+        let cam = Camera {
+            focal: Vec2::splat(50.0),
+            principal: Vec2::new(32.0, 24.0),
+            size: Vec2::new(64.0, 48.0),
+            ..Default::default()
+        };
+        let mut json = vec![];
+        write_to(&mut json, &cam).unwrap();
+        std::fs::write(&path, [&[0xef, 0xbb, 0xbf][..], &json].concat()).unwrap();
+        assert_eq!(read(&path).unwrap(), cam);
     }
 
     #[test]

@@ -279,10 +279,11 @@ fn intrinsics(model: i32, width: u64, height: u64, params: &[f64]) -> Result<Int
     // A supported model.
     let name = MODELS[model as usize];
     if params.len() != want {
-        return Err(format!(
-            "has {} parameters, but {name} ({model}) has {want}",
-            params.len()
-        ));
+        let got = match params.len() {
+            1 => "1 parameter".to_string(),
+            n => format!("{n} parameters"),
+        };
+        return Err(format!("has {got}, but {name} ({model}) has {want}"));
     }
     let p = |i: usize| params[i] as f32;
     // The models with one focal length; the others have two.
@@ -578,7 +579,7 @@ fn text_file<I: FromStr + Display, T>(
         path: path.to_path_buf(),
         error,
     })?;
-    records(&text)
+    records(super::without_bom(&text))
         .map_err(|(n, p)| field(path, format!("line {n}"), p))?
         .into_iter()
         .map(|(n, line)| {

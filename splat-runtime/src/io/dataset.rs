@@ -500,7 +500,7 @@ fn read_json(path: &Path) -> Result<serde_json::Value, DatasetError> {
         path: path.to_path_buf(),
         error,
     })?;
-    serde_json::from_str(&text).map_err(|error| DatasetError::Json {
+    serde_json::from_str(super::without_bom(&text)).map_err(|error| DatasetError::Json {
         path: path.to_path_buf(),
         error,
     })

@@ -13,6 +13,12 @@ pub mod undistort;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+/// A text file's contents without the byte-order mark that some Windows editors put first
+/// (JSON and COLMAP's formats have none; left in, it reads as part of the first field).
+fn without_bom(text: &str) -> &str {
+    text.strip_prefix('\u{feff}').unwrap_or(text)
+}
+
 /// Writes `path` through a temporary file in the same folder and a rename, so a failed or
 /// interrupted write never leaves a partial file behind.
 pub fn write_atomic(

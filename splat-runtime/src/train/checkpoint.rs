@@ -351,7 +351,7 @@ impl Reader<'_> {
             .filter(|end| *end <= self.bytes.len())
             .ok_or_else(|| CheckpointError::Damaged {
                 path: self.path.to_path_buf(),
-                what: format!("it ends before {what} ({count} items)"),
+                what: format!("it ends before {what} (count {count})"),
             })?;
         let out = &self.bytes[self.at..end];
         self.at = end;
