@@ -308,6 +308,9 @@ pub(crate) fn render_cmd(args: &RenderArgs, methods: &[Method]) -> Result<()> {
         }
     };
     methods::check_camera(method, methods, &camera)?;
+    if let Some(room) = crate::memory::available() {
+        crate::memory::check_render(camera.size.x as u32, camera.size.y as u32, room)?;
+    }
     // The view's picture, on black as the renderer composites: read before anything is
     // written, so a broken one fails the command with nothing written.
     let picture = match &shot {
