@@ -363,10 +363,16 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
         checkpoint_every: (args.checkpoint_every > 0).then_some(args.checkpoint_every),
         ..Default::default()
     };
-    // Made before training, not with the outputs at its end: an output folder that cannot be
-    // made fails the command before hours of training.
-    std::fs::create_dir_all(args.out.join("test"))
-        .with_context(|| format!("creating {}", args.out.join("test").display()))?;
+    // Tried before training, not with the outputs at its end: an output folder that cannot be
+    // made fails the command before hours of training. The renders' folder is made again with
+    // them, so a run stopped early leaves none empty.
+    let renders = args.out.join("test");
+    let made = !renders.exists();
+    std::fs::create_dir_all(&renders).with_context(|| format!("creating {}", renders.display()))?;
+    if made {
+        std::fs::remove_dir(&renders)
+            .with_context(|| format!("removing {} (made to try)", renders.display()))?;
+    }
     train(&Fit {
         args,
         gpu,
@@ -548,8 +554,16 @@ impl Fit<'_> {
                 "the CPU".to_string()
             }
         };
-        let stopped_by = listening.as_ref().and_then(Listening::stopped_by);
-        drop(listening);
+        // Still listening through the final evaluation: a signal there ends the run with the
+        // last step's checkpoint, as one during the steps does.
+        let stopped_by = || listening.as_ref().and_then(Listening::stopped_by);
+        let kept = || match opts.checkpoint_every {
+            Some(_) => format!(
+                "its checkpoint and metrics are in {}: the same command with --resume goes on",
+                args.out.display()
+            ),
+            None => "nothing was saved (--checkpoint-every 0)".to_string(),
+        };
         let stopped = state.step < opts.steps;
         match stopped {
             true => bar.abandon(),
@@ -557,18 +571,12 @@ impl Fit<'_> {
         }
         saved?;
         if stopped {
-            let kept = match opts.checkpoint_every {
-                Some(_) => format!(
-                    "its checkpoint and metrics are in {}: the same command with --resume goes on",
-                    args.out.display()
-                ),
-                None => "nothing was saved (--checkpoint-every 0)".to_string(),
-            };
             bail!(
-                "stopped by {} after step {} of {}; {kept}",
-                stopped_by.unwrap_or("a signal"),
+                "stopped by {} after step {} of {}; {}",
+                stopped_by().unwrap_or("a signal"),
                 state.step,
-                opts.steps
+                opts.steps,
+                kept()
             );
         }
         if faulty_steps > 0 {
@@ -580,6 +588,14 @@ impl Fit<'_> {
         let per_step = t.elapsed().as_secs_f64() / (opts.steps - first).max(1) as f64;
         let images = test_images(&params)?;
         let after = Evaluation::of(&images, &data.test)?;
+        if let Some(by) = stopped_by() {
+            bail!(
+                "stopped by {by} in the final evaluation, after the run's {} steps; {}",
+                opts.steps,
+                kept()
+            );
+        }
+        drop(listening);
         if log.evaluations.last().is_none_or(|e| e.0 < opts.steps) {
             log.evaluations.push((opts.steps, after));
         }
