@@ -30,6 +30,10 @@ pub fn write_atomic(
     outputs.commit().map_err(|e| e.error)
 }
 
+/// The ending of a file being written (`.scene.ply-Ab12Cd.partial`): renamed to its target
+/// when done, removed on failure; left only by a process killed outright.
+pub const PARTIAL: &str = ".partial";
+
 /// Files that appear together or not at all (a picture and its depth, a scene and its camera,
 /// a dataset's views and transforms): each is written to a temporary file beside its target
 /// (in the target's folder, made if missing), and none is moved into place until every one is
@@ -50,7 +54,12 @@ impl Outputs {
         write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
     ) -> std::io::Result<()> {
         self.make_folder(folder_of(path))?;
-        let mut tmp = tempfile::NamedTempFile::new_in(folder_of(path))?;
+        // Named for its target, so one that a killed process leaves says what it was.
+        let name = path.file_name().unwrap_or_default().to_string_lossy();
+        let mut tmp = tempfile::Builder::new()
+            .prefix(&format!(".{name}-"))
+            .suffix(PARTIAL)
+            .tempfile_in(folder_of(path))?;
         {
             let mut buf = std::io::BufWriter::new(tmp.as_file_mut());
             write(&mut buf)?;
@@ -191,6 +200,12 @@ mod tests {
 
         let mut outputs = Outputs::default();
         outputs.stage(&at("made/d/four.txt"), write).unwrap();
+        let staged = std::fs::read_dir(at("made/d")).unwrap().next().unwrap();
+        let name = staged.unwrap().file_name().into_string().unwrap();
+        assert!(
+            name.starts_with(".four.txt-") && name.ends_with(PARTIAL),
+            "{name}"
+        );
         outputs.commit().unwrap();
         assert_eq!(std::fs::read(at("made/d/four.txt")).unwrap(), b"x");
     }
