@@ -818,6 +818,15 @@ impl Log {
                 log.evaluations.push((step, e));
             }
         }
+        // Written with the checkpoint, they hold every step up to it, unless edited since.
+        let kept = log.steps.iter().map(|s| s.0);
+        if !kept.eq(1..=last) {
+            println!(
+                "warning: {} holds {} of the checkpoint's {last} steps: the resumed run's metrics miss the others",
+                path.display(),
+                log.steps.len()
+            );
+        }
         Ok(log)
     }
 

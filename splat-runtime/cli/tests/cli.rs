@@ -998,10 +998,22 @@ fn fit_resumes_from_its_checkpoint() {
         stdout.contains("resuming from out/checkpoint.bin after step 20 of 20"),
         "{stdout}"
     );
+    assert!(!stdout.contains("warning"), "{stdout}");
     let fit = fit_output(&out, 3, (16, 16));
     assert_eq!(fit.rows, 21);
     let steps: Vec<usize> = fit.psnr.iter().map(|p| p.0).collect();
     assert_eq!(steps, [0, 10, 20]);
+    // Metrics cut short (edited since): the run resumes and says what its log misses.
+    let csv = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
+    let cut: Vec<&str> = csv.lines().take(12).collect();
+    std::fs::write(out.join("metrics.csv"), cut.join("\n")).unwrap();
+    let stdout = ok(&splat(&[&args[..], &["--resume"]].concat(), dir.path()));
+    assert!(
+        stdout.contains(
+            "warning: out/metrics.csv holds 10 of the checkpoint's 20 steps: the resumed run's metrics miss the others"
+        ),
+        "{stdout}"
+    );
     // A start above the cap runs: the cap only stops growth.
     let capped = [
         "fit", "data", "--points", "50", "--out", "capped", "--steps", "2",
