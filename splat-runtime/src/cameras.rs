@@ -116,10 +116,9 @@ pub mod kannala_brandt {
     /// 180°) and before the polynomial's fold, the first angle where its slope
     /// r'(θ) = 1 + 3 k1 θ² + 5 k2 θ⁴ + 7 k3 θ⁶ + 9 k4 θ⁸ reaches zero. Past the fold a point
     /// lands on a pixel that a nearer ray reaches too: a ghost inside the picture. The slope is
-    /// checked at every sixteenth of 3 rad below the point's angle (the same for every point of
-    /// a camera: computed once where the compiler sees that) and at the angle itself, so a fold
-    /// is found wherever the slope stays negative for longer than 0.19 rad (a single fold
-    /// always).
+    /// checked at the angle itself and at every sixteenth of 3 rad below it (angles that do not
+    /// depend on the point, so calls for several points can share them), so a fold is found
+    /// wherever the slope stays negative for longer than 0.19 rad (a single fold always).
     pub fn can_project(cam: &Camera, p: Vec3) -> bool {
         let theta = (p.x * p.x + p.y * p.y).sqrt().atan2(p.z);
         let k = cam.distortion;
