@@ -218,3 +218,49 @@ fn a_depth_gradient_needs_the_depth_output() {
     let err = checks::group_error(&flat(&got.gradients.params), &flat(&want.gradients.params));
     assert!(err < 1e-5, "{err} of the largest gradient");
 }
+
+/// With no transmittance stop (`t_min` 0, `splat tradeoff`'s reference) a deep stack drives
+/// T below f32's normal range. The pixel stops at the smallest normal T instead of walking on
+/// with T stuck at a denormal, whose division back in the backward pass overflowed to inf
+/// and NaN: the gradients stay finite and match the default stop's, which leaves out less
+/// than 1e-4 of each pixel's color.
+#[test]
+fn no_transmittance_stop_keeps_the_gradients_finite() {
+    use splat_runtime::pipeline::shade::{Blend, T_MIN};
+    let cam = camera(16, 16);
+    let mut rng = fastrand::Rng::with_seed(9);
+    let ps: Vec<Params> = (0..400)
+        .map(|k| {
+            let z = 2.0 + 0.01 * k as f32;
+            let mut g = gaussian_at(&mut rng, &cam, Vec2::new(8.0, 8.0), z, -0.5);
+            g.opacity_logit = 0.0;
+            g
+        })
+        .collect();
+    let gradients = |t_min: f32| {
+        let opts = RenderOptions {
+            blend: Blend {
+                t_min,
+                ..Blend::default()
+            },
+            ..Default::default()
+        };
+        let (_, state) = render_for_backward::<Method>(&ps, &cam, &opts).unwrap();
+        let grad = FrameGrad {
+            color: vec![1.0; 16 * 16 * 3],
+            alpha: None,
+            depth: None,
+        };
+        let g = backward::<Method>(&state, &ps, &cam, &grad).unwrap();
+        g.params
+            .iter()
+            .flat_map(checks::words)
+            .collect::<Vec<f64>>()
+    };
+    let (deep, stopped) = (gradients(0.0), gradients(T_MIN));
+    let largest = stopped.iter().fold(0.0f64, |m, g| m.max(g.abs()));
+    for (k, (d, s)) in deep.iter().zip(&stopped).enumerate() {
+        assert!(d.is_finite(), "word {k}: {d}");
+        assert!((d - s).abs() <= 1e-3 * largest, "word {k}: {d} vs {s}");
+    }
+}

@@ -313,6 +313,7 @@ pub(crate) struct Outcome {
 }
 
 /// A setting's errors against the reference.
+#[derive(Default)]
 struct Row {
     knob: &'static str,
     value: String,
@@ -330,9 +331,16 @@ struct Row {
 }
 
 impl Row {
-    /// The worst group's relative RMSE (None without gradients).
+    /// The worst group's relative RMSE (None without gradients); NaN if any group's is, which
+    /// `f64::max` would pass over, reading as exact.
     fn gradient_error(&self) -> Option<f64> {
-        let worst = self.groups.iter().map(|g| g.1).fold(0.0, f64::max);
+        let worst = (self.groups.iter().map(|g| g.1)).fold(0.0, |worst: f64, e| {
+            if worst >= e || worst.is_nan() {
+                worst
+            } else {
+                e
+            }
+        });
         (!self.groups.is_empty()).then_some(worst)
     }
 }
@@ -670,12 +678,14 @@ fn draw(outputs: &mut Outputs, path: &std::path::Path, rows: &[Row], method: &st
         .collect();
     // Only the settings with a backward pass have a gradient point.
     let with_gradients: Vec<&Row> = rows.iter().filter(|r| r.backward_ms.is_some()).collect();
+    // A NaN error has no place on the axis: the tables show it.
     let gradient: Vec<(f64, f64)> = with_gradients
         .iter()
         .map(|r| {
             let time = r.forward_ms + r.backward_ms.unwrap_or(0.0);
             (time, r.gradient_error().unwrap_or(0.0))
         })
+        .filter(|(_, e)| !e.is_nan())
         .collect();
     plot::png(outputs, path, (1400, 560), |root| {
         let panels = root.split_evenly((1, 2));
@@ -795,6 +805,24 @@ fn panel(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The worst group's error is NaN when one group's is.
+    #[test]
+    fn a_nan_group_is_the_worst() {
+        let row = |errors: &[f64]| Row {
+            groups: errors.iter().map(|&e| ("g".into(), e, vec![])).collect(),
+            ..Row::default()
+        };
+        assert_eq!(row(&[0.5, 0.25]).gradient_error(), Some(0.5));
+        assert!(
+            row(&[0.5, f64::NAN, 0.25])
+                .gradient_error()
+                .unwrap()
+                .is_nan()
+        );
+        assert!(row(&[f64::NAN, 0.5]).gradient_error().unwrap().is_nan());
+        assert_eq!(row(&[]).gradient_error(), None);
+    }
 
     /// Exact gradients, and none at all (an empty scene), are 0 off, not -0.
     #[test]

@@ -336,7 +336,7 @@ fn tile_pass(
             ("STRIDE", layout.stride.to_string()),
             ("SHADE_AT", layout.shade_at.to_string()),
             ("CHANNELS", layout.channels.to_string()),
-            ("T_MIN", format!("{:?}", rule.t_min)),
+            ("T_MIN", format!("{:?}", rule.stop_at())),
             ("ALPHA_MIN", format!("{:?}", rule.alpha_min)),
             (
                 "BATCH_WORDS",

@@ -28,6 +28,16 @@ pub struct Blend {
     pub alpha_min: f32,
 }
 
+impl Blend {
+    /// The transmittance at or below which a pixel stops: `t_min`, but never below the
+    /// smallest normal f32. Under it T has lost its precision (with `t_min` 0 it sticks at the
+    /// smallest denormal and the pixel walks every primitive), and the backward pass, which
+    /// recovers T by dividing the last one back, overflows to inf and NaN.
+    pub fn stop_at(&self) -> f32 {
+        self.t_min.max(f32::MIN_POSITIVE)
+    }
+}
+
 impl Default for Blend {
     fn default() -> Self {
         Blend {
@@ -103,7 +113,7 @@ pub struct Step {
 pub fn step(alpha: F32x8, valid: M32x8, done: M32x8, t: F32x8, blend: Blend) -> Step {
     let live = counts(alpha, valid, blend) & !done;
     let next = t * (1.0 - alpha);
-    let stop = live & next.le(F32x8::splat(blend.t_min));
+    let stop = live & next.le(F32x8::splat(blend.stop_at()));
     let take = live & !stop;
     Step {
         alpha,
