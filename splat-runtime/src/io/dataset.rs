@@ -590,9 +590,9 @@ fn nerfstudio_shots(dir: &Path) -> Result<Shots, DatasetError> {
             .ok_or_else(|| field(&path, named("camera_model"), "must be a string"))?;
         let coefficient = |name: &str| Ok::<f64, DatasetError>(number(name)?.unwrap_or(0.0));
         let (camera_model, distortion, lens) = match model {
-            "PINHOLE" => (CameraModel::Pinhole, Vec4::ZERO, Lens::default()),
-            // nerfstudio's radial polynomial runs to k4 r⁸.
-            "OPENCV" => (
+            // nerfstudio's radial polynomial runs to k4 r⁸. It reads the coefficients under
+            // any model, so a PINHOLE camera (the default) that has them is OPENCV's.
+            "PINHOLE" | "OPENCV" => (
                 CameraModel::Pinhole,
                 Vec4::ZERO,
                 Lens {
@@ -607,6 +607,16 @@ fn nerfstudio_shots(dir: &Path) -> Result<Shots, DatasetError> {
                 },
             ),
             "OPENCV_FISHEYE" => {
+                if let Some(p) = ["p1", "p2"]
+                    .into_iter()
+                    .find(|p| coefficient(p).is_ok_and(|v| v != 0.0))
+                {
+                    return Err(field(
+                        &path,
+                        named(p),
+                        "is a tangential term, which OPENCV_FISHEYE does not have",
+                    ));
+                }
                 let k = [
                     coefficient("k1")?,
                     coefficient("k2")?,
@@ -638,9 +648,13 @@ fn nerfstudio_shots(dir: &Path) -> Result<Shots, DatasetError> {
         let shot = Shot::new(image_path, camera);
         shots.push(match lens.is_identity() {
             true => shot,
-            false => shot
-                .through(lens)
-                .map_err(|p| field(&path, format!("the OPENCV lens of {}", at("file_path")), p))?,
+            false => shot.through(lens).map_err(|p| {
+                field(
+                    &path,
+                    format!("the lens (k1-k4, p1, p2) of {}", at("file_path")),
+                    p,
+                )
+            })?,
         });
     }
     Ok(Shots::every_8th_held_out(shots, Vec::new()))
@@ -1435,7 +1449,18 @@ mod tests {
                 // A lens that folds (k1 < 0) before the rays of a picture far off its centre.
                 json!({"camera_model": "OPENCV", "k1": -0.1}),
                 json!({"cx": -60.0}),
-                "the OPENCV lens of frames[0].file_path finds no rectangle of the 30x20 picture's pixels",
+                "the lens (k1-k4, p1, p2) of frames[0].file_path finds no rectangle of the 30x20 picture's pixels",
+            ),
+            (
+                // The same lens without a camera_model: PINHOLE, and the lens still applies.
+                json!({"k1": -0.1}),
+                json!({"cx": -60.0}),
+                "the lens (k1-k4, p1, p2) of frames[0].file_path finds no rectangle",
+            ),
+            (
+                json!({"camera_model": "OPENCV_FISHEYE", "k1": 0.01, "p2": 0.001}),
+                none.clone(),
+                "p2 is a tangential term, which OPENCV_FISHEYE does not have",
             ),
         ];
         for (fields, frame, want) in cases {
