@@ -38,9 +38,11 @@ pub struct BenchArgs {
     /// Write the forward image here as raw little-endian float32, H x W x 3.
     #[arg(long)]
     raw_out: Option<PathBuf>,
-    #[arg(long, default_value_t = 800)]
+    /// The built-in camera's width (a camera file gives its own).
+    #[arg(long, default_value_t = 800, conflicts_with = "camera")]
     width: u32,
-    #[arg(long, default_value_t = 600)]
+    /// The built-in camera's height (a camera file gives its own).
+    #[arg(long, default_value_t = 600, conflicts_with = "camera")]
     height: u32,
     /// Compile the GPU shaders with naga's run-time checks (index clamps, division guards, a
     /// counter bounding each loop), to measure what they cost; off by default.
@@ -72,6 +74,12 @@ pub fn bench_cmd(args: &BenchArgs, methods: &[Method]) -> Result<()> {
     let gpu = crate::pick_gpu(args.backend)?.map(|g| g.with_shader_checks(args.shader_checks));
     if args.shader_checks && gpu.is_none() {
         bail!("--shader-checks is for the GPU's shaders; this run is on the CPU");
+    }
+    if let Some(gpu) = gpu.as_ref().filter(|_| !args.threads.is_empty()) {
+        bail!(
+            "--threads is for the CPU's thread pools; this run is on the GPU ({})",
+            gpu.adapter
+        );
     }
     let task = Bench {
         args,

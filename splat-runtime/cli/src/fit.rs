@@ -336,6 +336,11 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
     let mid = centres.iter().copied().sum::<Vec3>() / centres.len() as f32;
     let extent = 1.1 * centres.iter().map(|c| c.distance(mid)).fold(0.0, f32::max);
     let extent = if extent > 0.0 { extent } else { 1.0 } * args.global_scale;
+    if let (StrategyArg::Fixed, Some(cap)) = (&args.strategy, args.max_primitives) {
+        bail!(
+            "--max-primitives {cap}: the cap is on density control's growth, and --strategy fixed keeps the primitives it starts with"
+        );
+    }
     let opts = FitOptions {
         steps,
         background,
@@ -681,6 +686,12 @@ fn trained_groups<M: Trainable>(
     }
     let (frozen, trained): (Vec<&str>, Vec<&str>) =
         names.iter().partition(|n| freeze.iter().any(|f| f == *n));
+    if trained.is_empty() {
+        bail!(
+            "--freeze {}: those are all of {method}'s parameter groups, which leaves nothing to train",
+            frozen.join(",")
+        );
+    }
     let gradients = GradientSet::params::<M>(&trained).map_err(|e| anyhow!(e))?;
     if !frozen.is_empty() {
         println!(

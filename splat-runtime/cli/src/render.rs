@@ -59,9 +59,11 @@ pub struct RenderArgs {
     /// software ones included); `auto` picks a hardware GPU when there is one.
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     backend: Backend,
-    #[arg(long, default_value_t = 800)]
+    /// The built-in camera's width (a camera file gives its own).
+    #[arg(long, default_value_t = 800, conflicts_with = "camera")]
     width: u32,
-    #[arg(long, default_value_t = 600)]
+    /// The built-in camera's height (a camera file gives its own).
+    #[arg(long, default_value_t = 600, conflicts_with = "camera")]
     height: u32,
 }
 

@@ -44,9 +44,11 @@ pub struct TradeoffArgs {
     #[arg(long, default_value = "tradeoff")]
     out: PathBuf,
 
-    #[arg(long, default_value_t = 800)]
+    /// The built-in camera's width (a camera file gives its own).
+    #[arg(long, default_value_t = 800, conflicts_with = "camera")]
     width: u32,
-    #[arg(long, default_value_t = 600)]
+    /// The built-in camera's height (a camera file gives its own).
+    #[arg(long, default_value_t = 600, conflicts_with = "camera")]
     height: u32,
 }
 

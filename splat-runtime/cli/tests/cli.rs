@@ -940,6 +940,19 @@ fn fit_freezes_the_groups_it_is_told_to() {
         &["--freeze", "log_scale"],
         "log_scale cannot stay frozen under density control (adc)",
     );
+    refused(
+        &[
+            "--strategy",
+            "fixed",
+            "--freeze",
+            "sh,mean,log_scale,rotation,opacity_logit",
+        ],
+        "--freeze mean,log_scale,rotation,opacity_logit,sh: those are all of 3dgs's parameter groups, which leaves nothing to train",
+    );
+    refused(
+        &["--strategy", "fixed", "--max-primitives", "5"],
+        "--max-primitives 5: the cap is on density control's growth, and --strategy fixed keeps the primitives it starts with",
+    );
 }
 
 /// With no dataset, `splat fit` trains on views of the built-in planet; the test views are
@@ -1289,6 +1302,11 @@ fn bench_times_both_passes_and_writes_the_raw_image_render_would() {
             String::from_utf8_lossy(&run.stdout)
         );
     }
+    // Thread counts on the GPU (where there is an adapter, software ones included).
+    let gpu = splat(&["bench", "--backend", "gpu", "--threads", "2"], dir.path());
+    if !String::from_utf8_lossy(&gpu.stderr).contains("no GPU adapter") {
+        fails(&gpu, "--threads is for the CPU's thread pools", &out);
+    }
 }
 
 /// A dataset's view is a camera: `render` and `bench` take `--camera DATASET --view SPLIT/K`
@@ -1361,7 +1379,11 @@ fn a_dataset_view_is_a_camera() {
     assert!(stdout.contains("96x72"), "{stdout}");
 
     let out = dir.path().join("b.png");
-    let cases: [(&[&str], &str); 7] = [
+    let cases: [(&[&str], &str); 8] = [
+        (
+            &["--camera", "planet", "--width", "10"],
+            "the argument '--camera <CAMERA>' cannot be used with '--width <WIDTH>'",
+        ),
         (
             &["--camera", "planet", "--view", "test/2"],
             "there is no view test/2: the dataset has 2 test views (test/0 to test/1)",
