@@ -30,6 +30,7 @@ pub struct BenchArgs {
     /// Timed frames per measurement (after 3 warm-up frames).
     #[arg(long, default_value_t = 20)]
     iters: usize,
+    /// Tile size in pixels: 8, 16, 32 or 64 on the CPU; 8 or 16 on the GPU.
     #[arg(long, default_value_t = 16)]
     tile: u32,
     /// CPU thread counts to measure, e.g. 1,2,4,8,16 (default: all cores).
@@ -65,6 +66,9 @@ pub fn bench_cmd(args: &BenchArgs, methods: &[Method]) -> Result<()> {
     if let Some(&t) = args.threads.iter().find(|&&t| t > MAX_THREADS) {
         bail!("--threads {t}: at most {MAX_THREADS} threads");
     }
+    if let Some(raw) = &args.raw_out {
+        crate::check_out_file("--raw-out", raw)?;
+    }
     let (cloud, camera) = crate::scene::given_or_built_in(
         args.scene.as_deref(),
         &args.camera,
@@ -79,6 +83,16 @@ pub fn bench_cmd(args: &BenchArgs, methods: &[Method]) -> Result<()> {
         bail!(
             "--threads is for the CPU's thread pools; this run is on the GPU ({})",
             gpu.adapter
+        );
+    }
+    let (tiles, backend) = match gpu {
+        Some(_) => (&splat_runtime::gpu::TILE_SIZES[..], "GPU"),
+        None => (&splat_runtime::pipeline::TILE_SIZES[..], "CPU"),
+    };
+    if !tiles.contains(&args.tile) {
+        bail!(
+            "--tile {}: the {backend} backend takes tile sizes {tiles:?}",
+            args.tile
         );
     }
     let task = Bench {

@@ -526,9 +526,11 @@ impl Fit<'_> {
             if r.step.is_multiple_of(10) || r.refinement.is_some() || r.evaluation.is_some() || line
             {
                 let v = r.loss;
-                let test = log.evaluations.last().map_or(before.psnr, |e| e.1.psnr);
+                // The last measured: the final evaluation comes after the last step's line.
+                let (at, test) =
+                    (log.evaluations.last()).map_or((0, before.psnr), |e| (e.0, e.1.psnr));
                 let status = format!(
-                    "loss {:.4} (L1 {:.4}, SSIM {:.3}), test PSNR {test:.2} dB, {} primitives",
+                    "loss {:.4} (L1 {:.4}, SSIM {:.3}), test PSNR {test:.2} dB at step {at}, {} primitives",
                     v.loss, v.l1, v.ssim, r.primitives
                 );
                 if line {
@@ -604,18 +606,27 @@ impl Fit<'_> {
         if log.evaluations.last().is_none_or(|e| e.0 < opts.steps) {
             log.evaluations.push((opts.steps, after));
         }
+        let taken = opts.steps - first;
+        let pace = match taken {
+            0 => format!("no steps to take on {place}"),
+            1 => format!("1 step on {place}, {:.1} ms", per_step * 1e3),
+            n => format!("{n} steps on {place}, {:.1} ms per step", per_step * 1e3),
+        };
+        let views = match after.views {
+            1 => "1 test view".to_string(),
+            n => format!("{n} test views"),
+        };
         println!(
-            "{} steps on {place}, {:.1} ms per step, {} primitives; {} test views: PSNR {:.2} -> {:.2} dB, SSIM {:.3} -> {:.3}",
-            opts.steps - first,
-            per_step * 1e3,
+            "{pace}, {} primitives; {views}: PSNR {:.2} -> {:.2} dB, SSIM {:.3} -> {:.3}",
             params.len(),
-            after.views,
             before.psnr,
             after.psnr,
             before.ssim,
             after.ssim
         );
-        print_step_times(&times, opts.steps - first, gpu.as_ref());
+        if taken > 0 {
+            print_step_times(&times, taken, gpu.as_ref());
+        }
         let out = &args.out;
         let ply_path = out.join(SCENE);
         let cloud = GaussianCloud {

@@ -295,6 +295,26 @@ pub(crate) fn check_out_folder(dir: &std::path::Path) -> Result<()> {
     Ok(())
 }
 
+/// Refuses `path`, given as `flag`, for a file a command writes at its end, before the work:
+/// when it names a folder (one that exists, or a trailing `/`) or lies under a file.
+pub(crate) fn check_out_file(flag: &str, path: &std::path::Path) -> Result<()> {
+    let shown = path.display();
+    let trailing = path
+        .as_os_str()
+        .to_string_lossy()
+        .ends_with(std::path::is_separator);
+    if path.is_dir() || trailing {
+        anyhow::bail!("{flag} {shown}: it names a folder, and the output is a file");
+    }
+    let folder = path.parent().filter(|p| !p.as_os_str().is_empty());
+    if let Some(file) =
+        folder.and_then(|f| f.ancestors().find(|a| a.exists()).filter(|a| !a.is_dir()))
+    {
+        anyhow::bail!("{flag} {shown}: {} is a file, not a folder", file.display());
+    }
+    Ok(())
+}
+
 /// The name of the `k`th render of a run's views in its output folder.
 pub(crate) fn render_name(k: usize) -> String {
     format!("{k:03}.png")

@@ -28,7 +28,7 @@ pub struct RenderArgs {
     /// Output file: .png, .exr or .npy.
     #[arg(long, default_value = "render.png")]
     out: PathBuf,
-    /// Tile size in pixels (8, 16, 32 or 64).
+    /// Tile size in pixels: 8, 16, 32 or 64 on the CPU; 8 or 16 on the GPU.
     #[arg(long, default_value_t = 16)]
     tile: u32,
     /// Also output the expected depth.
@@ -201,6 +201,7 @@ pub(crate) fn gallery(
             out.display()
         );
     }
+    crate::check_out_file("--out", out)?;
     let cloud = scene::planet();
     let (cols, rows) = (CameraModel::ALL.len() as u32, methods.len() as u32);
     let (grid_width, grid_height) = (ROW_LABELS + width * cols, COLUMN_LABELS + height * rows);
@@ -296,6 +297,7 @@ pub(crate) fn render_cmd(args: &RenderArgs, methods: &[Method]) -> Result<()> {
             args.out.display()
         );
     }
+    crate::check_out_file("--out", &args.out)?;
     let t0 = Instant::now();
     let (cloud, source) = match &args.scene {
         Some(path) => (ply::read(path)?, path.display().to_string()),

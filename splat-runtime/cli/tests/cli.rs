@@ -1280,8 +1280,12 @@ fn bench_times_both_passes_and_writes_the_raw_image_render_would() {
     assert_eq!(raw, reference, "bench's raw image differs from render's");
 
     let out = dir.path().join("never.f32");
-    let bad: [(&[&str], &str); 5] = [
+    let bad: [(&[&str], &str); 6] = [
         (&["--iters", "0"], "--iters"),
+        (
+            &["--tile", "7"],
+            "--tile 7: the CPU backend takes tile sizes [8, 16, 32, 64]",
+        ),
         (
             &["--shader-checks"],
             "--shader-checks is for the GPU's shaders",
@@ -1709,6 +1713,28 @@ fn outputs_that_belong_together_appear_together_or_not_at_all() {
         "o.depth.png: it is a folder",
     );
     assert_eq!(kept("o.png"), picture, "the picture was replaced");
+    // A file output that names a folder, or lies under a file, is refused before the work.
+    let before_work = |out: Output, needle: &str| {
+        assert!(
+            out.stdout.is_empty(),
+            "{}",
+            String::from_utf8_lossy(&out.stdout)
+        );
+        refused(out, needle);
+    };
+    let bench = |raw: &str| {
+        let args = ["bench", "--iters", "1", "--threads", "1", "--raw-out", raw];
+        splat(&[&args[..], &small].concat(), dir.path())
+    };
+    before_work(bench("raw/"), "--raw-out raw/: it names a folder");
+    before_work(
+        bench("o.png/raw.f32"),
+        "--raw-out o.png/raw.f32: o.png is a file",
+    );
+    before_work(
+        splat(&["gallery", "--out", "o.depth.png"], dir.path()),
+        "--out o.depth.png: it names a folder",
+    );
     let scene_args = |camera: &'static str| ["scene", "--out", "keep.ply", "--camera-out", camera];
     // A camera under a file: no folder can be made there.
     refused(
