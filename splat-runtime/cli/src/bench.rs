@@ -268,7 +268,11 @@ impl Bench<'_> {
                 })?;
                 Ok((forward, both))
             })?;
-            print_table(&format!("CPU, {t} threads"), &forward, &both);
+            print_table(
+                &format!("CPU, {}", crate::count(t, "thread")),
+                &forward,
+                &both,
+            );
             rows.push((t, forward, both));
         }
         if rows.len() > 1 {

@@ -326,9 +326,9 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
     methods::check_camera(method, methods, &first.camera)?;
     let (width, height) = first.size();
     println!(
-        "{name}: {} training and {} test views of {width}x{height}{taken}, read in {:.1} s",
+        "{name}: {} training and {} of {width}x{height}{taken}, read in {:.1} s",
         data.train.len(),
-        data.test.len(),
+        crate::count(data.test.len(), "test view"),
         t.elapsed().as_secs_f64()
     );
     // The cameras' spread sets the scene's extent (3DGS scales position rates by it).
@@ -612,10 +612,7 @@ impl Fit<'_> {
             1 => format!("1 step on {place}, {:.1} ms", per_step * 1e3),
             n => format!("{n} steps on {place}, {:.1} ms per step", per_step * 1e3),
         };
-        let views = match after.views {
-            1 => "1 test view".to_string(),
-            n => format!("{n} test views"),
-        };
+        let views = crate::count(after.views, "test view");
         println!(
             "{pace}, {} primitives; {views}: PSNR {:.2} -> {:.2} dB, SSIM {:.3} -> {:.3}",
             params.len(),

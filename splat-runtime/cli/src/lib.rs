@@ -254,9 +254,9 @@ fn dispatch(cli: Cli, methods: &[Method]) -> Result<()> {
             let data = scene::dataset(views, width, height, background)?;
             dataset::write_blender(&out, &data)?;
             println!(
-                "{} training and {} test views of {width}x{height}",
+                "{} training and {} of {width}x{height}",
                 data.train.len(),
-                data.test.len()
+                count(data.test.len(), "test view")
             );
             crate::wrote(&out);
             Ok(())
@@ -313,6 +313,14 @@ pub(crate) fn check_out_file(flag: &str, path: &std::path::Path) -> Result<()> {
         anyhow::bail!("{flag} {shown}: {} is a file, not a folder", file.display());
     }
     Ok(())
+}
+
+/// `n` of `noun`, in the plural unless one: "1 test view", "3 test views".
+pub(crate) fn count(n: usize, noun: &str) -> String {
+    match n {
+        1 => format!("1 {noun}"),
+        n => format!("{n} {noun}s"),
+    }
 }
 
 /// The name of the `k`th render of a run's views in its output folder.

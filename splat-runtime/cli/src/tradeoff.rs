@@ -191,8 +191,11 @@ pub fn tradeoff_cmd(args: &TradeoffArgs, methods: &[Method]) -> Result<()> {
     let backend = match &gpu {
         Some(gpu) => format!("GPU, {}", gpu.adapter),
         None => format!(
-            "CPU, {} threads",
-            std::thread::available_parallelism().map_or(1, |n| n.get())
+            "CPU, {}",
+            crate::count(
+                std::thread::available_parallelism().map_or(1, |n| n.get()),
+                "thread"
+            )
         ),
     };
     println!(

@@ -1260,7 +1260,7 @@ fn bench_times_both_passes_and_writes_the_raw_image_render_would() {
     args.extend(["--raw-out", "ours.f32"]);
     let stdout = ok(&splat(&args, dir.path()));
     for needle in [
-        "CPU, 1 threads",
+        "CPU, 1 thread",
         "CPU, 2 threads",
         "speed-up",
         "forward + backward",
@@ -1578,7 +1578,7 @@ fn fit_starts_from_a_colmap_datasets_points() {
     let args = ["fit", "data", "--steps", "5", "--out", "out"];
     let stdout = ok(&splat(&args, dir.path()));
     assert!(
-        stdout.contains("2 training and 1 test views of 16x16"),
+        stdout.contains("2 training and 1 test view of 16x16"),
         "{stdout}"
     );
     assert!(
@@ -1604,7 +1604,7 @@ fn fit_starts_from_a_colmap_datasets_points() {
     let stdout = ok(&splat(&args, dir.path()));
     assert!(
         stdout.contains(
-            "views of 14x14 (the lens distortion of 3 pictures taken out, 16x16 cropped to 14x14)"
+            "1 test view of 14x14 (the lens distortion of 3 pictures taken out, 16x16 cropped to 14x14)"
         ),
         "{stdout}"
     );
