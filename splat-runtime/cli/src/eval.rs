@@ -9,9 +9,9 @@ use crate::{Backend, render};
 use anyhow::{Context, Result};
 use splat_runtime::RenderOptions;
 use splat_runtime::glam::Vec3;
+use splat_runtime::io::Outputs;
 use splat_runtime::io::dataset::{self, Shot};
 use splat_runtime::io::image::stage_image;
-use splat_runtime::io::{Outputs, ply};
 use splat_runtime::train::fit::composite;
 use splat_runtime::train::loss;
 use std::path::PathBuf;
@@ -50,7 +50,7 @@ struct Measured {
 
 pub(crate) fn eval_cmd(args: &EvalArgs, methods: &[Method]) -> Result<()> {
     let method = methods::find(methods, &args.method)?;
-    let cloud = ply::read(&args.scene)?;
+    let cloud = crate::scene::read(&args.scene)?;
     let shots = args.split.of(dataset::read_shots(&args.dataset)?);
     let shots = dataset::downscaled(shots, args.downscale.factor)?;
     let taken = args.downscale.how(&shots) + &undistorted(&shots);

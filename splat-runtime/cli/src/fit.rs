@@ -227,6 +227,8 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
     crate::check_out_folder(&args.out)?;
     check_out_files(&args.out)?;
     check_knobs(args)?;
+    let groups = method.full().param_fields.iter().map(|(name, _)| *name);
+    frozen_and_trained(&groups.collect::<Vec<_>>(), &args.freeze, method.name)?;
     // Picked first: the memory a run needs depends on where it trains.
     let gpu = crate::pick_gpu(args.backend)?;
     let background = if args.white { Vec3::ONE } else { Vec3::ZERO };
@@ -629,6 +631,7 @@ impl Fit<'_> {
         let cloud = GaussianCloud {
             sh_degree: 3,
             gaussians: params.iter().map(ToStored::to_stored).collect(),
+            folded_3d_filter: false,
         };
         // The result, its renders, the metrics and the curve appear together.
         let mut outputs = Outputs::default();
@@ -677,15 +680,13 @@ fn print_step_times(total: &StepTimes, steps: usize, gpu: Option<&Gpu>) {
     println!("| step | {wall:.2} | 100% |");
 }
 
-/// `opts` training every parameter group of `M` (`--method method`) but those named in
-/// `freeze`; says which are trained and which frozen.
-fn trained_groups<M: Trainable>(
-    opts: &FitOptions,
+/// The parameter groups `names` of `method` split into those `freeze` names and the rest;
+/// refused where `freeze` names a group the method lacks, or every group.
+fn frozen_and_trained<'a>(
+    names: &[&'a str],
     freeze: &[String],
     method: &str,
-) -> Result<FitOptions> {
-    let groups = param_groups::<M>();
-    let names: Vec<&str> = groups.iter().map(|(name, _)| name.as_str()).collect();
+) -> Result<(Vec<&'a str>, Vec<&'a str>)> {
     if let Some(unknown) = freeze.iter().find(|f| !names.contains(&f.as_str())) {
         bail!(
             "--freeze {unknown}: {method} has no parameter group `{unknown}`; its groups are {}",
@@ -700,6 +701,19 @@ fn trained_groups<M: Trainable>(
             frozen.join(",")
         );
     }
+    Ok((frozen, trained))
+}
+
+/// `opts` training every parameter group of `M` (`--method method`) but those named in
+/// `freeze`; says which are trained and which frozen.
+fn trained_groups<M: Trainable>(
+    opts: &FitOptions,
+    freeze: &[String],
+    method: &str,
+) -> Result<FitOptions> {
+    let groups = param_groups::<M>();
+    let names: Vec<&str> = groups.iter().map(|(name, _)| name.as_str()).collect();
+    let (frozen, trained) = frozen_and_trained(&names, freeze, method)?;
     let gradients = GradientSet::params::<M>(&trained).map_err(|e| anyhow!(e))?;
     if !frozen.is_empty() {
         println!(

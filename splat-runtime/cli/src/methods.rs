@@ -37,6 +37,8 @@ pub struct Instance {
     pub(crate) bench: fn(&Bench) -> Result<()>,
     pub(crate) tradeoff: fn(&Tradeoff) -> Result<Vec<Outcome>>,
     pub(crate) fit: Option<fn(&Fit) -> Result<()>>,
+    /// Its parameters' fields (name, words): the groups `splat fit --freeze` names.
+    pub(crate) param_fields: &'static [(&'static str, usize)],
     /// The effects a render with this instance simulates (`splat render --explain`).
     pub(crate) effects: fn(&Camera, &RenderOptions) -> Effects,
 }
@@ -55,6 +57,7 @@ impl Instance {
             bench: |b| b.run::<M>(),
             tradeoff: |t| t.run::<M>(),
             fit: None,
+            param_fields: M::PARAM_FIELDS,
             effects: Effects::of::<M>,
         }
     }

@@ -7,7 +7,7 @@ use plotters::prelude::RGBColor;
 use splat_runtime::glam::Vec3;
 use splat_runtime::gpu::{Gpu, GpuRenderer, GpuScene, HardwareRenderer};
 use splat_runtime::io::ply::{FromStored, GaussianCloud};
-use splat_runtime::io::{Outputs, image as image_io, ply};
+use splat_runtime::io::{Outputs, image as image_io};
 use splat_runtime::pipeline::precision::Precision;
 use splat_runtime::{Camera, CameraModel, Frame, Image, RenderOptions, SplatMethod, render};
 use std::path::PathBuf;
@@ -117,7 +117,7 @@ impl Render<'_> {
             }
             None => {
                 frames(&mut |camera| Ok(render::<M>(&params, camera, self.opts)?))?;
-                "CPU".to_string()
+                "the CPU".to_string()
             }
             Some(gpu) => {
                 let mut renderer = GpuRenderer::<M>::new(gpu, self.opts)?;
@@ -300,7 +300,7 @@ pub(crate) fn render_cmd(args: &RenderArgs, methods: &[Method]) -> Result<()> {
     crate::check_out_file("--out", &args.out)?;
     let t0 = Instant::now();
     let (cloud, source) = match &args.scene {
-        Some(path) => (ply::read(path)?, path.display().to_string()),
+        Some(path) => (scene::read(path)?, path.display().to_string()),
         None => (scene::planet(), "built-in planet".to_string()),
     };
     let (camera, shot) = match args.camera.read()? {
@@ -359,7 +359,7 @@ pub(crate) fn render_cmd(args: &RenderArgs, methods: &[Method]) -> Result<()> {
         frame.color.height,
         camera.model,
     );
-    let pairs = if backend == "CPU" {
+    let pairs = if gpu.is_none() {
         s.pairs.to_string()
     } else {
         "not counted on the GPU".to_string()
@@ -369,7 +369,7 @@ pub(crate) fn render_cmd(args: &RenderArgs, methods: &[Method]) -> Result<()> {
         s.visible, s.intersections
     );
     let stages = s.preprocess + s.rasterize + s.shade;
-    if backend != "CPU" && stages.is_zero() {
+    if gpu.is_some() && stages.is_zero() {
         println!(
             "load {:.1} ms; no stage times: this adapter has no GPU timestamps",
             ms(load)

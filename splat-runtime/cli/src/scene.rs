@@ -56,6 +56,7 @@ pub fn planet() -> GaussianCloud {
     GaussianCloud {
         sh_degree: 1,
         gaussians,
+        folded_3d_filter: false,
     }
 }
 
@@ -140,10 +141,24 @@ pub fn given_or_built_in(
         None => built_in_camera(width, height, CameraModel::Pinhole)?,
     };
     let cloud = match scene {
-        Some(path) => splat_runtime::io::ply::read(path)?,
+        Some(path) => read(path)?,
         None => planet(),
     };
     Ok((cloud, camera))
+}
+
+/// The PLY scene at `path`, with a note when the reader folded Mip-Splatting's 3D filter in.
+pub fn read(path: &std::path::Path) -> anyhow::Result<GaussianCloud> {
+    let cloud = splat_runtime::io::ply::read(path)?;
+    if cloud.folded_3d_filter {
+        eprintln!(
+            "note: {} holds Mip-Splatting's 3D filter (filter_3D), folded into its scales and \
+             opacities; for its 2D filter, --method 3dgs-aa is gsplat's antialiased mode (it adds \
+             0.3 px² to each footprint's variance, where Mip-Splatting adds 0.1)",
+            path.display()
+        );
+    }
+    Ok(cloud)
 }
 
 /// The built-in view ([`camera`]) at `width` x `height`, refused before any work when a side
@@ -206,6 +221,7 @@ pub fn dataset(
     let cloud = GaussianCloud {
         sh_degree: 1,
         gaussians: body(&mut Lcg(7)),
+        folded_3d_filter: false,
     };
     let params: Vec<gs3d::Params> = cloud.params();
     let opts = RenderOptions {

@@ -283,7 +283,7 @@ fn truncated(cloud: &ply::GaussianCloud, degree: u32) -> ply::GaussianCloud {
     let kept = ply::sh_coefficients(degree);
     let mut lower = ply::GaussianCloud {
         sh_degree: degree,
-        gaussians: cloud.gaussians.clone(),
+        ..cloud.clone()
     };
     for g in &mut lower.gaussians {
         g.sh[kept..].fill(Default::default());

@@ -137,7 +137,10 @@ fn every_method_renders_on_the_cameras_it_supports() {
             ],
             dir.path(),
         ));
-        assert!(stdout.starts_with(&format!("{method} on CPU")), "{stdout}");
+        assert!(
+            stdout.starts_with(&format!("{method} on the CPU")),
+            "{stdout}"
+        );
         assert!(stdout.contains(&format!("{model} camera")), "{stdout}");
         assert!(dir.path().join(&out).exists());
     }
@@ -939,6 +942,13 @@ fn fit_freezes_the_groups_it_is_told_to() {
     refused(
         &["--freeze", "log_scale"],
         "log_scale cannot stay frozen under density control (adc)",
+    );
+    // Checked before the dataset is read: a missing one is not what the error is about.
+    let before_reading = ["fit", "nowhere", "--freeze", "colour", "--out", "refused"];
+    fails(
+        &splat(&before_reading, dir.path()),
+        "--freeze colour: 3dgs has no parameter group",
+        &dir.path().join("refused/scene.ply"),
     );
     refused(
         &[

@@ -2,6 +2,11 @@
 //! with float properties `x y z [nx ny nz] f_dc_0..2 f_rest_0..(3(K-1)-1) opacity scale_0..2
 //! rot_0..3`, `f_rest` channel-major (all R coefficients, then G, then B). The SH degree
 //! (0 to 3) is read from the number of `f_rest` properties.
+//!
+//! A Mip-Splatting file adds `filter_3D`, the standard deviation of its 3D smoothing
+//! filter. It is folded in at reading, as Mip-Splatting's own fused export does: the
+//! filter convolved with the Gaussian adds filter² to each squared scale, and the opacity
+//! is scaled by the ratio of the determinants so that the Gaussian's integral is unchanged.
 
 use glam::{Vec3, Vec4};
 use std::collections::HashMap;
@@ -26,6 +31,8 @@ pub struct StoredGaussian {
 pub struct GaussianCloud {
     pub sh_degree: u32,
     pub gaussians: Vec<StoredGaussian>,
+    /// Whether the file held Mip-Splatting's 3D filter, now folded into the Gaussians.
+    pub folded_3d_filter: bool,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -225,6 +232,11 @@ pub fn parse(r: &mut impl BufRead) -> Result<GaussianCloud, PlyError> {
         find("rot_2")?,
         find("rot_3")?,
     ];
+    let filter_3d = ["filter_3D", "filter_3d"]
+        .into_iter()
+        .find(|n| index.contains_key(n))
+        .map(find)
+        .transpose()?;
 
     let offsets: Vec<usize> = props
         .iter()
@@ -277,18 +289,48 @@ pub fn parse(r: &mut impl BufRead) -> Result<GaussianCloud, PlyError> {
                 rest_idx[2 * per_channel + k],
             ])?;
         }
-        gaussians.push(StoredGaussian {
+        let mut g = StoredGaussian {
             mean: v3(mean)?,
             log_scale: v3(scale)?,
             rotation: Vec4::new(get(rot[0])?, get(rot[1])?, get(rot[2])?, get(rot[3])?),
             opacity_logit: get(opacity)?,
             sh,
-        });
+        };
+        if let Some(f) = filter_3d {
+            fold_3d_filter(&mut g, get(f)?);
+        }
+        gaussians.push(g);
     }
     Ok(GaussianCloud {
         sh_degree,
         gaussians,
+        folded_3d_filter: filter_3d.is_some(),
     })
+}
+
+/// Folds a 3D smoothing filter of standard deviation `filter` into the Gaussian: each
+/// squared scale s² becomes s² + filter², and the opacity is multiplied by
+/// sqrt(Π s² / Π (s² + filter²)). Computed in logs (f64), so that no scale or opacity that
+/// f32 holds underflows or saturates on the way.
+fn fold_3d_filter(g: &mut StoredGaussian, filter: f32) {
+    if filter == 0.0 {
+        return;
+    }
+    let ln_filter = f64::from(filter.abs()).ln();
+    // ln(e^a + e^b), exact where one term is far below the other.
+    let ln_add = |a: f64, b: f64| a.max(b) + (-(a - b).abs()).exp().ln_1p();
+    let mut ln_coef = 0.0;
+    for s in g.log_scale.as_mut() {
+        let ln_s = f64::from(*s);
+        let ln_widened = 0.5 * ln_add(2.0 * ln_s, 2.0 * ln_filter);
+        ln_coef += ln_s - ln_widened;
+        *s = ln_widened as f32;
+    }
+    // logit(sigmoid(o) coef) = ln p - ln(1 - p), with ln sigmoid(o) = -ln(1 + e^-o).
+    let o = f64::from(g.opacity_logit);
+    let ln_sigmoid = -ln_add(0.0, -o);
+    let ln_p = ln_sigmoid + ln_coef;
+    g.opacity_logit = (ln_p - (-ln_p.exp()).ln_1p()) as f32;
 }
 
 /// Writes the cloud in the INRIA layout (with zero normals), atomically.
@@ -382,6 +424,7 @@ mod tests {
         GaussianCloud {
             sh_degree: degree,
             gaussians,
+            folded_3d_filter: false,
         }
     }
 
@@ -454,6 +497,68 @@ mod tests {
         write_to(&mut bytes, &nan).unwrap();
         let e = parse(&mut bytes.as_slice()).unwrap_err().to_string();
         assert!(e.contains("vertex 2") && e.contains("`y`"), "{e}");
+    }
+
+    /// `cloud` as Mip-Splatting writes it: an extra `filter_3D` property per vertex.
+    fn with_filter(c: &GaussianCloud, filters: &[f32]) -> Vec<u8> {
+        let mut bytes = vec![];
+        write_to(&mut bytes, c).unwrap();
+        let end = b"end_header\n";
+        let at = bytes.windows(end.len()).position(|w| w == end).unwrap() + end.len();
+        let mut out = bytes[..at - end.len()].to_vec();
+        out.extend(b"property float filter_3D\n");
+        out.extend(end);
+        let stride = (bytes.len() - at) / c.gaussians.len();
+        for (row, f) in bytes[at..].chunks(stride).zip(filters) {
+            out.extend(row);
+            out.extend(f.to_le_bytes());
+        }
+        out
+    }
+
+    /// Mip-Splatting's 3D filter is folded in as its fused export does: s² + f² per axis,
+    /// and the opacity scaled by sqrt(Π s² / Π (s² + f²)) (computed here directly in f64).
+    #[test]
+    fn mip_splatting_filters_are_folded_in() {
+        let mut c = cloud(0);
+        // Ordinary, tiny (the filter dominates), saturated opacity, and no filter.
+        c.gaussians[1].log_scale = Vec3::splat(-30.0);
+        c.gaussians[2].opacity_logit = 40.0;
+        let filters = [0.05, 0.01, 0.002, 0.0, 0.3];
+        let read = parse(&mut with_filter(&c, &filters).as_slice()).unwrap();
+        let mut plain = vec![];
+        write_to(&mut plain, &c).unwrap();
+        assert!(read.folded_3d_filter && !parse(&mut plain.as_slice()).unwrap().folded_3d_filter);
+        for ((before, after), f) in c.gaussians.iter().zip(&read.gaussians).zip(filters) {
+            let f = f64::from(f);
+            let (mut det_before, mut det_after) = (1.0, 1.0);
+            for (s, s_after) in before
+                .log_scale
+                .to_array()
+                .iter()
+                .zip(after.log_scale.to_array())
+            {
+                let s2 = (2.0 * f64::from(*s)).exp();
+                let expected = s2 + f * f;
+                let got = (2.0 * f64::from(s_after)).exp();
+                assert!((got / expected - 1.0).abs() < 1e-6, "{got} vs {expected}");
+                det_before *= s2;
+                det_after *= expected;
+            }
+            let sigmoid = |o: f64| 1.0 / (1.0 + (-o).exp());
+            let p = sigmoid(f64::from(before.opacity_logit)) * (det_before / det_after).sqrt();
+            let expected = (p / (1.0 - p)).ln();
+            let got = f64::from(after.opacity_logit);
+            assert!(
+                (got - expected).abs() < 1e-5 * expected.abs().max(1.0),
+                "{got} vs {expected}"
+            );
+            assert_eq!(
+                (after.mean, after.rotation, after.sh),
+                (before.mean, before.rotation, before.sh)
+            );
+        }
+        assert_eq!(read.gaussians[3], c.gaussians[3], "no filter, no change");
     }
 
     /// A stream that never ends is read no further than the header's lines and vertices say.
