@@ -11,12 +11,13 @@ use std::time::{Duration, Instant};
 mod common;
 use common::{camera, scene, size_args};
 
-const STAGES: [&str; 6] = [
+const STAGES: [&str; 7] = [
     "preprocess",
     "rasterize",
     "shade",
     "forward",
-    "backward blend + reduce",
+    "backward blend",
+    "reduce (workers' sums)",
     "project adjoint",
 ];
 
@@ -44,7 +45,8 @@ fn main() {
             s.rasterize,
             s.shade,
             forward,
-            g.stats.blend + g.stats.reduce,
+            g.stats.blend,
+            g.stats.reduce,
             g.stats.project,
         ]
     };
@@ -59,9 +61,11 @@ fn main() {
             .unwrap();
         let best = pool.install(|| {
             run();
-            (0..3).map(|_| run()).fold([Duration::MAX; 6], |b, r| {
-                std::array::from_fn(|k| b[k].min(r[k]))
-            })
+            (0..3)
+                .map(|_| run())
+                .fold([Duration::MAX; STAGES.len()], |b, r| {
+                    std::array::from_fn(|k| b[k].min(r[k]))
+                })
         });
         rows.push(best);
     }

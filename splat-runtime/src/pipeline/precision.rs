@@ -144,9 +144,17 @@ impl Stored {
 
     /// `n` sums of zero, held as `precision` holds sums ([`sum_format`]).
     pub fn zero_sums(precision: Precision, n: usize) -> Stored {
+        // Zeros written now, not pages the kernel maps and zeroes at their first write: the
+        // backward blend's first writes land in random order, and with its workers faulting
+        // pages in together the 2-thread blend took 15% longer at 1M Gaussians.
+        fn written<T: Copy>(zero: T, n: usize) -> Vec<T> {
+            let mut v = Vec::with_capacity(n);
+            v.resize(n, zero);
+            v
+        }
         match sum_format(precision) {
-            Precision::F32 => Stored::F32(vec![0.0; n]),
-            _ => Stored::F16(vec![0; n]),
+            Precision::F32 => Stored::F32(written(0.0, n)),
+            _ => Stored::F16(written(0, n)),
         }
     }
 
