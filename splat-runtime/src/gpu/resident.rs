@@ -454,7 +454,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
 
     /// The last frame's tile lists, read back: each tile's primitives front to back, whole
     /// (`P_max` caps what the blends read, not the lists), as the CPU's
-    /// [`TileLists`](crate::pipeline::rasterize::TileLists).
+    /// [`TileLists`].
     pub fn download_tile_lists(&self) -> Result<TileLists, GpuRenderError> {
         let info = self.frame.ok_or(GpuRenderError::NoFrame)?;
         let tiles = info.grid.tile_count();

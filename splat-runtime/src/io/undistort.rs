@@ -6,7 +6,7 @@
 //! The view keeps the picture's focal lengths and principal point: its pixels are the
 //! picture's pixel grid, cropped to the pixels whose rays the picture saw (the lens puts them
 //! between the picture's pixel centres). Each of them is mapped through the lens into the
-//! picture and interpolated there bilinearly ([`Picture::blend`]: colors weighted by coverage,
+//! picture and interpolated there bilinearly (`Picture::blend`: colors weighted by coverage,
 //! 8-bit pictures kept 8-bit). The crop is found from the camera alone, before any pixel is
 //! read.
 
@@ -95,7 +95,7 @@ impl Undistortion {
     /// is cropped by a pixel at a time until none has one, then each side grows back while its
     /// next row or column is seen (a side cut for an unseen corner its neighbour also had).
     /// Only the border is checked: a lens that does not fold maps the rectangle's inside
-    /// between its border's images ([`Undistortion::apply`] refuses a pixel that falls
+    /// between its border's images (`Undistortion::apply` refuses a pixel that falls
     /// outside). An error when no rectangle is left, as for a principal point far off the
     /// picture.
     pub fn new(picture: Camera, lens: Lens) -> Result<Undistortion, String> {
