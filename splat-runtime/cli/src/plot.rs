@@ -69,6 +69,19 @@ pub fn text(size: u32) -> TextStyle<'static> {
     (FONT, size).into_font().into()
 }
 
+/// A text style for `label` at `size` pixels, or smaller where that is wider than `room`
+/// pixels on `area` (down to 6 pixels, below which a label is left to be cut).
+pub fn text_within(area: &Area, label: &str, size: u32, room: u32) -> TextStyle<'static> {
+    let fits = |style: &TextStyle| {
+        (area.estimate_text_size(label, style)).is_ok_and(|(width, _)| width <= room)
+    };
+    (6..=size)
+        .rev()
+        .map(text)
+        .find(fits)
+        .unwrap_or_else(|| text(6))
+}
+
 /// A canvas area of [`png`].
 pub type Area<'a> = DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>;
 

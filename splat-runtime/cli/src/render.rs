@@ -255,9 +255,13 @@ pub(crate) fn gallery(
     let mut outputs = Outputs::default();
     crate::plot::png_over(&mut outputs, out, &grid, |area| {
         let err = crate::plot::drawing("gallery's labels".to_string());
-        let label = crate::plot::text(15);
+        // Labels shrink to fit small panels rather than run into the next one.
+        let within = |label: &str, size: u32, room: u32| {
+            crate::plot::text_within(area, label, size, room.saturating_sub(8))
+        };
         for (c, model) in CameraModel::ALL.into_iter().enumerate() {
             let at = ((ROW_LABELS + c as u32 * width + 6) as i32, 5);
+            let label = within(model.name(), 15, width);
             area.draw_text(model.name(), &label, at).map_err(&err)?;
         }
         for (r, method) in methods.iter().enumerate() {
@@ -265,16 +269,17 @@ pub(crate) fn gallery(
                 6,
                 (COLUMN_LABELS + r as u32 * height + height / 2 - 8) as i32,
             );
+            let label = within(method.name, 15, ROW_LABELS);
             area.draw_text(method.name, &label, at).map_err(&err)?;
         }
-        let note = crate::plot::text(13).color(&RGBColor(200, 200, 200));
+        let unsupported_note = "pinhole camera only";
+        let note = within(unsupported_note, 13, width).color(&RGBColor(200, 200, 200));
         for (r, c) in &unsupported {
             let at = (
                 (ROW_LABELS + c * width + 6) as i32,
                 (COLUMN_LABELS + r * height + height / 2 - 8) as i32,
             );
-            area.draw_text("pinhole camera only", &note, at)
-                .map_err(&err)?;
+            area.draw_text(unsupported_note, &note, at).map_err(&err)?;
         }
         Ok(())
     })?;
