@@ -270,7 +270,9 @@ fn dispatch(cli: Cli, methods: &[Method]) -> Result<()> {
             };
             // A reader that stops early (`| head`) is not an error.
             match std::io::Write::write_all(&mut std::io::stdout(), text.as_bytes()) {
-                Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(e.into()),
+                Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => {
+                    Err(anyhow::Error::new(e).context("writing the source to standard output"))
+                }
                 _ => Ok(()),
             }
         }
