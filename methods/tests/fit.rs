@@ -415,6 +415,63 @@ fn three_dgs_fits_equiangular_views() {
     fits_views::<Method>("3DGS equiangular", &data);
 }
 
+/// What would go wrong at some later step is refused before the first: an extent that is not
+/// a length (positions would not train, and density control would split or prune everything),
+/// a view whose camera and image disagree, a view holding NaN or too few values.
+#[test]
+fn fit_refuses_a_bad_run_before_its_first_step() {
+    use splat_runtime::io::dataset::{Dataset, View};
+    use splat_runtime::pipeline::Image;
+    let scene: Vec<Params> = truth();
+    let opts = options(5);
+    let view = |i: usize| {
+        let camera = look_at(eye(i, 9, 0.0));
+        let image = render::<Method>(&scene, &camera, &opts.render)
+            .unwrap()
+            .color;
+        View::new(format!("frame_{i:03}"), camera, image, None, Vec3::ZERO)
+    };
+    let data = |last: View| Dataset {
+        train: vec![view(1), view(2), last],
+        test: vec![view(0)],
+        points: vec![],
+    };
+    let refused = |data: &Dataset, extent: f32| {
+        let mut params = scene.clone();
+        let mut steps = 0;
+        let e = fit::<Method>(data, &mut params, extent, &opts, |_| steps += 1).unwrap_err();
+        assert_eq!(steps, 0, "refused after {steps} steps: {e}");
+        e.to_string()
+    };
+    let good = data(view(3));
+    for extent in [0.0, -1.0, f32::NAN] {
+        let e = refused(&good, extent);
+        assert!(e.contains("extent must be a positive length"), "{e}");
+    }
+    let mut small = view(3);
+    small.camera.size = Vec2::new(20.0, 40.0);
+    let e = refused(&data(small), 1.0);
+    assert!(
+        e.contains("view frame_003: its camera is 20x40, its image 40x40"),
+        "{e}"
+    );
+    let image = view(3).into_image();
+    let short = Image {
+        data: image.data[..10].to_vec(),
+        ..image.clone()
+    };
+    let mut nan = image.clone();
+    nan.data[5] = f32::NAN;
+    for (image, why) in [
+        (short, "holds 10 values"),
+        (nan, "NaN or infinite at value 5"),
+    ] {
+        let bad = View::new("bad".into(), view(3).camera, image, None, Vec3::ZERO);
+        let e = refused(&data(bad), 1.0);
+        assert!(e.contains("view bad: its ") && e.contains(why), "{e}");
+    }
+}
+
 /// Density control on hand-made statistics: a small primitive under a strong screen-space pull
 /// is cloned, a large one split into two drawn from it (scales / 1.6), a faint one pruned,
 /// a quiet one kept; the cap on the count holds and spends its room on the strongest pull; the

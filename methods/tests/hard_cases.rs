@@ -264,3 +264,88 @@ fn no_transmittance_stop_keeps_the_gradients_finite() {
         assert!((d - s).abs() <= 1e-3 * largest, "word {k}: {d} vs {s}");
     }
 }
+
+/// `backward` takes the parameters and camera a second time: another count, another camera or
+/// a NaN output gradient is refused by name, not indexed out of bounds or turned into NaN (or,
+/// on the GPU, zero) gradients. A resident frame knows the upload it was rendered from.
+#[test]
+fn backward_refuses_what_the_frame_was_not_rendered_with() {
+    let (cam, ps) = (camera(40, 32), hard_scene());
+    let n = 40 * 32;
+    let grad = FrameGrad {
+        color: vec![0.5; n * 3],
+        alpha: None,
+        depth: None,
+    };
+    let opts = RenderOptions::default();
+    let (_, state) = render_for_backward::<Method>(&ps, &cam, &opts).unwrap();
+    assert_eq!(
+        backward::<Method>(&state, &ps[1..], &cam, &grad).err(),
+        Some(RenderError::ParamsCount {
+            got: ps.len() - 1,
+            want: ps.len()
+        })
+    );
+    let moved = splat_runtime::Camera {
+        translation: cam.translation + Vec3::X,
+        ..cam
+    };
+    assert_eq!(
+        backward::<Method>(&state, &ps, &moved, &grad).err(),
+        Some(RenderError::OtherCamera)
+    );
+    let mut nan = grad.clone();
+    nan.color[7] = f32::NAN;
+    assert_eq!(
+        backward::<Method>(&state, &ps, &cam, &nan).err(),
+        Some(RenderError::NonFiniteGradient {
+            what: "color",
+            index: 7
+        })
+    );
+    backward::<Method>(&state, &ps, &cam, &grad).unwrap();
+
+    let Some(gpu) = splat_runtime::gpu::adapter_or_skip() else {
+        return;
+    };
+    use splat_runtime::gpu::{GpuRenderError, GpuRenderer, GpuScene, entries::Accumulation};
+    let acc = Accumulation::default_for(&gpu);
+    let mut scene = GpuScene::<Method>::new(&gpu, &ps).unwrap();
+    let mut renderer = GpuRenderer::<Method>::new(&gpu, &opts).unwrap();
+    renderer.forward(&scene, &cam).unwrap();
+    assert!(matches!(
+        renderer.backward(&scene, &nan, acc),
+        Err(GpuRenderError::Render(
+            RenderError::NonFiniteGradient { .. }
+        ))
+    ));
+    let other = GpuScene::<Method>::new(&gpu, &ps).unwrap();
+    assert!(matches!(
+        renderer.backward(&other, &grad, acc),
+        Err(GpuRenderError::OtherScene)
+    ));
+    scene.upload(&gpu, &ps).unwrap();
+    assert!(matches!(
+        renderer.backward(&scene, &grad, acc),
+        Err(GpuRenderError::OtherScene)
+    ));
+    renderer.forward(&scene, &cam).unwrap();
+    renderer.backward(&scene, &grad, acc).unwrap();
+}
+
+/// A camera's rotation must be one: a scaled, sheared or mirrored matrix (a pose with a
+/// scale, OpenGL axes taken as OpenCV's) is refused, as the camera reader refuses it.
+#[test]
+fn a_camera_rotation_must_be_a_rotation() {
+    let (cam, ps) = (camera(40, 32), hard_scene());
+    let opts = RenderOptions::default();
+    let with = |rotation| splat_runtime::Camera { rotation, ..cam };
+    let scaled = with(cam.rotation * 2.0);
+    let mirrored =
+        with(splat_runtime::glam::Mat3::from_diagonal(Vec3::new(1.0, 1.0, -1.0)) * cam.rotation);
+    for (c, why) in [(scaled, "no scale or shear"), (mirrored, "must not mirror")] {
+        let e = render::<Method>(&ps, &c, &opts).err().unwrap().to_string();
+        assert!(e.contains(why), "{e}");
+    }
+    render::<Method>(&ps, &cam, &opts).unwrap();
+}

@@ -133,6 +133,31 @@ pub struct Camera {
     pub model: CameraModel,
 }
 
+/// What keeps a pose's 3x3 part from being a rotation (scale or shear would distort every
+/// render, a mirror flip it).
+pub enum NotRotation {
+    /// The largest entry of R^T R - I, past 1e-3.
+    Off(f32),
+    /// A negative determinant.
+    Mirror,
+}
+
+/// Whether `rotation` is a rotation, within 1e-3 per entry of R^T R - I (what f32 poses
+/// written to text keep).
+pub fn rotation_defect(rotation: &Mat3) -> Option<NotRotation> {
+    let off = (rotation.transpose() * *rotation - Mat3::IDENTITY)
+        .to_cols_array()
+        .iter()
+        .fold(0.0f32, |a, v| a.max(v.abs()));
+    if off > 1e-3 {
+        Some(NotRotation::Off(off))
+    } else if rotation.determinant() < 0.0 {
+        Some(NotRotation::Mirror)
+    } else {
+        None
+    }
+}
+
 impl Camera {
     /// All fields zero: the zero cotangent of a camera (`default()` has an identity rotation).
     pub const ZERO: Camera = Camera {

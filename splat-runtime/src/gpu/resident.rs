@@ -46,13 +46,22 @@ pub enum GpuRenderError {
     NoFrame,
     #[error("the scene has {got} primitives, the frame was rendered with {want}")]
     SceneChanged { got: usize, want: usize },
+    #[error(
+        "the scene is not the one the frame was rendered from (another scene, or parameters uploaded since): render the frame again"
+    )]
+    OtherScene,
 }
+
+/// Each upload's stamp: a frame knows the parameters it was rendered from by theirs.
+static UPLOADS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
 
 /// A method's primitives on the device: `Params` words per primitive, in order. An optimizer
 /// on the device updates [`GpuScene::buffer`] in place between frames.
 pub struct GpuScene<M: SplatMethod> {
     params: Grown,
     len: usize,
+    /// The stamp of the last upload (changes made in place on the device keep it).
+    stamp: u64,
     method: PhantomData<M>,
 }
 
@@ -61,6 +70,7 @@ impl<M: SplatMethod> GpuScene<M> {
         let mut scene = GpuScene {
             params: Grown::new(gpu, "parameters", params.len() * M::Params::LEN)?,
             len: 0,
+            stamp: 0,
             method: PhantomData,
         };
         scene.upload(gpu, params)?;
@@ -80,6 +90,7 @@ impl<M: SplatMethod> GpuScene<M> {
         self.params.ensure(gpu, params.len() * M::Params::LEN)?;
         gpu.write(&self.params, &words_of(params));
         self.len = params.len();
+        self.stamp = UPLOADS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         Ok(())
     }
 
@@ -193,6 +204,8 @@ pub struct GpuRenderer<'g, M: SplatMethod> {
     pending: Option<Pending>,
     /// The last frame finished.
     frame: Option<FrameInfo>,
+    /// The stamp of the scene's upload the last frame was rendered from ([`GpuScene::upload`]).
+    rendered_from: u64,
     method: PhantomData<M>,
 }
 
@@ -250,6 +263,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             timer: StageTimer::new(gpu, STAGES),
             pending: None,
             frame: None,
+            rendered_from: 0,
             method: PhantomData,
         })
     }
@@ -343,6 +357,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             primitives: n,
             camera: *camera,
         });
+        self.rendered_from = scene.stamp;
         Ok(grid)
     }
 
@@ -370,12 +385,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
     /// what was recorded from it must be submitted again.
     pub fn settle(&mut self, scene: &GpuScene<M>) -> Result<Option<FrameInfo>, GpuRenderError> {
         let p = self.pending.ok_or(GpuRenderError::NoFrame)?;
-        if scene.len() != p.primitives {
-            return Err(GpuRenderError::SceneChanged {
-                got: scene.len(),
-                want: p.primitives,
-            });
-        }
+        self.check_scene(scene, p.primitives)?;
         let counted = self.front.counted(self.gpu)?;
         if counted.cut {
             self.front.reserve(self.gpu, counted)?;
@@ -401,6 +411,20 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
     }
 
     /// The grid and primitive count of the frame finished last, or else of the one submitted.
+    /// Refuses a scene other than the one the frame of `primitives` was rendered from.
+    fn check_scene(&self, scene: &GpuScene<M>, primitives: usize) -> Result<(), GpuRenderError> {
+        if scene.len() != primitives {
+            return Err(GpuRenderError::SceneChanged {
+                got: scene.len(),
+                want: primitives,
+            });
+        }
+        match scene.stamp == self.rendered_from {
+            true => Ok(()),
+            false => Err(GpuRenderError::OtherScene),
+        }
+    }
+
     fn current(&self) -> Result<(TileGrid, usize), GpuRenderError> {
         let frame = self.frame.map(|f| (f.grid, f.primitives));
         let pending = self.pending.map(|p| (p.grid, p.primitives));
@@ -577,12 +601,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
     ) -> Result<(), GpuRenderError> {
         let gpu = self.gpu;
         let (grid, n) = self.current()?;
-        if scene.len() != n {
-            return Err(GpuRenderError::SceneChanged {
-                got: scene.len(),
-                want: n,
-            });
-        }
+        self.check_scene(scene, n)?;
         let layout = self.layout;
         let pixels = (grid.width * grid.height) as usize;
         let blend = self.blend(want_depth, acc)?;

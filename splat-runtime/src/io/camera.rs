@@ -12,7 +12,7 @@
 //! is global.
 
 use crate::pipeline::MAX_SIDE;
-use crate::types::{Camera, CameraModel};
+use crate::types::{Camera, CameraModel, NotRotation, rotation_defect};
 use glam::{Mat3, Vec2, Vec3, Vec4};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -194,29 +194,6 @@ fn rigid(m: &[[f32; 4]; 4], name: &'static str) -> Result<(Mat3, Vec3), CameraEr
         Some(NotRotation::Off(off)) => Err(CameraError::NotRigid(name, off)),
         Some(NotRotation::Mirror) => Err(CameraError::Mirrored(name)),
         None => Ok((rotation, col(3))),
-    }
-}
-
-/// What keeps a pose's 3x3 part from being a rotation (scale or shear would distort every
-/// render, a mirror flip it).
-pub(super) enum NotRotation {
-    /// The largest entry of R^T R - I, past 1e-3.
-    Off(f32),
-    /// A negative determinant.
-    Mirror,
-}
-
-pub(super) fn rotation_defect(rotation: &Mat3) -> Option<NotRotation> {
-    let off = (rotation.transpose() * *rotation - Mat3::IDENTITY)
-        .to_cols_array()
-        .iter()
-        .fold(0.0f32, |a, v| a.max(v.abs()));
-    if off > 1e-3 {
-        Some(NotRotation::Off(off))
-    } else if rotation.determinant() < 0.0 {
-        Some(NotRotation::Mirror)
-    } else {
-        None
     }
 }
 

@@ -17,12 +17,11 @@
 //! RGBA images are composited on the chosen background. Views can be taken smaller than
 //! their pictures ([`Shots::downscaled`]). Every error names the file and the field.
 
-use super::camera::NotRotation;
 use super::picture::Picture;
 pub use super::picture::{Footprint, View};
 use super::undistort::{Lens, Undistortion};
 use super::{Outputs, colmap};
-use crate::types::{Camera, CameraModel};
+use crate::types::{Camera, CameraModel, NotRotation, rotation_defect};
 use glam::{DVec4, Mat3, Mat4, Vec2, Vec3, Vec4};
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
@@ -861,7 +860,7 @@ fn posed_camera(c2w_gl: &Mat4, focal: Vec2, (width, height): (u32, u32)) -> Resu
             c2w_gl.row(3).to_array()
         ));
     }
-    match super::camera::rotation_defect(&Mat3::from_mat4(*c2w_gl)) {
+    match rotation_defect(&Mat3::from_mat4(*c2w_gl)) {
         Some(NotRotation::Off(off)) => {
             return Err(format!(
                 "is not a rigid pose: its 3x3 part is off a rotation by {off:.2e} (the largest entry of R^T R - I)"

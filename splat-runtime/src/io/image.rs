@@ -15,6 +15,30 @@ pub enum ImageError {
     Channels(usize),
     #[error("cannot write {path}: {error}")]
     Io { path: String, error: std::io::Error },
+    #[error(
+        "an image of {width}x{height} pixels and {channels} channels holds {values} values, not one per pixel and channel"
+    )]
+    Malformed {
+        width: u32,
+        height: u32,
+        channels: usize,
+        values: usize,
+    },
+    #[error("images stacked into one must have the same size: {0}x{1} and {2}x{3}")]
+    Sizes(u32, u32, u32, u32),
+}
+
+/// Refuses an image whose values do not fill its size (its fields are public).
+fn check(im: &Image) -> Result<(), ImageError> {
+    match im.data.len() == im.width as usize * im.height as usize * im.channels {
+        true => Ok(()),
+        false => Err(ImageError::Malformed {
+            width: im.width,
+            height: im.height,
+            channels: im.channels,
+            values: im.data.len(),
+        }),
+    }
 }
 
 impl From<CommitError> for ImageError {
@@ -46,13 +70,12 @@ pub fn write_frame(path: &Path, frame: &Frame) -> Result<Vec<PathBuf>, ImageErro
             let mut planes = vec![&frame.color];
             planes.extend(frame.alpha.as_ref());
             planes.extend(frame.depth.as_ref());
-            let stacked = stack(&planes);
-            write_npy(path, &stacked).map_err(io(path))?;
+            write_npy(path, &stack(&planes)?)?;
             Ok(vec![path.to_path_buf()])
         }
         "png" | "exr" => {
             let color = match (&frame.alpha, frame.color.channels) {
-                (Some(a), 3) => stack(&[&frame.color, a]),
+                (Some(a), 3) => stack(&[&frame.color, a])?,
                 _ => frame.color.clone(),
             };
             // The picture and its depth appear together or not at all.
@@ -115,9 +138,15 @@ fn stage_depth_png(outputs: &mut Outputs, path: &Path, im: &Image) -> Result<(),
         .map_err(io(path))
 }
 
-/// Interleaves images of the same size channel-wise.
-pub fn stack(images: &[&Image]) -> Image {
-    let (w, h) = (images[0].width, images[0].height);
+/// Interleaves images of the same size channel-wise (none: an empty image).
+pub fn stack(images: &[&Image]) -> Result<Image, ImageError> {
+    let (w, h) = images.first().map_or((0, 0), |i| (i.width, i.height));
+    for im in images {
+        check(im)?;
+        if (im.width, im.height) != (w, h) {
+            return Err(ImageError::Sizes(w, h, im.width, im.height));
+        }
+    }
     let channels: usize = images.iter().map(|i| i.channels).sum();
     let mut data = Vec::with_capacity((w * h) as usize * channels);
     for p in 0..(w * h) as usize {
@@ -125,12 +154,12 @@ pub fn stack(images: &[&Image]) -> Image {
             data.extend_from_slice(&im.data[p * im.channels..(p + 1) * im.channels]);
         }
     }
-    Image {
+    Ok(Image {
         width: w,
         height: h,
         channels,
         data,
-    }
+    })
 }
 
 /// Writes one image (1, 3 or 4 channels) as PNG (8 bits, clamped to [0, 1]) or EXR, by the
@@ -160,6 +189,7 @@ fn stage_picture(
     if ![1, 3, 4].contains(&im.channels) {
         return Err(ImageError::Channels(im.channels));
     }
+    check(im)?;
     if depth && ext == "png" {
         return stage_depth_png(outputs, path, im);
     }
@@ -208,7 +238,8 @@ fn stage_picture(
 }
 
 /// NumPy `.npy` v1.0, little-endian float32, shape (H, W, C).
-pub fn write_npy(path: &Path, im: &Image) -> std::io::Result<()> {
+pub fn write_npy(path: &Path, im: &Image) -> Result<(), ImageError> {
+    check(im)?;
     super::write_atomic(path, |w| {
         let dict = format!(
             "{{'descr': '<f4', 'fortran_order': False, 'shape': ({}, {}, {}), }}",
@@ -226,4 +257,44 @@ pub fn write_npy(path: &Path, im: &Image) -> std::io::Result<()> {
         }
         Ok(())
     })
+    .map_err(io(path))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An image whose values do not fill its size, or images of other sizes stacked, are
+    /// refused before any file is made.
+    #[test]
+    fn malformed_images_are_refused_before_writing() {
+        let dir = std::env::temp_dir().join("splat-never-written");
+        let short = Image {
+            width: 4,
+            height: 4,
+            channels: 3,
+            data: vec![0.5; 5],
+        };
+        for name in ["a.png", "a.exr"] {
+            let e = write_image(&dir.join(name), &short)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("holds 5 values"), "{e}");
+        }
+        let e = write_npy(&dir.join("a.npy"), &short)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("holds 5 values"), "{e}");
+        assert!(!dir.exists());
+        let gray = |w, h| Image {
+            width: w,
+            height: h,
+            channels: 1,
+            data: vec![0.0; (w * h) as usize],
+        };
+        let e = stack(&[&gray(4, 4), &gray(2, 2)]).unwrap_err().to_string();
+        assert!(e.contains("4x4 and 2x2"), "{e}");
+        assert_eq!(stack(&[&gray(2, 2), &gray(2, 2)]).unwrap().channels, 2);
+        assert_eq!(stack(&[]).unwrap().data.len(), 0);
+    }
 }

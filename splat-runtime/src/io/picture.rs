@@ -336,6 +336,40 @@ impl View {
         }
     }
 
+    /// What is wrong with the view's pixels, if anything: values that do not fill its size
+    /// (three channels, a coverage per pixel), NaN or infinite colors, coverage outside
+    /// [0, 1]. ([`View::new`] holds what it is given.)
+    pub fn defect(&self) -> Option<String> {
+        let (width, height) = self.size();
+        let pixels = width as usize * height as usize;
+        match &self.pixels {
+            Pixels::Composited { image, coverage } => {
+                if image.channels != 3 || image.data.len() != pixels * 3 {
+                    return Some(format!(
+                        "its image holds {} values in {} channels, where {width}x{height} RGB takes {}",
+                        image.data.len(),
+                        image.channels,
+                        pixels * 3
+                    ));
+                }
+                if let Some(i) = image.data.iter().position(|v| !v.is_finite()) {
+                    return Some(format!("its image is NaN or infinite at value {i}"));
+                }
+                let coverage = coverage.as_deref().unwrap_or_default();
+                if !coverage.is_empty() && coverage.len() != pixels {
+                    return Some(format!(
+                        "its coverage holds {} values for {pixels} pixels",
+                        coverage.len()
+                    ));
+                }
+                let i = coverage.iter().position(|a| !(0.0..=1.0).contains(a))?;
+                Some(format!("its coverage is outside [0, 1] at pixel {i}"))
+            }
+            Pixels::Rgba8 { words, .. } => (words.len() != pixels)
+                .then(|| format!("it holds {} pixels, not {pixels}", words.len())),
+        }
+    }
+
     /// The bytes its pixels take in memory ([`Footprint::held`]).
     pub fn held_bytes(&self) -> u64 {
         let floats = |v: &[f32]| std::mem::size_of_val(v) as u64;

@@ -338,7 +338,15 @@ pub fn write(path: &Path, cloud: &GaussianCloud) -> std::io::Result<()> {
     super::write_atomic(path, |w| write_to(w, cloud))
 }
 
+/// Refused, as [`parse`] would refuse the file: an SH degree above 3, a NaN or infinite value.
 pub fn write_to(w: &mut dyn Write, cloud: &GaussianCloud) -> std::io::Result<()> {
+    let refuse = |why: String| Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, why));
+    if cloud.sh_degree > 3 {
+        return refuse(format!(
+            "SH degree {} cannot be stored (0 to 3)",
+            cloud.sh_degree
+        ));
+    }
     let per_channel = sh_coefficients(cloud.sh_degree) - 1;
     let mut header = format!(
         "ply\nformat binary_little_endian 1.0\nelement vertex {}\n",
@@ -362,7 +370,7 @@ pub fn write_to(w: &mut dyn Write, cloud: &GaussianCloud) -> std::io::Result<()>
     }
     header.push_str("end_header\n");
     w.write_all(header.as_bytes())?;
-    for g in &cloud.gaussians {
+    for (i, g) in cloud.gaussians.iter().enumerate() {
         let mut row: Vec<f32> = vec![g.mean.x, g.mean.y, g.mean.z, 0.0, 0.0, 0.0];
         row.extend(g.sh[0].to_array());
         for ch in 0..3 {
@@ -371,6 +379,9 @@ pub fn write_to(w: &mut dyn Write, cloud: &GaussianCloud) -> std::io::Result<()>
         row.push(g.opacity_logit);
         row.extend(g.log_scale.to_array());
         row.extend(g.rotation.to_array());
+        if row.iter().any(|v| !v.is_finite()) {
+            return refuse(format!("Gaussian {i} has a NaN or infinite value"));
+        }
         for v in row {
             w.write_all(&v.to_le_bytes())?;
         }
@@ -491,12 +502,23 @@ mod tests {
         let e = parse(&mut byte.as_bytes()).unwrap_err().to_string();
         assert!(e.contains("property `opacity` is a byte"), "{e}");
 
+        // The writer refuses NaN (as the reader does): one written finite, then made NaN.
         let mut nan = c.clone();
         nan.gaussians[2].mean.y = f32::NAN;
+        let e = write_to(&mut vec![], &nan).unwrap_err().to_string();
+        assert!(e.contains("Gaussian 2 has a NaN"), "{e}");
+        nan.gaussians[2].mean.y = 1234.5;
         let mut bytes = vec![];
         write_to(&mut bytes, &nan).unwrap();
+        let at = (bytes.windows(4))
+            .position(|w| w == 1234.5f32.to_le_bytes())
+            .unwrap();
+        bytes[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
         let e = parse(&mut bytes.as_slice()).unwrap_err().to_string();
         assert!(e.contains("vertex 2") && e.contains("`y`"), "{e}");
+        let degree4 = GaussianCloud { sh_degree: 4, ..c };
+        let e = write_to(&mut vec![], &degree4).unwrap_err().to_string();
+        assert!(e.contains("SH degree 4 cannot be stored"), "{e}");
     }
 
     /// `cloud` as Mip-Splatting writes it: an extra `filter_3D` property per vertex.

@@ -29,8 +29,9 @@ pub struct FrameGrad {
 }
 
 impl FrameGrad {
-    /// Checks that every given gradient has one value per pixel (`channels` for the color),
-    /// and that a depth gradient comes with a frame that rendered depth (`depth_rendered`).
+    /// Checks that every given gradient has one finite value per pixel (`channels` for the
+    /// color), and that a depth gradient comes with a frame that rendered depth
+    /// (`depth_rendered`).
     pub fn check(
         &self,
         pixels: usize,
@@ -48,6 +49,16 @@ impl FrameGrad {
         for (what, got, want) in sizes {
             if let Some(got) = got.filter(|g| *g != want) {
                 return Err(RenderError::GradientSize { what, got, want });
+            }
+        }
+        let given = [
+            ("color", Some(&self.color)),
+            ("alpha", self.alpha.as_ref()),
+            ("depth", self.depth.as_ref()),
+        ];
+        for (what, values) in given {
+            if let Some(index) = values.and_then(|v| v.iter().position(|g| !g.is_finite())) {
+                return Err(RenderError::NonFiniteGradient { what, index });
             }
         }
         Ok(())

@@ -116,12 +116,24 @@ pub enum RenderError {
         "{count} tile intersections exceed the limit of {limit}: lower the resolution or the number of primitives"
     )]
     TooManyIntersections { count: u64, limit: u64 },
+    #[error(
+        "the frame's {what} need {bytes} bytes, more than could be allocated: lower the resolution or the number of primitives"
+    )]
+    Memory { what: &'static str, bytes: u64 },
     #[error("gradient `{what}` has {got} values, the frame has {want}")]
     GradientSize {
         what: &'static str,
         got: usize,
         want: usize,
     },
+    #[error("gradient `{what}` is NaN or infinite at value {index}")]
+    NonFiniteGradient { what: &'static str, index: usize },
+    #[error(
+        "backward is given {got} primitives, and the frame was rendered from {want}: pass the parameters it was rendered with"
+    )]
+    ParamsCount { got: usize, want: usize },
+    #[error("backward is given another camera than the frame was rendered with")]
+    OtherCamera,
     #[error(
         "a depth gradient needs a frame rendered with the depth output (RenderOptions::depth, `--depth`)"
     )]
@@ -160,6 +172,8 @@ pub struct Frame {
 
 /// What the backward pass needs from the forward pass; only built by [`render_for_backward`].
 pub struct ForwardState<M: SplatMethod> {
+    /// The camera the frame was rendered from.
+    pub camera: Camera,
     pub grid: TileGrid,
     pub pre: Preprocessed<M>,
     pub lists: TileLists,
@@ -266,6 +280,19 @@ pub(crate) fn check<M: SplatMethod>(
     }
     if !(camera.rotation.is_finite() && camera.translation.is_finite()) {
         return Err(RenderError::Camera("pose must be finite"));
+    }
+    match crate::types::rotation_defect(&camera.rotation) {
+        Some(crate::types::NotRotation::Off(_)) => {
+            return Err(RenderError::Camera(
+                "rotation must be a rotation (R^T R = I: no scale or shear)",
+            ));
+        }
+        Some(crate::types::NotRotation::Mirror) => {
+            return Err(RenderError::Camera(
+                "rotation must not mirror (a negative determinant)",
+            ));
+        }
+        None => {}
     }
     if !camera.distortion.is_finite() {
         return Err(RenderError::Camera("distortion must be finite"));
@@ -395,6 +422,7 @@ fn forward<M: SplatMethod>(
         stats,
     };
     let state = keep.then_some(ForwardState {
+        camera: *camera,
         grid,
         pre,
         lists,
@@ -454,7 +482,8 @@ pub(crate) fn alpha_and_depth(
 }
 
 /// Gradients of the parameters and (unless the render's options turned it off) the camera,
-/// given the gradient of each output.
+/// given the gradient of each output. `params` and `camera` are those the frame was rendered
+/// with (their count and the camera are checked).
 pub fn backward<M: SplatMethod>(
     state: &ForwardState<M>,
     params: &[M::Params],
@@ -464,6 +493,15 @@ pub fn backward<M: SplatMethod>(
     let pixels = (state.grid.width * state.grid.height) as usize;
     grad.check(pixels, M::Color::LEN, state.depth_acc.len() == pixels)?;
     let n = state.pre.projected.len();
+    if params.len() != n {
+        return Err(RenderError::ParamsCount {
+            got: params.len(),
+            want: n,
+        });
+    }
+    if *camera != state.camera {
+        return Err(RenderError::OtherCamera);
+    }
     let words = M::Shade::LEN;
     let t0 = Instant::now();
     // The f16 sums' loss scale; f32 sums are not scaled (and no pass over the gradient is

@@ -70,6 +70,32 @@ pub fn rasterize<M: SplatMethod>(
     use_cull: bool,
 ) -> Result<TileLists, RenderError> {
     let tiles = grid.tile_count();
+    // The count below keeps each pair's tile (4 bytes) before the total is known: where the
+    // boxes alone could pass the limit, the pairs are counted first, so that a frame over it
+    // is refused without holding them.
+    let boxed: u64 = pre.visible.par_iter().map(|(_, r)| r.count() as u64).sum();
+    if boxed > MAX_INTERSECTIONS && !(use_cull && M::HAS_TILE_CULL) {
+        return Err(RenderError::TooManyIntersections {
+            count: boxed,
+            limit: MAX_INTERSECTIONS,
+        });
+    }
+    if boxed > MAX_INTERSECTIONS {
+        let count: u64 = (pre.visible.par_iter())
+            .map(|(i, rect)| {
+                let mut n = 0u64;
+                let cull = &pre.projected[*i as usize].cull;
+                for_each_kept_tile::<M>(grid, rect, cull, use_cull, |_| n += 1);
+                n
+            })
+            .sum();
+        if count > MAX_INTERSECTIONS {
+            return Err(RenderError::TooManyIntersections {
+                count,
+                limit: MAX_INTERSECTIONS,
+            });
+        }
+    }
     // Count: per chunk, the tiles each primitive keeps (`tile_cull` runs once per candidate
     // tile) and the pairs of each tile.
     let chunks: Vec<&[(u32, TileRect)]> = pre.visible.chunks(CHUNK).collect();
@@ -110,7 +136,14 @@ pub fn rasterize<M: SplatMethod>(
     }
     let total = *ranges.last().unwrap() as usize;
     // Emit: every chunk writes only its own slots of each tile.
-    let mut entries = vec![0u64; total];
+    let mut entries = Vec::new();
+    entries
+        .try_reserve_exact(total)
+        .map_err(|_| RenderError::Memory {
+            what: "tile lists",
+            bytes: total as u64 * 8,
+        })?;
+    entries.resize(total, 0u64);
     let out = SharedSlots(entries.as_mut_ptr());
     (chunks, kept, histograms.as_mut_slice())
         .into_par_iter()

@@ -284,6 +284,13 @@ pub fn render_views<M: SplatMethod>(
 impl Evaluation {
     /// Mean PSNR and SSIM of `images` against the pictures of `views`.
     pub fn of(images: &[Image], views: &[View]) -> Result<Evaluation, FitError> {
+        if images.len() != views.len() || views.is_empty() {
+            return Err(FitError::Unsupported(format!(
+                "an evaluation takes one image per view, and at least one: {} images, {} views",
+                images.len(),
+                views.len()
+            )));
+        }
         let mut e = Evaluation {
             views: views.len(),
             ..Default::default()
@@ -608,6 +615,7 @@ pub(crate) fn rates_for<M: Trainable>(
     if data.train.is_empty() {
         return Err(FitError::NoViews);
     }
+    check_run::<M>(data, extent, opts)?;
     let mut rates = M::learning_rates(extent);
     if rates.len() != M::Params::LEN {
         return Err(FitError::Unsupported(format!(
@@ -634,6 +642,52 @@ pub(crate) fn rates_for<M: Trainable>(
         )));
     }
     Ok(rates)
+}
+
+/// Refuses, before the first step, what would fail or go wrong at some later one: an extent
+/// that is not a length (positions would not train, and density control would split or prune
+/// every primitive), a loss weight outside [0, 1], a background that is not a color, and any
+/// view that cannot be rendered or compared (its camera, its size, its pixels).
+fn check_run<M: SplatMethod>(
+    data: &Dataset,
+    extent: f32,
+    opts: &FitOptions,
+) -> Result<(), FitError> {
+    let refuse = |why: String| Err(FitError::Unsupported(why));
+    if !(extent.is_finite() && extent > 0.0) {
+        return refuse(format!(
+            "the scene's extent must be a positive length, not {extent}"
+        ));
+    }
+    if !(0.0..=1.0).contains(&opts.ssim_weight) {
+        return refuse(format!(
+            "the SSIM weight must be in [0, 1], not {}",
+            opts.ssim_weight
+        ));
+    }
+    if !opts.background.is_finite() {
+        return refuse(format!("the background {} is not a color", opts.background));
+    }
+    let render = for_training(&opts.render);
+    for view in data.train.iter().chain(&data.test) {
+        let name = &view.name;
+        if let Some(defect) = view.defect() {
+            return refuse(format!("view {name}: {defect}"));
+        }
+        let (w, h) = view.size();
+        if view.camera.size != glam::Vec2::new(w as f32, h as f32) {
+            return refuse(format!(
+                "view {name}: its camera is {}x{}, its image {w}x{h}",
+                view.camera.size.x, view.camera.size.y
+            ));
+        }
+        if (w.min(h) as usize) < loss::WINDOW {
+            return Err(LossError::TooSmall(w, h).into());
+        }
+        crate::pipeline::check::<M>(&view.camera, &render)
+            .map_err(|e| FitError::Unsupported(format!("view {name}: {e}")))?;
+    }
+    Ok(())
 }
 
 /// The settings of a run that change its steps beyond its method, length, strategy, extent

@@ -34,6 +34,15 @@ pub enum LossError {
     },
     #[error("SSIM needs images of at least {WINDOW} x {WINDOW} pixels, not {0} x {1}")]
     TooSmall(u32, u32),
+    #[error(
+        "an image of {width}x{height} pixels and {channels} channels holds {values} values: it needs at least one pixel and channel, and a value for each"
+    )]
+    Malformed {
+        width: u32,
+        height: u32,
+        channels: usize,
+        values: usize,
+    },
 }
 
 /// The normalized Gaussian taps of the SSIM window.
@@ -54,6 +63,17 @@ const BAND: usize = 64;
 /// That `render` and `target` have the same size and channels (any size: PSNR needs no
 /// window).
 fn check_shape(render: &Image, target: &Image) -> Result<(), LossError> {
+    for i in [render, target] {
+        let values = i.width as usize * i.height as usize * i.channels;
+        if values == 0 || i.data.len() != values {
+            return Err(LossError::Malformed {
+                width: i.width,
+                height: i.height,
+                channels: i.channels,
+                values: i.data.len(),
+            });
+        }
+    }
     let shape = |i: &Image| (i.width, i.height, i.channels);
     if shape(render) != shape(target) {
         return Err(LossError::Shape {
@@ -277,7 +297,11 @@ pub fn psnr(a: &Image, b: &Image) -> Result<f64, LossError> {
         .map(|(x, y)| (x.clamp(0.0, 1.0) as f64 - *y as f64).powi(2))
         .sum::<f64>()
         / a.data.len() as f64;
-    Ok(-10.0 * mse.max(1e-20).log10())
+    // A NaN error stays NaN (`max` would make it the best score).
+    Ok(match mse.is_nan() {
+        true => f64::NAN,
+        false => -10.0 * mse.max(1e-20).log10(),
+    })
 }
 
 /// `(1 - ssim_weight) L1 + ssim_weight (1 - SSIM)` of `render` against `target`, and its
@@ -328,6 +352,35 @@ pub fn loss_and_gradient(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A NaN anywhere makes the PSNR NaN, not the best score; an image whose values do not
+    /// fill its size is refused.
+    #[test]
+    fn nan_and_malformed_images_are_not_measured_as_perfect() {
+        let a = image(16, 16, 3, 1);
+        let mut nan = a.clone();
+        nan.data[3] = f32::NAN;
+        assert!(psnr(&nan, &a).unwrap().is_nan());
+        assert!(psnr(&a, &nan).unwrap().is_nan());
+        let short = Image {
+            data: a.data[..10].to_vec(),
+            ..a.clone()
+        };
+        assert!(matches!(
+            psnr(&short, &a),
+            Err(LossError::Malformed { values: 10, .. })
+        ));
+        assert!(matches!(ssim(&a, &short), Err(LossError::Malformed { .. })));
+        let none = Image {
+            channels: 0,
+            data: vec![],
+            ..a.clone()
+        };
+        assert!(matches!(
+            psnr(&none, &none),
+            Err(LossError::Malformed { .. })
+        ));
+    }
 
     fn image(w: u32, h: u32, c: usize, seed: u64) -> Image {
         let mut rng = fastrand::Rng::with_seed(seed);
