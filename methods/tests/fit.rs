@@ -1122,7 +1122,13 @@ fn a_run_resumed_from_its_checkpoint_takes_the_same_steps() {
                         channels: 3,
                         data: v.image().data[..(w / 2 * h / 2 * 3) as usize].to_vec(),
                     };
-                    View::new(v.name.clone(), v.camera, image, None, v.background)
+                    let camera = Camera {
+                        size: v.camera.size / 2.0,
+                        focal: v.camera.focal / 2.0,
+                        principal: v.camera.principal / 2.0,
+                        ..v.camera
+                    };
+                    View::new(v.name.clone(), camera, image, None, v.background)
                 })
                 .collect(),
             ..data.clone()
