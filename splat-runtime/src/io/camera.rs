@@ -258,15 +258,56 @@ pub fn write(path: &Path, camera: &Camera) -> std::io::Result<()> {
     super::write_atomic(path, |w| write_to(w, camera))
 }
 
+/// Refused with what [`read`] would say of the file: a camera that is not finite, positive and
+/// rigid, or whose size is not whole pixels.
 pub fn write_to(w: &mut dyn std::io::Write, camera: &Camera) -> std::io::Result<()> {
-    let json =
-        serde_json::to_string_pretty(&CameraFile::from_camera(camera)).expect("serializable");
+    let invalid = |why: String| std::io::Error::new(std::io::ErrorKind::InvalidInput, why);
+    if camera.size != camera.size.round() || camera.size.min_element() < 1.0 {
+        return Err(invalid(format!(
+            "a camera of {}x{} pixels cannot be written: its size must be whole pixels",
+            camera.size.x, camera.size.y
+        )));
+    }
+    let file = CameraFile::from_camera(camera);
+    file.to_camera()
+        .map_err(|e| invalid(format!("the camera cannot be written: {e}")))?;
+    let json = serde_json::to_string_pretty(&file).expect("serializable");
     w.write_all(json.as_bytes())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// What the reader would refuse is not written.
+    #[test]
+    fn cameras_the_reader_refuses_are_not_written() {
+        let good = Camera {
+            size: Vec2::new(64.0, 48.0),
+            focal: Vec2::splat(50.0),
+            principal: Vec2::new(32.0, 24.0),
+            ..Default::default()
+        };
+        write_to(&mut vec![], &good).unwrap();
+        let bad = [
+            Camera {
+                focal: Vec2::NAN,
+                ..good
+            },
+            Camera {
+                size: Vec2::new(2.5, 48.0),
+                ..good
+            },
+            Camera {
+                rotation: Mat3::from_diagonal(Vec3::splat(3.0)),
+                ..good
+            },
+        ];
+        for camera in bad {
+            let e = write_to(&mut vec![], &camera).unwrap_err();
+            assert_eq!(e.kind(), std::io::ErrorKind::InvalidInput, "{e}");
+        }
+    }
 
     #[test]
     fn json_round_trip_and_validation() {
