@@ -182,10 +182,14 @@ impl Checkpoint {
             path: path.to_path_buf(),
             error,
         };
+        let mut file = std::fs::File::open(path).map_err(io)?;
+        // A checkpoint is a file of known length: a device or pipe (`/dev/zero`) is not read
+        // without end.
+        if !file.metadata().map_err(io)?.is_file() {
+            return Err(io(std::io::Error::other("it is not a regular file")));
+        }
         let mut bytes = vec![];
-        std::fs::File::open(path)
-            .and_then(|mut f| f.read_to_end(&mut bytes))
-            .map_err(io)?;
+        file.read_to_end(&mut bytes).map_err(io)?;
         Checkpoint::parse(&bytes, path)
     }
 
@@ -533,5 +537,12 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("earlier splat (format SPLATCK1)"), "{e}");
+        #[cfg(unix)]
+        {
+            let e = Checkpoint::read(Path::new("/dev/zero"))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("not a regular file"), "{e}");
+        }
     }
 }
