@@ -284,9 +284,9 @@ pub fn render_views<M: SplatMethod>(
 impl Evaluation {
     /// Mean PSNR and SSIM of `images` against the pictures of `views`.
     pub fn of(images: &[Image], views: &[View]) -> Result<Evaluation, FitError> {
-        if images.len() != views.len() || views.is_empty() {
+        if images.len() != views.len() {
             return Err(FitError::Unsupported(format!(
-                "an evaluation takes one image per view, and at least one: {} images, {} views",
+                "an evaluation takes one image per view: {} images, {} views",
                 images.len(),
                 views.len()
             )));
