@@ -30,7 +30,7 @@ pub enum ImageError {
 
 /// Refuses an image whose values do not fill its size (its fields are public).
 fn check(im: &Image) -> Result<(), ImageError> {
-    match im.data.len() == im.width as usize * im.height as usize * im.channels {
+    match im.fills_its_size() {
         true => Ok(()),
         false => Err(ImageError::Malformed {
             width: im.width,

@@ -344,7 +344,7 @@ impl View {
         let pixels = width as usize * height as usize;
         match &self.pixels {
             Pixels::Composited { image, coverage } => {
-                if image.channels != 3 || image.data.len() != pixels * 3 {
+                if image.channels != 3 || !image.fills_its_size() {
                     return Some(format!(
                         "its image holds {} values in {} channels, where {width}x{height} RGB takes {}",
                         image.data.len(),
@@ -355,8 +355,8 @@ impl View {
                 if let Some(i) = image.data.iter().position(|v| !v.is_finite()) {
                     return Some(format!("its image is NaN or infinite at value {i}"));
                 }
-                let coverage = coverage.as_deref().unwrap_or_default();
-                if !coverage.is_empty() && coverage.len() != pixels {
+                let coverage = coverage.as_deref()?;
+                if coverage.len() != pixels {
                     return Some(format!(
                         "its coverage holds {} values for {pixels} pixels",
                         coverage.len()

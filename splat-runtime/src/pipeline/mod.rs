@@ -149,6 +149,14 @@ pub struct Image {
     pub data: Vec<f32>,
 }
 
+impl Image {
+    /// Whether `data` holds one value per pixel and channel (the fields are public, so an
+    /// image made by hand may not).
+    pub fn fills_its_size(&self) -> bool {
+        self.data.len() == self.width as usize * self.height as usize * self.channels
+    }
+}
+
 #[derive(Clone, Debug, Default)]
 pub struct Stats {
     pub primitives: usize,

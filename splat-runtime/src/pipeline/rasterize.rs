@@ -71,24 +71,21 @@ pub fn rasterize<M: SplatMethod>(
 ) -> Result<TileLists, RenderError> {
     let tiles = grid.tile_count();
     // The count below keeps each pair's tile (4 bytes) before the total is known: where the
-    // boxes alone could pass the limit, the pairs are counted first, so that a frame over it
-    // is refused without holding them.
+    // boxes alone could pass the limit, the pairs are counted first (the boxes are the pairs
+    // where no `tile_cull` runs), so that a frame over it is refused without holding them.
     let boxed: u64 = pre.visible.par_iter().map(|(_, r)| r.count() as u64).sum();
-    if boxed > MAX_INTERSECTIONS && !(use_cull && M::HAS_TILE_CULL) {
-        return Err(RenderError::TooManyIntersections {
-            count: boxed,
-            limit: MAX_INTERSECTIONS,
-        });
-    }
     if boxed > MAX_INTERSECTIONS {
-        let count: u64 = (pre.visible.par_iter())
-            .map(|(i, rect)| {
-                let mut n = 0u64;
-                let cull = &pre.projected[*i as usize].cull;
-                for_each_kept_tile::<M>(grid, rect, cull, use_cull, |_| n += 1);
-                n
-            })
-            .sum();
+        let count: u64 = match use_cull && M::HAS_TILE_CULL {
+            false => boxed,
+            true => (pre.visible.par_iter())
+                .map(|(i, rect)| {
+                    let mut n = 0u64;
+                    let cull = &pre.projected[*i as usize].cull;
+                    for_each_kept_tile::<M>(grid, rect, cull, use_cull, |_| n += 1);
+                    n
+                })
+                .sum(),
+        };
         if count > MAX_INTERSECTIONS {
             return Err(RenderError::TooManyIntersections {
                 count,

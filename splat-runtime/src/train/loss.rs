@@ -64,8 +64,7 @@ const BAND: usize = 64;
 /// window).
 fn check_shape(render: &Image, target: &Image) -> Result<(), LossError> {
     for i in [render, target] {
-        let values = i.width as usize * i.height as usize * i.channels;
-        if values == 0 || i.data.len() != values {
+        if i.data.is_empty() || !i.fills_its_size() {
             return Err(LossError::Malformed {
                 width: i.width,
                 height: i.height,
