@@ -27,7 +27,7 @@ pub struct BenchArgs {
     method: String,
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     backend: Backend,
-    /// Timed frames per measurement (after 3 warm-up frames).
+    /// Timed frames per measurement (after 0.3 s of warm-up frames).
     #[arg(long, default_value_t = 20)]
     iters: usize,
     /// Tile size in pixels: 8, 16, 32 or 64 on the CPU; 8 or 16 on the GPU.
@@ -282,12 +282,9 @@ impl Bench<'_> {
     }
 }
 
-/// Medians over `iters` frames of `frame`, after three warm-up frames (pipelines compile and
-/// buffers grow on first use).
+/// Medians over `iters` frames of `frame`, after a warm-up.
 fn measure(iters: usize, mut frame: impl FnMut() -> Result<Sample>) -> Result<Sample> {
-    for _ in 0..3 {
-        frame()?;
-    }
+    crate::warm_up::warm_up(&mut frame)?;
     let samples = (0..iters).map(|_| frame()).collect::<Result<Vec<_>>>()?;
     let median = |mut v: Vec<Duration>| {
         v.sort();

@@ -27,6 +27,7 @@ mod render;
 mod scene;
 mod tradeoff;
 mod view;
+mod warm_up;
 
 pub use methods::{Instance, Method};
 

@@ -5,7 +5,7 @@
 use crate::bench::Bench;
 use crate::fit::Fit;
 use crate::render::{Frames, Render};
-use crate::tradeoff::{Outcome, Tradeoff};
+use crate::tradeoff::{Outcome, PaceFrame, Tradeoff};
 use anyhow::{Result, bail};
 use splat_runtime::io::ply::{FromStored, ToStored};
 use splat_runtime::train::Trainable;
@@ -36,6 +36,8 @@ pub struct Instance {
     pub(crate) render: fn(&Render, Frames) -> Result<String>,
     pub(crate) bench: fn(&Bench) -> Result<()>,
     pub(crate) tradeoff: fn(&Tradeoff) -> Result<Vec<Outcome>>,
+    /// The default frame every GPU setting of `splat tradeoff` is timed beside.
+    pub(crate) tradeoff_pace: for<'a> fn(&Tradeoff<'a>) -> Result<Box<dyn PaceFrame + 'a>>,
     pub(crate) fit: Option<fn(&Fit) -> Result<()>>,
     /// Its parameters' fields (name, words): the groups `splat fit --freeze` names.
     pub(crate) param_fields: &'static [(&'static str, usize)],
@@ -56,6 +58,7 @@ impl Instance {
             render: |r, each| r.run::<M>(each),
             bench: |b| b.run::<M>(),
             tradeoff: |t| t.run::<M>(),
+            tradeoff_pace: |t| t.pace::<M>(),
             fit: None,
             param_fields: M::PARAM_FIELDS,
             effects: Effects::of::<M>,

@@ -8,6 +8,8 @@
 //! The reference is the f32 render with every knob at its most accurate
 //! ([`reference_options`]); the f64 brute-force renderer would take minutes on a real scene. Gradients are those of one fixed random linear loss on the color
 //! (uniform in [-0.5, 0.5) per channel, as `splat bench`), compared per parameter group.
+//! Each time comes with its ratio to the default's: on the GPU measured beside the default
+//! frame, in turns ([`PaceFrame`]), since the GPU's clock moves with its load.
 
 use crate::Backend;
 use crate::methods::{self, Method};
@@ -21,6 +23,7 @@ use splat_runtime::io::{Outputs, ply};
 use splat_runtime::pipeline::precision::Precision;
 use splat_runtime::pipeline::shade::Blend;
 use splat_runtime::{Camera, FrameGrad, RenderOptions, SplatMethod, param_groups};
+use std::cell::RefCell;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -36,7 +39,7 @@ pub struct TradeoffArgs {
     method: String,
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     backend: Backend,
-    /// Timed frames per setting and pass (after one warm-up frame); the median is reported.
+    /// Timed frames per setting and pass (after 0.3 s of warm-up frames); the median is reported.
     #[arg(long, default_value_t = 5)]
     iters: usize,
     /// Output folder: tradeoff.csv (one row per setting), gradients.csv (per parameter group
@@ -227,6 +230,22 @@ pub fn tradeoff_cmd(args: &TradeoffArgs, methods: &[Method]) -> Result<()> {
         .collect();
     let runs = 1 + settings.len() + cloud.sh_degree as usize + models.len() + 1;
     let bar = indicatif::ProgressBar::new(runs as u64);
+    // On the GPU every setting is timed beside the method's default frame on this scene.
+    let pace_task = Tradeoff {
+        cloud: &cloud,
+        camera: &camera,
+        gpu: gpu.as_ref(),
+        iters: args.iters,
+        options: vec![],
+        bar: &bar,
+        pace: None,
+    };
+    let pace = match &gpu {
+        Some(_) => Some((method.instance(cloud.sh_degree, &camera).tradeoff_pace)(
+            &pace_task,
+        )?),
+        None => None,
+    };
     let task =
         |method: &Method, cloud: &ply::GaussianCloud, options: Vec<(RenderOptions, Forward)>| {
             let task = Tradeoff {
@@ -236,6 +255,7 @@ pub fn tradeoff_cmd(args: &TradeoffArgs, methods: &[Method]) -> Result<()> {
                 iters: args.iters,
                 options,
                 bar: &bar,
+                pace: pace.as_deref(),
             };
             (method.instance(cloud.sh_degree, &camera).tradeoff)(&task)
         };
@@ -266,7 +286,17 @@ pub fn tradeoff_cmd(args: &TradeoffArgs, methods: &[Method]) -> Result<()> {
         rows.push(compare("model", m.name.to_string(), &o, &exact_reference));
     }
     bar.finish_and_clear();
-    print_table(&rows);
+    if pace.is_none() {
+        // The CPU's clock holds: each row against the default row, timed apart.
+        let default = (rows.first()).map(|r| (r.forward_ms, r.backward_ms));
+        if let Some((forward, backward)) = default {
+            for r in &mut rows {
+                r.forward_x = Some(r.forward_ms / forward);
+                r.backward_x = r.backward_ms.zip(backward).map(|(b, d)| b / d);
+            }
+        }
+    }
+    print_table(&rows, pace.is_some());
     if let Some(e) = exact {
         println!("(model rows against {}'s most accurate render)", e.name);
     }
@@ -299,6 +329,81 @@ pub struct Tradeoff<'a> {
     iters: usize,
     options: Vec<(RenderOptions, Forward)>,
     bar: &'a indicatif::ProgressBar,
+    /// The frame each setting is timed beside (GPU only).
+    pace: Option<&'a (dyn PaceFrame + 'a)>,
+}
+
+/// The main method's frame at the default options on the scene, run in turn with each
+/// setting's frames so that each time comes with a ratio taken at the same clock: a GPU's
+/// clock follows its load, and the host's work between settings (building pipelines, comparing
+/// the last one) lets it fall. In one H200 run it moved between 345 and 1,980 MHz, and
+/// settings timed alone read up to 2.5x slower than the same work timed earlier.
+pub(crate) trait PaceFrame {
+    fn forward(&self) -> Result<Duration>;
+    fn backward(&self) -> Result<Duration>;
+    /// What it holds on the device, left out of each setting's memory.
+    fn bytes(&self) -> usize;
+}
+
+/// A renderer's frames on the GPU, timed by the host's clock around the device's work.
+struct GpuFrames<'a, M: SplatMethod> {
+    gpu: &'a Gpu,
+    camera: &'a Camera,
+    renderer: GpuRenderer<'a, M>,
+}
+
+impl<M: SplatMethod> GpuFrames<'_, M> {
+    fn forward(&mut self, scene: &GpuScene<M>) -> Result<Duration> {
+        let t = Instant::now();
+        self.renderer.forward(scene, self.camera)?;
+        self.gpu.wait()?;
+        Ok(t.elapsed())
+    }
+
+    /// The backward pass alone, after an untimed forward pass.
+    fn backward(&mut self, scene: &GpuScene<M>, grad: &FrameGrad) -> Result<Duration> {
+        self.renderer.forward(scene, self.camera)?;
+        self.gpu.wait()?;
+        let t = Instant::now();
+        let acc = Accumulation::default_for(self.gpu);
+        self.renderer.backward(scene, grad, acc)?;
+        self.gpu.wait()?;
+        Ok(t.elapsed())
+    }
+}
+
+/// [`GpuFrames`] with their own scene and loss gradient: a [`PaceFrame`].
+struct Pace<'a, M: SplatMethod> {
+    frames: RefCell<GpuFrames<'a, M>>,
+    scene: GpuScene<M>,
+    grad: FrameGrad,
+    bytes: usize,
+}
+
+impl<M: SplatMethod> PaceFrame for Pace<'_, M> {
+    fn forward(&self) -> Result<Duration> {
+        self.frames.borrow_mut().forward(&self.scene)
+    }
+
+    fn backward(&self) -> Result<Duration> {
+        self.frames.borrow_mut().backward(&self.scene, &self.grad)
+    }
+
+    fn bytes(&self) -> usize {
+        self.bytes
+    }
+}
+
+/// The fixed random linear loss's gradient on the color (uniform in [-0.5, 0.5) per channel).
+fn loss_gradient<M: SplatMethod>(camera: &Camera) -> FrameGrad {
+    let (w, h) = (camera.size.x as usize, camera.size.y as usize);
+    let mut rng = fastrand::Rng::with_seed(1);
+    let channels = <M::Color as splat_runtime::Flat>::LEN;
+    FrameGrad {
+        color: (0..w * h * channels).map(|_| rng.f32() - 0.5).collect(),
+        alpha: None,
+        depth: None,
+    }
 }
 
 /// What one setting's frames gave.
@@ -306,6 +411,9 @@ pub(crate) struct Outcome {
     forward: Duration,
     /// None on the hardware path, which has no backward pass.
     backward: Option<Duration>,
+    /// The times over the pace frame's, where there is one.
+    forward_x: Option<f64>,
+    backward_x: Option<f64>,
     /// Bytes the frame holds (CPU: kept for the backward pass; GPU: allocated on the device).
     bytes: usize,
     /// Sorted keys: (primitive, tile) pairs, or visible primitives on the hardware path.
@@ -324,6 +432,9 @@ struct Row {
     value: String,
     forward_ms: f64,
     backward_ms: Option<f64>,
+    /// The times against the default's: beside the pace frame (GPU) or the default row (CPU).
+    forward_x: Option<f64>,
+    backward_x: Option<f64>,
     mib: f64,
     intersections: usize,
     sort_mib: Option<f64>,
@@ -350,20 +461,37 @@ impl Row {
     }
 }
 
-impl Tradeoff<'_> {
+impl<'a> Tradeoff<'a> {
+    /// This method's default frame on the scene, the pace of every GPU setting.
+    pub(crate) fn pace<M: SplatMethod>(&self) -> Result<Box<dyn PaceFrame + 'a>>
+    where
+        M::Params: FromStored,
+    {
+        let gpu = self.gpu.context("a pace frame needs a GPU")?;
+        let before = allocated(gpu);
+        let mut frames = GpuFrames {
+            gpu,
+            camera: self.camera,
+            renderer: GpuRenderer::<M>::new(gpu, &RenderOptions::default())?,
+        };
+        let scene = GpuScene::<M>::new(gpu, &self.cloud.params::<M::Params>())?;
+        let grad = loss_gradient::<M>(self.camera);
+        // Its buffers grow to the frame's size on its first frames.
+        frames.backward(&scene, &grad)?;
+        Ok(Box::new(Pace {
+            frames: RefCell::new(frames),
+            scene,
+            grad,
+            bytes: allocated(gpu).saturating_sub(before),
+        }))
+    }
+
     pub(crate) fn run<M: SplatMethod>(&self) -> Result<Vec<Outcome>>
     where
         M::Params: FromStored,
     {
         let params: Vec<M::Params> = self.cloud.params();
-        let (w, h) = (self.camera.size.x as usize, self.camera.size.y as usize);
-        let mut rng = fastrand::Rng::with_seed(1);
-        let channels = <M::Color as splat_runtime::Flat>::LEN;
-        let grad = FrameGrad {
-            color: (0..w * h * channels).map(|_| rng.f32() - 0.5).collect(),
-            alpha: None,
-            depth: None,
-        };
+        let grad = loss_gradient::<M>(self.camera);
         let scene = match self.gpu {
             Some(gpu) => Some(GpuScene::<M>::new(gpu, &params)?),
             None => None,
@@ -403,13 +531,13 @@ impl Tradeoff<'_> {
         grad: &FrameGrad,
     ) -> Result<(Outcome, Vec<M::Params>)> {
         let camera = self.camera;
-        let forward = median(self.iters, || {
+        let (forward, _) = paced(self.iters, NO_PACE, || {
             let t = Instant::now();
             splat_runtime::render::<M>(params, camera, opts)?;
             Ok(t.elapsed())
         })?;
         let (frame, state) = splat_runtime::render_for_backward::<M>(params, camera, opts)?;
-        let backward = median(self.iters, || {
+        let (backward, _) = paced(self.iters, NO_PACE, || {
             let t = Instant::now();
             splat_runtime::backward::<M>(&state, params, camera, grad)?;
             Ok(t.elapsed())
@@ -418,6 +546,8 @@ impl Tradeoff<'_> {
         let outcome = Outcome {
             forward,
             backward: Some(backward),
+            forward_x: None,
+            backward_x: None,
             bytes: state.bytes(),
             intersections: frame.stats.intersections,
             sort_bytes: None,
@@ -434,31 +564,26 @@ impl Tradeoff<'_> {
         opts: &RenderOptions,
         grad: &FrameGrad,
     ) -> Result<(Outcome, Vec<M::Params>)> {
-        let mut renderer = GpuRenderer::<M>::new(gpu, opts)?;
-        let acc = Accumulation::default_for(gpu);
-        let camera = self.camera;
-        let forward = median(self.iters, || {
-            let t = Instant::now();
-            renderer.forward(scene, camera)?;
-            gpu.wait()?;
-            Ok(t.elapsed())
-        })?;
-        let backward = median(self.iters, || {
-            renderer.forward(scene, camera)?;
-            gpu.wait()?;
-            let t = Instant::now();
-            renderer.backward(scene, grad, acc)?;
-            gpu.wait()?;
-            Ok(t.elapsed())
-        })?;
-        let frame = renderer.download_frame()?;
-        let gradients = renderer.download_gradients()?.gradients;
+        let mut frames = GpuFrames {
+            gpu,
+            camera: self.camera,
+            renderer: GpuRenderer::<M>::new(gpu, opts)?,
+        };
+        let pace_forward = self.pace.map(|p| move || p.forward());
+        let (forward, forward_x) = paced(self.iters, pace_forward, || frames.forward(scene))?;
+        let pace_backward = self.pace.map(|p| move || p.backward());
+        let (backward, backward_x) =
+            paced(self.iters, pace_backward, || frames.backward(scene, grad))?;
+        let frame = frames.renderer.download_frame()?;
+        let gradients = frames.renderer.download_gradients()?.gradients;
         let outcome = Outcome {
             forward,
             backward: Some(backward),
-            bytes: allocated(gpu),
+            forward_x,
+            backward_x,
+            bytes: self.allocated(gpu),
             intersections: frame.stats.intersections,
-            sort_bytes: Some(renderer.sort_bytes()),
+            sort_bytes: Some(frames.renderer.sort_bytes()),
             color: frame.color.data,
             gradients: vec![],
         };
@@ -473,7 +598,8 @@ impl Tradeoff<'_> {
         opts: &RenderOptions,
     ) -> Result<(Outcome, Vec<M::Params>)> {
         let mut renderer = HardwareRenderer::<M>::new(gpu, opts)?;
-        let forward = median(self.iters, || {
+        let pace_forward = self.pace.map(|p| move || p.forward());
+        let (forward, forward_x) = paced(self.iters, pace_forward, || {
             let t = Instant::now();
             renderer.forward(scene, self.camera)?;
             gpu.wait()?;
@@ -483,13 +609,22 @@ impl Tradeoff<'_> {
         let outcome = Outcome {
             forward,
             backward: None,
-            bytes: allocated(gpu),
+            forward_x,
+            backward_x: None,
+            bytes: self.allocated(gpu),
             intersections: frame.stats.intersections,
             sort_bytes: Some(renderer.sort_bytes()),
             color: frame.color.data,
             gradients: vec![],
         };
         Ok((outcome, vec![]))
+    }
+}
+
+impl Tradeoff<'_> {
+    /// Bytes allocated on the device but for the pace frame's.
+    fn allocated(&self, gpu: &Gpu) -> usize {
+        allocated(gpu).saturating_sub(self.pace.map_or(0, |p| p.bytes()))
     }
 }
 
@@ -507,7 +642,7 @@ fn ms(d: Option<f64>, digits: usize) -> String {
 
 fn write_outputs(dir: &std::path::Path, rows: &[Row], method: &str) -> Result<()> {
     let mut summary = String::from(
-        "knob,setting,forward_ms,backward_ms,memory_mib,intersections,sort_mib,psnr_db,max_abs,gradient_rel_rmse\n",
+        "knob,setting,forward_ms,forward_vs_default,backward_ms,backward_vs_default,memory_mib,intersections,sort_mib,psnr_db,max_abs,gradient_rel_rmse\n",
     );
     // The ranges hold a comma: quoted, as CSV quotes such fields.
     let mut detail = String::from("knob,setting,group,rel_rmse,range,mre\n");
@@ -515,11 +650,13 @@ fn write_outputs(dir: &std::path::Path, rows: &[Row], method: &str) -> Result<()
         let empty = |v: Option<String>| v.unwrap_or_default();
         writeln!(
             summary,
-            "{},{},{:.4},{},{:.3},{},{},{:.3},{:.6e},{}",
+            "{},{},{:.4},{},{},{},{:.3},{},{},{:.3},{:.6e},{}",
             r.knob,
             r.value,
             r.forward_ms,
+            empty(r.forward_x.map(|v| format!("{v:.4}"))),
             empty(r.backward_ms.map(|v| format!("{v:.4}"))),
+            empty(r.backward_x.map(|v| format!("{v:.4}"))),
             r.mib,
             r.intersections,
             empty(r.sort_mib.map(|v| format!("{v:.3}"))),
@@ -551,12 +688,33 @@ fn write_outputs(dir: &std::path::Path, rows: &[Row], method: &str) -> Result<()
     Ok(())
 }
 
-/// The median time of `iters` runs of `run`, after one warm-up run.
-fn median(iters: usize, mut run: impl FnMut() -> Result<Duration>) -> Result<Duration> {
-    run()?;
-    let mut times = (0..iters).map(|_| run()).collect::<Result<Vec<_>>>()?;
-    times.sort();
-    Ok(times[times.len() / 2])
+/// No pace frame (the CPU's).
+const NO_PACE: Option<fn() -> Result<Duration>> = None;
+
+/// The median time of `iters` runs of `run` after a warm-up and, given a pace frame, the
+/// median of each run's time over that of the pace frame run after it.
+fn paced(
+    iters: usize,
+    mut pace: Option<impl FnMut() -> Result<Duration>>,
+    mut run: impl FnMut() -> Result<Duration>,
+) -> Result<(Duration, Option<f64>)> {
+    let mut round = || -> Result<(Duration, Option<f64>)> {
+        let t = run()?;
+        let x = match &mut pace {
+            Some(pace) => Some(t.as_secs_f64() / pace()?.as_secs_f64()),
+            None => None,
+        };
+        Ok((t, x))
+    };
+    crate::warm_up::warm_up(&mut round)?;
+    let rounds = (0..iters).map(|_| round()).collect::<Result<Vec<_>>>()?;
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let time = median(rounds.iter().map(|r| r.0.as_secs_f64()).collect());
+    let ratios: Option<Vec<f64>> = rounds.iter().map(|r| r.1).collect();
+    Ok((Duration::from_secs_f64(time), ratios.map(median)))
 }
 
 fn compare(knob: &'static str, value: String, o: &Outcome, reference: &Outcome) -> Row {
@@ -583,6 +741,8 @@ fn compare(knob: &'static str, value: String, o: &Outcome, reference: &Outcome) 
         value,
         forward_ms: o.forward.as_secs_f64() * 1e3,
         backward_ms: o.backward.map(|d| d.as_secs_f64() * 1e3),
+        forward_x: o.forward_x,
+        backward_x: o.backward_x,
         mib: o.bytes as f64 / 1048576.0,
         intersections: o.intersections,
         sort_mib: o.sort_bytes.map(|b| b as f64 / 1048576.0),
@@ -625,18 +785,20 @@ fn gradient_errors(got: &[f64], want: &[f64]) -> (f64, Vec<Option<f64>>) {
     (rmse, mres)
 }
 
-fn print_table(rows: &[Row]) {
+fn print_table(rows: &[Row], paced: bool) {
     println!(
-        "\n| knob | setting | forward ms | backward ms | MiB | sorted keys | sort MiB | PSNR dB | max abs | gradient rel. RMSE (worst group) |"
+        "\n| knob | setting | forward ms | x default | backward ms | x default | MiB | sorted keys | sort MiB | PSNR dB | max abs | gradient rel. RMSE (worst group) |"
     );
-    println!("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+    println!("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for r in rows {
         println!(
-            "| {} | {} | {:.2} | {} | {:.1} | {} | {} | {:.1} | {:.1e} | {} |",
+            "| {} | {} | {:.2} | {} | {} | {} | {:.1} | {} | {} | {:.1} | {:.1e} | {} |",
             r.knob,
             r.value,
             r.forward_ms,
+            ms(r.forward_x, 2),
             ms(r.backward_ms, 2),
+            ms(r.backward_x, 2),
             r.mib,
             r.intersections,
             ms(r.sort_mib, 1),
@@ -647,6 +809,14 @@ fn print_table(rows: &[Row]) {
         );
     }
     println!("(PSNR and errors against the reference; inf: the same image)");
+    println!(
+        "(x default: {})",
+        match paced {
+            true =>
+                "each frame's time over the default frame's run after it, the median of the rounds",
+            false => "the time over the default row's",
+        }
+    );
 }
 
 /// Errors at or below this (an exact match) are drawn on the floor of the log axis.

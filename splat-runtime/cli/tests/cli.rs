@@ -1832,6 +1832,13 @@ fn csv_rows(path: &Path) -> Vec<Vec<String>> {
     text.lines().skip(1).map(fields).collect()
 }
 
+const TRADEOFF_HEADER: &str = "knob,setting,forward_ms,forward_vs_default,backward_ms,backward_vs_default,memory_mib,intersections,sort_mib,psnr_db,max_abs,gradient_rel_rmse";
+
+/// The index of `tradeoff.csv`'s column `name`.
+fn tradeoff_column(name: &str) -> usize {
+    TRADEOFF_HEADER.split(',').position(|c| c == name).unwrap()
+}
+
 /// `splat tradeoff` end to end on a small view: every knob and setting in the CSV, gradient
 /// errors per parameter group and magnitude range, a plot; what the errors must be where the
 /// answer is known (a tile size never changes the image; t_min 0 is the reference itself; a
@@ -1844,6 +1851,8 @@ fn tradeoff_sweeps_every_knob_and_writes_its_table_and_plot() {
     let args = [&["tradeoff", "--backend", "cpu", "--out", "cpu"][..], &size].concat();
     let stdout = ok(&splat(&args, dir.path()));
     assert!(stdout.contains("| knob | setting |"), "{stdout}");
+    let csv = std::fs::read_to_string(dir.path().join("cpu/tradeoff.csv")).unwrap();
+    assert_eq!(csv.lines().next(), Some(TRADEOFF_HEADER));
     let rows = csv_rows(&dir.path().join("cpu/tradeoff.csv"));
     let settings: Vec<(&str, &str)> = rows.iter().map(|r| (&*r[0], &*r[1])).collect();
     let want = [
@@ -1883,7 +1892,17 @@ fn tradeoff_sweeps_every_knob_and_writes_its_table_and_plot() {
             .find(|r| r[0] == knob && (r[1] == value || knob == "default"));
         row.unwrap()[column].parse().unwrap()
     };
-    let (psnr, gradient) = (7, 9);
+    let (psnr, gradient) = (
+        tradeoff_column("psnr_db"),
+        tradeoff_column("gradient_rel_rmse"),
+    );
+    // On the CPU each time is against the default row's.
+    let forward_x = tradeoff_column("forward_vs_default");
+    assert_eq!(field("default", "", forward_x), 1.0);
+    assert!(
+        rows.iter()
+            .all(|r| r[forward_x].parse::<f64>().unwrap() > 0.0)
+    );
     for tile in ["8", "32", "64"] {
         assert_eq!(field("tile", tile, psnr), field("default", "", psnr));
     }
@@ -1943,11 +1962,20 @@ fn tradeoff_sweeps_every_knob_and_writes_its_table_and_plot() {
     assert!(tile[psnr].parse::<f64>().unwrap() > 60.0, "{tile:?}");
     let default = &gpu[0];
     let number = |r: &[String], c: usize| r[c].parse::<f64>().unwrap();
+    // Every GPU time comes with its ratio to the default frame run beside it.
+    let backward_x = tradeoff_column("backward_vs_default");
+    assert!(gpu.iter().all(|r| number(r, forward_x) > 0.0), "{gpu:?}");
+    let (keys, sort) = (
+        tradeoff_column("intersections"),
+        tradeoff_column("sort_mib"),
+    );
     for r in &hardware {
         // Forward only; one sort key per visible primitive, fewer than the tile pairs.
-        assert_eq!((&*r[3], &*r[gradient]), ("", ""), "{r:?}");
-        assert!(number(r, 5) < number(default, 5), "{r:?}");
-        assert!(number(r, 6) < number(default, 6), "{r:?}");
+        let backward = tradeoff_column("backward_ms");
+        assert_eq!((&*r[backward], &*r[backward_x]), ("", ""), "{r:?}");
+        assert_eq!(&*r[gradient], "", "{r:?}");
+        assert!(number(r, keys) < number(default, keys), "{r:?}");
+        assert!(number(r, sort) < number(default, sort), "{r:?}");
     }
     let format = |name: &str| hardware.iter().find(|r| r[1] == format!("hardware {name}"));
     let (f16, unorm8) = (format("f16").unwrap(), format("unorm8").unwrap());
