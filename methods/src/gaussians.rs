@@ -1,7 +1,8 @@
 //! 3D Gaussian Splatting (Kerbl et al. 2023) with EWA splatting and the StopThePop tile cull
 //! (XPR, Rhyner et al. 2026, Listing 1 and §A.1.1), in the conventions of gsplat's "classic"
 //! mode: OpenCV camera, pixel centres at +0.5, 0.3 px dilation, tangent clamp,
-//! near plane 0.01, alpha <= 0.99, pairs below 1/255 skipped, SH + 0.5 clamped at 0.
+//! near plane 0.01, pairs below 1/255 skipped, SH + 0.5 clamped at 0; but alpha <= 0.99, as
+//! the original 3DGS rasterizer (gsplat: 0.999; the one rule where trained scenes differ).
 //!
 //! The SH degree is a compile-time property of the method: `gaussians_3d!` instantiates one
 //! method per degree (`gs3d_sh0` .. `gs3d_sh2`, and `gs3d` for degree 3), so a scene without

@@ -847,9 +847,16 @@ fn draw(outputs: &mut Outputs, path: &std::path::Path, rows: &[Row], method: &st
         }
         k
     });
+    // Times as ratios to the default's (`x default`), which hold where a GPU's clock moves; a
+    // frame's forward and backward ratios weighed by the default row's times.
+    let Some(default) = rows.first() else {
+        bail!("no settings to plot");
+    };
+    let (forward, backward) = (default.forward_ms, default.backward_ms.unwrap_or(0.0));
+    let x = |r: &Row| r.forward_x.unwrap_or(f64::NAN);
     let image: Vec<(f64, f64)> = rows
         .iter()
-        .map(|r| (r.forward_ms, 10f64.powf(-r.psnr / 20.0)))
+        .map(|r| (x(r), 10f64.powf(-r.psnr / 20.0)))
         .collect();
     // Only the settings with a backward pass have a gradient point.
     let with_gradients: Vec<&Row> = rows.iter().filter(|r| r.backward_ms.is_some()).collect();
@@ -857,7 +864,8 @@ fn draw(outputs: &mut Outputs, path: &std::path::Path, rows: &[Row], method: &st
     let gradient: Vec<(f64, f64)> = with_gradients
         .iter()
         .map(|r| {
-            let time = r.forward_ms + r.backward_ms.unwrap_or(0.0);
+            let b = r.backward_x.unwrap_or(f64::NAN);
+            let time = (x(r) * forward + b * backward) / (forward + backward);
             (time, r.gradient_error().unwrap_or(0.0))
         })
         .filter(|(_, e)| !e.is_nan())
@@ -868,14 +876,14 @@ fn draw(outputs: &mut Outputs, path: &std::path::Path, rows: &[Row], method: &st
         let series = [
             (
                 "image against forward time",
-                "forward ms",
+                "forward time, x the default's",
                 "image RMSE",
                 &image,
                 &all,
             ),
             (
                 "gradients against forward + backward time",
-                "forward + backward ms",
+                "forward + backward time, x the default's",
                 "gradient rel. RMSE, worst group",
                 &gradient,
                 &with_gradients,
