@@ -1,7 +1,8 @@
 #!/bin/bash
-# Issues 11, 12 and 14 measured on the lent H200 beside gsplat, as one device call (about 5
-# minutes on 2026-11-30, plus up to one for the shader-checks run added since; each part has its own time limit, most important first; the CPU
-# sweep by thread count only with CPU=1). Prepared here, run there
+# Issues 11, 12 and 14 measured on the lent H200 beside gsplat, as one device call (231 s on
+# 2026-12-04, 263 s of device time with the machine's start; each part has its own time limit,
+# most important first; the CPU sweep by thread count only with CPU=1). The SM clock is logged
+# every 100 ms to $OUT/clocks.csv: it follows the load. Prepared here, run there
 # from the repository root with carry [".gl", ".dev"]:
 #   .gl/   the Vulkan loader debs (see the device README);
 #   .dev/  `splat.xz` (cargo build --release -p splat-cli; strip; xz: 73 MB stripped, over
@@ -24,6 +25,9 @@ else
     export VK_DRIVER_FILES=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
     N=1000000 W=1920 H=1080 ITERS=20 STEPS=7000 N_TRADEOFF=200000 GSPLAT=1 SLOW=1
     nvidia-smi --query-gpu=name,driver_version,clocks.sm,clocks.mem --format=csv
+    nvidia-smi --query-gpu=timestamp,clocks.sm,power.draw,utilization.gpu --format=csv \
+        -lms 100 >"$OUT/clocks.csv" &
+    clock_log=$!
 fi
 part() { echo; echo "=== $1 ($(date +%T))"; }
 # Each part's time limit, in seconds on the H200 (SLOW times that on lavapipe).
@@ -97,8 +101,8 @@ part "issue 14: splat tradeoff on the GPU, $N_TRADEOFF Gaussians at 960x540"
 big=/tmp/big
 mkdir -p $big
 python3 .dev/make_scene.py $N_TRADEOFF 960 540 $big
-limit 60 $splat tradeoff --backend gpu --scene $big/scene.ply --camera $big/camera.json \
-    --iters 3 --out /tmp/tradeoff
+limit 100 $splat tradeoff --backend gpu --scene $big/scene.ply --camera $big/camera.json \
+    --iters 5 --out /tmp/tradeoff
 tar czf "$OUT/tradeoff.tgz" -C /tmp/tradeoff . 2>/dev/null
 
 if [ "${CPU:-0}" = 1 ]; then
@@ -107,4 +111,5 @@ if [ "${CPU:-0}" = 1 ]; then
 fi
 
 part "done"
+[ -n "${clock_log:-}" ] && kill "$clock_log"
 ls -la "$OUT"
