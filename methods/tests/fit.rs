@@ -1135,6 +1135,15 @@ fn a_run_resumed_from_its_checkpoint_takes_the_same_steps() {
         };
         let err = fit_from::<Method>(&smaller, &mut other, 1.0, &opts, |_| {}).unwrap_err();
         assert!(err.to_string().contains("another --downscale"), "{err}");
+        // And a state built by hand whose moments are not the parameters' size.
+        let mut built = at20.clone();
+        built.adam.m.pop();
+        let err = fit_from::<Method>(&data, &mut built, 1.0, &opts, |_| {}).unwrap_err();
+        assert!(
+            err.to_string()
+                .contains("not a run's state: Adam's moments"),
+            "{err}"
+        );
     });
 }
 

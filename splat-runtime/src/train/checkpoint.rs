@@ -127,6 +127,36 @@ impl Checkpoint {
         self.params.len() / self.words.max(1)
     }
 
+    /// What makes this state no run's (its fields are public, so a caller can build one):
+    /// parameters that are not whole primitives, moments or statistics of another size, a
+    /// step past the run's end. `read` refuses the same in a file.
+    pub fn size_defect(&self) -> Option<String> {
+        let (words, params) = (self.words, self.params.len());
+        let (m, v) = (self.adam.m.len(), self.adam.v.len());
+        let (stats, seen) = (self.grad2d.len(), self.seen.len());
+        if words == 0 || params % words != 0 {
+            Some(format!(
+                "{params} parameter words are not whole primitives of {words} words"
+            ))
+        } else if m != params || v != params {
+            Some(format!(
+                "Adam's moments hold {m} and {v} words, the parameters {params}"
+            ))
+        } else if stats != seen || (stats != 0 && stats != self.primitives()) {
+            Some(format!(
+                "density control's statistics are for {stats} and {seen} primitives, the parameters for {}",
+                self.primitives()
+            ))
+        } else if self.step > self.steps {
+            Some(format!(
+                "step {} is past the run's {} steps",
+                self.step, self.steps
+            ))
+        } else {
+            None
+        }
+    }
+
     /// Writes the checkpoint to `path` atomically (a run killed while writing leaves the
     /// previous checkpoint).
     pub fn write(&self, path: &Path) -> std::io::Result<()> {
@@ -138,6 +168,10 @@ impl Checkpoint {
     /// the training views and their pixels, 0 and 0 for none), then the parameters, both
     /// moments and the statistics, then the CRC-32 of every byte before it.
     pub fn write_to(&self, w: &mut dyn Write) -> std::io::Result<()> {
+        if let Some(defect) = self.size_defect() {
+            let what = format!("not a run's state: {defect}");
+            return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, what));
+        }
         let mut summed = Summed {
             w,
             crc: crc32fast::Hasher::new(),
@@ -426,6 +460,45 @@ mod tests {
         let crc = crc32fast::hash(&fields);
         fields.extend(crc.to_le_bytes());
         fields
+    }
+
+    /// A state of mismatched sizes is refused by name before a byte is written.
+    #[test]
+    fn a_state_of_mismatched_sizes_is_not_written() {
+        type Spoil = fn(&mut Checkpoint);
+        let cases: [(Spoil, &str); 6] = [
+            (
+                |c| c.params.push(0.0),
+                "5 parameter words are not whole primitives of 2 words",
+            ),
+            (
+                |c| c.words = 0,
+                "4 parameter words are not whole primitives of 0 words",
+            ),
+            (
+                |c| c.adam.v.truncate(3),
+                "Adam's moments hold 4 and 3 words, the parameters 4",
+            ),
+            (
+                |c| c.seen.clear(),
+                "density control's statistics are for 2 and 0 primitives, the parameters for 2",
+            ),
+            (
+                |c| (c.grad2d, c.seen) = (vec![0.0], vec![1]),
+                "density control's statistics are for 1 and 1 primitives, the parameters for 2",
+            ),
+            (|c| c.step = 11, "step 11 is past the run's 10 steps"),
+        ];
+        assert_eq!(sample().size_defect(), None);
+        for (spoil, want) in cases {
+            let mut c = sample();
+            spoil(&mut c);
+            assert_eq!(c.size_defect().as_deref(), Some(want));
+            let mut bytes = vec![];
+            let error = c.write_to(&mut bytes).unwrap_err();
+            assert_eq!(error.to_string(), format!("not a run's state: {want}"));
+            assert!(bytes.is_empty());
+        }
     }
 
     #[test]

@@ -541,6 +541,11 @@ pub(crate) fn adopt<M: Trainable>(
     train: &[View],
     opts: &FitOptions,
 ) -> Result<(), FitError> {
+    if let Some(defect) = state.size_defect() {
+        return Err(FitError::Unsupported(format!(
+            "the checkpoint is not a run's state: {defect}"
+        )));
+    }
     if state.method != M::NAME || state.words != M::Params::LEN {
         return Err(FitError::Unsupported(format!(
             "the checkpoint is of {} ({} parameter words), not {} ({})",
