@@ -25,14 +25,19 @@ fn ms(d: Duration) -> f64 {
     d.as_secs_f64() * 1e3
 }
 
-/// Element-wise minimum of the per-stage times of `runs` runs of `f`, after running it for
-/// 0.3 s: a GPU left idle while the host worked (the one-shot frames' uploads, say) runs at
-/// lower clocks until it has been busy a while (the CLI's `warm_up` says more).
-fn best<const K: usize>(runs: usize, mut f: impl FnMut() -> [Duration; K]) -> [Duration; K] {
+/// Runs `f` for 0.3 s before timing it: a GPU left idle while the host worked (the one-shot
+/// frames' uploads, say) runs at lower clocks until it has been busy a while (the CLI's
+/// `warm_up` says more).
+fn warm_up<T>(mut f: impl FnMut() -> T) {
     let start = Instant::now();
     while start.elapsed() < Duration::from_millis(300) {
         f();
     }
+}
+
+/// Element-wise minimum of the per-stage times of `runs` runs of `f`, after a [`warm_up`].
+fn best<const K: usize>(runs: usize, mut f: impl FnMut() -> [Duration; K]) -> [Duration; K] {
+    warm_up(&mut f);
     let mut out = [Duration::MAX; K];
     for _ in 0..runs {
         for (o, t) in out.iter_mut().zip(f()) {
@@ -182,10 +187,7 @@ fn main() {
             let (d, _) = gpu_run(&mut renderer, &scene_gpu, acc);
             (t[3], ms(t[3]) / ms(d[3]), issued)
         };
-        let start = Instant::now();
-        while start.elapsed() < Duration::from_millis(300) {
-            round();
-        }
+        warm_up(&mut round);
         let rounds: Vec<_> = (0..5).map(|_| round()).collect();
         let blend = rounds.iter().map(|r| r.0).min().unwrap();
         let mut ratios: Vec<f64> = rounds.iter().map(|r| r.1).collect();

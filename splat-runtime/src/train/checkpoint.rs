@@ -129,7 +129,7 @@ impl Checkpoint {
 
     /// What makes this state no run's (its fields are public, so a caller can build one):
     /// parameters that are not whole primitives, moments or statistics of another size, a
-    /// step past the run's end. `read` refuses the same in a file.
+    /// step past the run's end. `read` refuses a file that holds such a state.
     pub fn size_defect(&self) -> Option<String> {
         let (words, params) = (self.words, self.params.len());
         let (m, v) = (self.adam.m.len(), self.adam.v.len());
@@ -300,11 +300,6 @@ impl Checkpoint {
             }
             v => v.filter(|v| v.views > 0),
         };
-        if step > steps {
-            return Err(damaged(format!(
-                "step {step} is past the run's {steps} steps"
-            )));
-        }
         let total = primitives
             .checked_mul(words)
             .ok_or_else(|| damaged(format!("{primitives} primitives of {words} words")))?;
@@ -323,12 +318,7 @@ impl Checkpoint {
                 bytes.len() - r.at
             )));
         }
-        if stats != 0 && stats != primitives {
-            return Err(damaged(format!(
-                "statistics for {stats} primitives, parameters for {primitives}"
-            )));
-        }
-        Ok(Checkpoint {
+        let checkpoint = Checkpoint {
             method,
             words,
             strategy,
@@ -346,7 +336,11 @@ impl Checkpoint {
             rng,
             extent,
             views,
-        })
+        };
+        match checkpoint.size_defect() {
+            Some(defect) => Err(damaged(defect)),
+            None => Ok(checkpoint),
+        }
     }
 }
 
@@ -602,6 +596,18 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("pixels in no training views"), "{e}");
+        // A state no run has (`size_defect`): a step past the run's end (the step follows
+        // the words).
+        let mut late = bytes.clone();
+        let at = names + 8;
+        late[at..at + 8].copy_from_slice(&11u64.to_le_bytes());
+        let e = Checkpoint::parse(&summed(late), path)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("damaged: step 11 is past the run's 10 steps"),
+            "{e}"
+        );
         let e = Checkpoint::parse(b"PLY\n....", path)
             .unwrap_err()
             .to_string();
