@@ -18,6 +18,7 @@ use crate::flat::Flat;
 use crate::lanes::{F32x8, LANES, M32x8};
 use crate::method::SplatMethod;
 use crate::types::{Camera, ContributionLanes};
+use rayon::prelude::*;
 
 /// Gradient of the loss with respect to each requested output, in the layout of the frame.
 #[derive(Clone, Debug)]
@@ -57,12 +58,27 @@ impl FrameGrad {
             ("depth", self.depth.as_ref()),
         ];
         for (what, values) in given {
-            if let Some(index) = values.and_then(|v| v.iter().position(|g| !g.is_finite())) {
+            if let Some(index) = values.and_then(|v| first_not_finite(v)) {
                 return Err(RenderError::NonFiniteGradient { what, index });
             }
         }
         Ok(())
     }
+}
+
+/// The index of the first value of `values` that is not finite: blocks in parallel, each
+/// tested by a branch-free fold the compiler vectorizes (rayon's `position_first`, item by
+/// item, took 20x as long over a 1080p color gradient).
+fn first_not_finite(values: &[f32]) -> Option<usize> {
+    const BLOCK: usize = 1 << 16;
+    let (k, block) = values
+        .par_chunks(BLOCK)
+        .enumerate()
+        .find_first(|(_, b)| b.iter().fold(false, |bad, g| bad | !g.is_finite()))?;
+    block
+        .iter()
+        .position(|g| !g.is_finite())
+        .map(|i| k * BLOCK + i)
 }
 
 /// One worker's gradient sums per primitive: `shade[i * Shade::LEN..]` and `depth[i]`, held
@@ -327,5 +343,28 @@ fn add_ray_gradient<M: SplatMethod, const MODEL: u32>(
         let centre = glam::Vec2::new((x0 + l as u32) as f32 + 0.5, y as f32 + 0.5);
         let d = M::pixel_info_adjoint_as::<MODEL>(centre, camera, &M::Pixel::read_words(&words));
         *out = out.add_cotangent(&d);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::first_not_finite;
+
+    #[test]
+    fn the_first_value_not_finite_is_found_in_any_block() {
+        let n = 3 * (1 << 16) + 5;
+        assert_eq!(first_not_finite(&vec![1.0; n]), None);
+        assert_eq!(first_not_finite(&[]), None);
+        for (at, bad) in [
+            (0, f32::NAN),
+            (70_000, f32::INFINITY),
+            (n - 1, f32::NEG_INFINITY),
+        ] {
+            let mut v = vec![-2.5; n];
+            v[at] = bad;
+            // A later bad value in a later block does not hide the first.
+            v[n - 1] = f32::NAN;
+            assert_eq!(first_not_finite(&v), Some(at), "{bad} at {at}");
+        }
     }
 }
