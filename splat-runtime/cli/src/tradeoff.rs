@@ -350,9 +350,20 @@ struct GpuFrames<'a, M: SplatMethod> {
     gpu: &'a Gpu,
     camera: &'a Camera,
     renderer: GpuRenderer<'a, M>,
+    /// Whether the loss gradient is in the renderer's output gradient buffer already.
+    grad_on_device: bool,
 }
 
-impl<M: SplatMethod> GpuFrames<'_, M> {
+impl<'a, M: SplatMethod> GpuFrames<'a, M> {
+    fn new(gpu: &'a Gpu, camera: &'a Camera, opts: &RenderOptions) -> Result<Self> {
+        Ok(GpuFrames {
+            gpu,
+            camera,
+            renderer: GpuRenderer::<M>::new(gpu, opts)?,
+            grad_on_device: false,
+        })
+    }
+
     fn forward(&mut self, scene: &GpuScene<M>) -> Result<Duration> {
         let t = Instant::now();
         self.renderer.forward(scene, self.camera)?;
@@ -360,13 +371,20 @@ impl<M: SplatMethod> GpuFrames<'_, M> {
         Ok(t.elapsed())
     }
 
-    /// The backward pass alone, after an untimed forward pass.
+    /// The backward pass alone, after an untimed forward pass. The loss gradient goes up once,
+    /// untimed, and the timed passes find it on the device, as `splat fit`'s loss leaves it:
+    /// the host's check, interleave and upload of it would be the same for every setting and
+    /// hide their differences.
     fn backward(&mut self, scene: &GpuScene<M>, grad: &FrameGrad) -> Result<Duration> {
         self.renderer.forward(scene, self.camera)?;
+        let acc = Accumulation::default_for(self.gpu);
+        if !self.grad_on_device {
+            self.renderer.backward(scene, grad, acc)?;
+            self.grad_on_device = true;
+        }
         self.gpu.wait()?;
         let t = Instant::now();
-        let acc = Accumulation::default_for(self.gpu);
-        self.renderer.backward(scene, grad, acc)?;
+        self.renderer.backward_on_device(scene, acc)?;
         self.gpu.wait()?;
         Ok(t.elapsed())
     }
@@ -469,11 +487,7 @@ impl<'a> Tradeoff<'a> {
     {
         let gpu = self.gpu.context("a pace frame needs a GPU")?;
         let before = allocated(gpu);
-        let mut frames = GpuFrames {
-            gpu,
-            camera: self.camera,
-            renderer: GpuRenderer::<M>::new(gpu, &RenderOptions::default())?,
-        };
+        let mut frames = GpuFrames::new(gpu, self.camera, &RenderOptions::default())?;
         let scene = GpuScene::<M>::new(gpu, &self.cloud.params::<M::Params>())?;
         let grad = loss_gradient::<M>(self.camera);
         // Its buffers grow to the frame's size on its first frames.
@@ -564,11 +578,7 @@ impl<'a> Tradeoff<'a> {
         opts: &RenderOptions,
         grad: &FrameGrad,
     ) -> Result<(Outcome, Vec<M::Params>)> {
-        let mut frames = GpuFrames {
-            gpu,
-            camera: self.camera,
-            renderer: GpuRenderer::<M>::new(gpu, opts)?,
-        };
+        let mut frames = GpuFrames::new(gpu, self.camera, opts)?;
         let pace_forward = self.pace.map(|p| move || p.forward());
         let (forward, forward_x) = paced(self.iters, pace_forward, || frames.forward(scene))?;
         let pace_backward = self.pace.map(|p| move || p.backward());
