@@ -14,6 +14,7 @@ mod fisheye_fold;
 mod fit;
 mod gpu_parity;
 mod gradients;
+mod gsplat_reference;
 mod hard_cases;
 mod hardware;
 mod lens;

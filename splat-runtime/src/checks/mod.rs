@@ -35,6 +35,7 @@
 //! `SPLAT_REQUIRE_GPU=1`.
 
 pub mod adjoint;
+pub mod bound;
 pub mod extremes;
 pub mod forward;
 pub mod gradients;
@@ -66,6 +67,18 @@ pub struct Twin {
     pub evaluate: Flat64,
     pub evaluate_adjoint: Adjoint64,
 }
+
+/// The camera's differentiable fields as ranges of its float slots ([`Camera::float_slots`];
+/// the image size, slots 16..18, has no gradient): how the gradient checks group them.
+pub const CAMERA_GROUPS: [(&str, std::ops::Range<usize>); 7] = [
+    ("rotation", 0..9),
+    ("translation", 9..12),
+    ("focal", 12..14),
+    ("principal", 14..16),
+    ("distortion", 18..22),
+    ("shutter_turn", 22..25),
+    ("shutter_shift", 25..28),
+];
 
 /// A value's words as f64.
 pub fn words<P: Flat>(p: &P) -> Vec<f64> {
