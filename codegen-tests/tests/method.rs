@@ -148,3 +148,40 @@ fn param_groups_are_the_declared_fields() {
         .collect();
     assert_eq!(got, want);
 }
+
+/// The box and the tile cull hold every pixel the 1/255 threshold keeps, on opaque splats too
+/// (whose footprint reaches past three sigma), and the cull drops some tiles of the boxes.
+#[test]
+fn the_box_and_the_cull_hold_every_kept_pixel() {
+    use splat_runtime::checks::forward::{
+        boxes_hold_every_contributing_pixel, tile_cull_is_conservative,
+    };
+    let cam = splat_runtime::Camera {
+        focal: Vec2::splat(64.0),
+        principal: Vec2::new(32.0, 24.0),
+        size: Vec2::new(64.0, 48.0),
+        ..Default::default()
+    };
+    let mut rng = fastrand::Rng::with_seed(5);
+    let params: Vec<isotropic::Params> = (0..80)
+        .map(|_| {
+            let z = 2.0 + 4.0 * rng.f32();
+            let at = Vec2::new(rng.f32() * 1.2 - 0.6, rng.f32() * 0.9 - 0.45);
+            isotropic::Params {
+                mean: (at * z).extend(z),
+                log_radius: -3.5 + 1.5 * rng.f32(),
+                color: Vec3::new(rng.f32(), rng.f32(), rng.f32()),
+                opacity_logit: 8.0 * rng.f32() - 3.0,
+            }
+        })
+        .collect();
+    let outside =
+        boxes_hold_every_contributing_pixel::<Method>("isotropic", &params, &cam, 1.0 / 255.0);
+    assert!(outside > 0, "the boxes should leave pixels out");
+    for (with, without) in tile_cull_is_conservative::<Method>("isotropic", &params, &cam) {
+        assert!(
+            with < without,
+            "the cull dropped nothing ({with} of {without})"
+        );
+    }
+}

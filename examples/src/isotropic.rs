@@ -32,7 +32,9 @@ pub mod isotropic {
         let z = t.z.max(0.01);
         let center = Vec2::new(cam.focal.x * t.x / z, cam.focal.y * t.y / z) + cam.principal;
         let sigma = cam.focal.x * p.log_radius.exp() / z;
-        let radius = 3.0 * sigma;
+        let opacity = sigmoid(p.opacity_logit);
+        // Out to where alpha falls to 1/255: an opaque splat reaches past three sigma.
+        let radius = sigma * (2.0 * (255.0 * opacity).ln().max(0.0)).sqrt();
         Projected {
             visible: t.z > 0.01,
             depth: z,
@@ -42,7 +44,7 @@ pub mod isotropic {
             shade: Shade {
                 center,
                 inv_sigma2: 1.0 / (sigma * sigma),
-                opacity: sigmoid(p.opacity_logit),
+                opacity,
                 color: p.color,
             },
         }
