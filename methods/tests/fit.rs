@@ -1147,6 +1147,52 @@ fn a_run_resumed_from_its_checkpoint_takes_the_same_steps() {
     });
 }
 
+/// With MCMC a resumed run takes the uninterrupted run's steps too, bit for bit: relocation
+/// and growth draw from the checkpoint's generator state, and the position noise from the step
+/// (CPU, one thread). The sampler acts on both sides of the checkpoint.
+#[test]
+fn an_mcmc_run_resumed_from_its_checkpoint_takes_the_same_steps() {
+    use splat_runtime::train::fit::fit_from;
+    use splat_runtime::train::{Checkpoint, McmcOptions};
+    let dir = tempfile::tempdir().unwrap();
+    write_known_scene(dir.path());
+    let data = read_blender(dir.path(), Vec3::ZERO).unwrap();
+    let opts = FitOptions {
+        densify: Some(Strategy::Mcmc(McmcOptions {
+            start: 5,
+            every: 5,
+            growth: 0.2,
+            ..Default::default()
+        })),
+        ..resumable_options()
+    };
+    let start = moved_start::<Method>(&truth());
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    pool.install(|| {
+        let mut whole = Checkpoint::start::<Method>(&start, opts.steps, opts.seed);
+        let mut saved = vec![];
+        let mut counts = vec![];
+        fit_from::<Method>(&data, &mut whole, 1.0, &opts, |r| {
+            saved.extend(r.checkpoint.cloned());
+            counts.push(r.primitives);
+        })
+        .unwrap();
+        assert!(
+            counts[19] > start.len() && counts[39] > counts[19],
+            "the sampler grows on both sides of the checkpoint: {counts:?}"
+        );
+        let path = dir.path().join("checkpoint.bin");
+        saved[0].write(&path).unwrap();
+        let mut resumed = Checkpoint::read(&path).unwrap();
+        assert_eq!(resumed.step, 20);
+        fit_from::<Method>(&data, &mut resumed, 1.0, &opts, |_| {}).unwrap();
+        assert_eq!(resumed, whole);
+    });
+}
+
 /// On the GPU loop a resumed run goes on from the checkpoint's state (moments and statistics
 /// downloaded, uploaded again) and ends as close to the uninterrupted run as two GPU runs of
 /// the same steps do (float atomics add in any order).
