@@ -10,7 +10,8 @@ use crate::common::{
 use splat_methods::{gs3d, gs3d_aa};
 use splat_runtime::checks::forward::{forward_matches_reference, gpu_forward_matches_cpu};
 use splat_runtime::checks::gradients::{
-    gpu_gradients_match_cpu, gradients_match_finite_differences, gradients_match_reference_adjoint,
+    FINITE_DIFFERENCES, REFERENCE_ADJOINT, gpu_gradients_match_cpu,
+    gradients_match_finite_differences, gradients_match_reference_adjoint,
 };
 use splat_runtime::glam::{DMat3, DQuat, DVec3, Vec2, Vec3};
 use splat_runtime::{RenderOptions, render};
@@ -91,7 +92,7 @@ fn antialiased_3dgs_passes_the_shared_checks() {
         &cam,
         &GAUSSIAN_GROUPS,
         &CAMERA_GROUPS[..4],
-        1e-4,
+        FINITE_DIFFERENCES,
     );
     let dense_cam = camera(64, 48);
     let dense: Vec<gs3d_aa::Params> = as_method(spread_gaussians(&dense_cam, 1000, 12));
@@ -101,7 +102,7 @@ fn antialiased_3dgs_passes_the_shared_checks() {
         &dense_cam,
         &GAUSSIAN_GROUPS,
         &CAMERA_GROUPS[..4],
-        1e-4,
+        REFERENCE_ADJOINT,
     );
     gpu_forward_matches_cpu::<gs3d_aa::Method>("3dgs-aa", &dense, &dense_cam);
     gpu_gradients_match_cpu::<gs3d_aa::Method>("3dgs-aa", &dense, &dense_cam);

@@ -14,7 +14,8 @@ use splat_runtime::checks::forward::{
     tile_cull_is_conservative,
 };
 use splat_runtime::checks::gradients::{
-    gpu_gradients_match_cpu, gradients_match_finite_differences, gradients_match_reference_adjoint,
+    FINITE_DIFFERENCES, REFERENCE_ADJOINT, gpu_gradients_match_cpu,
+    gradients_match_finite_differences, gradients_match_reference_adjoint,
     invalid_pairs_leave_no_trace,
 };
 use splat_runtime::glam::{Vec2, Vec3};
@@ -63,7 +64,7 @@ fn render_gradients_match_finite_differences() {
             &cam,
             &GAUSSIAN_GROUPS,
             cameras,
-            1e-4,
+            FINITE_DIFFERENCES,
         );
     }
 }
@@ -206,7 +207,7 @@ fn gradients_match_the_reference_adjoint_on_realistic_scenes() {
             &cam,
             &GAUSSIAN_GROUPS,
             camera_groups(model),
-            1e-4,
+            REFERENCE_ADJOINT,
         );
     }
 }

@@ -7,6 +7,7 @@
 use crate::common::{as_method, gaussian_toward, spread_gaussians, wide_camera};
 use splat_methods::gs3d::Params;
 use splat_methods::{FromStored, geer, gs3d, gut, linprim};
+use splat_runtime::checks::bound::Bound;
 use splat_runtime::checks::extremes::{EXTREMES, extremes_stay_finite_and_correct};
 use splat_runtime::glam::{Vec2, Vec3};
 use splat_runtime::{Camera, CameraModel, SplatMethod};
@@ -29,9 +30,13 @@ fn scene(cam: &Camera) -> Vec<Params> {
     ps
 }
 
-/// Gradients within 1e-3 of each group's largest: f32 sums with cancellation put unmodified
-/// Gaussians 1e-4 to 3e-4 off the f64 adjoint in these scenes.
-const TOL: f64 = 1e-3;
+/// Gradients within 1e-4 of each element plus 1e-3 of its group's largest, on the CPU against
+/// the f64 adjoint and on the GPU against the CPU: the Gaussian on the near plane (depth
+/// 0.0100001, its footprint the whole image) coarsens every f32 gradient of the scene, so the
+/// unmodified Gaussians sit up to 2.8e-4 of their group's largest off the f64 adjoint on the
+/// CPU (3DGUT's rotation; 0.27 of this bound) and 3.4e-4 off the CPU on the GPU (3DGS's log
+/// scale: 1.5e-3 relative, 0.33 of this bound, 9.5 of the GPU's usual bound).
+const BOUND: Bound = Bound::new(1e-4, 1e-3);
 
 /// The base scene for `model`, as `M`'s parameters, and its camera.
 fn base<M: SplatMethod>(model: CameraModel) -> (Vec<M::Params>, Camera)
@@ -48,7 +53,7 @@ where
     M::Params: FromStored,
 {
     let (base, cam) = base::<M>(model);
-    let ran = extremes_stay_finite_and_correct::<M>(label, &base, &cam, 10_000, TOL);
+    let ran = extremes_stay_finite_and_correct::<M>(label, &base, &cam, 10_000, BOUND);
     assert_eq!(ran.len(), EXTREMES.len() + 1, "{label}: {ran:?}");
 }
 

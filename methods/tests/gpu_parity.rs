@@ -2,9 +2,9 @@
 //! tile_cull, radix sort, tile ranges, binning, per-tile shading; backward blend and project's
 //! adjoint) against the CPU backend, for tile sizes 8 and 16:
 //! - forward color, alpha and depth within 1e-4 absolute + 1% relative per element;
-//! - gradients of every parameter group and the camera within 1e-3 of the group's largest
-//!   gradient, for each way of accumulating them (workgroup reduction or not, f32 atomics or
-//!   a compare-exchange loop).
+//! - gradients of every parameter group and camera field, element by element within
+//!   `GPU_GRADIENTS`, for each way of accumulating them (workgroup reduction or not, f32
+//!   atomics or a compare-exchange loop).
 //!
 //! The resident renderer (one renderer and scene across changing frames) equals the one-shot
 //! path frame by frame; shaders compiled with naga's run-time checks equal those without.
@@ -15,12 +15,15 @@
 use crate::common::{camera, gaussian_at, spread_gaussians};
 use splat_methods::gs3d::{Method, Params};
 use splat_runtime::checks::forward::outputs_close;
-use splat_runtime::checks::{camera_words, group_error, words};
+use splat_runtime::checks::gradients::{GPU_GRADIENTS, camera_matches, groups_match};
+use splat_runtime::checks::{CAMERA_GROUPS, camera_words, group_error, words};
 use splat_runtime::glam::Vec2;
 use splat_runtime::gpu::entries::{Accumulation, Reduction};
 use splat_runtime::gpu::{Gpu, GpuRenderer, GpuScene, adapter_or_skip};
 use splat_runtime::types::Camera;
-use splat_runtime::{FrameGrad, RenderOptions, backward, render, render_for_backward};
+use splat_runtime::{
+    FrameGrad, RenderOptions, backward, param_groups, render, render_for_backward,
+};
 
 fn scene(seed: u64, count: usize, cam: &Camera, log_scale: f32) -> Vec<Params> {
     let mut rng = fastrand::Rng::with_seed(seed);
@@ -159,32 +162,18 @@ fn gpu_gradients_match_cpu() {
             let g = splat_runtime::gpu::render::backward(&mut gstate, &grad, *acc).unwrap();
             atomics.push(g.atomics);
             let words = |ps: &[Params]| -> Vec<Vec<f64>> { ps.iter().map(words).collect() };
-            let (gw, cw) = (words(&g.gradients.params), words(&cpu.params));
-            let groups = [
-                ("mean", 0..3),
-                ("log_scale", 3..6),
-                ("rotation", 6..10),
-                ("opacity", 10..11),
-                ("sh", 11..59),
-            ];
-            for (name, range) in groups {
-                let pick = |w: &[Vec<f64>]| -> Vec<f64> {
-                    w.iter().flat_map(|p| p[range.clone()].to_vec()).collect()
-                };
-                let err = group_error(&pick(&gw), &pick(&cw));
-                println!("tile {tile_size}, {acc:?}, {name}: {err:.2e}");
-                assert!(
-                    err <= 1e-3,
-                    "tile {tile_size}, {acc:?}, {name}: error {err}"
-                );
-            }
-            let (gc, cc) = (camera_words(&g.gradients.camera), camera_words(&cpu.camera));
-            let err = group_error(&gc[..16], &cc[..16]);
-            println!("tile {tile_size}, {acc:?}, camera: {err:.2e}");
-            assert!(
-                err <= 1e-3,
-                "tile {tile_size}, {acc:?}, camera: error {err}"
+            let at = format!("tile {tile_size}, {acc:?}");
+            let (got, want) = (words(&g.gradients.params), words(&cpu.params));
+            groups_match(
+                &at,
+                &got,
+                &want,
+                None,
+                &param_groups::<Method>(),
+                GPU_GRADIENTS,
             );
+            let (got, want) = (camera_words(&g.gradients.camera), camera_words(&cpu.camera));
+            camera_matches(&at, &got, &want, None, &CAMERA_GROUPS, GPU_GRADIENTS);
         }
         println!("tile {tile_size}: atomics issued per mode {atomics:?}");
         // Each reduction issues fewer global atomics than one per pixel, the workgroup's

@@ -8,7 +8,8 @@ use crate::common::{CAMERA_GROUPS, GAUSSIAN_GROUPS, camera, gaussian_at, spread_
 use splat_methods::gs3d::{Method, Params};
 use splat_runtime::CameraModel::Pinhole;
 use splat_runtime::checks::gradients::{
-    gpu_gradients_match_cpu, gradients_match_reference_adjoint, invalid_pairs_leave_no_trace,
+    REFERENCE_ADJOINT, gpu_gradients_match_cpu, gradients_match_reference_adjoint,
+    invalid_pairs_leave_no_trace,
 };
 use splat_runtime::checks::{self, group_error};
 use splat_runtime::glam::Vec2;
@@ -162,7 +163,7 @@ fn gradients_match_the_reference_adjoint_on_a_realistic_scene() {
         &cam,
         &GAUSSIAN_GROUPS,
         &CAMERA_GROUPS[..4],
-        1e-4,
+        REFERENCE_ADJOINT,
     );
 }
 

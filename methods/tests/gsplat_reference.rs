@@ -211,7 +211,7 @@ fn image_matches(at: &str, f: &Fixture, frame: &Frame, bounds: &Bounds) {
     for (what, channels, values, want, bound) in outputs {
         assert_eq!(values.len(), want.len(), "{at}: {what} size");
         let (got, want) = clear(channels, values, want);
-        bound.check(&format!("{at}, {what}"), &got, &want, |i| {
+        bound.check(&format!("{at}, {what}"), &got, &want, None, |i| {
             format!("clear value {i}")
         });
     }
@@ -230,6 +230,7 @@ fn gradients_match<M: SplatMethod>(at: &str, f: &Fixture, got: &Gradients<M>, bo
             &format!("{at}, {group}"),
             &pick(&params),
             &pick(&f.params_gradient),
+            None,
             |i| format!("Gaussian {} word {}", i / width, i % width),
         );
     }
@@ -240,6 +241,7 @@ fn gradients_match<M: SplatMethod>(at: &str, f: &Fixture, got: &Gradients<M>, bo
             &format!("{at}, camera {field}"),
             &camera[range.clone()],
             &f.camera_gradient[range.clone()],
+            None,
             |i| format!("slot {}", range.start + i),
         );
     }

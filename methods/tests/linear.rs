@@ -11,7 +11,8 @@ use splat_runtime::checks::forward::{
     tile_cull_is_conservative,
 };
 use splat_runtime::checks::gradients::{
-    gpu_gradients_match_cpu, gradients_match_finite_differences, gradients_match_reference_adjoint,
+    FINITE_DIFFERENCES, REFERENCE_ADJOINT, gpu_gradients_match_cpu,
+    gradients_match_finite_differences, gradients_match_reference_adjoint,
     invalid_pairs_leave_no_trace,
 };
 use splat_runtime::glam::Vec2;
@@ -113,7 +114,7 @@ fn render_gradients_match_finite_differences() {
         &cam,
         &GAUSSIAN_GROUPS,
         &CAMERA_GROUPS[..4],
-        1e-4,
+        FINITE_DIFFERENCES,
     );
 }
 
@@ -148,7 +149,7 @@ fn gradients_match_the_reference_adjoint_on_a_realistic_scene() {
         &cam,
         &GAUSSIAN_GROUPS,
         &CAMERA_GROUPS[..4],
-        1e-4,
+        REFERENCE_ADJOINT,
     );
 }
 

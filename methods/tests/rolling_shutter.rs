@@ -15,7 +15,7 @@ use splat_runtime::checks::forward::{
     tile_cull_is_conservative,
 };
 use splat_runtime::checks::gradients::{
-    gpu_gradients_match_cpu, gradients_match_finite_differences,
+    FINITE_DIFFERENCES, gpu_gradients_match_cpu, gradients_match_finite_differences,
 };
 use splat_runtime::glam::{DMat3, DVec3, Mat3, Vec2, Vec3, Vec4};
 use splat_runtime::io::camera::with_last_row_pose;
@@ -181,7 +181,7 @@ where
             &small,
             &GAUSSIAN_GROUPS,
             &cameras,
-            1e-4,
+            FINITE_DIFFERENCES,
         );
         gpu_gradients_match_cpu::<M>(&label, &covering, &small);
     }

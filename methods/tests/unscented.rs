@@ -11,7 +11,8 @@ use splat_runtime::checks::forward::{
     boxes_hold_every_contributing_pixel, forward_matches_reference, gpu_forward_matches_cpu,
 };
 use splat_runtime::checks::gradients::{
-    gpu_gradients_match_cpu, gradients_match_finite_differences, gradients_match_reference_adjoint,
+    FINITE_DIFFERENCES, REFERENCE_ADJOINT, gpu_gradients_match_cpu,
+    gradients_match_finite_differences, gradients_match_reference_adjoint,
     invalid_pairs_leave_no_trace,
 };
 use splat_runtime::glam::Vec2;
@@ -54,7 +55,7 @@ fn render_gradients_match_finite_differences() {
             &cam,
             &GAUSSIAN_GROUPS,
             cameras,
-            1e-4,
+            FINITE_DIFFERENCES,
         );
     }
 }
@@ -97,7 +98,7 @@ fn gradients_match_the_reference_adjoint_on_realistic_scenes() {
             &cam,
             &GAUSSIAN_GROUPS,
             camera_groups(model),
-            1e-4,
+            REFERENCE_ADJOINT,
         );
     }
 }

@@ -3,15 +3,19 @@
 //! pixel a disk reaches, gradients against finite differences and the reference's adjoint, the
 //! GPU against the CPU, the PLY round trip, and the command line.
 
+use splat_runtime::checks::bound::Bound;
 use splat_runtime::checks::forward::{
-    boxes_hold_every_contributing_pixel, forward_matches_reference, gpu_forward_matches_cpu,
+    ImageBound, REFERENCE_IMAGE, boxes_hold_every_contributing_pixel,
+    forward_matches_reference_within, gpu_forward_matches_cpu,
 };
 use splat_runtime::checks::gradients::{
-    gpu_gradients_match_cpu, gradients_match_finite_differences, gradients_match_reference_adjoint,
+    FINITE_DIFFERENCES, gpu_gradients_match_cpu, gradients_match_finite_differences,
+    gradients_match_reference_adjoint,
 };
 use splat_runtime::checks::reference;
 use splat_runtime::glam::{Mat3, Quat, Vec2, Vec3, Vec4};
 use splat_runtime::io::ply::{FromStored, ToStored};
+use splat_runtime::pipeline::shade::Blend;
 use splat_runtime::{Camera, Flat};
 use surfels::surfel::{self, Method, Params};
 
@@ -83,12 +87,26 @@ const CAMERA: [(&str, std::ops::Range<usize>); 4] = [
     ("principal", 14..16),
 ];
 
+/// A surfel's alpha comes from where the pixel's ray meets its plane, which divides by the
+/// ray's angle to the plane: f32 loses more there than in a Gaussian's footprint. Measured:
+/// color and alpha 2.3e-5 off the f64 reference at 0.29 (1.5x the bound measured on the
+/// built-in methods, 0.5 of this one).
+const IMAGE: ImageBound = ImageBound {
+    values: Bound::new(3e-5, 6e-6),
+    ..REFERENCE_IMAGE
+};
+
+/// For the same reason the gradients: measured 8.8e-4 relative on a small log-scale gradient
+/// of the dense scene (1.7x `REFERENCE_ADJOINT`, 0.75 of this bound).
+const ADJOINT: Bound = Bound::new(3e-4, 3e-5).with_sum(1e-6);
+
 #[test]
 fn renders_match_the_f64_reference_on_cpu_and_gpu() {
     let cam = camera(48.0, 32.0);
     let mut params = disks(1, 16, Vec3::new(2.6, 1.8, 2.0), -1.3);
     params.push(edge_on(&cam));
-    let coverage = forward_matches_reference::<Method>("2dgs", &params, &cam);
+    let blend = Blend::default();
+    let coverage = forward_matches_reference_within::<Method>("2dgs", &params, &cam, blend, IMAGE);
     assert!(
         coverage > 0.2,
         "the scene should cover the image ({coverage})"
@@ -97,7 +115,7 @@ fn renders_match_the_f64_reference_on_cpu_and_gpu() {
 
     let cam = camera(64.0, 48.0);
     let dense = disks(2, 500, Vec3::new(3.6, 2.8, 3.0), -2.2);
-    forward_matches_reference::<Method>("2dgs dense", &dense, &cam);
+    forward_matches_reference_within::<Method>("2dgs dense", &dense, &cam, blend, IMAGE);
     gpu_forward_matches_cpu::<Method>("2dgs dense", &dense, &cam);
 }
 
@@ -151,7 +169,14 @@ fn render_gradients_match_finite_differences() {
         let least = solo.alpha.iter().fold(1.0f64, |m, a| m.min(*a));
         assert!(least > 2.0 / 255.0, "each disk covers the image ({least})");
     }
-    gradients_match_finite_differences::<Method>("2dgs", &params, &cam, &GROUPS, &CAMERA, 1e-4);
+    gradients_match_finite_differences::<Method>(
+        "2dgs",
+        &params,
+        &cam,
+        &GROUPS,
+        &CAMERA,
+        FINITE_DIFFERENCES,
+    );
 }
 
 /// A dense scene (pairs skipped mid-list, pixels stopped at the T-stop): the backward pass
@@ -160,7 +185,7 @@ fn render_gradients_match_finite_differences() {
 fn dense_gradients_match_the_reference_adjoint_on_cpu_and_gpu() {
     let cam = camera(48.0, 32.0);
     let params = disks(5, 400, Vec3::new(3.0, 2.2, 2.0), -2.0);
-    gradients_match_reference_adjoint::<Method>("2dgs", &params, &cam, &GROUPS, &CAMERA, 1e-4);
+    gradients_match_reference_adjoint::<Method>("2dgs", &params, &cam, &GROUPS, &CAMERA, ADJOINT);
     gpu_gradients_match_cpu::<Method>("2dgs", &params, &cam);
 }
 

@@ -25,6 +25,13 @@ pub struct ReferenceGrad {
     pub params: Vec<Vec<f64>>,
     /// The camera's float slots.
     pub camera: Vec<f64>,
+    /// Per primitive and word, a bound on the sum of the magnitudes of the terms its gradient
+    /// adds up over pixels (each pixel's cotangent of the shade data, in magnitude, through
+    /// the magnitude of `project`'s Jacobian): the scale an f32 sum's rounding is relative to,
+    /// however much the terms cancel.
+    pub gross_params: Vec<Vec<f64>>,
+    /// The same for the camera's float slots.
+    pub gross_camera: Vec<f64>,
     /// Pairs skipped as invalid on a pixel that took a later entry of its list (the case a
     /// blend must skip without a trace).
     pub skipped_before_a_take: usize,
@@ -68,7 +75,9 @@ pub fn backward<M: SplatMethod>(
     prims.sort_by(|a, b| a.0.depth.total_cmp(&b.0.depth).then(a.1.cmp(&b.1)));
     // Cotangents of project's float outputs per visible primitive.
     let mut d_projected: Vec<Vec<f64>> = prims.iter().map(|p| vec![0.0; p.3.len()]).collect();
+    let mut gross_projected = d_projected.clone();
     let mut d_camera = vec![0.0; camera.len()];
+    let mut gross_camera = vec![0.0; camera.len()];
     let (mut skipped_before_a_take, mut stopped_pixels) = (0, 0);
     let channels = <M::Color as Flat>::LEN;
     let depth = |k: usize| prims[k].3[0];
@@ -135,6 +144,11 @@ pub fn backward<M: SplatMethod>(
                 for (acc, v) in d_proj[shade_at..].iter_mut().zip(&d_in[pixel.len()..]) {
                     *acc += v;
                 }
+                let gross = &mut gross_projected[e.prim];
+                gross[0] += (e.alpha * e.t * d_depth_sum).abs();
+                for (acc, v) in gross[shade_at..].iter_mut().zip(&d_in[pixel.len()..]) {
+                    *acc += v.abs();
+                }
                 for (acc, v) in d_pixel.iter_mut().zip(&d_in) {
                     *acc += v;
                 }
@@ -144,21 +158,38 @@ pub fn backward<M: SplatMethod>(
                 for (acc, v) in d_camera.iter_mut().zip(&d_in[2..]) {
                     *acc += v;
                 }
+                for (acc, v) in gross_camera.iter_mut().zip(&d_in[2..]) {
+                    *acc += v.abs();
+                }
             }
         }
     }
+    let n = <M::Params as Flat>::LEN;
     let mut out = ReferenceGrad {
-        params: vec![vec![0.0; <M::Params as Flat>::LEN]; params.len()],
+        params: vec![vec![0.0; n]; params.len()],
         camera: d_camera,
+        gross_params: vec![vec![0.0; n]; params.len()],
+        gross_camera,
         skipped_before_a_take,
         stopped_pixels,
     };
-    for ((_, i, input, _), d) in prims.iter().zip(&d_projected) {
+    for (((_, i, input, _), d), gross) in prims.iter().zip(&d_projected).zip(&gross_projected) {
         let d_in = (twin.project_adjoint)(input, &ints, d);
-        let n = out.params[*i].len();
         out.params[*i].copy_from_slice(&d_in[..n]);
         for (acc, v) in out.camera.iter_mut().zip(&d_in[n..]) {
             *acc += v;
+        }
+        // |J^T| g, one column of the Jacobian (a unit cotangent) per output that has terms.
+        for (j, g) in gross.iter().enumerate().filter(|(_, g)| **g > 0.0) {
+            let mut unit = vec![0.0; gross.len()];
+            unit[j] = 1.0;
+            let column = (twin.project_adjoint)(input, &ints, &unit);
+            for (acc, v) in out.gross_params[*i].iter_mut().zip(&column[..n]) {
+                *acc += v.abs() * g;
+            }
+            for (acc, v) in out.gross_camera.iter_mut().zip(&column[n..]) {
+                *acc += v.abs() * g;
+            }
         }
     }
     out

@@ -3,8 +3,9 @@
 //! of invalid pairs, and the GPU backward against the CPU's.
 
 use super::adjoint::{self, ReferenceGrad};
+use super::bound::Bound;
 use super::reference::{Reference, render_words, render_words_edited};
-use super::{camera_words, channels, frame_grad, group_error, options, weights, words};
+use super::{camera_words, channels, frame_grad, options, weights, words};
 use crate::flat::Flat;
 use crate::method::{GradientSet, SplatMethod};
 use crate::pipeline::{backward, render_for_backward};
@@ -24,15 +25,15 @@ fn central_difference(f: impl Fn(f64) -> f64, x: f64) -> f64 {
 
 /// Backward-pass gradients of a random linear loss on color, alpha and depth against central
 /// differences of the reference render, per parameter group (word ranges of `Params`) and
-/// camera group (ranges of the camera's float slots): within `tol` of each group's largest
-/// gradient. The scene must stay clear of the thresholds (the caller checks).
+/// camera group (ranges of the camera's float slots), each element within `bound`. The scene
+/// must stay clear of the thresholds (the caller checks).
 pub fn gradients_match_finite_differences<M: SplatMethod>(
     label: &str,
     params: &[M::Params],
     cam: &Camera,
     groups: &[(&str, Range<usize>)],
     camera_groups: &[(&str, Range<usize>)],
-    tol: f64,
+    bound: Bound,
 ) {
     let ws: Vec<Vec<f64>> = params.iter().map(words).collect();
     let cw = camera_words(cam);
@@ -55,11 +56,12 @@ pub fn gradients_match_finite_differences<M: SplatMethod>(
                 want.push(central_difference(f, ws[i][k]));
             }
         }
-        let err = group_error(&got, &want);
-        println!("{label} {name}: max error {err:.2e} of the largest gradient");
-        assert!(err <= tol, "{label} {name}: {got:?} vs {want:?}");
+        let width = range.len();
+        bound.check(&format!("{label} {name}"), &got, &want, None, |k| {
+            format!("primitive {} word {}", k / width, k % width)
+        });
     }
-    shade_gradient_matches_finite_differences::<M>(label, &ws, cam, &w, &g.shade, tol);
+    shade_gradient_matches_finite_differences::<M>(label, &ws, cam, &w, &g.shade, bound);
     let cam_grad = camera_words(&g.camera);
     for (name, range) in camera_groups {
         let got: Vec<f64> = range.clone().map(|k| cam_grad[k]).collect();
@@ -74,9 +76,9 @@ pub fn gradients_match_finite_differences<M: SplatMethod>(
                 central_difference(f, cw[k])
             })
             .collect();
-        let err = group_error(&got, &want);
-        println!("{label} camera {name}: max error {err:.2e} of the largest gradient");
-        assert!(err <= tol, "{label} camera {name}: {got:?} vs {want:?}");
+        bound.check(&format!("{label} camera {name}"), &got, &want, None, |k| {
+            format!("slot {}", range.start + k)
+        });
     }
 }
 
@@ -89,7 +91,7 @@ fn shade_gradient_matches_finite_differences<M: SplatMethod>(
     cam: &Camera,
     weights: &[Vec<f64>; 3],
     got: &[f32],
-    tol: f64,
+    bound: Bound,
 ) {
     let words = <M::Shade as Flat>::LEN;
     if M::ShadeLanes::default().as_ref().len() != words {
@@ -117,15 +119,15 @@ fn shade_gradient_matches_finite_differences<M: SplatMethod>(
         })
         .collect();
     let got: Vec<f64> = got.iter().map(|g| *g as f64).collect();
-    let err = group_error(&got, &want);
-    println!("{label} shade data: max error {err:.2e} of the largest gradient");
-    assert!(err <= tol, "{label} shade data: {got:?} vs {want:?}");
+    bound.check(&format!("{label} shade data"), &got, &want, None, |k| {
+        format!("primitive {} word {}", k / words, k % words)
+    });
 }
 
 /// Backward-pass gradients of a random linear loss on color, alpha and depth (tiles 8 and 16)
 /// against the analytic adjoint of the f64 reference (on the f32 renderer's side of every
-/// threshold), per parameter group and camera group:
-/// within `tol` of each group's largest gradient. Made for realistic scenes, where pairs fall
+/// threshold), per parameter group and camera group, each element within `bound`. Made for
+/// realistic scenes, where pairs fall
 /// below the method's threshold at the footprints' edges and lists end at the T-stop; the
 /// check fails if the scene has neither (returns the reference's counts of both).
 pub fn gradients_match_reference_adjoint<M: SplatMethod>(
@@ -134,7 +136,7 @@ pub fn gradients_match_reference_adjoint<M: SplatMethod>(
     cam: &Camera,
     groups: &[(&str, Range<usize>)],
     camera_groups: &[(&str, Range<usize>)],
-    tol: f64,
+    bound: Bound,
 ) -> ReferenceGrad {
     let n = (cam.size.x * cam.size.y) as usize;
     let w = weights(n, channels::<M>());
@@ -150,18 +152,11 @@ pub fn gradients_match_reference_adjoint<M: SplatMethod>(
         let g = backward::<M>(&state, params, cam, &frame_grad(&w)).unwrap();
         let got: Vec<Vec<f64>> = g.params.iter().map(words).collect();
         let label = format!("{label}, tile {tile_size}");
-        groups_match(&label, &got, &reference.params, groups, tol);
-        let cam_grad = camera_words(&g.camera);
-        for (name, range) in camera_groups {
-            let err = group_error(&cam_grad[range.clone()], &reference.camera[range.clone()]);
-            println!(
-                "{label}, tile {tile_size}, camera {name}: max error {err:.2e} of the largest"
-            );
-            assert!(
-                err <= tol,
-                "{label}, tile {tile_size}, camera {name}: error {err:.2e}"
-            );
-        }
+        let gross = Some(&reference.gross_params[..]);
+        groups_match(&label, &got, &reference.params, gross, groups, bound);
+        let got = camera_words(&g.camera);
+        let gross = Some(&reference.gross_camera[..]);
+        camera_matches(&label, &got, &reference.camera, gross, camera_groups, bound);
     }
     println!(
         "{label}: {} pairs skipped before a later take, {} pixels stopped at the T-stop",
@@ -170,36 +165,49 @@ pub fn gradients_match_reference_adjoint<M: SplatMethod>(
     reference
 }
 
-/// Each parameter group of `got` (per primitive, its words) within `tol` of the group's
-/// largest gradient in `reference`; prints every group's error and panics naming the worst
-/// element of the first group past `tol`.
+/// Each parameter group of `got` (per primitive, its words) against `reference`, each element
+/// within `bound` (given the magnitude of its terms `gross`, per primitive and word, where
+/// known); prints every group's worst element and panics naming it past the bound.
 pub fn groups_match<N: AsRef<str>>(
     label: &str,
     got: &[Vec<f64>],
     reference: &[Vec<f64>],
+    gross: Option<&[Vec<f64>]>,
     groups: &[(N, Range<usize>)],
-    tol: f64,
+    bound: Bound,
 ) {
     for (name, range) in groups {
-        let name = name.as_ref();
         let pick = |ps: &[Vec<f64>]| -> Vec<f64> {
             ps.iter().flat_map(|p| p[range.clone()].to_vec()).collect()
         };
-        let (g, r) = (pick(got), pick(reference));
-        let err = group_error(&g, &r);
-        let worst = (0..g.len())
-            .max_by(|&a, &b| (g[a] - r[a]).abs().total_cmp(&(g[b] - r[b]).abs()))
-            .map_or(String::new(), |w| {
-                let (i, k) = (w / range.len(), w % range.len());
-                format!(
-                    "; worst: primitive {i} word {k}, {:e} vs reference {:e}",
-                    g[w], r[w]
-                )
-            });
-        println!("{label}, {name}: max error {err:.2e} of the largest{worst}");
-        assert!(
-            err <= tol,
-            "{label}, {name}: error {err:.2e} of the largest gradient{worst}"
+        let width = range.len();
+        bound.check(
+            &format!("{label}, {}", name.as_ref()),
+            &pick(got),
+            &pick(reference),
+            gross.map(pick).as_deref(),
+            |k| format!("primitive {} word {}", k / width, k % width),
+        );
+    }
+}
+
+/// Each camera group of `got` (float slots) against `reference`, each element within `bound`
+/// (given the magnitude of its terms `gross` where known).
+pub fn camera_matches<N: AsRef<str>>(
+    label: &str,
+    got: &[f64],
+    reference: &[f64],
+    gross: Option<&[f64]>,
+    groups: &[(N, Range<usize>)],
+    bound: Bound,
+) {
+    for (name, range) in groups {
+        bound.check(
+            &format!("{label}, camera {}", name.as_ref()),
+            &got[range.clone()],
+            &reference[range.clone()],
+            gross.map(|g| &g[range.clone()]),
+            |k| format!("slot {}", range.start + k),
         );
     }
 }
@@ -284,15 +292,35 @@ pub fn invalid_pairs_leave_no_trace<M: SplatMethod>(
     valid_pixels
 }
 
-/// The GPU backward against the CPU backward (the device's default accumulation, tiles 8 and
-/// 16): every parameter word and the camera within 1e-3 of the largest gradient. Measured
-/// near 1e-6; the bound leaves room for a pair whose alpha sits within an ulp of the cutoff,
-/// which the two backends' `exp` can decide differently (3DGUT on the equiangular camera, 400
-/// particles: one such pair, 6e-4).
+/// The GPU backward against the CPU's (the device's default accumulation, tiles 8 and 16), for
+/// a random linear loss weighted only on the reference's clear pixels (a pair within rounding
+/// of a threshold may be decided either way by the two backends): each parameter group and
+/// each camera field, element by element, within [`GPU_GRADIENTS`] ([`GPU_GRADIENTS_WIDE`] on
+/// the wide camera models).
 #[cfg(feature = "gpu")]
 pub fn gpu_gradients_match_cpu<M: SplatMethod>(label: &str, params: &[M::Params], cam: &Camera) {
     gpu_gradients_match_cpu_with::<M>(label, params, cam, Default::default());
 }
+
+/// The GPU's gradients against the CPU's, the terms' magnitude from the f64 adjoint. Measured
+/// over every check of the workspace on lavapipe (2026-12-06): 0.46 of the bound (3DGS's mean
+/// on the fisheye); without the sum term the dense extremes scenes reached 14x.
+pub const GPU_GRADIENTS: Bound = Bound::new(1e-4, 1e-5).with_sum(1e-6);
+
+/// [`GPU_GRADIENTS`] on the wide camera models, whose projections call the inverse
+/// trigonometric functions Vulkan lets be far less exact than the CPU's (atan2 to 4096 ulp).
+/// Measured (lavapipe): GES on the fisheye, 2.0e-4 relative on a mean gradient (1.07 of
+/// [`GPU_GRADIENTS`]), 0.36 of this bound.
+pub const GPU_GRADIENTS_WIDE: Bound = Bound::new(3e-4, 3e-5).with_sum(1e-6);
+
+/// The CPU's gradients against central differences of the f64 reference (scenes clear of the
+/// thresholds). Measured: 0.68 of the bound (3DGS's focal length on the fisheye, 7.5e-5
+/// relative).
+pub const FINITE_DIFFERENCES: Bound = Bound::new(1e-4, 1e-5);
+
+/// The CPU's gradients against the f64 reference's analytic adjoint. Measured: 0.49 of the
+/// bound (LinPrim's log scale, 4e-4 relative on a small element).
+pub const REFERENCE_ADJOINT: Bound = Bound::new(1e-4, 1e-5).with_sum(1e-6);
 
 /// [`gpu_gradients_match_cpu`] with the blend's thresholds `blend` on both backends.
 #[cfg(feature = "gpu")]
@@ -302,11 +330,33 @@ pub fn gpu_gradients_match_cpu_with<M: SplatMethod>(
     cam: &Camera,
     blend: crate::pipeline::shade::Blend,
 ) {
+    let bound = match cam.model {
+        crate::CameraModel::Pinhole => GPU_GRADIENTS,
+        _ => GPU_GRADIENTS_WIDE,
+    };
+    gpu_gradients_match_cpu_within::<M>(label, params, cam, blend, bound);
+}
+
+/// [`gpu_gradients_match_cpu_with`] within `bound`: for scenes whose f32 precision is known to
+/// be coarser (the extremes', see [`super::extremes`]).
+#[cfg(feature = "gpu")]
+pub fn gpu_gradients_match_cpu_within<M: SplatMethod>(
+    label: &str,
+    params: &[M::Params],
+    cam: &Camera,
+    blend: crate::pipeline::shade::Blend,
+    bound: Bound,
+) {
     let Some(gpu) = crate::gpu::adapter_or_skip() else {
         return;
     };
-    let n = (cam.size.x * cam.size.y) as usize;
-    let grad = frame_grad(&weights(n, <M::Color as Flat>::LEN));
+    let clear = super::forward::clear_reference::<M>(label, params, cam, blend).clear;
+    let w = super::weights_on(&clear, <M::Color as Flat>::LEN);
+    let grad = frame_grad(&w);
+    // The scale of each gradient's terms (the reference stops at the default T-stop and
+    // takes every pair the method keeps: for other thresholds, an overestimate).
+    let terms = adjoint::backward::<M>(params, cam, &w);
+    let groups = crate::param_groups::<M>();
     for tile_size in [8, 16] {
         let opts = super::options_with(tile_size, blend);
         let (_, state) = render_for_backward::<M>(params, cam, &opts).unwrap();
@@ -318,20 +368,16 @@ pub fn gpu_gradients_match_cpu_with<M: SplatMethod>(
             &grad,
             crate::gpu::entries::Accumulation::default_for(&gpu),
         )
-        .unwrap();
-        let flat = |ps: &[M::Params]| -> Vec<f64> { ps.iter().flat_map(words).collect() };
-        let err = group_error(&flat(&got.gradients.params), &flat(&want.params));
-        let cam_err = group_error(
-            &camera_words(&got.gradients.camera),
-            &camera_words(&want.camera),
-        );
-        println!(
-            "{label}, tile {tile_size}: GPU gradients {err:.2e}, camera {cam_err:.2e} of the largest"
-        );
-        assert!(
-            err <= 1e-3 && cam_err <= 1e-3,
-            "{label}, tile {tile_size}: gradients {err}, camera {cam_err}"
-        );
+        .unwrap()
+        .gradients;
+        let at = format!("{label}, tile {tile_size}, GPU / CPU");
+        let all = |ps: &[M::Params]| -> Vec<Vec<f64>> { ps.iter().map(words).collect() };
+        let (got_params, want_params) = (all(&got.params), all(&want.params));
+        let gross = Some(&terms.gross_params[..]);
+        groups_match(&at, &got_params, &want_params, gross, &groups, bound);
+        let (got, want) = (camera_words(&got.camera), camera_words(&want.camera));
+        let gross = Some(&terms.gross_camera[..]);
+        camera_matches(&at, &got, &want, gross, &super::CAMERA_GROUPS, bound);
     }
 }
 

@@ -128,6 +128,17 @@ fn weights(n: usize, channels: usize) -> [Vec<f64>; 3] {
     [random(n * channels), random(n), random(n)]
 }
 
+/// [`weights`] zero off the `clear` pixels (one per pixel).
+fn weights_on(clear: &[bool], channels: usize) -> [Vec<f64>; 3] {
+    let mut w = weights(clear.len(), channels);
+    for (px, _) in clear.iter().enumerate().filter(|(_, c)| !**c) {
+        w[0][px * channels..(px + 1) * channels].fill(0.0);
+        w[1][px] = 0.0;
+        w[2][px] = 0.0;
+    }
+    w
+}
+
 fn frame_grad(w: &[Vec<f64>; 3]) -> FrameGrad {
     let f32s = |v: &[f64]| v.iter().map(|x| *x as f32).collect::<Vec<f32>>();
     FrameGrad {

@@ -9,6 +9,19 @@ use crate::method::SplatMethod;
 use crate::pipeline::shade::Blend;
 use crate::types::{Camera, CameraModel};
 
+/// The alpha threshold every built-in method and example compares with (`alpha >= 1/255`): the
+/// decision the clear-pixel rule watches beside the blend's own `alpha_min`.
+pub const ALPHA_THRESHOLD: f64 = 1.0 / 255.0;
+
+/// How near an alpha may come to a threshold (relative to the threshold) before its pixel is
+/// not clear: an f32 renderer's alpha is off the f64 one by ~1e-6 relative (the exponent's
+/// rounding), and two f32 renderers (CPU, GPU) may decide such a pair either way.
+pub const ALPHA_MARGIN: f64 = 1e-4;
+
+/// How near T after a pair may come to the T-stop (relative) before its pixel is not clear: T
+/// is a product over the pixel's list, so its rounding grows with the list.
+pub const T_MARGIN: f64 = 1e-3;
+
 /// An f64 render: color (H x W x channels), alpha and depth (H x W), row-major.
 pub struct Reference {
     pub width: usize,
@@ -16,6 +29,23 @@ pub struct Reference {
     pub color: Vec<f64>,
     pub alpha: Vec<f64>,
     pub depth: Vec<f64>,
+    /// Per pixel, whether no decision its walk takes lies within the margins of its threshold
+    /// ([`ALPHA_MARGIN`] of [`ALPHA_THRESHOLD`] or of the blend's `alpha_min`, [`T_MARGIN`] of
+    /// the T-stop): where f32 renderers must agree with each other and with the reference.
+    /// The checks compare images only on clear pixels and weight losses only there.
+    pub clear: Vec<bool>,
+}
+
+impl Reference {
+    /// How many pixels are not clear.
+    pub fn unclear(&self) -> usize {
+        self.clear.iter().filter(|c| !**c).count()
+    }
+}
+
+/// Whether `value` lies within `margin` (relative) of `threshold`.
+fn near(value: f64, threshold: f64, margin: f64) -> bool {
+    threshold > 0.0 && (value / threshold - 1.0).abs() <= margin
 }
 
 /// Renders `params` with method `M` through `camera`, with the default blend.
@@ -92,6 +122,7 @@ fn render_words_with<M: SplatMethod>(
         color: vec![],
         alpha: vec![0.0; width * height],
         depth: vec![0.0; width * height],
+        clear: vec![true; width * height],
     };
     for y in 0..height {
         for x in 0..width {
@@ -101,13 +132,17 @@ fn render_words_with<M: SplatMethod>(
                 pixel = info(&pixel, &ints).0;
             }
             let (mut t, mut c, mut d) = (1.0f64, vec![0.0; channels], 0.0f64);
+            let mut clear = true;
             for (depth, _, shade) in &prims {
                 let input: Vec<f64> = pixel.iter().chain(shade).copied().collect();
                 let (o, valid) = (twin.evaluate)(&input, &[]);
+                clear &= !near(o[0], ALPHA_THRESHOLD, ALPHA_MARGIN)
+                    && !near(o[0], alpha_min, ALPHA_MARGIN);
                 if valid[0] == 0 || o[0] < alpha_min {
                     continue;
                 }
                 let next = t * (1.0 - o[0]);
+                clear &= !near(next, t_min, T_MARGIN);
                 if next <= t_min {
                     break;
                 }
@@ -119,6 +154,7 @@ fn render_words_with<M: SplatMethod>(
             }
             out.color.extend(&c);
             let px = y * width + x;
+            out.clear[px] = clear;
             out.alpha[px] = 1.0 - t;
             out.depth[px] = if t < 1.0 { d / (1.0 - t) } else { 0.0 };
         }
