@@ -6,6 +6,7 @@ use codegen_tests::check::{
     GradientReport, adjoint_lanes_vs_scalar, gradient, lanes_vs_scalar, uniform,
 };
 use codegen_tests::corpus::*;
+use codegen_tests::samples;
 use fastrand::Rng;
 
 const SEED: u64 = 0x5EED;
@@ -68,91 +69,35 @@ macro_rules! corpus {
     )*};
 }
 
-fn plain<const N: usize>(lo: f64, hi: f64) -> impl Fn(&mut Rng) -> ([f64; N], [u32; 0]) {
-    move |r| (uniform(r, lo, hi), [])
-}
-
-/// Values of magnitude in [lo, hi] with a random sign.
-fn signed<const N: usize>(lo: f64, hi: f64) -> impl Fn(&mut Rng) -> ([f64; N], [u32; 0]) {
-    move |r| {
-        (
-            std::array::from_fn(|_| (lo + (hi - lo) * r.f64()) * if r.bool() { 1.0 } else { -1.0 }),
-            [],
-        )
-    }
-}
-
-fn mat2_inputs(r: &mut Rng) -> ([f64; 5], [u32; 0]) {
-    let mut x: [f64; 5] = uniform(r, -0.5, 0.5);
-    x[0] += 1.5;
-    x[3] += 1.5;
-    x[4] = 0.5 + 0.5 * r.f64();
-    (x, [])
-}
-
-fn covariance_inputs(r: &mut Rng) -> ([f64; 10], [u32; 0]) {
-    let mut x: [f64; 10] = uniform(r, -1.0, 1.0);
-    x[0] = 0.5 + 0.5 * r.f64();
-    for s in &mut x[4..7] {
-        *s = -1.0 + 1.5 * r.f64();
-    }
-    x[9] = 2.0 + 2.0 * r.f64();
-    (x, [])
-}
-
-fn flags_inputs(r: &mut Rng) -> ([f64; 1], [u32; 2]) {
-    ([0.5 + 1.5 * r.f64()], [r.bool() as u32, r.u32(0..10)])
-}
-
-fn splat_inputs(r: &mut Rng) -> ([f64; 58], [u32; 0]) {
-    let mut x: [f64; 58] = uniform(r, -1.0, 1.0);
-    x[2] = 2.0 + r.f64(); // mean.z in front of the eye
-    for s in &mut x[3..6] {
-        *s = 0.1 + 0.9 * r.f64();
-    }
-    x[57] = -r.f64(); // eye.z
-    (x, [])
-}
-
 corpus! {
-    scalars::arith / arith_adjoint => plain::<2>(0.2, 1.5);
-    scalars::transcendental / transcendental_adjoint => plain::<2>(0.2, 2.0);
-    scalars::trig / trig_adjoint => plain::<2>(-0.9, 0.9);
-    scalars::powers / powers_adjoint => plain::<2>(0.3, 2.0);
-    scalars::minmax / minmax_adjoint => plain::<3>(-1.0, 1.0);
-    scalars::rounding / rounding_adjoint => plain::<1>(-3.0, 3.0);
-    scalars::misc / misc_adjoint => plain::<2>(0.2, 3.0);
-    scalars::sincos / sincos_adjoint => plain::<1>(-3.0, 3.0);
-    vectors::geometry / geometry_adjoint => plain::<6>(-1.0, 1.0);
-    vectors::elementwise / elementwise_adjoint => plain::<9>(0.2, 1.0);
-    vectors::shape / shape_adjoint => plain::<5>(-1.0, 1.0);
-    vectors::rotate / rotate_adjoint => signed::<7>(0.2, 1.0);
-    vectors::components / components_adjoint => plain::<3>(-1.0, 1.0);
-    matrices::mat3 / mat3_adjoint => plain::<12>(-1.0, 1.0);
-    matrices::mat2 / mat2_adjoint => mat2_inputs;
-    matrices::covariance / covariance_adjoint => covariance_inputs;
-    control::nested / nested_adjoint => plain::<2>(-2.0, 2.0);
-    control::statements / statements_adjoint => plain::<2>(-1.0, 1.5);
-    control::vector_loop / vector_loop_adjoint => |r: &mut Rng| {
-        let mut x: [f64; 4] = uniform(r, -1.0, 1.0);
-        x[3] = 0.5 + r.f64();
-        (x, [])
-    };
-    control::array_loop / array_loop_adjoint => plain::<5>(-1.0, 1.0);
-    control::guarded / guarded_adjoint => |r: &mut Rng| {
-        ([-2.0 + 5.0 * r.f64(), (0.3 + 0.7 * r.f64()) * if r.bool() { 1.0 } else { -1.0 }], [])
-    };
-    control::flags / flags_adjoint => flags_inputs;
-    structured::sh_color / sh_color_adjoint => signed::<51>(0.05, 1.0);
-    structured::splat_of / splat_of_adjoint => splat_inputs;
-    structured::uses_custom / uses_custom_adjoint => plain::<2>(-1.0, 1.0);
-    jacobians::every_op_jacobian / every_op_jacobian_adjoint => plain::<2>(0.15, 0.85);
-    jacobians::scalar_jacobian / scalar_jacobian_adjoint => plain::<1>(-1.5, 1.5);
-    jacobians::branch_jacobian / branch_jacobian_adjoint => |r: &mut Rng| {
-        // Away from the branches' edges at 0.5.
-        let side = |r: &mut Rng| if r.bool() { 0.1 + 0.3 * r.f64() } else { 0.6 + 0.3 * r.f64() };
-        ([side(r), side(r)], [])
-    };
+    scalars::arith / arith_adjoint => samples::plain::<2>(0.2, 1.5);
+    scalars::transcendental / transcendental_adjoint => samples::plain::<2>(0.2, 2.0);
+    scalars::trig / trig_adjoint => samples::plain::<2>(-0.9, 0.9);
+    scalars::powers / powers_adjoint => samples::plain::<2>(0.3, 2.0);
+    scalars::minmax / minmax_adjoint => samples::plain::<3>(-1.0, 1.0);
+    scalars::rounding / rounding_adjoint => samples::plain::<1>(-3.0, 3.0);
+    scalars::misc / misc_adjoint => samples::plain::<2>(0.2, 3.0);
+    scalars::sincos / sincos_adjoint => samples::plain::<1>(-3.0, 3.0);
+    vectors::geometry / geometry_adjoint => samples::plain::<6>(-1.0, 1.0);
+    vectors::elementwise / elementwise_adjoint => samples::plain::<9>(0.2, 1.0);
+    vectors::shape / shape_adjoint => samples::plain::<5>(-1.0, 1.0);
+    vectors::rotate / rotate_adjoint => samples::signed::<7>(0.2, 1.0);
+    vectors::components / components_adjoint => samples::plain::<3>(-1.0, 1.0);
+    matrices::mat3 / mat3_adjoint => samples::plain::<12>(-1.0, 1.0);
+    matrices::mat2 / mat2_adjoint => samples::mat2;
+    matrices::covariance / covariance_adjoint => samples::covariance;
+    control::nested / nested_adjoint => samples::plain::<2>(-2.0, 2.0);
+    control::statements / statements_adjoint => samples::plain::<2>(-1.0, 1.5);
+    control::vector_loop / vector_loop_adjoint => samples::vector_loop;
+    control::array_loop / array_loop_adjoint => samples::plain::<5>(-1.0, 1.0);
+    control::guarded / guarded_adjoint => samples::guarded;
+    control::flags / flags_adjoint => samples::flags;
+    structured::sh_color / sh_color_adjoint => samples::signed::<51>(0.05, 1.0);
+    structured::splat_of / splat_of_adjoint => samples::splat;
+    structured::uses_custom / uses_custom_adjoint => samples::plain::<2>(-1.0, 1.0);
+    jacobians::every_op_jacobian / every_op_jacobian_adjoint => samples::plain::<2>(0.15, 0.85);
+    jacobians::scalar_jacobian / scalar_jacobian_adjoint => samples::plain::<1>(-1.5, 1.5);
+    jacobians::branch_jacobian / branch_jacobian_adjoint => samples::branch_sides;
 }
 
 #[test]

@@ -191,22 +191,11 @@ fn image_matches(at: &str, f: &Fixture, frame: &Frame, bounds: &Bounds) {
         let want: Vec<f64> = (0..want.len()).filter(keep).map(|i| want[i]).collect();
         (got, want)
     };
-    let outputs: [(&str, usize, &Vec<f32>, &Vec<f64>, Bound); 3] = [
+    let (alpha, depth) = (frame.alpha.as_ref(), frame.depth.as_ref());
+    let outputs = [
         ("color", 3, &frame.color.data, &f.color, bounds.image),
-        (
-            "alpha",
-            1,
-            &frame.alpha.as_ref().unwrap().data,
-            &f.alpha,
-            bounds.image,
-        ),
-        (
-            "depth",
-            1,
-            &frame.depth.as_ref().unwrap().data,
-            &f.depth,
-            bounds.depth,
-        ),
+        ("alpha", 1, &alpha.unwrap().data, &f.alpha, bounds.image),
+        ("depth", 1, &depth.unwrap().data, &f.depth, bounds.depth),
     ];
     for (what, channels, values, want, bound) in outputs {
         assert_eq!(values.len(), want.len(), "{at}: {what} size");

@@ -129,6 +129,7 @@ fn weights(n: usize, channels: usize) -> [Vec<f64>; 3] {
 }
 
 /// [`weights`] zero off the `clear` pixels (one per pixel).
+#[cfg(feature = "gpu")]
 fn weights_on(clear: &[bool], channels: usize) -> [Vec<f64>; 3] {
     let mut w = weights(clear.len(), channels);
     for (px, _) in clear.iter().enumerate().filter(|(_, c)| !**c) {
