@@ -429,7 +429,8 @@ fn fits_views_of_a_known_scene(model: CameraModel) {
         before.psnr, after.psnr
     );
     assert!(
-        after.psnr > before.psnr + 4.0,
+        // Measured +15.3 dB (pinhole), +14.4 (fisheye and equiangular).
+        after.psnr > before.psnr + 13.5,
         "{model}: held-out views get closer"
     );
     assert!(

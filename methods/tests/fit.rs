@@ -186,10 +186,8 @@ fn three_dgs_fits_a_blender_dataset_of_a_known_scene() {
         before.psnr, after.psnr, before.ssim, after.ssim
     );
     assert!(last < 0.6 * first, "the training loss falls");
-    assert!(
-        after.psnr > before.psnr + 4.0,
-        "held-out views get closer to the truth"
-    );
+    // Measured 14.03 -> 25.40 dB (2026-12-06, 2 threads).
+    assert!(after.psnr > 25.0, "held-out views get closer to the truth");
     assert!(after.ssim > before.ssim);
     // 300 steps train only the DC term of the colors: the higher SH bands are still zero.
     assert!(
@@ -221,7 +219,7 @@ fn linprim_fits_the_known_scene() {
         "LinPrim: test PSNR {:.2} -> {:.2} dB",
         before.psnr, after.psnr
     );
-    assert!(after.psnr > before.psnr + 4.0);
+    assert!(after.psnr > 22.3, "measured 13.65 -> 22.70 dB");
     let mcmc = FitOptions {
         densify: Some(Strategy::Mcmc(Default::default())),
         ..options(1)
@@ -342,8 +340,9 @@ fn fits_views<M: Trainable>(label: &str, data: &splat_runtime::io::dataset::Data
         "{label}: test PSNR {:.2} -> {:.2} dB",
         before.psnr, after.psnr
     );
+    // Measured +10.5 dB (3DGS fisheye and equiangular), +9.7 (3DGUT fisheye).
     assert!(
-        after.psnr > before.psnr + 5.0,
+        after.psnr > before.psnr + 9.0,
         "{label}: held-out views get closer"
     );
 }
@@ -776,7 +775,10 @@ fn mcmc_fits_the_known_scene_from_random_points() {
     );
     assert_eq!(params.len(), 240, "MCMC grows to its cap");
     assert!(relocated > 20, "and relocates");
-    assert!(after > before + 4.0, "and fits the held-out views");
+    assert!(
+        after > before + 5.5,
+        "and fits the held-out views (measured +6.0 dB)"
+    );
 }
 
 /// The GPU loop trains like the CPU loop: on the known scene, the same steps from the same
@@ -816,8 +818,9 @@ fn the_gpu_loop_trains_like_the_cpu_loop() {
         losses[0],
         losses[losses.len() - 1]
     );
-    assert!(gpu_psnr > before.psnr + 4.0, "the GPU loop trains");
-    assert!((gpu_psnr - cpu_psnr).abs() < 1.0, "and like the CPU loop");
+    // Measured 14.03 -> CPU 25.40, GPU 25.41 dB.
+    assert!(gpu_psnr > 25.0, "the GPU loop trains");
+    assert!((gpu_psnr - cpu_psnr).abs() < 0.2, "and like the CPU loop");
 
     let sparse: Vec<Params> = scene
         .iter()
@@ -852,7 +855,10 @@ fn the_gpu_loop_trains_like_the_cpu_loop() {
     assert!(densified.1 > 3 * sparse.len(), "the count grows");
     assert!(densified.0 > fixed.0 + 3.0, "and the fit improves");
     assert_eq!(sampled.1, 240, "MCMC grows to its cap");
-    assert!(sampled.0 > before.psnr + 4.0, "and fits the held-out views");
+    assert!(
+        sampled.0 > before.psnr + 5.5,
+        "and fits the held-out views (measured +6.2 dB)"
+    );
 }
 
 /// A primitive whose gradient is not finite (3DGEER's, at a scale of e^60 whose square
@@ -1014,7 +1020,7 @@ fn random_backgrounds_recomposite_the_targets_and_train() {
         "random backgrounds: held-out PSNR {:.2} -> {:.2} dB",
         before.psnr, after.psnr
     );
-    assert!(after.psnr > before.psnr + 4.0);
+    assert!(after.psnr > 25.0, "measured 14.03 -> 25.42 dB");
 }
 
 /// Options for the resume tests: 40 steps, density control every 5 steps from step 5 with an
