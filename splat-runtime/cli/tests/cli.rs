@@ -1908,7 +1908,7 @@ fn tradeoff_sweeps_every_knob_and_writes_its_table_and_plot() {
     }
     assert_eq!(field("t_min", "0", psnr), f64::INFINITY);
     assert_eq!(field("t_min", "0", gradient), 0.0);
-    assert!(field("default", "", psnr) > 60.0);
+    assert!(field("default", "", psnr) > 80.0, "measured 84.0 dB");
     assert!(field("p_max", "8", psnr) < field("p_max", "512", psnr));
     assert!(field("p_max", "8", gradient) > field("default", "", gradient));
     // Gradient sums never change the image; shade data coded in 255 steps of its range does.
@@ -1916,9 +1916,21 @@ fn tradeoff_sweeps_every_knob_and_writes_its_table_and_plot() {
     assert_eq!(field("gradient_precision", "f16", psnr), default_psnr);
     assert!(field("shade_precision", "unorm8", psnr) < field("shade_precision", "unorm16", psnr));
     // The model rows are against 3DGEER's most accurate render: 3DGEER at the defaults is
-    // close, the approximations are not.
-    assert!(field("model", "3dgeer", psnr) > 60.0);
-    assert!(field("model", "3dgs", psnr) < 50.0);
+    // close (measured 86.5 dB), the approximations are not, each by what it approximates
+    // (measured: 3DGS 15.8 dB, 3DGS-AA 23.9, 3DGUT 20.7, LinPrim 22.9).
+    assert!(field("model", "3dgeer", psnr) > 80.0);
+    for (model, measured) in [
+        ("3dgs", 15.8),
+        ("3dgs-aa", 23.9),
+        ("3dgut", 20.7),
+        ("linprim", 22.9),
+    ] {
+        let got = field("model", model, psnr);
+        assert!(
+            (got - measured).abs() < 1.0,
+            "{model}: {got} dB from 3DGEER's render"
+        );
+    }
 
     let detail = csv_rows(&dir.path().join("cpu/gradients.csv"));
     assert!(detail.iter().all(|r| r.len() == 6), "{detail:?}");

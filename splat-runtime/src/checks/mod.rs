@@ -14,8 +14,8 @@
 //! - [`variants`]: the kernels compiled for one camera model against the generic ones, and a
 //!   lower SH degree's instance against the full one.
 //!
-//! Each check panics with a message naming the pixel, primitive or parameter group that is
-//! off, so it reads as a test:
+//! Each check holds every element to one rule ([`bound`]) and panics with a message naming the
+//! pixel, primitive or parameter group that is off, so it reads as a test:
 //!
 //! ```ignore
 //! use splat_runtime::checks::{forward, gradients};
@@ -25,7 +25,7 @@
 //!     forward::forward_matches_reference::<my_method::Method>("mine", &scene, &camera);
 //!     let groups = [("mean", 0..3), ("scale", 3..6), ("opacity", 6..7)];
 //!     gradients::gradients_match_reference_adjoint::<my_method::Method>(
-//!         "mine", &scene, &camera, &groups, &[], 1e-4,
+//!         "mine", &scene, &camera, &groups, &[], gradients::REFERENCE_ADJOINT,
 //!     );
 //!     forward::gpu_forward_matches_cpu::<my_method::Method>("mine", &scene, &camera);
 //! }
