@@ -2042,13 +2042,15 @@ fn a_rolling_shutter_camera_needs_a_method_that_renders_it() {
     }
 }
 
-/// A run killed (SIGKILL) while it writes its output leaves the previous file whole: every
-/// output goes to a temporary file in the same folder, renamed over the target once complete.
-/// The render is large enough that its encoding takes a while, and the kill comes as soon as
-/// the temporary file appears, so it lands in the middle of the write.
+/// A run killed while it writes its output leaves the previous file whole: every output goes
+/// to a temporary file in the same folder, renamed over the target once complete. The kill
+/// comes from the kernel, mid-write and without a race: the run's file size limit (`ulimit
+/// -f`, 64 blocks of 512 bytes) is below the new render's size, so the write past it gets
+/// SIGXFSZ, which ends the process where it stands.
 #[cfg(unix)]
 #[test]
 fn a_run_killed_while_writing_leaves_the_previous_output_whole() {
+    use std::os::unix::process::ExitStatusExt;
     let dir = temp();
     let out = dir.path().join("render.exr");
     let args = |size: [&'static str; 2]| {
@@ -2067,43 +2069,39 @@ fn a_run_killed_while_writing_leaves_the_previous_output_whole() {
     };
     ok(&splat(&args(["64", "48"]), dir.path()));
     let before = std::fs::read(&out).unwrap();
-    let others = || -> Vec<PathBuf> {
-        std::fs::read_dir(dir.path())
-            .unwrap()
-            .map(|e| e.unwrap().path())
-            .filter(|p| *p != out)
-            .collect()
-    };
-    let mut child = Command::new(env!("CARGO_BIN_EXE_splat"))
-        .args(args(["4000", "3000"]))
+    let limit = 64 * 512;
+    let run = Command::new("sh")
+        .arg("-c")
+        .arg("ulimit -c 0; ulimit -f 64; exec \"$0\" \"$@\"")
+        .arg(env!("CARGO_BIN_EXE_splat"))
+        .args(args(["320", "240"]))
         .current_dir(dir.path())
-        .stdout(std::process::Stdio::null())
-        .spawn()
+        .output()
         .expect("run splat");
-    let started = std::time::Instant::now();
-    let temporary = loop {
-        if let Some(t) = others().pop() {
-            child.kill().unwrap(); // SIGKILL
-            break t;
-        }
-        assert!(
-            child.try_wait().unwrap().is_none(),
-            "the render finished before it could be killed while writing"
-        );
-        assert!(
-            started.elapsed().as_secs() < 300,
-            "no temporary file appeared"
-        );
-        std::thread::sleep(std::time::Duration::from_millis(1));
-    };
-    child.wait().unwrap();
+    assert_eq!(
+        run.status.signal(),
+        Some(25), // SIGXFSZ
+        "the run should die writing past its file size limit: {run:?}"
+    );
     assert_eq!(
         std::fs::read(&out).unwrap(),
         before,
         "the previous output changed"
     );
+    let partial: Vec<PathBuf> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| *p != out)
+        .collect();
+    assert_eq!(partial.len(), 1, "{partial:?}");
+    let name = partial[0].file_name().unwrap().to_string_lossy();
     assert!(
-        temporary.exists(),
-        "the kill came after the write was complete"
+        name.starts_with(".render.exr-") && name.ends_with(".partial"),
+        "{name}"
+    );
+    assert_eq!(
+        std::fs::metadata(&partial[0]).unwrap().len(),
+        limit,
+        "the kill came mid-write"
     );
 }
