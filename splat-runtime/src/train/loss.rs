@@ -461,7 +461,8 @@ mod tests {
             worst = worst.max((fd - grad[i] as f64).abs() / scale);
         }
         println!("worst gradient error {worst:.2e} of the largest");
-        assert!(worst < 1e-5, "{worst}");
+        // Measured 1.15e-7 (2026-12-06).
+        assert!(worst < 1e-6, "{worst}");
     }
 
     /// Bands of any height give the same SSIM and, bit for bit, the same gradient: each band
