@@ -1,4 +1,4 @@
-//! Isotropic Gaussians: a complete method in under 50 lines, written as a user would in their
+//! Isotropic Gaussians: a complete method in about 60 lines, written as a user would in their
 //! own crate (only the public API of splat-macros and splat-runtime). codegen-tests uses it
 //! for the snapshot of the generated Rust and to test the `SplatMethod` glue.
 
