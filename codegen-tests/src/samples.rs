@@ -75,3 +75,44 @@ pub fn branch_sides(r: &mut Rng) -> ([f64; 2], [u32; 0]) {
     };
     ([side(r), side(r)], [])
 }
+
+/// Calls `$callback! { $($args)* ENTRIES }` with every corpus function as an entry `module::f /
+/// f_adjoint => sampler` (an expression of this module), each followed by `, inverse_trig` where
+/// it calls inverse trigonometric functions (the GPU's Vulkan lets those be 4096 ulp off): the
+/// one list both the CPU checks (`tests/corpus.rs`) and the GPU's (`tests/gpu.rs`) run.
+#[macro_export]
+macro_rules! with_corpus {
+    ($callback:ident ! ($($args:tt)*)) => {
+        $callback! {
+            $($args)*
+            scalars::arith / arith_adjoint => $crate::samples::plain::<2>(0.2, 1.5);
+            scalars::transcendental / transcendental_adjoint => $crate::samples::plain::<2>(0.2, 2.0);
+            scalars::trig / trig_adjoint => $crate::samples::plain::<2>(-0.9, 0.9), inverse_trig;
+            scalars::powers / powers_adjoint => $crate::samples::plain::<2>(0.3, 2.0);
+            scalars::minmax / minmax_adjoint => $crate::samples::plain::<3>(-1.0, 1.0);
+            scalars::rounding / rounding_adjoint => $crate::samples::plain::<1>(-3.0, 3.0);
+            scalars::misc / misc_adjoint => $crate::samples::plain::<2>(0.2, 3.0);
+            scalars::sincos / sincos_adjoint => $crate::samples::plain::<1>(-3.0, 3.0);
+            vectors::geometry / geometry_adjoint => $crate::samples::plain::<6>(-1.0, 1.0);
+            vectors::elementwise / elementwise_adjoint => $crate::samples::plain::<9>(0.2, 1.0);
+            vectors::shape / shape_adjoint => $crate::samples::plain::<5>(-1.0, 1.0);
+            vectors::rotate / rotate_adjoint => $crate::samples::signed::<7>(0.2, 1.0);
+            vectors::components / components_adjoint => $crate::samples::plain::<3>(-1.0, 1.0);
+            matrices::mat3 / mat3_adjoint => $crate::samples::plain::<12>(-1.0, 1.0);
+            matrices::mat2 / mat2_adjoint => $crate::samples::mat2;
+            matrices::covariance / covariance_adjoint => $crate::samples::covariance;
+            control::nested / nested_adjoint => $crate::samples::plain::<2>(-2.0, 2.0);
+            control::statements / statements_adjoint => $crate::samples::plain::<2>(-1.0, 1.5);
+            control::vector_loop / vector_loop_adjoint => $crate::samples::vector_loop;
+            control::array_loop / array_loop_adjoint => $crate::samples::plain::<5>(-1.0, 1.0);
+            control::guarded / guarded_adjoint => $crate::samples::guarded;
+            control::flags / flags_adjoint => $crate::samples::flags;
+            structured::sh_color / sh_color_adjoint => $crate::samples::signed::<51>(0.05, 1.0);
+            structured::splat_of / splat_of_adjoint => $crate::samples::splat;
+            structured::uses_custom / uses_custom_adjoint => $crate::samples::plain::<2>(-1.0, 1.0);
+            jacobians::every_op_jacobian / every_op_jacobian_adjoint => $crate::samples::plain::<2>(0.15, 0.85), inverse_trig;
+            jacobians::scalar_jacobian / scalar_jacobian_adjoint => $crate::samples::plain::<1>(-1.5, 1.5);
+            jacobians::branch_jacobian / branch_jacobian_adjoint => $crate::samples::branch_sides;
+        }
+    };
+}

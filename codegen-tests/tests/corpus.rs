@@ -6,7 +6,6 @@ use codegen_tests::check::{
     GradientReport, adjoint_lanes_vs_scalar, gradient, lanes_vs_scalar, uniform,
 };
 use codegen_tests::corpus::*;
-use codegen_tests::samples;
 use fastrand::Rng;
 
 const SEED: u64 = 0x5EED;
@@ -31,7 +30,7 @@ fn to_f32<const N: usize>(x: [f64; N]) -> [f32; N] {
 
 /// One gradient test and two lane tests per corpus function.
 macro_rules! corpus {
-    ($($m:ident :: $f:ident / $adj:ident => $sample:expr;)*) => {$(
+    ($($m:ident :: $f:ident / $adj:ident => $sample:expr $(, $inverse_trig:ident)?;)*) => {$(
         mod $f {
             use super::*;
 
@@ -69,36 +68,7 @@ macro_rules! corpus {
     )*};
 }
 
-corpus! {
-    scalars::arith / arith_adjoint => samples::plain::<2>(0.2, 1.5);
-    scalars::transcendental / transcendental_adjoint => samples::plain::<2>(0.2, 2.0);
-    scalars::trig / trig_adjoint => samples::plain::<2>(-0.9, 0.9);
-    scalars::powers / powers_adjoint => samples::plain::<2>(0.3, 2.0);
-    scalars::minmax / minmax_adjoint => samples::plain::<3>(-1.0, 1.0);
-    scalars::rounding / rounding_adjoint => samples::plain::<1>(-3.0, 3.0);
-    scalars::misc / misc_adjoint => samples::plain::<2>(0.2, 3.0);
-    scalars::sincos / sincos_adjoint => samples::plain::<1>(-3.0, 3.0);
-    vectors::geometry / geometry_adjoint => samples::plain::<6>(-1.0, 1.0);
-    vectors::elementwise / elementwise_adjoint => samples::plain::<9>(0.2, 1.0);
-    vectors::shape / shape_adjoint => samples::plain::<5>(-1.0, 1.0);
-    vectors::rotate / rotate_adjoint => samples::signed::<7>(0.2, 1.0);
-    vectors::components / components_adjoint => samples::plain::<3>(-1.0, 1.0);
-    matrices::mat3 / mat3_adjoint => samples::plain::<12>(-1.0, 1.0);
-    matrices::mat2 / mat2_adjoint => samples::mat2;
-    matrices::covariance / covariance_adjoint => samples::covariance;
-    control::nested / nested_adjoint => samples::plain::<2>(-2.0, 2.0);
-    control::statements / statements_adjoint => samples::plain::<2>(-1.0, 1.5);
-    control::vector_loop / vector_loop_adjoint => samples::vector_loop;
-    control::array_loop / array_loop_adjoint => samples::plain::<5>(-1.0, 1.0);
-    control::guarded / guarded_adjoint => samples::guarded;
-    control::flags / flags_adjoint => samples::flags;
-    structured::sh_color / sh_color_adjoint => samples::signed::<51>(0.05, 1.0);
-    structured::splat_of / splat_of_adjoint => samples::splat;
-    structured::uses_custom / uses_custom_adjoint => samples::plain::<2>(-1.0, 1.0);
-    jacobians::every_op_jacobian / every_op_jacobian_adjoint => samples::plain::<2>(0.15, 0.85);
-    jacobians::scalar_jacobian / scalar_jacobian_adjoint => samples::plain::<1>(-1.5, 1.5);
-    jacobians::branch_jacobian / branch_jacobian_adjoint => samples::branch_sides;
-}
+codegen_tests::with_corpus!(corpus!());
 
 #[test]
 fn no_diff_stops_the_gradient() {

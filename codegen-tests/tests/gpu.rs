@@ -172,27 +172,34 @@ fn check<const NF: usize, const NI: usize, const MF: usize, const MI: usize>(
     e
 }
 
-/// Each kernel with its inputs and, where not `TOL`, the tolerances of its CPU and GPU forms.
+/// The GPU form's tolerance for a corpus entry's mark.
+macro_rules! gpu_tolerance {
+    () => {
+        TOL
+    };
+    (inverse_trig) => {
+        TOL_INVERSE_TRIG
+    };
+}
+
+/// Each kernel with its inputs, marked `inverse_trig` where its GPU form gets
+/// `TOL_INVERSE_TRIG`; pushes the name of each past its bounds to `$failures`.
 macro_rules! gpu_corpus {
-    ($gpu:expr, $($m:ident :: $f:ident / $adj:ident => $sample:expr $(, $cpu:ident, $gpu_tol:ident)?;)*) => {{
-        let mut failures = vec![];
-        $(
+    ($gpu:expr, $failures:expr, $($m:ident :: $f:ident / $adj:ident => $sample:expr $(, $inverse_trig:ident)?;)*) => {$(
+        {
+            let gpu = gpu_tolerance!($($inverse_trig)?);
             let k = Kernel { name: stringify!($f), f: $m::scalar::$f, adj: $m::scalar::$adj, twin: $m::twin::$f, twin_adj: $m::twin::$adj };
-            #[allow(unused_mut, unused_assignments)]
-            let (mut cpu, mut gpu) = (TOL, TOL);
-            $((cpu, gpu) = ($cpu, $gpu_tol);)?
-            let bounds = (Bound::new(cpu, cpu), Bound::new(gpu, gpu));
+            let bounds = (Bound::new(TOL, TOL), Bound::new(gpu, gpu));
             let e = check($gpu, ($m::GENERATED_WGSL, $m::GENERATED_FUNCTIONS), k, $sample, bounds);
             println!(
                 "{:<28} of the bounds: forward gpu {:.3} cpu {:.3} | adjoint gpu {:.3} cpu {:.3}",
                 concat!(stringify!($m), "::", stringify!($f)), e.gpu, e.cpu, e.gpu_adj, e.cpu_adj
             );
             if e.gpu.max(e.cpu).max(e.gpu_adj).max(e.cpu_adj) > 1.0 {
-                failures.push(format!("{}: {e:?}", stringify!($f)));
+                $failures.push(format!("{}: {e:?}", stringify!($f)));
             }
-        )*
-        failures
-    }};
+        }
+    )*};
 }
 
 #[test]
@@ -201,37 +208,12 @@ fn corpus_kernels_match_the_rust_forms_on_the_gpu() {
         return;
     };
     println!("adapter: {}", gpu.adapter);
-    let failures = gpu_corpus!(&gpu,
-        scalars::arith / arith_adjoint => samples::plain::<2>(0.2, 1.5);
-        scalars::transcendental / transcendental_adjoint => samples::plain::<2>(0.2, 2.0);
-        scalars::trig / trig_adjoint => samples::plain::<2>(-0.9, 0.9), TOL, TOL_INVERSE_TRIG;
-        scalars::powers / powers_adjoint => samples::plain::<2>(0.3, 2.0);
-        scalars::minmax / minmax_adjoint => samples::plain::<3>(-1.0, 1.0);
-        scalars::rounding / rounding_adjoint => samples::plain::<1>(-3.0, 3.0);
-        scalars::misc / misc_adjoint => samples::plain::<2>(0.2, 3.0);
-        scalars::sincos / sincos_adjoint => samples::plain::<1>(-3.0, 3.0);
-        vectors::geometry / geometry_adjoint => samples::plain::<6>(-1.0, 1.0);
-        vectors::elementwise / elementwise_adjoint => samples::plain::<9>(0.2, 1.0);
-        vectors::shape / shape_adjoint => samples::plain::<5>(-1.0, 1.0);
-        vectors::rotate / rotate_adjoint => samples::signed::<7>(0.2, 1.0);
-        vectors::components / components_adjoint => samples::plain::<3>(-1.0, 1.0);
-        matrices::mat3 / mat3_adjoint => samples::plain::<12>(-1.0, 1.0);
-        matrices::mat2 / mat2_adjoint => samples::mat2;
-        matrices::covariance / covariance_adjoint => samples::covariance;
-        control::nested / nested_adjoint => samples::plain::<2>(-2.0, 2.0);
-        control::statements / statements_adjoint => samples::plain::<2>(-1.0, 1.5);
-        control::vector_loop / vector_loop_adjoint => samples::vector_loop;
-        control::array_loop / array_loop_adjoint => samples::plain::<5>(-1.0, 1.0);
-        control::guarded / guarded_adjoint => samples::guarded;
-        control::flags / flags_adjoint => samples::flags;
-        structured::sh_color / sh_color_adjoint => samples::signed::<51>(0.05, 1.0);
-        structured::splat_of / splat_of_adjoint => samples::splat;
-        structured::uses_custom / uses_custom_adjoint => samples::plain::<2>(-1.0, 1.0);
+    let mut failures: Vec<String> = vec![];
+    codegen_tests::with_corpus!(gpu_corpus!(&gpu, failures,));
+    // The kinks corpus (its gradients are checked by rule in `tests/kinks.rs`) runs here too.
+    gpu_corpus!(&gpu, failures,
         kinks::nan_branch / nan_branch_adjoint => samples::plain::<1>(-1.0, 1.0);
         kinks::lazy_div / lazy_div_adjoint => samples::plain::<2>(-1.0, 1.0);
-        jacobians::every_op_jacobian / every_op_jacobian_adjoint => samples::plain::<2>(0.15, 0.85), TOL, TOL_INVERSE_TRIG;
-        jacobians::scalar_jacobian / scalar_jacobian_adjoint => samples::plain::<1>(-1.5, 1.5);
-        jacobians::branch_jacobian / branch_jacobian_adjoint => samples::branch_sides;
     );
     assert!(
         failures.is_empty(),
