@@ -7,9 +7,9 @@
 use crate::common::gaussian_at;
 use splat_methods::gs3d::{Method, Params};
 use splat_runtime::glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
-use splat_runtime::io::dataset::{DatasetError, read_blender};
+use splat_runtime::io::dataset::{Dataset, DatasetError, read_blender};
 use splat_runtime::train::fit::{FitOptions, StepReport, evaluate, fit};
-use splat_runtime::train::{DensifyOptions, Strategy, Trainable};
+use splat_runtime::train::{Checkpoint, DensifyOptions, Strategy, Trainable};
 use splat_runtime::{Camera, CameraModel, RenderOptions, SplatMethod, render};
 use std::path::Path;
 
@@ -392,7 +392,7 @@ fn three_dgs_fits_a_nerfstudio_fisheye_dataset() {
 /// model, so the views are made in memory: the fisheye dataset's poses and split.
 #[test]
 fn three_dgs_fits_equiangular_views() {
-    use splat_runtime::io::dataset::{Dataset, View};
+    use splat_runtime::io::dataset::View;
     let scene: Vec<Params> = truth();
     let opts = options(0);
     let view = |i: usize| {
@@ -419,7 +419,7 @@ fn three_dgs_fits_equiangular_views() {
 /// a view whose camera and image disagree, a view holding NaN or too few values.
 #[test]
 fn fit_refuses_a_bad_run_before_its_first_step() {
-    use splat_runtime::io::dataset::{Dataset, View};
+    use splat_runtime::io::dataset::View;
     use splat_runtime::pipeline::Image;
     let scene: Vec<Params> = truth();
     let opts = options(5);
@@ -1039,6 +1039,37 @@ fn resumable_options() -> FitOptions {
     }
 }
 
+/// A CPU run of `opts` from `start`, recorded: its end state, the checkpoints it saved and the
+/// primitive count after each step. Call it on one thread, so sums run in one order.
+fn recorded_run(
+    data: &splat_runtime::io::dataset::Dataset,
+    start: &[Params],
+    opts: &FitOptions,
+) -> (
+    splat_runtime::train::Checkpoint,
+    Vec<splat_runtime::train::Checkpoint>,
+    Vec<usize>,
+) {
+    let mut whole = Checkpoint::start::<Method>(start, opts.steps, opts.seed);
+    let (mut saved, mut counts) = (vec![], vec![]);
+    splat_runtime::train::fit::fit_from::<Method>(data, &mut whole, 1.0, opts, |r| {
+        saved.extend(r.checkpoint.cloned());
+        counts.push(r.primitives);
+    })
+    .unwrap();
+    (whole, saved, counts)
+}
+
+/// `at` written to `dir`, read back (equal to what was written) and run to the end.
+fn resumed_from_file(dir: &Path, data: &Dataset, at: &Checkpoint, opts: &FitOptions) -> Checkpoint {
+    let path = dir.join("checkpoint.bin");
+    at.write(&path).unwrap();
+    let mut resumed = Checkpoint::read(&path).unwrap();
+    assert_eq!(&resumed, at);
+    splat_runtime::train::fit::fit_from::<Method>(data, &mut resumed, 1.0, opts, |_| {}).unwrap();
+    resumed
+}
+
 /// A run from its checkpoint (written to a file and read back) takes the very steps the
 /// uninterrupted run took: the same primitives, moments and generator state, bit for bit, with
 /// density control acting on both sides of the checkpoint (CPU, one thread, so sums run in one
@@ -1046,8 +1077,7 @@ fn resumable_options() -> FitOptions {
 #[test]
 fn a_run_resumed_from_its_checkpoint_takes_the_same_steps() {
     use splat_runtime::Image;
-    use splat_runtime::io::dataset::{Dataset, View};
-    use splat_runtime::train::Checkpoint;
+    use splat_runtime::io::dataset::View;
     use splat_runtime::train::fit::fit_from;
     let dir = tempfile::tempdir().unwrap();
     let scene = truth();
@@ -1064,14 +1094,7 @@ fn a_run_resumed_from_its_checkpoint_takes_the_same_steps() {
         .build()
         .unwrap();
     pool.install(|| {
-        let mut whole = Checkpoint::start::<Method>(&start, opts.steps, opts.seed);
-        let mut saved = vec![];
-        let mut counts = vec![];
-        fit_from::<Method>(&data, &mut whole, 1.0, &opts, |r| {
-            saved.extend(r.checkpoint.cloned());
-            counts.push(r.primitives);
-        })
-        .unwrap();
+        let (whole, saved, counts) = recorded_run(&data, &start, &opts);
         assert_eq!(saved.iter().map(|c| c.step).collect::<Vec<_>>(), [20, 40]);
         assert_eq!(saved[1], whole, "the last checkpoint is the run's end");
         let at20 = &saved[0];
@@ -1080,13 +1103,7 @@ fn a_run_resumed_from_its_checkpoint_takes_the_same_steps() {
             counts[19] != start.len() && counts[39] != counts[19],
             "{counts:?}"
         );
-
-        let path = dir.path().join("checkpoint.bin");
-        at20.write(&path).unwrap();
-        let mut resumed = Checkpoint::read(&path).unwrap();
-        assert_eq!(&resumed, at20);
-        fit_from::<Method>(&data, &mut resumed, 1.0, &opts, |_| {}).unwrap();
-        assert_eq!(resumed, whole);
+        assert_eq!(resumed_from_file(dir.path(), &data, at20, &opts), whole);
 
         // Another run length, method or strategy is refused.
         let mut other = at20.clone();
@@ -1158,8 +1175,7 @@ fn a_run_resumed_from_its_checkpoint_takes_the_same_steps() {
 /// (CPU, one thread). The sampler acts on both sides of the checkpoint.
 #[test]
 fn an_mcmc_run_resumed_from_its_checkpoint_takes_the_same_steps() {
-    use splat_runtime::train::fit::fit_from;
-    use splat_runtime::train::{Checkpoint, McmcOptions};
+    use splat_runtime::train::McmcOptions;
     let dir = tempfile::tempdir().unwrap();
     write_known_scene(dir.path());
     let data = read_blender(dir.path(), Vec3::ZERO).unwrap();
@@ -1178,24 +1194,16 @@ fn an_mcmc_run_resumed_from_its_checkpoint_takes_the_same_steps() {
         .build()
         .unwrap();
     pool.install(|| {
-        let mut whole = Checkpoint::start::<Method>(&start, opts.steps, opts.seed);
-        let mut saved = vec![];
-        let mut counts = vec![];
-        fit_from::<Method>(&data, &mut whole, 1.0, &opts, |r| {
-            saved.extend(r.checkpoint.cloned());
-            counts.push(r.primitives);
-        })
-        .unwrap();
+        let (whole, saved, counts) = recorded_run(&data, &start, &opts);
         assert!(
             counts[19] > start.len() && counts[39] > counts[19],
             "the sampler grows on both sides of the checkpoint: {counts:?}"
         );
-        let path = dir.path().join("checkpoint.bin");
-        saved[0].write(&path).unwrap();
-        let mut resumed = Checkpoint::read(&path).unwrap();
-        assert_eq!(resumed.step, 20);
-        fit_from::<Method>(&data, &mut resumed, 1.0, &opts, |_| {}).unwrap();
-        assert_eq!(resumed, whole);
+        assert_eq!(saved[0].step, 20);
+        assert_eq!(
+            resumed_from_file(dir.path(), &data, &saved[0], &opts),
+            whole
+        );
     });
 }
 
@@ -1210,7 +1218,6 @@ fn the_gpu_loop_resumes_from_its_checkpoint() {
     let Some(gpu) = splat_runtime::gpu::adapter_or_skip() else {
         return;
     };
-    use splat_runtime::train::Checkpoint;
     use splat_runtime::train::gpu_fit::fit_gpu_from;
     let dir = tempfile::tempdir().unwrap();
     write_known_scene(dir.path());
