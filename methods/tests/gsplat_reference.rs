@@ -13,6 +13,8 @@
 use serde_json::Value;
 use splat_methods::FromStored;
 use splat_runtime::checks::bound::Bound;
+use splat_runtime::checks::forward::{ImageBound, MOST_UNCLEAR, output_matches};
+use splat_runtime::checks::gradients::{camera_matches, groups_match};
 use splat_runtime::checks::{CAMERA_GROUPS, camera_words, words};
 use splat_runtime::glam::{Mat3, Vec2, Vec3, Vec4};
 use splat_runtime::io::ply::StoredGaussian;
@@ -42,25 +44,25 @@ const GPU_GRADIENT: Bound = Bound::new(2e-4, 2e-5);
 
 /// The bounds of one backend.
 struct Bounds {
-    image: Bound,
-    depth: Bound,
+    image: ImageBound,
     gradient: Bound,
 }
 
 const CPU: Bounds = Bounds {
-    image: IMAGE,
-    depth: DEPTH,
+    image: ImageBound {
+        values: IMAGE,
+        depth: DEPTH,
+    },
     gradient: GRADIENT,
 };
 
 const GPU: Bounds = Bounds {
-    image: GPU_IMAGE,
-    depth: DEPTH,
+    image: ImageBound {
+        values: GPU_IMAGE,
+        depth: DEPTH,
+    },
     gradient: GPU_GRADIENT,
 };
-
-/// The most pixels a fixture may leave out as not clear (near a threshold).
-const MOST_UNCLEAR: f64 = 0.02;
 
 struct Fixture {
     name: String,
@@ -182,58 +184,41 @@ fn options(tile_size: u32) -> RenderOptions {
 
 /// The frame's color, alpha and depth against the fixture's on its clear pixels.
 fn image_matches(at: &str, f: &Fixture, frame: &Frame, bounds: &Bounds) {
-    let clear = |channels: usize, values: &[f32], want: &[f64]| {
-        let keep = |i: &usize| f.clear[i / channels];
-        let got: Vec<f64> = (0..values.len())
-            .filter(keep)
-            .map(|i| values[i] as f64)
-            .collect();
-        let want: Vec<f64> = (0..want.len()).filter(keep).map(|i| want[i]).collect();
-        (got, want)
-    };
     let (alpha, depth) = (frame.alpha.as_ref(), frame.depth.as_ref());
     let outputs = [
-        ("color", 3, &frame.color.data, &f.color, bounds.image),
-        ("alpha", 1, &alpha.unwrap().data, &f.alpha, bounds.image),
-        ("depth", 1, &depth.unwrap().data, &f.depth, bounds.depth),
+        ("color", &frame.color.data, &f.color),
+        ("alpha", &alpha.unwrap().data, &f.alpha),
+        ("depth", &depth.unwrap().data, &f.depth),
     ];
-    for (what, channels, values, want, bound) in outputs {
-        assert_eq!(values.len(), want.len(), "{at}: {what} size");
-        let (got, want) = clear(channels, values, want);
-        bound.check(&format!("{at}, {what}"), &got, &want, None, |i| {
-            format!("clear value {i}")
-        });
+    for (what, values, want) in outputs {
+        let got: Vec<f64> = values.iter().map(|v| *v as f64).collect();
+        output_matches(at, what, &got, want, &f.clear, bounds.image);
     }
 }
 
 /// The gradients against the fixture's: each of the method's parameter groups, and each
-/// camera field.
+/// camera field gsplat differentiates (it has no lens distortion or rolling shutter).
 fn gradients_match<M: SplatMethod>(at: &str, f: &Fixture, got: &Gradients<M>, bounds: &Bounds) {
     let params: Vec<Vec<f64>> = got.params.iter().map(words).collect();
-    for (group, range) in param_groups::<M>() {
-        let pick = |ps: &[Vec<f64>]| -> Vec<f64> {
-            ps.iter().flat_map(|p| p[range.clone()].to_vec()).collect()
-        };
-        let width = range.len();
-        bounds.gradient.check(
-            &format!("{at}, {group}"),
-            &pick(&params),
-            &pick(&f.params_gradient),
-            None,
-            |i| format!("Gaussian {} word {}", i / width, i % width),
-        );
-    }
+    let groups = param_groups::<M>();
+    groups_match(
+        at,
+        &params,
+        &f.params_gradient,
+        None,
+        &groups,
+        bounds.gradient,
+    );
     let camera = camera_words(&got.camera);
-    // gsplat has no lens distortion or rolling shutter: the fields it differentiates.
-    for (field, range) in &CAMERA_GROUPS[..4] {
-        bounds.gradient.check(
-            &format!("{at}, camera {field}"),
-            &camera[range.clone()],
-            &f.camera_gradient[range.clone()],
-            None,
-            |i| format!("slot {}", range.start + i),
-        );
-    }
+    let fields = &CAMERA_GROUPS[..4];
+    camera_matches(
+        at,
+        &camera,
+        &f.camera_gradient,
+        None,
+        fields,
+        bounds.gradient,
+    );
 }
 
 fn check<M: SplatMethod>(name: &str)

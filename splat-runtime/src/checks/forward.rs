@@ -6,7 +6,7 @@ use super::reference::{Reference, render_with, render_words};
 use super::{camera_words, options, options_with, words};
 use crate::method::SplatMethod;
 use crate::pipeline::shade::Blend;
-use crate::pipeline::{Frame, RenderOptions, render};
+use crate::pipeline::{Frame, Image, RenderOptions, render};
 use crate::types::Camera;
 
 /// Bounds on an image: on color and alpha, and on the expected depth (divided by alpha, so a
@@ -131,7 +131,7 @@ pub fn clear_reference<M: SplatMethod>(
 /// One output (H x W x channels, row-major) against its reference on the clear pixels, within
 /// `bound`'s depth bound for `what == "depth"`, its value bound otherwise; returns the worst
 /// fraction of the bound.
-fn output_matches(
+pub fn output_matches(
     at: &str,
     what: &str,
     got: &[f64],
@@ -171,15 +171,8 @@ pub fn frames_match(
     clear: &[bool],
     bound: ImageBound,
 ) -> f64 {
-    let pairs = [
-        ("color", Some(&want.color), Some(&got.color)),
-        ("alpha", want.alpha.as_ref(), got.alpha.as_ref()),
-        ("depth", want.depth.as_ref(), got.depth.as_ref()),
-    ];
     let mut worst = 0.0f64;
-    for (what, w, g) in pairs {
-        let Some(w) = w else { continue };
-        let g = g.unwrap_or_else(|| panic!("{label}: {what} is missing"));
+    for (what, w, g) in outputs_of(label, want, got) {
         let f64s = |v: &[f32]| v.iter().map(|x| *x as f64).collect::<Vec<f64>>();
         worst = worst.max(output_matches(
             label,
@@ -306,19 +299,32 @@ pub fn gpu_forward_matches_cpu_within<M: SplatMethod>(
     }
 }
 
-/// Asserts that every output of `got` (color, alpha, depth, as far as `want` has them) is
-/// within `abs + rel * |want|` of `want`'s, naming the output and element that is not; returns
-/// the worst difference as a fraction of its bound.
-pub fn outputs_close(label: &str, want: &Frame, got: &Frame, abs: f32, rel: f32) -> f32 {
+/// The outputs `want` has (color, alpha, depth), each beside `got`'s, which must have them.
+fn outputs_of<'a>(
+    label: &str,
+    want: &'a Frame,
+    got: &'a Frame,
+) -> Vec<(&'static str, &'a Image, &'a Image)> {
     let pairs = [
         ("color", Some(&want.color), Some(&got.color)),
         ("alpha", want.alpha.as_ref(), got.alpha.as_ref()),
         ("depth", want.depth.as_ref(), got.depth.as_ref()),
     ];
+    pairs
+        .into_iter()
+        .filter_map(|(what, w, g)| {
+            let missing = || panic!("{label}: {what} is missing");
+            w.map(|w| (what, w, g.unwrap_or_else(missing)))
+        })
+        .collect()
+}
+
+/// Asserts that every output of `got` (color, alpha, depth, as far as `want` has them) is
+/// within `abs + rel * |want|` of `want`'s, naming the output and element that is not; returns
+/// the worst difference as a fraction of its bound.
+pub fn outputs_close(label: &str, want: &Frame, got: &Frame, abs: f32, rel: f32) -> f32 {
     let mut worst = 0.0f32;
-    for (what, w, g) in pairs {
-        let Some(w) = w else { continue };
-        let g = g.unwrap_or_else(|| panic!("{label}: {what} is missing"));
+    for (what, w, g) in outputs_of(label, want, got) {
         assert_eq!(w.data.len(), g.data.len(), "{label}: {what} sizes");
         for (i, (a, b)) in w.data.iter().zip(&g.data).enumerate() {
             let bound = abs + rel * a.abs();
