@@ -214,9 +214,16 @@ fn a_depth_gradient_needs_the_depth_output() {
     let got = render::backward(&mut state, &color_only, acc).unwrap();
     let want = render::backward(&mut deep_state, &color_only, acc).unwrap();
     // Atomics sum in any order: equal up to the rounding of the order.
-    let flat = |g: &[Params]| g.iter().flat_map(checks::words).collect::<Vec<f64>>();
-    let err = checks::group_error(&flat(&got.gradients.params), &flat(&want.gradients.params));
-    assert!(err < 1e-5, "{err} of the largest gradient");
+    let all = |g: &[Params]| g.iter().map(checks::words).collect::<Vec<_>>();
+    let terms = checks::adjoint::backward_for::<Method>(&ps, &cam, &color_only).gross_params;
+    checks::gradients::groups_match(
+        "GPU, without and with the depth state",
+        &all(&got.gradients.params),
+        &all(&want.gradients.params),
+        Some(&terms),
+        &splat_runtime::param_groups::<Method>(),
+        checks::gradients::ATOMIC_ORDER,
+    );
 }
 
 /// With no transmittance stop (`t_min` 0, `splat tradeoff`'s reference) a deep stack drives

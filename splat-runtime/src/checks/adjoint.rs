@@ -15,6 +15,7 @@
 use super::{camera_words, words};
 use crate::flat::Flat;
 use crate::method::SplatMethod;
+use crate::pipeline::FrameGrad;
 use crate::pipeline::shade::T_MIN;
 use crate::types::Camera;
 use glam::Vec2;
@@ -46,6 +47,24 @@ struct Taken {
     color: Vec<f64>,
     t: f64,
     input: Vec<f64>,
+}
+
+/// [`backward`] for the loss whose output gradients are `grad` (an output it leaves out
+/// weighs zero).
+pub fn backward_for<M: SplatMethod>(
+    params: &[M::Params],
+    cam: &Camera,
+    grad: &FrameGrad,
+) -> ReferenceGrad {
+    let f64s = |v: &[f32]| v.iter().map(|x| f64::from(*x)).collect::<Vec<f64>>();
+    let pixels = (cam.size.x * cam.size.y) as usize;
+    let or_zero = |g: &Option<Vec<f32>>| g.as_deref().map_or(vec![0.0; pixels], f64s);
+    let w = [
+        f64s(&grad.color),
+        or_zero(&grad.alpha),
+        or_zero(&grad.depth),
+    ];
+    backward::<M>(params, cam, &w)
 }
 
 /// The gradient of the loss with weights `w = [color, alpha, depth]` (H x W x channels, H x W,

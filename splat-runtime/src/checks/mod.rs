@@ -92,15 +92,6 @@ pub fn camera_words(c: &Camera) -> Vec<f64> {
     c.float_slots().map(f64::from).to_vec()
 }
 
-/// max |a - b| / max |b| over a group of gradients.
-pub fn group_error(got: &[f64], want: &[f64]) -> f64 {
-    let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(1e-12);
-    got.iter()
-        .zip(want)
-        .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()))
-        / scale
-}
-
 fn channels<M: SplatMethod>() -> usize {
     <M::Color as Flat>::LEN
 }
