@@ -718,7 +718,7 @@ fn step_times_add_up(stdout: &str) {
 /// Ctrl-C during `splat fit` ends the run after the step in progress with its checkpoint and
 /// metrics saved (and no result written); `--resume` goes on from that step, and SIGTERM (a
 /// batch scheduler's stop) ends it as Ctrl-C does. On both loops (the GPU's where there is an
-/// adapter).
+/// adapter); on the CPU's, resumed to the end, the run ends where one never stopped does.
 #[cfg(unix)]
 #[test]
 fn an_interrupted_fit_saves_its_checkpoint_and_resumes_from_it() {
@@ -829,6 +829,19 @@ fn an_interrupted_fit_saves_its_checkpoint_and_resumes_from_it() {
         let second = interrupted(&["--resume"], libc::SIGTERM).unwrap();
         assert!(second > first, "{backend}: {second} after {first}");
         assert_eq!(last_row(), second);
+        if backend == "cpu" {
+            // Resumed to the end, twice stopped, the CPU's run ends on the very scene of a run
+            // never stopped (the GPU's adds its gradients in the atomics' order).
+            ok(&splat(&[&args[..], &["--resume"]].concat(), dir.path()));
+            let whole = [&args[..args.len() - 1], &["whole"]].concat();
+            ok(&splat(&whole, dir.path()));
+            let scene = |run: &str| std::fs::read(dir.path().join(run).join("scene.ply")).unwrap();
+            assert!(
+                scene("cpu") == scene("whole"),
+                "the resumed run's scene differs"
+            );
+            assert_eq!(last_row(), steps.parse::<usize>().unwrap());
+        }
     }
 }
 
