@@ -1,5 +1,5 @@
 """Independent references for 3DGS: images and gradients from gsplat's pure-PyTorch
-implementation, in float64, committed as fixtures that `methods/tests/gsplat_reference.rs`
+implementation, in float64, committed as fixtures that `methods/tests/independent_reference.rs`
 compares the CPU and GPU pipelines against.
 
 What comes from gsplat (`gsplat/cuda/_torch_impl.py` of the release named below, loaded from
