@@ -18,6 +18,13 @@ pub fn signed<const N: usize>(lo: f64, hi: f64) -> impl Fn(&mut Rng) -> ([f64; N
     }
 }
 
+/// `minmax`: `clamp`'s bounds in order (x <= y), as Rust's `clamp` requires (it panics
+/// otherwise); z anywhere.
+pub fn minmax(r: &mut Rng) -> ([f64; 3], [u32; 0]) {
+    let [a, b, z]: [f64; 3] = uniform(r, -1.0, 1.0);
+    ([a.min(b), a.max(b), z], [])
+}
+
 /// `mat2`: a well-conditioned matrix (near 1.5 I) and a positive scale.
 pub fn mat2(r: &mut Rng) -> ([f64; 5], [u32; 0]) {
     let mut x: [f64; 5] = uniform(r, -0.5, 0.5);
@@ -89,7 +96,7 @@ macro_rules! with_corpus {
             scalars::transcendental / transcendental_adjoint => $crate::samples::plain::<2>(0.2, 2.0);
             scalars::trig / trig_adjoint => $crate::samples::plain::<2>(-0.9, 0.9), inverse_trig;
             scalars::powers / powers_adjoint => $crate::samples::plain::<2>(0.3, 2.0);
-            scalars::minmax / minmax_adjoint => $crate::samples::plain::<3>(-1.0, 1.0);
+            scalars::minmax / minmax_adjoint => $crate::samples::minmax;
             scalars::rounding / rounding_adjoint => $crate::samples::plain::<1>(-3.0, 3.0);
             scalars::misc / misc_adjoint => $crate::samples::plain::<2>(0.2, 3.0);
             scalars::sincos / sincos_adjoint => $crate::samples::plain::<1>(-3.0, 3.0);

@@ -19,3 +19,16 @@ pub fn splat_method(attr: TokenStream, item: TokenStream) -> TokenStream {
 pub fn splat_functions(attr: TokenStream, item: TokenStream) -> TokenStream {
     splat_compiler::expand(splat_compiler::Kind::Functions, attr.into(), item.into()).into()
 }
+
+/// `#[adjoint(f)]` on a helper: inside a `#[splat_method]` or `#[splat_functions]` module the
+/// compiler reads it (and differentiates the helper with `f`); anywhere else it only marks `f`
+/// as used, so a module's source also compiles as ordinary Rust.
+#[proc_macro_attribute]
+pub fn adjoint(attr: TokenStream, item: TokenStream) -> TokenStream {
+    let used: TokenStream = format!("const _: () = {{ let _ = {attr}; }};")
+        .parse()
+        .expect("a path");
+    let mut out = item;
+    out.extend(used);
+    out
+}

@@ -4,7 +4,7 @@
 //! as plain Rust.
 
 pub use crate::types::{Camera, Contribution, Projected, Tile};
-pub use glam::{Mat2, Mat3, Quat, Vec2, Vec3, Vec4};
+pub use glam::{Mat2, Mat3, Quat, Vec2, Vec2Swizzles, Vec3, Vec3Swizzles, Vec4, Vec4Swizzles};
 
 /// `if c { a } else { b }`. Both operands are computed; in the adjoint only the selected one
 /// receives a gradient, and a NaN in the other does not leak.
@@ -64,4 +64,158 @@ pub fn spherical_harmonics<const N: usize>(sh: [Vec3; N], dir: Vec3) -> Vec3 {
         -0.590_043_6 * x * (xx - 3.0 * yy),
     ];
     sh.iter().zip(basis).map(|(c, b)| *c * b).sum()
+}
+
+/// The free forms of methods a kernel may call (`exp(x)` for `x.exp()`, the compiler's
+/// `FREE_AS_METHOD`), as ordinary Rust of the same meaning, so that a method's source also
+/// compiles as it is written (`codegen-tests/tests/plain.rs` compiles its corpus both ways and
+/// compares them).
+pub use free::{
+    abs, atan2, clamp, cos, cross, determinant, dot, exp, inverse, length, ln, log, log1p, max,
+    min, normalize, sin, sqrt, tan, transpose,
+};
+
+/// The free forms' definitions, and the traits that say which types each takes.
+pub mod free {
+    use glam::{Mat2, Mat3, Vec2, Vec3, Vec4};
+
+    macro_rules! of_f32 {
+        ($($name:ident => $method:ident),*) => {$(
+            #[doc = concat!("`x.", stringify!($method), "()`.")]
+            #[inline(always)]
+            pub fn $name(x: f32) -> f32 {
+                x.$method()
+            }
+        )*};
+    }
+    of_f32!(exp => exp, ln => ln, log => ln, log1p => ln_1p, sqrt => sqrt, sin => sin,
+        cos => cos, tan => tan);
+
+    /// `y.atan2(x)`: the angle of (x, y).
+    #[inline(always)]
+    pub fn atan2(y: f32, x: f32) -> f32 {
+        y.atan2(x)
+    }
+
+    /// Types with element-wise `abs`, `min`, `max` and `clamp`: `f32` and the vectors.
+    pub trait Elementwise: Copy {
+        fn abs_of(self) -> Self;
+        fn min_of(self, other: Self) -> Self;
+        fn max_of(self, other: Self) -> Self;
+        fn clamp_of(self, lo: Self, hi: Self) -> Self;
+    }
+
+    /// Vectors: `dot`, `length`, `normalize`.
+    pub trait Vector: Copy {
+        fn dot_of(self, other: Self) -> f32;
+        fn length_of(self) -> f32;
+        fn normalize_of(self) -> Self;
+    }
+
+    /// Square matrices: `transpose`, `inverse`, `determinant`.
+    pub trait Matrix: Copy {
+        fn transpose_of(self) -> Self;
+        fn inverse_of(self) -> Self;
+        fn determinant_of(self) -> f32;
+    }
+
+    macro_rules! elementwise {
+        ($($t:ty),*) => {$(
+            impl Elementwise for $t {
+                fn abs_of(self) -> Self { self.abs() }
+                fn min_of(self, other: Self) -> Self { self.min(other) }
+                fn max_of(self, other: Self) -> Self { self.max(other) }
+                fn clamp_of(self, lo: Self, hi: Self) -> Self { self.clamp(lo, hi) }
+            }
+        )*};
+    }
+    elementwise!(f32, Vec2, Vec3, Vec4);
+
+    macro_rules! vector {
+        ($($t:ty),*) => {$(
+            impl Vector for $t {
+                fn dot_of(self, other: Self) -> f32 { self.dot(other) }
+                fn length_of(self) -> f32 { self.length() }
+                fn normalize_of(self) -> Self { self.normalize() }
+            }
+        )*};
+    }
+    vector!(Vec2, Vec3, Vec4);
+
+    macro_rules! matrix {
+        ($($t:ty),*) => {$(
+            impl Matrix for $t {
+                fn transpose_of(self) -> Self { self.transpose() }
+                fn inverse_of(self) -> Self { self.inverse() }
+                fn determinant_of(self) -> f32 { self.determinant() }
+            }
+        )*};
+    }
+    matrix!(Mat2, Mat3);
+
+    /// `x.abs()`.
+    #[inline(always)]
+    pub fn abs<T: Elementwise>(x: T) -> T {
+        x.abs_of()
+    }
+
+    /// `a.min(b)`.
+    #[inline(always)]
+    pub fn min<T: Elementwise>(a: T, b: T) -> T {
+        a.min_of(b)
+    }
+
+    /// `a.max(b)`.
+    #[inline(always)]
+    pub fn max<T: Elementwise>(a: T, b: T) -> T {
+        a.max_of(b)
+    }
+
+    /// `x.clamp(lo, hi)`.
+    #[inline(always)]
+    pub fn clamp<T: Elementwise>(x: T, lo: T, hi: T) -> T {
+        x.clamp_of(lo, hi)
+    }
+
+    /// `a.dot(b)`.
+    #[inline(always)]
+    pub fn dot<T: Vector>(a: T, b: T) -> f32 {
+        a.dot_of(b)
+    }
+
+    /// `v.length()`.
+    #[inline(always)]
+    pub fn length<T: Vector>(v: T) -> f32 {
+        v.length_of()
+    }
+
+    /// `v.normalize()`.
+    #[inline(always)]
+    pub fn normalize<T: Vector>(v: T) -> T {
+        v.normalize_of()
+    }
+
+    /// `a.cross(b)`.
+    #[inline(always)]
+    pub fn cross(a: Vec3, b: Vec3) -> Vec3 {
+        a.cross(b)
+    }
+
+    /// `m.transpose()`.
+    #[inline(always)]
+    pub fn transpose<T: Matrix>(m: T) -> T {
+        m.transpose_of()
+    }
+
+    /// `m.inverse()`.
+    #[inline(always)]
+    pub fn inverse<T: Matrix>(m: T) -> T {
+        m.inverse_of()
+    }
+
+    /// `m.determinant()`.
+    #[inline(always)]
+    pub fn determinant<T: Matrix>(m: T) -> f32 {
+        m.determinant_of()
+    }
 }
