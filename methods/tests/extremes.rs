@@ -31,11 +31,14 @@ fn scene(cam: &Camera) -> Vec<Params> {
 }
 
 /// Gradients within 1e-4 of each element plus 1e-3 of its group's largest, on the CPU against
-/// the f64 adjoint and on the GPU against the CPU: the Gaussian on the near plane (depth
-/// 0.0100001, its footprint the whole image) coarsens every f32 gradient of the scene, so the
-/// unmodified Gaussians sit up to 2.8e-4 of their group's largest off the f64 adjoint on the
-/// CPU (3DGUT's rotation; 0.27 of this bound) and 3.4e-4 off the CPU on the GPU (3DGS's log
-/// scale: 1.5e-3 relative, 0.33 of this bound, 9.5 of the GPU's usual bound).
+/// the f64 adjoint and on the GPU against the CPU: 100x the other checks' share of the group's
+/// largest. What needs it is the GPU against the CPU on Gaussians the cases leave alone: in
+/// every case that takes their neighbours out (collapsed, screen-sized, transparent), 3DGUT's
+/// primitive 3 has a rotation gradient 1.9e-3 of itself off the CPU's (0.51 of this bound, the
+/// worst; 5e-4 of its group's largest) and 3DGS's primitive 5 a log-scale gradient 1.5e-3 off
+/// (0.33). Not the Gaussian on the near plane: without it the same elements are the worst. Why
+/// the GPU differs there is not yet known; on the CPU, against the f64 adjoint, the worst is
+/// 3DGUT's opacity gradient at the back of the 10,000-deep stack (1.8e-3 off a value of 1e-6).
 const BOUND: Bound = Bound::new(1e-4, 1e-3);
 
 /// The base scene for `model`, as `M`'s parameters, and its camera.
