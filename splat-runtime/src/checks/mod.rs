@@ -37,6 +37,7 @@
 pub mod adjoint;
 pub mod bound;
 pub mod extremes;
+pub mod fixture;
 pub mod forward;
 pub mod gradients;
 pub mod reference;
