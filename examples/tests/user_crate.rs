@@ -26,5 +26,5 @@ fn the_surfels_crate_builds_and_passes_its_tests() {
         String::from_utf8_lossy(&run.stderr)
     );
     assert!(run.status.success(), "{report}");
-    assert!(report.contains("test result: ok. 7 passed"), "{report}");
+    assert!(report.contains("test result: ok. 8 passed"), "{report}");
 }
