@@ -3,7 +3,7 @@
 //! mutations of each seed, under an allocator that counts. No input may panic, nor hold more
 //! than `ALLOWANCE` plus `PER_BYTE` times its size at once: a header that claims more than the
 //! file holds is refused before anything is allocated for it. The coverage-guided runs are
-//! AFL++'s (README.md, Tests).
+//! AFL++'s (docs/testing.md).
 
 use splat_fuzz::{SEPARATOR, Scratch, Target};
 use std::alloc::{GlobalAlloc, Layout, System};
