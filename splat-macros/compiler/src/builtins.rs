@@ -2,8 +2,9 @@
 //! `spherical_harmonics`, written in the accepted subset itself so they lower, differentiate
 //! and emit (Rust, lanes, WGSL) like user code.
 //!
-//! The camera models come from `splat-runtime/src/cameras.rs`, which the runtime compiles as
-//! plain Rust: one module per model with its `CODE`, `NAME` and functions. Each model's
+//! The camera models come from the `splat-cameras` crate, whose `camera_models!` the runtime
+//! expands as plain Rust and whose text this reads: one module per model with its `CODE`,
+//! `NAME` and functions. Each model's
 //! functions become builtins named `__{model}_{function}`, and `cam.project_point(p)` lowers to
 //! a helper that picks the model by its code; a kernel specialized to one model
 //! (`Kernel::models`) keeps only that model's branch. `spherical_harmonics` has its plain-Rust
@@ -13,13 +14,38 @@ use crate::diag::Diag;
 use crate::model::FnDef;
 use quote::{format_ident, quote};
 
-/// The camera models' source, shared with the runtime.
-const CAMERAS: &str = include_str!("../../../splat-runtime/src/cameras.rs");
+/// The items of `splat_cameras::camera_models!`: the camera models, shared with the runtime.
+fn camera_source() -> Vec<syn::Item> {
+    let file: syn::File = syn::parse_str(splat_cameras::SOURCE).expect("splat-cameras parses");
+    let body = file
+        .items
+        .into_iter()
+        .find_map(|item| match item {
+            syn::Item::Macro(m) if m.ident.as_ref().is_some_and(|i| i == "camera_models") => {
+                Some(m.mac.tokens)
+            }
+            _ => None,
+        })
+        .expect("splat-cameras defines camera_models!");
+    // `() => { ITEMS };`: the one arm's body.
+    let arm = body
+        .into_iter()
+        .find_map(|t| match t {
+            proc_macro2::TokenTree::Group(g) if g.delimiter() == proc_macro2::Delimiter::Brace => {
+                Some(g.stream())
+            }
+            _ => None,
+        })
+        .expect("camera_models! has a body");
+    syn::parse2::<syn::File>(arm)
+        .expect("camera_models!'s body is items")
+        .items
+}
 
 /// The functions every camera model defines: `cam.{name}(..)` in a kernel.
 const MODEL_FUNCTIONS: &[&str] = &["project_point", "pixel_ray", "can_project"];
 
-/// A camera model of `cameras.rs`.
+/// A camera model of `splat-cameras`.
 pub struct CameraModel {
     /// Its module name (`pinhole`), as in camera files and `CameraModel::name`.
     pub name: String,
@@ -28,10 +54,9 @@ pub struct CameraModel {
     fns: Vec<syn::ItemFn>,
 }
 
-/// The camera models, in the order `cameras.rs` defines them.
+/// The camera models, in the order `splat-cameras` defines them.
 pub fn camera_models() -> Vec<CameraModel> {
-    let file: syn::File = syn::parse_str(CAMERAS).expect("cameras.rs parses");
-    file.items
+    camera_source()
         .into_iter()
         .filter_map(|item| match item {
             syn::Item::Mod(m) => Some(m),
@@ -65,11 +90,10 @@ pub fn camera_models() -> Vec<CameraModel> {
         .collect()
 }
 
-/// The functions of `cameras.rs` outside the models' modules: they hold for every model
+/// The functions of `splat-cameras` outside the models' modules: they hold for every model
 /// (`center`, the rolling shutter's pose), and `cam.{name}(..)` calls them.
 fn shared_camera_fns() -> Vec<syn::ItemFn> {
-    let file: syn::File = syn::parse_str(CAMERAS).expect("cameras.rs parses");
-    file.items
+    camera_source()
         .into_iter()
         .filter_map(|item| match item {
             syn::Item::Fn(f) => Some(f),
