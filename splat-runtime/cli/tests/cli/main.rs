@@ -1,0 +1,14 @@
+//! The `splat` command end to end, one module per command (one test binary, so the command line and
+//! its 16 method instances are linked once): every output format, every kind of bad input (a clear
+//! error, a non-zero exit, no output file), and what each command promises.
+
+mod bench;
+mod common;
+mod dataset;
+mod eval;
+mod fit;
+mod gallery;
+mod inspect;
+mod outputs;
+mod render;
+mod tradeoff;
