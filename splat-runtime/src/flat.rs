@@ -2,6 +2,7 @@
 //! and the generated code. Floats are stored as is; `bool` and integers as their bit patterns.
 
 use glam::{Mat2, Mat3, Quat, Vec2, Vec3, Vec4};
+use rayon::prelude::*;
 
 /// A value with a fixed flattened size, readable from and writable to `f32` words.
 pub trait Flat: Copy + Default + Send + Sync + 'static {
@@ -24,6 +25,29 @@ pub trait Flat: Copy + Default + Send + Sync + 'static {
             Self::read_words(&vec![0.0; Self::LEN])
         }
     }
+}
+
+/// Reads every value of `values` back from its words in `flat` (as many). In parallel, as
+/// [`write_all`]: a training step does both over every primitive.
+pub fn read_all<P: Flat>(values: &mut [P], flat: &[f32]) {
+    (values.par_iter_mut())
+        .zip(flat.par_chunks_exact(P::LEN))
+        .for_each(|(p, w)| *p = P::read_words(w));
+}
+
+/// Writes the words of every value of `values` into `flat`, one after another. (On one
+/// thread, the two conversions took 4 ms of a 95 ms step on 100,000 primitives, 2 cores.)
+pub fn write_all<P: Flat>(values: &[P], flat: &mut [f32]) {
+    (values.par_iter())
+        .zip(flat.par_chunks_exact_mut(P::LEN))
+        .for_each(|(p, out)| p.write_words(out));
+}
+
+/// The words of every value of `values`, one after another.
+pub fn flatten<P: Flat>(values: &[P]) -> Vec<f32> {
+    let mut flat = vec![0.0f32; values.len() * P::LEN];
+    write_all(values, &mut flat);
+    flat
 }
 
 impl Flat for f32 {

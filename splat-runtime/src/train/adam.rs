@@ -2,9 +2,16 @@
 //! of `Params` (each field its own rate, as 3DGS trains positions, scales, rotations,
 //! opacities and colors at different rates) and bias correction.
 
-use super::checkpoint::AdamState;
 use crate::method::{SplatMethod, word_name};
 use rayon::prelude::*;
+
+/// Adam's state: its step count and both moments, one per parameter word.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct AdamState {
+    pub step: u64,
+    pub m: Vec<f32>,
+    pub v: Vec<f32>,
+}
 
 /// Adam's state for `primitives` x `words` parameter words.
 pub struct Adam {

@@ -7,6 +7,7 @@
 //! checked first, and every count against the file's length before anything is allocated, so
 //! a damaged file is refused by name, never trusted.
 
+use super::adam::AdamState;
 use crate::flat::Flat;
 use crate::method::SplatMethod;
 use std::io::{Read, Write};
@@ -23,14 +24,6 @@ const UNSIZED: &[u8; 8] = b"SPLATCK3";
 /// Earlier formats (the first without the strategy, the second without the scene's extent):
 /// refused with a word on why.
 const OLDER: &[&[u8; 8]] = &[b"SPLATCK1", b"SPLATCK2"];
-
-/// Adam's state: its step count and both moments, one per parameter word.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct AdamState {
-    pub step: u64,
-    pub m: Vec<f32>,
-    pub v: Vec<f32>,
-}
 
 /// A training run's state after `step` of `steps` steps.
 #[derive(Clone, Debug, PartialEq)]
@@ -101,7 +94,7 @@ impl Checkpoint {
             settings: String::new(),
             step: 0,
             steps,
-            params: super::fit::flatten::<M>(params),
+            params: crate::flat::flatten(params),
             adam: AdamState {
                 step: 0,
                 m: vec![0.0; params.len() * M::Params::LEN],

@@ -7,48 +7,10 @@
 //! It reads a method's primitives through [`Trainable::shape`], so any method whose primitives
 //! have a position, an oriented scale and an opacity densifies without code of its own.
 
-use super::fit::{Trainable, flatten};
-use crate::flat::Flat;
+use super::trainable::{Shape, Trainable};
+use crate::flat::{Flat, flatten};
 use crate::types::Camera;
-use glam::{Quat, Vec2, Vec3, Vec4};
-
-/// A primitive as density control sees it.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Shape {
-    pub position: Vec3,
-    /// Extent along each local axis (a Gaussian's standard deviations), world units.
-    pub scale: Vec3,
-    pub rotation: Quat,
-    /// In [0, 1].
-    pub opacity: f32,
-}
-
-impl Shape {
-    /// The shape of a Gaussian in 3DGS's parameterization: log scales, a (w, x, y, z)
-    /// rotation quaternion (normalized here), an opacity logit.
-    pub fn from_gaussian(mean: Vec3, log_scale: Vec3, rotation: Vec4, opacity_logit: f32) -> Shape {
-        let r = rotation;
-        Shape {
-            position: mean,
-            scale: log_scale.exp(),
-            rotation: Quat::from_xyzw(r.y, r.z, r.w, r.x).normalize(),
-            opacity: 1.0 / (1.0 + (-opacity_logit).exp()),
-        }
-    }
-
-    /// Back to that parameterization: (mean, log scales, (w, x, y, z) rotation, opacity
-    /// logit), with the opacity kept inside (0, 1) and the scales above zero.
-    pub fn to_gaussian(&self) -> (Vec3, Vec3, Vec4, f32) {
-        let o = self.opacity.clamp(1e-6, 1.0 - 1e-6);
-        let q = self.rotation;
-        (
-            self.position,
-            self.scale.max(Vec3::splat(1e-12)).ln(),
-            Vec4::new(q.w, q.x, q.y, q.z),
-            (o / (1.0 - o)).ln(),
-        )
-    }
-}
+use glam::{Vec2, Vec3};
 
 /// The gradient of the loss with respect to where primitive `p` lands on the image, in NDC
 /// units (pixels times half the image size, as gsplat scales it), given the gradient of its
@@ -284,7 +246,7 @@ impl Densifier {
     /// Lowers every opacity above `2 * prune_opacity` to it.
     pub fn reset_opacity<M: Trainable>(&self, params: &mut [M::Params]) {
         let ceiling = 2.0 * self.opts.prune_opacity;
-        let words = |p: &M::Params| flatten::<M>(std::slice::from_ref(p));
+        let words = |p: &M::Params| flatten(std::slice::from_ref(p));
         for p in params.iter_mut() {
             let shape = M::shape(p);
             if shape.opacity > ceiling {

@@ -6,88 +6,19 @@
 
 use super::adam::{Adam, Faults};
 use super::checkpoint::{Checkpoint, ViewsFootprint};
-use super::densify::{Densifier, DensifyOptions, Refinement, Shape, screen_gradient};
+use super::densify::{Densifier, DensifyOptions, Refinement, screen_gradient};
 use super::loss::{self, LossError, LossValue};
 use super::mcmc::{Mcmc, McmcOptions};
 use super::step_times::StepTimes;
-use crate::flat::Flat;
+use super::trainable::{Rate, Shape, Trainable};
+use crate::flat::{Flat, flatten, read_all, write_all};
 use crate::io::dataset::{Dataset, View};
 use crate::method::{SplatMethod, param_groups, word_name};
 use crate::pipeline::{FrameGrad, Image, RenderError, RenderOptions};
-use glam::{Vec2, Vec3};
-use rayon::prelude::*;
+use glam::Vec3;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
-
-/// How one parameter word is trained: its learning rate decays exponentially from `first` to
-/// `last` over the run, and it stays fixed (no gradient, no moment) before step `from_step`
-/// (3DGS unlocks one SH band every 1,000 steps).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Rate {
-    pub first: f32,
-    pub last: f32,
-    pub from_step: usize,
-}
-
-impl Rate {
-    /// A word that is never trained.
-    pub const FROZEN: Rate = Rate {
-        first: 0.0,
-        last: 0.0,
-        from_step: usize::MAX,
-    };
-
-    /// A rate that neither decays nor waits.
-    pub const fn fixed(lr: f32) -> Rate {
-        Rate {
-            first: lr,
-            last: lr,
-            from_step: 0,
-        }
-    }
-
-    /// The rate at `step` of `steps`.
-    pub fn at(&self, step: usize, steps: usize) -> f32 {
-        let t = step as f32 / steps.max(1) as f32;
-        match (
-            step < self.from_step,
-            self.first == self.last || self.first == 0.0,
-        ) {
-            (true, _) => 0.0,
-            (false, true) => self.first,
-            (false, false) => self.first * (self.last / self.first).powf(t),
-        }
-    }
-}
-
-/// What a method declares to be trained.
-pub trait Trainable: SplatMethod {
-    /// How each word of `Params` is trained; `extent` is the scene's radius (3DGS scales
-    /// position rates by it).
-    fn learning_rates(extent: f32) -> Vec<Rate>;
-
-    /// A primitive at `point` with linear RGB `color` and size `scale` (world units).
-    fn from_point(point: Vec3, color: Vec3, scale: f32) -> Self::Params;
-
-    /// Where the primitive is, how large, how turned and how opaque (for density control).
-    fn shape(p: &Self::Params) -> Shape;
-
-    /// `p` with its shape replaced, everything else (color) kept.
-    fn with_shape(p: &Self::Params, shape: &Shape) -> Self::Params;
-
-    /// The gradient of the position, read from a gradient of `Params`.
-    fn position_gradient(g: &Self::Params) -> Vec3;
-
-    /// The gradient of where the primitive lands on the image (pixels), read from a gradient
-    /// of `Shade`, for a method whose shade data holds that point (3DGS's `center`). Density
-    /// control grows from it, as 3DGS does; without it (`None`), from the position gradient
-    /// pulled back through the pinhole Jacobian, which also counts what reaches the position
-    /// through the footprint's shape and view-dependent color.
-    fn screen_gradient(_: &Self::Shade) -> Option<Vec2> {
-        None
-    }
-}
 
 /// Each word's rate at `step` of `steps` as Adam takes it (on both backends): negative for a
 /// word not trained yet, which then neither moves nor gathers moments (they start from zero).
@@ -440,7 +371,7 @@ pub fn fit_from<M: Trainable>(
         times.loss = clock.elapsed();
         let g = crate::pipeline::backward::<M>(&pass, &params, &view.camera, &grad)?;
         (times.blend, times.project) = (g.stats.blend + g.stats.reduce, g.stats.project);
-        write_flat::<M>(&g.params, &mut grads);
+        write_all(&g.params, &mut grads);
         let clock = Instant::now();
         if let Some(m) = &mcmc {
             m.regularize(&flat, &mut grads, words);
@@ -452,10 +383,10 @@ pub fn fit_from<M: Trainable>(
         if let Some(m) = &mcmc {
             let clock = Instant::now();
             if m.opts.refines_at(step) {
-                read_into::<M>(&mut params, &flat);
+                read_all(&mut params, &flat);
                 let r = m.refine::<M>(&mut params, &mut rng);
                 adam.remap(&r.origin);
-                flat = flatten::<M>(&params);
+                flat = flatten(&params);
                 grads = vec![0.0; flat.len()];
                 refinement = Some(r);
             }
@@ -466,7 +397,7 @@ pub fn fit_from<M: Trainable>(
             m.perturb(&mut flat, words, rate, rng.u32(..));
             times.optimizer += clock.elapsed();
         }
-        read_into::<M>(&mut params, &flat);
+        read_all(&mut params, &flat);
         if let Some(d) = densifier.as_mut().filter(|d| step < d.opts.stop) {
             let clock = Instant::now();
             let shade_words = M::Shade::LEN;
@@ -481,13 +412,13 @@ pub fn fit_from<M: Trainable>(
             if d.refines_at(step) {
                 let r = d.refine::<M>(&mut params, step, extent, &mut rng);
                 adam.remap(&r.origin);
-                flat = flatten::<M>(&params);
+                flat = flatten(&params);
                 grads = vec![0.0; flat.len()];
                 refinement = Some(r);
             }
             if d.resets_at(step) {
                 d.reset_opacity::<M>(&mut params);
-                let after = flatten::<M>(&params);
+                let after = flatten(&params);
                 // Only the words the reset moved (opacities) forget their moments.
                 adam.forget(|k| flat[k] != after[k]);
                 flat = after;
@@ -744,8 +675,8 @@ fn shape_words<M: Trainable>() -> Vec<usize> {
         opacity: 0.2 * k,
     };
     let (a, b) = (
-        flatten::<M>(&[M::with_shape(&base, &shape(1.0))]),
-        flatten::<M>(&[M::with_shape(&base, &shape(2.0))]),
+        flatten(&[M::with_shape(&base, &shape(1.0))]),
+        flatten(&[M::with_shape(&base, &shape(2.0))]),
     );
     (0..a.len()).filter(|&k| a[k] != b[k]).collect()
 }
@@ -756,27 +687,4 @@ pub(crate) fn step_background(opts: &FitOptions, rng: &mut fastrand::Rng) -> Vec
         true => Vec3::new(rng.f32(), rng.f32(), rng.f32()),
         false => opts.background,
     }
-}
-
-/// Reads every primitive of `params` back from its words in `flat` (as many). In parallel,
-/// as [`write_flat`]: a step does both over every primitive.
-pub(crate) fn read_into<M: SplatMethod>(params: &mut [M::Params], flat: &[f32]) {
-    (params.par_iter_mut())
-        .zip(flat.par_chunks_exact(M::Params::LEN))
-        .for_each(|(p, w)| *p = M::Params::read_words(w));
-}
-
-/// Writes the words of every primitive of `params` into `flat`, one after another. (On one
-/// thread, the two conversions took 4 ms of a 95 ms step on 100,000 primitives, 2 cores.)
-pub(crate) fn write_flat<M: SplatMethod>(params: &[M::Params], flat: &mut [f32]) {
-    (params.par_iter())
-        .zip(flat.par_chunks_exact_mut(M::Params::LEN))
-        .for_each(|(p, out)| p.write_words(out));
-}
-
-/// The parameter words of every primitive, one after another.
-pub(crate) fn flatten<M: SplatMethod>(params: &[M::Params]) -> Vec<f32> {
-    let mut flat = vec![0.0f32; params.len() * M::Params::LEN];
-    write_flat::<M>(params, &mut flat);
-    flat
 }

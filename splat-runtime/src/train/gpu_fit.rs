@@ -11,12 +11,13 @@ use super::adam::Faults;
 use super::checkpoint::Checkpoint;
 use super::densify::Densifier;
 use super::fit::{
-    Evaluation, FitError, FitOptions, StepReport, Trainable, adopt, after_every, composite,
-    ends_after, flatten, for_training, rates_for, saves_at, step_background, step_rates,
+    Evaluation, FitError, FitOptions, StepReport, adopt, after_every, composite, ends_after,
+    for_training, rates_for, saves_at, step_background, step_rates,
 };
 use super::loss::LossValue;
 use super::step_times::StepTimes;
-use crate::flat::Flat;
+use super::trainable::Trainable;
+use crate::flat::{Flat, flatten};
 use crate::gpu::entries::Accumulation;
 use crate::gpu::timing::StageTimer;
 use crate::gpu::train::{
@@ -162,12 +163,12 @@ pub fn fit_gpu_from<M: Trainable>(
                 origin = r.origin.clone();
                 refinement = Some(r);
             }
-            let before = flatten::<M>(&host);
+            let before = flatten(&host);
             if d.resets_at(step) {
                 d.reset_opacity::<M>(&mut host);
             }
             // Only the words the reset moved (opacities) forget their moments.
-            let after = flatten::<M>(&host);
+            let after = flatten(&host);
             device
                 .adam
                 .remap(gpu, n, &origin, |k| before[k] != after[k])?;
@@ -189,7 +190,7 @@ pub fn fit_gpu_from<M: Trainable>(
         if save || ends_after(opts, step, stops) {
             let n = scene.len();
             state.step = step + 1;
-            state.params = flatten::<M>(&scene.download(gpu)?);
+            state.params = flatten(&scene.download(gpu)?);
             state.adam = device.adam.download(gpu, n)?;
             (state.grad2d, state.seen) = match densifier.as_mut() {
                 Some(d) => {

@@ -2,7 +2,7 @@
 //! when the dataset has no points, each sized by its neighbours as 3DGS does (or all of one
 //! given size and color).
 
-use super::fit::Trainable;
+use super::trainable::Trainable;
 use crate::io::dataset::Point;
 use glam::Vec3;
 use rayon::prelude::*;

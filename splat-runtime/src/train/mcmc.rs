@@ -9,8 +9,8 @@
 //! Relocation reads a method's primitives through [`Trainable::shape`]; the per-step terms
 //! work on the parameter words ([`GaussianWords`]), on the host and on the device alike.
 
-use super::densify::{Refinement, Shape};
-use super::fit::Trainable;
+use super::densify::Refinement;
+use super::trainable::{Shape, Trainable};
 use crate::flat::Flat;
 use glam::{Mat3, Vec3, Vec4};
 

@@ -14,9 +14,11 @@ pub mod init;
 pub mod loss;
 pub mod mcmc;
 pub mod step_times;
+pub mod trainable;
 
 pub use checkpoint::Checkpoint;
-pub use densify::{DensifyOptions, Shape};
-pub use fit::{FitOptions, Rate, Strategy, Trainable};
+pub use densify::DensifyOptions;
+pub use fit::{FitOptions, Strategy};
 pub use mcmc::McmcOptions;
 pub use step_times::StepTimes;
+pub use trainable::{Rate, Shape, Trainable};
