@@ -135,7 +135,8 @@ pub fn extremes_stay_finite_and_correct<M: SplatMethod>(
 }
 
 /// The CPU render as the f64 reference's ([`super::forward::forward_matches_reference`]); every
-/// gradient of a random loss on color, alpha and depth finite, and each element of each
+/// gradient of a random loss on color, alpha and depth (the depth where it is clear, see
+/// [`super::reference::Reference::depth_clear`]) finite, and each element of each
 /// parameter group within `bound` of the reference's analytic adjoint (tiles 8 and 16), so a
 /// primitive whose gradients are tiny (nearly transparent, at the back of a deep stack) is
 /// held to its own size; on the GPU, the forward as the CPU's
@@ -149,7 +150,8 @@ pub fn scene_stays_finite_and_correct<M: SplatMethod>(
 ) {
     super::forward::forward_matches_reference::<M>(label, params, cam);
     let n = (cam.size.x * cam.size.y) as usize;
-    let w = weights(n, channels::<M>());
+    let mut w = weights(n, channels::<M>());
+    super::reference::render::<M>(params, cam).weigh_depth_where_clear(&mut w);
     let reference = adjoint::backward::<M>(params, cam, &w);
     let groups = param_groups::<M>();
     for tile_size in [8, 16] {

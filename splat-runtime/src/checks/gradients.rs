@@ -294,7 +294,9 @@ pub fn invalid_pairs_leave_no_trace<M: SplatMethod>(
 
 /// The GPU backward against the CPU's (the device's default accumulation, tiles 8 and 16), for
 /// a random linear loss weighted only on the reference's clear pixels (a pair within rounding
-/// of a threshold may be decided either way by the two backends): each parameter group and
+/// of a threshold may be decided either way by the two backends), its depth only where that is
+/// clear too ([`Reference::depth_clear`](super::reference::Reference::depth_clear): a faint
+/// pixel's depth carries 1 - T's rounding many times over): each parameter group and
 /// each camera field, element by element, within [`GPU_GRADIENTS`] ([`GPU_GRADIENTS_WIDE`] on
 /// the wide camera models).
 #[cfg(feature = "gpu")]
@@ -356,8 +358,9 @@ pub fn gpu_gradients_match_cpu_within<M: SplatMethod>(
     let Some(gpu) = crate::gpu::adapter_or_skip() else {
         return;
     };
-    let clear = super::forward::clear_reference::<M>(label, params, cam, blend).clear;
-    let w = super::weights_on(&clear, <M::Color as Flat>::LEN);
+    let reference = super::forward::clear_reference::<M>(label, params, cam, blend);
+    let mut w = super::weights_on(&reference.clear, <M::Color as Flat>::LEN);
+    reference.weigh_depth_where_clear(&mut w);
     let grad = frame_grad(&w);
     // The scale of each gradient's terms (the reference stops at the default T-stop and
     // takes every pair the method keeps: for other thresholds, an overestimate).
