@@ -7,8 +7,8 @@
 //! changes between backends.
 
 use super::kernel::{self, load};
+use super::packing::ShadePacking;
 use super::scatter;
-use super::shade_pack::ShadePacking;
 use super::state::PixelState;
 use super::sums::Sums;
 use super::{Gpu, GpuError};
@@ -17,6 +17,9 @@ use crate::method::{GradientSet, SplatMethod, WgslFunction};
 use crate::pipeline::RenderOptions;
 use crate::pipeline::shade::Blend;
 use crate::types::{Camera, CameraModel};
+
+/// How `backward` adds its gradients: an option of its entry point.
+pub use super::scatter::{Accumulation, Reduction};
 
 const TILES: &str = include_str!("shaders/tiles.wgsl");
 /// `fn finite`, for the shaders that test their inputs.
@@ -158,45 +161,6 @@ pub fn tiles<M: SplatMethod>(entry: TilesEntry, use_cull: bool) -> Result<String
         ],
     );
     Ok(format!("{wgsl}\n{FINITE}\n{PIXEL_SPAN}\n{body}"))
-}
-
-/// Where the backward blend sums an entry's gradient over pixels before its global atomics.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Reduction {
-    /// No reduction: one atomic per (pixel, entry, gradient word), the baseline.
-    None,
-    /// `subgroupAdd` over each subgroup (no barrier): one atomic per (subgroup, entry, word).
-    Subgroup,
-    /// A tree in workgroup memory: one atomic per (tile, entry, word), at the price of a
-    /// barrier per level.
-    Workgroup,
-}
-
-/// How the backward blend adds its gradients to global memory.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub struct Accumulation {
-    pub reduce: Reduction,
-    /// `atomicAdd` on f32 (`SHADER_FLOAT32_ATOMIC`); otherwise a compare-exchange loop on u32.
-    pub float_atomics: bool,
-}
-
-impl Accumulation {
-    /// Subgroup reduction where the adapter has subgroups (else workgroup reduction), with
-    /// f32 atomics where it has them (else compare-exchange). On the H200 the subgroup
-    /// reduction is the fastest and the two atomics tie after it (200k Gaussians at
-    /// 1920x1080, the gpu bench's sweep: 10.4 ms with f32 `atomicAdd`, 9.9 with
-    /// compare-exchange, against 18.9 / 366 without a reduction and 56.0 / 33.9 with the
-    /// workgroup's).
-    pub fn default_for(gpu: &Gpu) -> Accumulation {
-        Accumulation {
-            reduce: if gpu.subgroups {
-                Reduction::Subgroup
-            } else {
-                Reduction::Workgroup
-            },
-            float_atomics: gpu.float_atomics,
-        }
-    }
 }
 
 /// Workgroup sizes and batch sizes of a blend pass.

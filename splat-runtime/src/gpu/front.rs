@@ -15,10 +15,10 @@
 use super::device::{Grown, Kernel, as_bytes, dispatch};
 use super::entries::{self, Layout, TilesEntry};
 use super::per_model::PerModel;
-use super::resident::{GpuRenderError, GpuScene, words_of};
+use super::scene::{GpuScene, words_of};
 use super::sort::{RadixSort, Scan, tile_bits};
 use super::timing::StageTimer;
-use super::{Gpu, GpuError};
+use super::{Gpu, GpuError, GpuRenderError};
 use crate::flat::Flat;
 use crate::method::SplatMethod;
 use crate::pipeline::RenderError;

@@ -23,12 +23,14 @@ pub mod dispatch;
 pub mod entries;
 mod front;
 pub mod kernel;
+mod packing;
 mod per_model;
 mod prune;
 pub mod raster;
 pub mod render;
 pub mod resident;
 mod scatter;
+mod scene;
 pub mod shade_pack;
 pub mod sort;
 pub mod state;
@@ -39,7 +41,8 @@ pub mod train;
 pub use device::Gpu;
 pub use front::sort_bytes;
 pub use raster::HardwareRenderer;
-pub use resident::{GpuRenderError, GpuRenderer, GpuScene, StageTimes};
+pub use resident::{GpuRenderer, StageTimes};
+pub use scene::GpuScene;
 
 /// The tile sizes the GPU backend renders with: one invocation per pixel of a tile.
 pub const TILE_SIZES: [u32; 2] = [8, 16];
@@ -55,6 +58,23 @@ pub fn adapter_or_skip() -> Option<Gpu> {
             None
         }
     }
+}
+
+/// Why a GPU frame or its backward pass failed: the frame's own error or the device's.
+#[derive(Debug, thiserror::Error)]
+pub enum GpuRenderError {
+    #[error(transparent)]
+    Render(#[from] crate::pipeline::RenderError),
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+    #[error("no finished frame: render one first (or finish the one submitted)")]
+    NoFrame,
+    #[error("the scene has {got} primitives, the frame was rendered with {want}")]
+    SceneChanged { got: usize, want: usize },
+    #[error(
+        "the scene is not the one the frame was rendered from (another scene, or parameters uploaded since): render the frame again"
+    )]
+    OtherScene,
 }
 
 #[derive(Debug, thiserror::Error)]

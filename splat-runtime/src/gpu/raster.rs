@@ -14,9 +14,10 @@
 
 use super::front::{COUNT, Front, PROJECT, SORT};
 use super::per_model::PerModel;
-use super::resident::{FrameInfo, GpuRenderError, GpuScene};
+use super::resident::FrameInfo;
 use super::timing::StageTimer;
 use super::{Gpu, GpuError, entries};
+use super::{GpuRenderError, GpuScene};
 use crate::method::SplatMethod;
 use crate::pipeline::grid::TileGrid;
 use crate::pipeline::precision::Precision;

@@ -4,7 +4,8 @@
 
 use super::Gpu;
 use super::entries::Accumulation;
-use super::resident::{GpuGradients, GpuRenderError, GpuRenderer, GpuScene};
+use super::resident::{GpuGradients, GpuRenderer};
+use super::{GpuRenderError, GpuScene};
 use crate::method::SplatMethod;
 use crate::pipeline::{Frame, FrameGrad, RenderOptions};
 use crate::types::Camera;
