@@ -52,6 +52,26 @@ pub struct WgslFunction {
     pub results: &'static [(&'static str, WgslScalar)],
 }
 
+/// A generated flat f64 function (`module::twin::f`) taking and returning slices: float and
+/// integer inputs to float and integer results.
+pub type Flat64 = fn(&[f64], &[u32]) -> (Vec<f64>, Vec<u32>);
+
+/// A generated flat f64 adjoint (`module::twin::f_adjoint`): inputs, integer inputs and the
+/// cotangent of the float results to the cotangent of the float inputs.
+pub type Adjoint64 = fn(&[f64], &[u32], &[f64]) -> Vec<f64>;
+
+/// A method's f64 twins: its flat `project`, `pixel_info` and `evaluate` and their adjoints
+/// (`#[splat_method]` fills [`SplatMethod::TWIN`]; the checks' reference renderer runs them).
+#[derive(Clone, Copy)]
+pub struct Twin {
+    pub project: Flat64,
+    pub project_adjoint: Adjoint64,
+    pub pixel_info: Option<Flat64>,
+    pub pixel_info_adjoint: Option<Adjoint64>,
+    pub evaluate: Flat64,
+    pub evaluate_adjoint: Adjoint64,
+}
+
 /// A point-based differentiable rendering method.
 pub trait SplatMethod: Send + Sync + 'static {
     /// The module name the method was declared with.
@@ -83,7 +103,7 @@ pub trait SplatMethod: Send + Sync + 'static {
     const SOURCE: GeneratedSource;
     /// The f64 twins of the method's functions and their adjoints, for the reference renderer
     /// and the checks of [`crate::checks`].
-    const TWIN: crate::checks::Twin;
+    const TWIN: Twin;
 
     /// Per-primitive parameters (what is optimized).
     type Params: Flat;

@@ -49,26 +49,6 @@ use crate::pipeline::shade::Blend;
 use crate::pipeline::{FrameGrad, RenderOptions};
 use crate::types::Camera;
 
-/// A generated flat f64 function (`module::twin::f`) taking and returning slices: float and
-/// integer inputs to float and integer results.
-pub type Flat64 = fn(&[f64], &[u32]) -> (Vec<f64>, Vec<u32>);
-
-/// A generated flat f64 adjoint (`module::twin::f_adjoint`): inputs, integer inputs and the
-/// cotangent of the float results to the cotangent of the float inputs.
-pub type Adjoint64 = fn(&[f64], &[u32], &[f64]) -> Vec<f64>;
-
-/// A method's f64 twins: its flat `project`, `pixel_info` and `evaluate` and their adjoints
-/// (`#[splat_method]` fills [`SplatMethod::TWIN`]).
-#[derive(Clone, Copy)]
-pub struct Twin {
-    pub project: Flat64,
-    pub project_adjoint: Adjoint64,
-    pub pixel_info: Option<Flat64>,
-    pub pixel_info_adjoint: Option<Adjoint64>,
-    pub evaluate: Flat64,
-    pub evaluate_adjoint: Adjoint64,
-}
-
 /// The camera's differentiable fields as ranges of its float slots ([`Camera::float_slots`];
 /// the image size, slots 16..18, has no gradient): how the gradient checks group them.
 pub const CAMERA_GROUPS: [(&str, std::ops::Range<usize>); 7] = [

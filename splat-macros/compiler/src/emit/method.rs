@@ -9,7 +9,7 @@ use crate::types::{Ty, plain_builtin};
 use proc_macro2::{Literal, TokenStream};
 use quote::quote;
 
-/// The `checks::Twin` of the method: its f64 twins (module `twin`) behind slice signatures.
+/// The `method::Twin` of the method: its f64 twins (module `twin`) behind slice signatures.
 fn twin_const(has_pixel_info: bool) -> TokenStream {
     let rt = quote!(::splat_runtime);
     let f = |name: &str| {
@@ -47,7 +47,7 @@ fn twin_const(has_pixel_info: bool) -> TokenStream {
     let (project, project_adjoint) = (f("project"), adjoint("project_adjoint"));
     let (evaluate, evaluate_adjoint) = (f("evaluate"), adjoint("evaluate_adjoint"));
     quote! {
-        #rt::checks::Twin {
+        #rt::method::Twin {
             project: #project,
             project_adjoint: #project_adjoint,
             pixel_info: #pixel_info,
@@ -306,7 +306,7 @@ pub fn method_impl(m: &Module, roles: &Roles, kernels: &[Kernel]) -> TokenStream
             const SHADE_FIELD_GROUPS: &'static [u32] = &[#(#shade_field_groups),*];
             const ALPHA_GROUPS: u32 = #alpha_groups;
             const SOURCE: #rt::GeneratedSource = #rt::GeneratedSource { rust: GENERATED_RUST, wgsl: GENERATED_WGSL, functions: GENERATED_FUNCTIONS };
-            const TWIN: #rt::checks::Twin = #twin;
+            const TWIN: #rt::method::Twin = #twin;
             type Params = #p_t;
             type Cull = #c_t;
             type Shade = #s_t;
