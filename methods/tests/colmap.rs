@@ -5,7 +5,7 @@
 //! scale the intrinsics; bad models are refused with errors naming the file and the element.
 
 use splat_runtime::glam::{DQuat, Mat3, Vec2, Vec3, Vec4};
-use splat_runtime::io::colmap::read_colmap;
+use splat_runtime::io::dataset::colmap::read_colmap;
 use splat_runtime::io::dataset::{Dataset, DatasetError, View, read, read_shots};
 use splat_runtime::{Camera, CameraModel};
 use std::path::Path;

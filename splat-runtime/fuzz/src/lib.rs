@@ -12,7 +12,8 @@
 
 use splat_runtime::Image;
 use splat_runtime::glam::Vec3;
-use splat_runtime::io::{camera, colmap, dataset, image, ply};
+use splat_runtime::io::dataset::{self, colmap};
+use splat_runtime::io::{camera, image, ply};
 use std::path::{Path, PathBuf};
 
 /// Joins the files of a multi-file input.

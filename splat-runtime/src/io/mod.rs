@@ -3,7 +3,6 @@
 //! file in the target's folder, then a rename).
 
 pub mod camera;
-pub mod colmap;
 pub mod dataset;
 pub mod image;
 mod picture;

@@ -5,7 +5,7 @@
 //! uploads); the f32 image the CPU reads is made from them when asked for, the same bit for
 //! bit.
 
-use super::dataset::{DatasetError, image_error};
+use super::dataset::error::{DatasetError, image_error};
 use crate::pipeline::Image;
 use crate::types::Camera;
 use glam::Vec3;

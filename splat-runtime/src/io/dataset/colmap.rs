@@ -12,8 +12,9 @@
 //! The files are untrusted: every count in a binary file is checked against the bytes left
 //! before anything is allocated, and every error names the file and the element.
 
-use super::dataset::{Dataset, DatasetError, Point, Shot, Shots, field, image_size, rescaled};
-use super::undistort::Lens;
+use super::error::{DatasetError, field, image_size};
+use super::shots::{Dataset, Point, Shot, Shots, rescaled};
+use crate::io::undistort::Lens;
 use crate::types::{Camera, CameraModel};
 use glam::{DMat3, DQuat, DVec3, DVec4, Mat3, Vec2, Vec3, Vec4};
 use rayon::prelude::*;
@@ -579,7 +580,7 @@ fn text_file<I: FromStr + Display, T>(
         path: path.to_path_buf(),
         error,
     })?;
-    records(super::without_bom(&text))
+    records(crate::io::without_bom(&text))
         .map_err(|(n, p)| field(path, format!("line {n}"), p))?
         .into_iter()
         .map(|(n, line)| {
