@@ -154,11 +154,20 @@ impl Module {
                 fns.push(def);
             }
         }
-        let builtins = crate::builtins::builtin_fns(
-            |f| parse_fn(f, &mut resolver, diag).map(|d| FnDef { builtin: true, ..d }),
-            diag,
+        let errors_before = diag.count();
+        for f in crate::builtins::builtin_items() {
+            if let Some(def) = parse_fn(f, &mut resolver, diag) {
+                fns.push(FnDef {
+                    builtin: true,
+                    ..def
+                });
+            }
+        }
+        debug_assert_eq!(
+            diag.count(),
+            errors_before,
+            "the builtin source type-checks"
         );
-        fns.extend(builtins);
         Some(Module {
             name: item.ident,
             vis: item.vis,
