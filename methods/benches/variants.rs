@@ -300,7 +300,7 @@ fn main() {
 /// 3DGS's passes (all threads) storing the shade data or the gradient sums in a reduced
 /// format, against f32.
 fn storage(gaussians: &[Gaussian], w: f32, h: f32) {
-    use splat_runtime::pipeline::precision::Precision;
+    use splat_runtime::precision::Precision;
     let cam = camera(w, h);
     println!();
     println!(

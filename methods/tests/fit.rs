@@ -419,8 +419,8 @@ fn three_dgs_fits_equiangular_views() {
 /// a view whose camera and image disagree, a view holding NaN or too few values.
 #[test]
 fn fit_refuses_a_bad_run_before_its_first_step() {
+    use splat_runtime::frame::Image;
     use splat_runtime::io::dataset::View;
-    use splat_runtime::pipeline::Image;
     let scene: Vec<Params> = truth();
     let opts = options(5);
     let view = |i: usize| {
@@ -1286,22 +1286,22 @@ fn the_gpu_loop_resumes_from_its_checkpoint() {
 /// position, pulls its position gradient back through the pinhole Jacobian.
 #[test]
 fn device_statistics_count_what_the_image_shows_as_the_cpu_does() {
-    use splat_runtime::gpu::train::ScreenSource;
+    use splat_runtime::train::device::ScreenSource;
     device_statistics_match_the_cpu::<Method>(ScreenSource::Shade { slot: 0 });
     device_statistics_match_the_cpu::<splat_methods::gut::Method>(ScreenSource::Position {
         word: 0,
     });
 }
 
-fn device_statistics_match_the_cpu<M: Trainable>(source: splat_runtime::gpu::train::ScreenSource)
+fn device_statistics_match_the_cpu<M: Trainable>(source: splat_runtime::train::device::ScreenSource)
 where
     M::Params: splat_methods::FromStored,
 {
     use splat_methods::{FromStored, ToStored};
     use splat_runtime::gpu::entries::Accumulation;
-    use splat_runtime::gpu::train::GpuObserver;
     use splat_runtime::gpu::{GpuRenderer, GpuScene};
     use splat_runtime::train::densify::{Densifier, screen_gradient};
+    use splat_runtime::train::device::GpuObserver;
     use splat_runtime::train::gpu_fit::screen_source;
     use splat_runtime::{Flat, FrameGrad, backward, render_for_backward};
     let Some(gpu) = splat_runtime::gpu::adapter_or_skip() else {
@@ -1385,8 +1385,8 @@ fn a_gpu_step_from_a_cut_frame_is_held_back_and_taken_again() {
     use crate::common::{camera, spread_gaussians};
     use splat_runtime::Flat;
     use splat_runtime::gpu::entries::Accumulation;
-    use splat_runtime::gpu::train::{AdamStep, GpuAdam, GpuObserver, ScreenSource};
     use splat_runtime::gpu::{GpuRenderer, GpuScene};
+    use splat_runtime::train::device::{AdamStep, GpuAdam, GpuObserver, ScreenSource};
     let Some(gpu) = splat_runtime::gpu::adapter_or_skip() else {
         return;
     };

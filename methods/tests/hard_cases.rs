@@ -233,7 +233,7 @@ fn a_depth_gradient_needs_the_depth_output() {
 /// than 1e-4 of each pixel's color.
 #[test]
 fn no_transmittance_stop_keeps_the_gradients_finite() {
-    use splat_runtime::pipeline::shade::{Blend, T_MIN};
+    use splat_runtime::blend::{Blend, T_MIN};
     let cam = camera(16, 16);
     let mut rng = fastrand::Rng::with_seed(9);
     let ps: Vec<Params> = (0..400)

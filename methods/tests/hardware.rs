@@ -12,7 +12,7 @@ use splat_runtime::CameraModel;
 use splat_runtime::checks::forward::hardware_forward_matches_tiles;
 use splat_runtime::gpu::raster::HardwareRenderer;
 use splat_runtime::gpu::{GpuScene, adapter_or_skip};
-use splat_runtime::pipeline::precision::Precision;
+use splat_runtime::precision::Precision;
 use splat_runtime::{RenderOptions, render};
 
 #[test]

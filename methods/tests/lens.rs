@@ -368,9 +368,9 @@ fn colmap_radial_fisheyes_read_as_kannala_brandt() {
 }
 
 /// `path`'s pixels as a view's RGB.
-fn image_of(path: &Path) -> splat_runtime::pipeline::Image {
+fn image_of(path: &Path) -> splat_runtime::frame::Image {
     let rgb = image::open(path).unwrap().into_rgb8();
-    splat_runtime::pipeline::Image {
+    splat_runtime::frame::Image {
         width: rgb.width(),
         height: rgb.height(),
         channels: 3,

@@ -14,7 +14,7 @@ use splat_runtime::checks::forward::outputs_close;
 use splat_runtime::checks::gradients::{GPU_GRADIENTS, groups_match};
 use splat_runtime::checks::{adjoint, words};
 use splat_runtime::glam::{Vec2, Vec3};
-use splat_runtime::pipeline::precision::Precision;
+use splat_runtime::precision::Precision;
 use splat_runtime::{
     Camera, Frame, FrameGrad, RenderOptions, backward, param_groups, render_for_backward,
 };

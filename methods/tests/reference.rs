@@ -66,11 +66,11 @@ fn gaussians_straddling_tile_boundaries() {
 /// the image is bit for bit the one rendered without naming them.
 #[test]
 fn blend_thresholds_follow_the_reference_on_cpu_and_gpu() {
+    use splat_runtime::blend::{Blend, T_MIN};
     use splat_runtime::checks::forward::{
         forward_matches_reference_with, gpu_forward_matches_cpu_with,
     };
     use splat_runtime::checks::gradients::gpu_gradients_match_cpu_with;
-    use splat_runtime::pipeline::shade::{Blend, T_MIN};
 
     let mut rng = fastrand::Rng::with_seed(4);
     let cam = camera(48, 40);

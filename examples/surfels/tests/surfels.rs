@@ -16,7 +16,7 @@ use splat_runtime::checks::gradients::{
 use splat_runtime::checks::reference;
 use splat_runtime::glam::{Mat3, Quat, Vec2, Vec3, Vec4};
 use splat_runtime::io::ply::{FromStored, ToStored};
-use splat_runtime::pipeline::shade::Blend;
+use splat_runtime::blend::Blend;
 use splat_runtime::{Camera, Flat};
 use surfels::surfel::{self, Method, Params};
 

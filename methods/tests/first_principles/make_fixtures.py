@@ -39,7 +39,7 @@ negative) on many pixels, and the fisheye's 3DGUT scene one beside the camera, w
 point on most rays lies behind it (tau_max clamped).
 
 Our conventions (splat's DESIGN.md §6, `methods/src/{unscented,exact,linear}.rs`,
-`splat-runtime/src/cameras.rs`): OpenCV camera, world-to-camera p -> R p + t with R's nine
+`splat-runtime/core/src/cameras.rs`): OpenCV camera, world-to-camera p -> R p + t with R's nine
 entries differentiated as they are (camera centre -R^T t, world ray R^T d); pixel centres at
 +0.5; quaternion (w, x, y, z) normalized; scale exp(log scale); color = SH(mean - centre) +
 0.5 clamped at 0 (the INRIA basis); rays start at the camera (3DGUT's tau_max clamped at 0);

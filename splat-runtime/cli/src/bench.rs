@@ -6,7 +6,6 @@
 //! (H x W x 3, what `shared/bench/gsplat_bench.py` compares against gsplat's).
 
 use crate::Backend;
-use crate::methods::{self, Method};
 use anyhow::{Context, Result, bail};
 use splat_runtime::gpu::entries::Accumulation;
 use splat_runtime::gpu::{Gpu, GpuRenderer, GpuScene};
@@ -20,97 +19,43 @@ use std::time::{Duration, Instant};
 pub struct BenchArgs {
     /// INRIA 3DGS PLY scene (default: the built-in one).
     #[arg(long)]
-    scene: Option<PathBuf>,
+    pub(crate) scene: Option<PathBuf>,
     #[command(flatten)]
-    camera: crate::view::CameraArgs,
+    pub(crate) camera: crate::view::CameraArgs,
     #[arg(long)]
-    method: String,
+    pub(crate) method: String,
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
-    backend: Backend,
+    pub(crate) backend: Backend,
     /// Timed frames per measurement (after 0.3 s of warm-up frames).
     #[arg(long, default_value_t = 20)]
-    iters: usize,
+    pub(crate) iters: usize,
     /// Tile size in pixels: 8, 16, 32 or 64 on the CPU; 8 or 16 on the GPU.
     #[arg(long, default_value_t = 16)]
-    tile: u32,
+    pub(crate) tile: u32,
     /// CPU thread counts to measure, e.g. 1,2,4,8,16 (default: all cores).
     #[arg(long, value_delimiter = ',')]
-    threads: Vec<usize>,
+    pub(crate) threads: Vec<usize>,
     /// Write the forward image here as raw little-endian float32, H x W x 3.
     #[arg(long)]
-    raw_out: Option<PathBuf>,
+    pub(crate) raw_out: Option<PathBuf>,
     /// The built-in camera's width (a camera file gives its own).
     #[arg(long, default_value_t = 800, conflicts_with = "camera")]
-    width: u32,
+    pub(crate) width: u32,
     /// The built-in camera's height (a camera file gives its own).
     #[arg(long, default_value_t = 600, conflicts_with = "camera")]
-    height: u32,
+    pub(crate) height: u32,
     /// Compile the GPU shaders with naga's run-time checks (index clamps, division guards, a
     /// counter bounding each loop), to measure what they cost; off by default.
     #[arg(long)]
-    shader_checks: bool,
-}
-
-/// The most threads a pool is timed with (a thread costs its stack and the kernel's bookkeeping,
-/// and past the cores only adds switching).
-const MAX_THREADS: usize = 1024;
-
-pub fn bench_cmd(args: &BenchArgs, methods: &[Method]) -> Result<()> {
-    let method = methods::find(methods, &args.method)?;
-    if args.iters == 0 {
-        bail!("--iters must be at least 1");
-    }
-    if let Some(&t) = args.threads.iter().find(|&&t| t == 0) {
-        bail!("--threads {t}: a thread count must be at least 1");
-    }
-    if let Some(&t) = args.threads.iter().find(|&&t| t > MAX_THREADS) {
-        bail!("--threads {t}: at most {MAX_THREADS} threads");
-    }
-    if let Some(raw) = &args.raw_out {
-        crate::check_out_file("--raw-out", raw)?;
-    }
-    let (cloud, camera) = crate::scene::given_or_built_in(
-        args.scene.as_deref(),
-        &args.camera,
-        (args.width, args.height),
-    )?;
-    methods::check_camera(method, methods, &camera)?;
-    let gpu = crate::pick_gpu(args.backend)?.map(|g| g.with_shader_checks(args.shader_checks));
-    if args.shader_checks && gpu.is_none() {
-        bail!("--shader-checks is for the GPU's shaders; this run is on the CPU");
-    }
-    if let Some(gpu) = gpu.as_ref().filter(|_| !args.threads.is_empty()) {
-        bail!(
-            "--threads is for the CPU's thread pools; this run is on the GPU ({})",
-            gpu.adapter
-        );
-    }
-    let (tiles, backend) = match gpu {
-        Some(_) => (&splat_runtime::gpu::TILE_SIZES[..], "GPU"),
-        None => (&splat_runtime::pipeline::TILE_SIZES[..], "CPU"),
-    };
-    if !tiles.contains(&args.tile) {
-        bail!(
-            "--tile {}: the {backend} backend takes tile sizes {tiles:?}",
-            args.tile
-        );
-    }
-    let task = Bench {
-        args,
-        method: method.name,
-        cloud: &cloud,
-        camera: &camera,
-        gpu: gpu.as_ref(),
-    };
-    (method.instance(cloud.sh_degree, &camera).bench)(&task)
+    pub(crate) shader_checks: bool,
 }
 
 pub struct Bench<'a> {
-    args: &'a BenchArgs,
-    method: &'a str,
-    cloud: &'a ply::GaussianCloud,
-    camera: &'a Camera,
-    gpu: Option<&'a Gpu>,
+    pub(crate) args: &'a BenchArgs,
+    pub(crate) method: &'a str,
+    pub(crate) cloud: &'a ply::GaussianCloud,
+    pub(crate) camera: &'a Camera,
+    pub(crate) gpu: Option<&'a Gpu>,
 }
 
 /// One timed frame: its wall time and its stages' times, in the order of the table's columns.

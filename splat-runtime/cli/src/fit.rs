@@ -4,27 +4,21 @@
 //! and the training curve as a plot.
 
 use crate::interrupt::Listening;
-use crate::methods::{self, Method};
-use crate::view::{Downscale, undistorted};
-use crate::{memory, plot, scene};
+use crate::view::Downscale;
+use crate::{memory, plot};
 use anyhow::{Context, Result, anyhow, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use plotters::prelude::*;
 use splat_runtime::glam::Vec3;
 use splat_runtime::gpu::Gpu;
 use splat_runtime::io::Outputs;
-use splat_runtime::io::dataset::{self, Dataset};
+use splat_runtime::io::dataset::Dataset;
 use splat_runtime::io::image::stage_image;
 use splat_runtime::io::ply::{self, GaussianCloud, ToStored};
-use splat_runtime::pipeline::MAX_SIDE;
-use splat_runtime::train::fit::{
-    CPU_STEP_BYTES_PER_PIXEL, Evaluation, FitOptions, StepReport, fit_from, render_views,
-};
+use splat_runtime::train::fit::{Evaluation, FitOptions, StepReport, fit_from, render_views};
 use splat_runtime::train::gpu_fit::{fit_gpu_from, render_views_gpu};
-use splat_runtime::train::loss::{LossValue, WINDOW};
-use splat_runtime::train::{
-    Checkpoint, DensifyOptions, McmcOptions, StepTimes, Strategy, Trainable, init,
-};
+use splat_runtime::train::loss::LossValue;
+use splat_runtime::train::{Checkpoint, McmcOptions, StepTimes, Strategy, Trainable, init};
 use splat_runtime::{Effects, Flat, GradientSet, RenderOptions, param_groups};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -37,97 +31,97 @@ pub struct FitArgs {
     /// sparse/0 or sparse, the pictures in images; every 8th view by name held out; training
     /// starts from the model's points). Without one: the built-in dataset, 32 views of the
     /// built-in planet (112x84, rendered by 3DGS), which trains in under a minute on 2 cores.
-    dataset: Option<PathBuf>,
+    pub(crate) dataset: Option<PathBuf>,
     #[command(flatten)]
-    downscale: Downscale,
+    pub(crate) downscale: Downscale,
     /// The method to train (one that implements `Trainable`).
     #[arg(long)]
-    method: String,
+    pub(crate) method: String,
     /// Training steps [default: 7000; 2000 on the built-in dataset].
     #[arg(long)]
-    steps: Option<usize>,
+    pub(crate) steps: Option<usize>,
     /// How many points to start from: at most this many of the dataset's points (evenly
     /// spaced), or as many random ones in a cube around the cameras' target when it has none
     /// (Blender and nerfstudio scenes) [default: 100000; 2000 on the built-in dataset].
     #[arg(long)]
-    points: Option<usize>,
+    pub(crate) points: Option<usize>,
     /// The random points' cube: its half-side in units of the scene's extent (the cameras'
     /// largest distance from their centre, times 1.1 and --global-scale), as gsplat's
     /// `init_extent` [default: 3; 0.5 on the built-in dataset].
     #[arg(long, allow_negative_numbers = true)]
-    init_extent: Option<f32>,
+    pub(crate) init_extent: Option<f32>,
     /// Start every primitive at this size (the dataset's world units) instead of
     /// the root mean square distance to its 3 nearest neighbours, as 3DGS sizes them
     /// (shared/bench/gsplat_train.py starts at 0.02).
     #[arg(long, allow_negative_numbers = true)]
-    init_size: Option<f32>,
+    pub(crate) init_size: Option<f32>,
     /// Start every primitive with this color, `R,G,B` in [0, 1] as the images store it,
     /// instead of its point's (random ones: a random color; gsplat_train.py starts at
     /// 0.5,0.5,0.5).
     #[arg(long, value_parser = parse_color)]
-    init_color: Option<Vec3>,
+    pub(crate) init_color: Option<Vec3>,
     /// Multiplies the scene's extent, as gsplat's `global_scale`: the position learning rate,
     /// density control's size thresholds and the random points' cube scale with it. Objects
     /// that fill little of the cameras' sphere train better with less than 1 (a resumed run
     /// must pass the same value).
     #[arg(long, allow_negative_numbers = true, default_value_t = 1.0)]
-    global_scale: f32,
+    pub(crate) global_scale: f32,
     /// Composite the images on white instead of black.
     #[arg(long)]
-    white: bool,
+    pub(crate) white: bool,
     /// A random background color per step (transparent parts of the images re-composited on
     /// it), so the scene cannot paint the background in; evaluation stays on black or white.
     #[arg(long)]
-    random_background: bool,
+    pub(crate) random_background: bool,
     #[arg(long, default_value_t = 0)]
-    seed: u64,
+    pub(crate) seed: u64,
     /// How the primitive set changes.
     #[arg(long, value_enum, default_value_t = StrategyArg::Adc)]
-    strategy: StrategyArg,
+    pub(crate) strategy: StrategyArg,
     /// Density control adds no primitives past this many [default: 4000000 with adc, 1000000
     /// with mcmc; 6000 on the built-in dataset].
     #[arg(long)]
-    max_primitives: Option<usize>,
+    pub(crate) max_primitives: Option<usize>,
     /// Adaptive density control without its opacity resets (huge primitives are still pruned
     /// after step 3,000), as gsplat 1.5.3 trains: its reset test never passes.
     #[arg(long)]
-    no_opacity_reset: bool,
+    pub(crate) no_opacity_reset: bool,
     /// Measure the test views' PSNR and SSIM every this many steps (for the curve and
     /// metrics.csv; they are always measured before the first step and after the last);
     /// 0: only then.
     #[arg(long, default_value_t = 250)]
-    eval_every: usize,
+    pub(crate) eval_every: usize,
     /// Save the run's state to <out>/checkpoint.bin every this many steps (and after the
     /// last); 0: never.
     #[arg(long, default_value_t = 1000)]
-    checkpoint_every: usize,
+    pub(crate) checkpoint_every: usize,
     /// Go on from <out>/checkpoint.bin (and keep <out>/metrics.csv up to it): the same steps
     /// follow as in the run that saved it.
     #[arg(long)]
-    resume: bool,
+    pub(crate) resume: bool,
     /// Parameter groups to keep as they start (comma-separated field names of the method's
     /// parameters, e.g. `sh` to fit the geometry alone, or `mean,log_scale,rotation` to fit
     /// colors and opacities on fixed shapes): their gradients are never computed. Freezing a
     /// shape group needs `--strategy fixed`.
     #[arg(long, value_delimiter = ',')]
-    freeze: Vec<String>,
+    pub(crate) freeze: Vec<String>,
     /// Also print the effects each training step simulates (the first training view's camera)
     /// and the gradients its backward pass computes.
     #[arg(long)]
-    explain: bool,
+    pub(crate) explain: bool,
     /// Where to train: the GPU (the device-resident loop), the CPU, or `auto` (a hardware
     /// GPU when there is one).
     #[arg(long, value_enum, default_value_t = crate::Backend::Auto)]
-    backend: crate::Backend,
+    pub(crate) backend: crate::Backend,
     /// Output folder: the trained scene as an INRIA 3DGS PLY (scene.ply), the test views
     /// rendered (test/<n>.png), the loss and test PSNR / SSIM by step (metrics.csv) and as a
     /// plot (curve.png).
     #[arg(long, default_value = "fit")]
-    out: PathBuf,
+    pub(crate) out: PathBuf,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
-enum StrategyArg {
+pub(crate) enum StrategyArg {
     /// 3DGS's adaptive density control (gsplat's DefaultStrategy): clone and split where the
     /// screen-space position gradient is large, prune faint and huge primitives, reset
     /// opacities every 3,000 steps (not with --no-opacity-reset).
@@ -140,275 +134,33 @@ enum StrategyArg {
     Fixed,
 }
 
-/// The knobs whose defaults depend on the dataset.
-struct Defaults {
-    steps: usize,
-    points: usize,
-    /// `None`: the strategy's own default.
-    max_primitives: Option<usize>,
-    init_extent: f32,
-}
-
-/// For a dataset folder: gsplat's defaults for a 7,000-step run.
-const DATASET_DEFAULTS: Defaults = Defaults {
-    steps: 7000,
-    points: 100_000,
-    max_primitives: None,
-    init_extent: 3.0,
-};
-
-/// The defaults that train the built-in dataset in under a minute on 2 cores.
-const BUILT_IN_DEFAULTS: Defaults = Defaults {
-    steps: 2000,
-    points: 2000,
-    max_primitives: Some(6000),
-    init_extent: 0.5,
-};
-
 /// Steps whose [`Faults`](splat_runtime::train::adam::Faults) are printed; later ones are
 /// counted.
-const FAULTS_SHOWN: usize = 10;
-const FAULTS_AFTER_SHOWN: usize = FAULTS_SHOWN + 1;
+pub(crate) const FAULTS_SHOWN: usize = 10;
+pub(crate) const FAULTS_AFTER_SHOWN: usize = FAULTS_SHOWN + 1;
 
 /// The names of the files a run writes into its output folder (and `test/` for renders).
-const CHECKPOINT: &str = "checkpoint.bin";
-const METRICS: &str = "metrics.csv";
-const SCENE: &str = "scene.ply";
-const CURVE: &str = "curve.png";
-
-/// Refuses an output folder where one of the run's files is a folder: found now, not after
-/// hours of training.
-fn check_out_files(out: &Path) -> Result<()> {
-    for name in [CHECKPOINT, METRICS, SCENE, CURVE] {
-        let path = out.join(name);
-        if path.is_dir() {
-            bail!(
-                "--out {}: {} is a folder, and the run writes its {name} there",
-                out.display(),
-                path.display()
-            );
-        }
-    }
-    Ok(())
-}
-
-/// Refuses knobs out of their range before the dataset is read (which can take minutes).
-fn check_knobs(args: &FitArgs) -> Result<()> {
-    let positive = |v: f32| v > 0.0 && v.is_finite();
-    if args.points == Some(0) {
-        bail!("--points must be at least 1");
-    }
-    if let Some(e) = args.init_extent.filter(|e| !positive(*e)) {
-        bail!("--init-extent must be a positive number, not {e}");
-    }
-    if let Some(s) = args.init_size.filter(|s| !positive(*s)) {
-        bail!("--init-size must be a positive number, not {s}");
-    }
-    if args.no_opacity_reset && !matches!(args.strategy, StrategyArg::Adc) {
-        bail!("--no-opacity-reset is for --strategy adc, the only one that resets opacities");
-    }
-    if !positive(args.global_scale) {
-        bail!(
-            "--global-scale must be a positive number, not {}",
-            args.global_scale
-        );
-    }
-    Ok(())
-}
-
-pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
-    let method = methods::find(methods, &args.method)?;
-    let Some(train) = method.full().fit else {
-        bail!(
-            "{} cannot be trained: it does not declare how (splat_runtime::train::Trainable)",
-            method.name
-        );
-    };
-    crate::check_out_folder(&args.out)?;
-    check_out_files(&args.out)?;
-    check_knobs(args)?;
-    let groups = method.full().param_fields.iter().map(|(name, _)| *name);
-    frozen_and_trained(&groups.collect::<Vec<_>>(), &args.freeze, method.name)?;
-    // Picked first: the memory a run needs depends on where it trains.
-    let gpu = crate::pick_gpu(args.backend)?;
-    let background = if args.white { Vec3::ONE } else { Vec3::ZERO };
-    let t = Instant::now();
-    let (data, name, defaults, taken) = match &args.dataset {
-        Some(dir) => {
-            let name = dir.display().to_string();
-            let full = dataset::read_shots(dir)?;
-            let shots = full.clone().downscaled(args.downscale.factor)?;
-            if let Some(room) = memory::available() {
-                let demand = memory::Demand {
-                    threads: rayon::current_num_threads(),
-                    step: gpu.is_none().then_some(CPU_STEP_BYTES_PER_PIXEL),
-                };
-                memory::check_room(&name, (&full, &shots), args.downscale.factor, room, demand)?;
-            }
-            let all = || shots.train.iter().chain(&shots.test);
-            let pictures = all().map(|s| s.path.as_path());
-            crate::check_renders_spare(&args.out.join("test"), shots.test.len(), pictures)?;
-            let taken = args.downscale.how(all()) + &undistorted(all());
-            let bar = ProgressBar::new(all().count() as u64).with_style(
-                ProgressStyle::with_template("{bar:40} {pos}/{len} pictures decoded, {elapsed}")
-                    .expect("a valid template"),
-            );
-            let data = shots.load_counted(background, &|| bar.inc(1))?;
-            bar.finish_and_clear();
-            (data, name, DATASET_DEFAULTS, taken)
-        }
-        None if args.downscale.factor != 1 => {
-            bail!("--downscale applies to a dataset's pictures, and none was given")
-        }
-        None => {
-            let (views, width, height) = scene::DATASET;
-            (
-                scene::dataset(views, width, height, background)?,
-                "the built-in dataset".to_string(),
-                BUILT_IN_DEFAULTS,
-                String::new(),
-            )
-        }
-    };
-    let resume = match args.resume {
-        true => {
-            let path = args.out.join(CHECKPOINT);
-            let c = Checkpoint::read(&path)?;
-            if let Some(steps) = args.steps.filter(|s| *s != c.steps) {
-                bail!(
-                    "{} is a checkpoint of a {}-step run, not {steps} (the learning rates follow the run's length): leave --steps out",
-                    path.display(),
-                    c.steps
-                );
-            }
-            println!(
-                "resuming from {} after step {} of {}",
-                path.display(),
-                c.step,
-                c.steps
-            );
-            Some(c)
-        }
-        false => {
-            let earlier = args.out.join(CHECKPOINT);
-            if earlier.exists() {
-                println!(
-                    "note: {} is an earlier run's; this run replaces it (--resume goes on from it instead)",
-                    earlier.display()
-                );
-            }
-            None
-        }
-    };
-    let steps = (args.steps)
-        .or(resume.as_ref().map(|c| c.steps))
-        .unwrap_or(defaults.steps);
-    let points = args.points.unwrap_or(defaults.points);
-    let max_primitives = args.max_primitives.or(defaults.max_primitives);
-    let init_extent = args.init_extent.unwrap_or(defaults.init_extent);
-    if data.train.is_empty() {
-        bail!("{name}: no training views");
-    }
-    // Refused here, by file, rather than at the first step or evaluation that meets them.
-    for view in data.train.iter().chain(&data.test) {
-        let (w, h) = view.size();
-        let side = WINDOW as u32..=MAX_SIDE;
-        if !(side.contains(&w) && side.contains(&h)) {
-            // The view, not the picture, where a --downscale or an undistortion made it.
-            let what = match taken.is_empty() {
-                true => format!("{} is", view.name),
-                false => format!("the view of {} is", view.name),
-            };
-            bail!(
-                "{what} {w}x{h} pixels{taken}: training takes views of {WINDOW} (the loss's SSIM window) to {MAX_SIDE} pixels a side"
-            );
-        }
-    }
-    let first = &data.train[0];
-    methods::check_camera(method, methods, &first.camera)?;
-    let (width, height) = first.size();
-    println!(
-        "{name}: {} training and {} of {width}x{height}{taken}, read in {:.1} s",
-        data.train.len(),
-        crate::count(data.test.len(), "test view"),
-        t.elapsed().as_secs_f64()
-    );
-    // The cameras' spread sets the scene's extent (3DGS scales position rates by it).
-    let centres: Vec<Vec3> = data.train.iter().map(|v| v.camera.center()).collect();
-    let mid = centres.iter().copied().sum::<Vec3>() / centres.len() as f32;
-    let extent = 1.1 * centres.iter().map(|c| c.distance(mid)).fold(0.0, f32::max);
-    let extent = if extent > 0.0 { extent } else { 1.0 } * args.global_scale;
-    if let (StrategyArg::Fixed, Some(cap)) = (&args.strategy, args.max_primitives) {
-        bail!(
-            "--max-primitives {cap}: the cap is on density control's growth, and --strategy fixed keeps the primitives it starts with"
-        );
-    }
-    let opts = FitOptions {
-        steps,
-        background,
-        seed: args.seed,
-        densify: match args.strategy {
-            StrategyArg::Adc => {
-                let d = DensifyOptions::default();
-                Some(Strategy::Adc(DensifyOptions {
-                    max_primitives: max_primitives.unwrap_or(d.max_primitives),
-                    opacity_resets: !args.no_opacity_reset,
-                    ..d
-                }))
-            }
-            StrategyArg::Mcmc => {
-                let m = McmcOptions::default();
-                Some(Strategy::Mcmc(McmcOptions {
-                    max_primitives: max_primitives.unwrap_or(m.max_primitives),
-                    ..m
-                }))
-            }
-            StrategyArg::Fixed => None,
-        },
-        random_background: args.random_background,
-        eval_every: (args.eval_every > 0).then_some(args.eval_every),
-        checkpoint_every: (args.checkpoint_every > 0).then_some(args.checkpoint_every),
-        ..Default::default()
-    };
-    // Tried before training, not with the outputs at its end: an output folder that cannot be
-    // made fails the command before hours of training. The renders' folder is made again with
-    // them, so a run stopped early leaves none empty.
-    let renders = args.out.join("test");
-    let made = !renders.exists();
-    std::fs::create_dir_all(&renders).with_context(|| format!("creating {}", renders.display()))?;
-    if made {
-        std::fs::remove_dir(&renders)
-            .with_context(|| format!("removing {} (made to try)", renders.display()))?;
-    }
-    train(&Fit {
-        args,
-        gpu,
-        data: &data,
-        resume,
-        points,
-        mid,
-        extent,
-        init_extent,
-        opts: &opts,
-    })
-}
+pub(crate) const CHECKPOINT: &str = "checkpoint.bin";
+pub(crate) const METRICS: &str = "metrics.csv";
+pub(crate) const SCENE: &str = "scene.ply";
+pub(crate) const CURVE: &str = "curve.png";
 
 /// A training run, for any method.
 pub struct Fit<'a> {
-    args: &'a FitArgs,
+    pub(crate) args: &'a FitArgs,
     /// Where it trains: a GPU, or the CPU.
-    gpu: Option<Gpu>,
-    data: &'a Dataset,
+    pub(crate) gpu: Option<Gpu>,
+    pub(crate) data: &'a Dataset,
     /// The checkpoint to go on from, if any.
-    resume: Option<Checkpoint>,
+    pub(crate) resume: Option<Checkpoint>,
     /// How many points to start from.
-    points: usize,
+    pub(crate) points: usize,
     /// The cameras' centre and the scene's radius.
-    mid: Vec3,
-    extent: f32,
+    pub(crate) mid: Vec3,
+    pub(crate) extent: f32,
     /// The random points' cube's half-side, in units of `extent`.
-    init_extent: f32,
-    opts: &'a FitOptions,
+    pub(crate) init_extent: f32,
+    pub(crate) opts: &'a FitOptions,
 }
 
 impl Fit<'_> {
@@ -682,7 +434,7 @@ fn print_step_times(total: &StepTimes, steps: usize, gpu: Option<&Gpu>) {
 
 /// The parameter groups `names` of `method` split into those `freeze` names and the rest;
 /// refused where `freeze` names a group the method lacks, or every group.
-fn frozen_and_trained<'a>(
+pub(crate) fn frozen_and_trained<'a>(
     names: &[&'a str],
     freeze: &[String],
     method: &str,

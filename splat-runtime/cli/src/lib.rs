@@ -17,7 +17,7 @@
 //! The project's own `splat` binary is this entry point with the built-in methods.
 
 mod bench;
-mod eval;
+mod commands;
 mod fit;
 mod interrupt;
 mod memory;
@@ -26,6 +26,7 @@ mod plot;
 mod render;
 mod scene;
 mod tradeoff;
+mod tradeoff_report;
 mod view;
 mod warm_up;
 
@@ -101,7 +102,7 @@ enum Command {
     Fit(fit::FitArgs),
     /// Measure a scene on a dataset's views as `splat fit` measures its result: PSNR and SSIM
     /// per view and their mean, with the renders and a CSV in --out.
-    Eval(eval::EvalArgs),
+    Eval(commands::eval::EvalArgs),
     /// Print the Rust or WGSL the #[splat_method] compiler generated for a method.
     Inspect {
         #[arg(long)]
@@ -202,11 +203,11 @@ where
 
 fn dispatch(cli: Cli, methods: &[Method]) -> Result<()> {
     match cli.command {
-        Command::Render(args) => render::render_cmd(&args, methods),
-        Command::Fit(args) => fit::fit_cmd(&args, methods),
-        Command::Eval(args) => eval::eval_cmd(&args, methods),
-        Command::Bench(args) => bench::bench_cmd(&args, methods),
-        Command::Tradeoff(args) => tradeoff::tradeoff_cmd(&args, methods),
+        Command::Render(args) => commands::render::render_cmd(&args, methods),
+        Command::Fit(args) => commands::fit::fit_cmd(&args, methods),
+        Command::Eval(args) => commands::eval::eval_cmd(&args, methods),
+        Command::Bench(args) => commands::bench::bench_cmd(&args, methods),
+        Command::Tradeoff(args) => commands::tradeoff::tradeoff_cmd(&args, methods),
         Command::Scene { out, camera_out } => {
             let ply = out.extension().and_then(|e| e.to_str());
             if !ply.is_some_and(|e| e.eq_ignore_ascii_case("ply")) {
@@ -262,7 +263,9 @@ fn dispatch(cli: Cli, methods: &[Method]) -> Result<()> {
             crate::wrote(&out);
             Ok(())
         }
-        Command::Gallery { out, width, height } => render::gallery(&out, width, height, methods),
+        Command::Gallery { out, width, height } => {
+            commands::render::gallery(&out, width, height, methods)
+        }
         Command::Inspect { method, lang } => {
             let source = methods::find(methods, &method)?.full().source;
             let text = match lang {

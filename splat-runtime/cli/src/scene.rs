@@ -164,7 +164,7 @@ pub fn read(path: &std::path::Path) -> anyhow::Result<GaussianCloud> {
 /// The built-in view ([`camera`]) at `width` x `height`, refused before any work when a side
 /// is out of range.
 pub fn built_in_camera(width: u32, height: u32, model: CameraModel) -> anyhow::Result<Camera> {
-    let side = 1..=splat_runtime::pipeline::MAX_SIDE;
+    let side = 1..=splat_runtime::frame::MAX_SIDE;
     if !side.contains(&width) || !side.contains(&height) {
         anyhow::bail!(
             "image size {width}x{height} is out of range (1..={} per side)",

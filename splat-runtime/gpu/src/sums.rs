@@ -1,0 +1,143 @@
+//! The backward blend's per-primitive gradient sums held in f16 on the device
+//! (`RenderOptions::gradient_precision`, the CPU's `precision::Stored` sums): two to a 32-bit
+//! word, each add a compare-exchange loop that rounds the sum to f16 (on the bits, as the CPU
+//! does) and saturates it at +-65504. The sums are loss-scaled as on the CPU: a pass over the
+//! output gradients finds the largest (`shaders/largest.wgsl`), and every add multiplies by the
+//! power of two that brings it to 1 to 2; `project`'s adjoint reads the sums unscaled. This
+//! module is the one place their layout is defined, for the shaders and for the host.
+
+use super::device::{Kernel, dispatch};
+use super::{Gpu, GpuError};
+use half::f16;
+use splat_core::precision::{Precision, sum_format, sum_scale};
+
+const LARGEST: &str = include_str!("shaders/largest.wgsl");
+
+/// How the sums are held: f32 (one word each, f32 atomics or a compare-exchange loop) or f16.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Sums {
+    pub half: bool,
+}
+
+impl Sums {
+    /// The sums of a backward pass at `precision` (a unorm one is refused before a frame).
+    pub fn at(precision: Precision) -> Sums {
+        Sums {
+            half: sum_format(precision) == Precision::F16,
+        }
+    }
+
+    /// Words holding `n` sums.
+    pub fn words(self, n: usize) -> usize {
+        match self.half {
+            true => n.div_ceil(2),
+            false => n,
+        }
+    }
+
+    /// WGSL of `fn add_grad(i: u32, v: f32)` for f16 sums in `grads` (`atomic<u32>`), with
+    /// the largest output gradient's bits in `grad_largest[0]` (needs `half.wgsl`, `finite`).
+    pub(crate) const WGSL_ADD_HALF: &'static str = "    let word = i / 2u;
+    let shift = (i % 2u) * 16u;
+    let scaled = v * sum_scale(grad_largest[0]);
+    var old = atomicLoad(&grads[word]);
+    loop {
+        let sum = saturate_half(from_half((old >> shift) & 0xffffu) + scaled);
+        let held = (old & ~(0xffffu << shift)) | (to_half(sum) << shift);
+        let r = atomicCompareExchangeWeak(&grads[word], old, held);
+        if (r.exchanged) {
+            break;
+        }
+        old = r.old_value;
+    }";
+
+    /// WGSL of `fn grad(at: u32) -> f32` (sum `at`, unscaled) and `fn grad_bits(at: u32) ->
+    /// u32` (nonzero where the sum is) over the `u32` array `grads`.
+    pub(crate) fn wgsl_read(self) -> String {
+        match self.half {
+            false => "fn grad(at: u32) -> f32 {
+    return bitcast<f32>(grads[at]);
+}
+
+fn grad_bits(at: u32) -> u32 {
+    return grads[at];
+}
+"
+            .into(),
+            true => "fn grad(at: u32) -> f32 {
+    return from_half(grad_bits(at)) / sum_scale(grad_largest[0]);
+}
+
+fn grad_bits(at: u32) -> u32 {
+    return (grads[at / 2u] >> ((at % 2u) * 16u)) & 0xffffu;
+}
+"
+            .into(),
+        }
+    }
+
+    /// The `n` sums held in `words`, unscaled by the scale of `largest` (the bits of the
+    /// largest output gradient), as `project`'s adjoint reads them.
+    pub fn decode(self, words: &[u32], n: usize, largest: u32) -> Vec<f32> {
+        match self.half {
+            false => words[..n].iter().map(|w| f32::from_bits(*w)).collect(),
+            true => {
+                let scale = sum_scale(Precision::F16, f32::from_bits(largest));
+                (0..n)
+                    .map(|at| {
+                        let bits = (words[at / 2] >> (16 * (at % 2))) as u16;
+                        f16::from_bits(bits).to_f32() / scale
+                    })
+                    .collect()
+            }
+        }
+    }
+}
+
+/// The pass that finds a frame's largest output gradient, and where it leaves it.
+pub(crate) struct Largest {
+    kernel: Kernel,
+    info: wgpu::Buffer,
+    /// The largest magnitude's f32 bits (one word).
+    pub bits: wgpu::Buffer,
+}
+
+impl Largest {
+    /// The pass over output gradients of `words` per pixel.
+    pub fn new(gpu: &Gpu, words: usize) -> Result<Largest, GpuError> {
+        let source = LARGEST.replace("{{WORDS}}", &words.to_string());
+        Ok(Largest {
+            kernel: gpu.kernel(&source, "largest_gradient")?,
+            info: gpu.uniform_buffer(4),
+            bits: gpu.buffer("largest output gradient", 1)?,
+        })
+    }
+
+    /// Records the pass over the `pixels` gradients of `pixel_grad`, the first `read` words
+    /// of each.
+    pub fn record(
+        &self,
+        gpu: &Gpu,
+        enc: &mut wgpu::CommandEncoder,
+        pixel_grad: &wgpu::Buffer,
+        (pixels, read): (usize, usize),
+    ) -> Result<(), GpuError> {
+        gpu.write(&self.info, &[pixels as u32, read as u32, 0, 0]);
+        enc.clear_buffer(&self.bits, 0, None);
+        let bind = gpu.bind_named(
+            &self.kernel,
+            &[
+                ("pixel_grad", pixel_grad),
+                ("grad_largest", &self.bits),
+                ("info", &self.info),
+            ],
+        )?;
+        dispatch(
+            enc,
+            &self.kernel.pipeline,
+            &bind,
+            (pixels as u32).div_ceil(256),
+        );
+        Ok(())
+    }
+}

@@ -1,0 +1,390 @@
+//! The training loop on the GPU, step for step the CPU loop of [`super::fit`]: the scene, the
+//! target images, the loss, the gradients and Adam's moments live on the device. A step is
+//! the renderer's forward, the loss and backward, Adam, density control's statistics or MCMC's
+//! penalties and noise, all recorded without waiting for the frame, and one read-back of the
+//! loss value and of the words Adam could not step (a few words), then of the stage times. A
+//! frame that did not fit the renderer's buffers holds Adam and the statistics back on the
+//! device ([`splat_gpu::GpuRenderer::settle`]), and the step runs again. Every hundred steps
+//! density control or MCMC refines on the host: the scene and the moments go down and back up.
+
+use super::adam::Faults;
+use super::checkpoint::Checkpoint;
+use super::densify::Densifier;
+use super::fit::{
+    Evaluation, FitError, FitOptions, StepReport, adopt, after_every, composite, ends_after,
+    for_training, rates_for, saves_at, step_background, step_rates,
+};
+use super::loss::LossValue;
+use super::step_times::StepTimes;
+use super::trainable::Trainable;
+use crate::device::{
+    AdamStep, GpuAdam, GpuLoss, GpuMcmc, GpuObserver, GpuTrainError, ScreenSource,
+};
+use glam::{Vec2, Vec3};
+use splat_core::flat::{Flat, flatten};
+use splat_core::frame::Image;
+use splat_core::method::SplatMethod;
+use splat_core::types::Camera;
+use splat_gpu::entries::Accumulation;
+use splat_gpu::timing::StageTimer;
+use splat_gpu::{Gpu, GpuRenderError, GpuRenderer, GpuScene};
+use splat_io::dataset::{Dataset, View};
+use std::time::Instant;
+
+impl From<GpuTrainError> for FitError {
+    fn from(e: GpuTrainError) -> FitError {
+        FitError::Gpu(e.to_string())
+    }
+}
+
+impl From<GpuRenderError> for FitError {
+    fn from(e: GpuRenderError) -> FitError {
+        FitError::Gpu(e.to_string())
+    }
+}
+
+impl From<splat_gpu::GpuError> for FitError {
+    fn from(e: splat_gpu::GpuError) -> FitError {
+        FitError::Gpu(e.to_string())
+    }
+}
+
+/// Trains `params` as [`super::fit::fit`] does, on `gpu`.
+pub fn fit_gpu<M: Trainable>(
+    gpu: &Gpu,
+    data: &Dataset,
+    params: &mut Vec<M::Params>,
+    extent: f32,
+    opts: &FitOptions,
+    progress: impl FnMut(&StepReport),
+) -> Result<(), FitError> {
+    let mut state = Checkpoint::start::<M>(params, opts.steps, opts.seed);
+    fit_gpu_from::<M>(gpu, data, &mut state, extent, opts, progress)?;
+    *params = state.params::<M>();
+    Ok(())
+}
+
+/// Trains from `state` as [`super::fit::fit_from`] does, on `gpu`.
+pub fn fit_gpu_from<M: Trainable>(
+    gpu: &Gpu,
+    data: &Dataset,
+    state: &mut Checkpoint,
+    extent: f32,
+    opts: &FitOptions,
+    mut progress: impl FnMut(&StepReport),
+) -> Result<(), FitError> {
+    let rates = rates_for::<M>(data, extent, opts)?;
+    adopt::<M>(state, extent, &data.train, opts)?;
+    let words = M::Params::LEN;
+    let source = screen_source::<M>().ok_or_else(|| {
+        FitError::Unsupported(format!(
+            "{}: its screen position is not two consecutive shade words, or (without one) its position not three consecutive parameter words",
+            M::NAME
+        ))
+    })?;
+    let renderer = GpuRenderer::<M>::new(gpu, &for_training(&opts.render))?;
+    // The loss on the device reads the frame as f32 words.
+    if opts.render.precision != splat_core::precision::Precision::F32 {
+        return Err(FitError::Unsupported(format!(
+            "GPU training reads its frames as f32, not {}: render at another precision with `splat render` or `splat tradeoff`",
+            opts.render.precision.name()
+        )));
+    }
+    if renderer.param_floats() != words || M::Color::LEN != 3 {
+        return Err(FitError::Unsupported(format!(
+            "{}: GPU training needs all-float parameters and RGB color",
+            M::NAME
+        )));
+    }
+    let targets: Vec<_> = data.train.iter().collect();
+    let mut scene = GpuScene::<M>::new(gpu, &state.params::<M>())?;
+    let mut adam = GpuAdam::new(gpu, words)?;
+    adam.restore(gpu, &state.adam)?;
+    let mut device = DeviceStep {
+        gpu,
+        renderer,
+        loss: GpuLoss::new(gpu, &targets, opts.ssim_weight as f32)?,
+        adam,
+        observer: GpuObserver::new(gpu)?,
+        mcmc: match opts.mcmc::<M>()? {
+            Some(m) => Some(GpuMcmc::new(gpu, m, words)?),
+            None => None,
+        },
+        source,
+        acc: Accumulation::default_for(gpu),
+        timer: StageTimer::new(gpu, STAGES),
+    };
+    let mut densifier =
+        (opts.adc()).map(|d| Densifier::resume(d.clone(), scene.len(), &state.grad2d, &state.seen));
+    let mut rng = fastrand::Rng::with_seed(state.rng);
+    for step in state.step..opts.steps {
+        let started = Instant::now();
+        let k = rng.usize(..data.train.len());
+        let camera = &data.train[k].camera;
+        let background = step_background(opts, &mut rng);
+        let lr = step_rates(&rates, step, opts.steps);
+        let observing = densifier.as_ref().is_some_and(|d| step < d.opts.stop);
+        let n = scene.len();
+        let (value, faults) = device.take(&scene, (k, camera, background), &lr, observing)?;
+        // Read now, with nothing left to wait for (MCMC's noise, recorded below, is timed in the
+        // next step's read: the previous step's noise), and before the evaluation's frames
+        // replace the renderer's times.
+        let mut times = device.times()?;
+
+        let clock = Instant::now();
+        let mut refinement = None;
+        if let Some(m) = &device.mcmc {
+            if m.mcmc.opts.refines_at(step) {
+                let mut host = scene.download(gpu)?;
+                let r = m.mcmc.refine::<M>(&mut host, &mut rng);
+                device.adam.remap(gpu, n, &r.origin, |_| false)?;
+                scene.upload(gpu, &host)?;
+                refinement = Some(r);
+            }
+            times.densify = clock.elapsed();
+            // A position not trained yet (a negative rate) is not stirred either.
+            let (n, lr) = (scene.len(), lr[m.mcmc.words.position].max(0.0));
+            let mut enc = gpu.device.create_command_encoder(&Default::default());
+            device.timer.start(&mut enc, NOISE);
+            m.record_perturb(gpu, &mut enc, scene.buffer(), n, lr, rng.u32(..))?;
+            device.timer.end(&mut enc, NOISE);
+            device.timer.resolve(&mut enc, NOISE..STAGES);
+            gpu.queue.submit([enc.finish()]);
+        }
+        if let Some(d) = densifier.as_mut().filter(|d| step < d.opts.stop)
+            && (d.refines_at(step) || d.resets_at(step))
+        {
+            let mut host = scene.download(gpu)?;
+            let mut origin: Vec<Option<usize>> = (0..n).map(Some).collect();
+            if d.refines_at(step) {
+                let (grad2d, seen) = device.observer.take(gpu, n)?;
+                d.add_observations(&grad2d, &seen);
+                let r = d.refine::<M>(&mut host, step, extent, &mut rng);
+                origin = r.origin.clone();
+                refinement = Some(r);
+            }
+            let before = flatten(&host);
+            if d.resets_at(step) {
+                d.reset_opacity::<M>(&mut host);
+            }
+            // Only the words the reset moved (opacities) forget their moments.
+            let after = flatten(&host);
+            device
+                .adam
+                .remap(gpu, n, &origin, |k| before[k] != after[k])?;
+            scene.upload(gpu, &host)?;
+            times.densify = clock.elapsed();
+        }
+        let clock = Instant::now();
+        let evaluation = match after_every(opts.eval_every, step) {
+            true => {
+                let images =
+                    render_resident(&mut device.renderer, &scene, &data.test, opts.background)?;
+                Some(Evaluation::of(&images, &data.test)?)
+            }
+            false => None,
+        };
+        times.evaluation = clock.elapsed();
+        let stops = opts.stop_requested();
+        let save = saves_at(opts, step, stops);
+        if save || ends_after(opts, step, stops) {
+            let n = scene.len();
+            state.step = step + 1;
+            state.params = flatten(&scene.download(gpu)?);
+            state.adam = device.adam.download(gpu, n)?;
+            (state.grad2d, state.seen) = match densifier.as_mut() {
+                Some(d) => {
+                    let (grad2d, seen) = device.observer.take(gpu, n)?;
+                    d.add_observations(&grad2d, &seen);
+                    d.statistics()
+                }
+                None => Default::default(),
+            };
+            state.rng = rng.get_seed();
+        }
+        progress(&StepReport {
+            step,
+            loss: &value,
+            primitives: scene.len(),
+            refinement: refinement.as_ref(),
+            faults,
+            evaluation,
+            checkpoint: save.then_some(&*state),
+            times: StepTimes {
+                wall: started.elapsed(),
+                ..times
+            },
+        });
+        if stops {
+            break;
+        }
+    }
+    Ok(())
+}
+
+// The loop's own timed stages, besides the renderer's (two timestamps each).
+const LOSS: u32 = 0;
+const OPTIMIZER: u32 = 1;
+const STATISTICS: u32 = 2;
+/// MCMC's position noise, after the step's read-back (refinement comes first, as on the CPU).
+const NOISE: u32 = 3;
+const STAGES: u32 = 4;
+
+/// What a step runs on the device: the renderer, the loss, Adam, density control's statistics
+/// or MCMC's terms, and the timer of the loop's own stages.
+struct DeviceStep<'g, M: SplatMethod> {
+    gpu: &'g Gpu,
+    renderer: GpuRenderer<'g, M>,
+    loss: GpuLoss,
+    adam: GpuAdam,
+    observer: GpuObserver,
+    mcmc: Option<GpuMcmc>,
+    source: ScreenSource,
+    acc: Accumulation,
+    timer: StageTimer,
+}
+
+impl<M: SplatMethod> DeviceStep<'_, M> {
+    /// One step from training view `k` through `camera` on `background`, at the learning
+    /// rates `lr`, with density control's statistics if `observing`: the value of its loss
+    /// and the words Adam could not step.
+    ///
+    /// The frame is not waited for: the loss, the backward pass, Adam and the statistics are
+    /// recorded behind it, and the step's one wait reads the loss value and Adam's faults. A
+    /// frame with more intersections than the buffers held (its lists cut short) holds Adam
+    /// and the statistics back on the device, and the step runs again with room.
+    fn take(
+        &mut self,
+        scene: &GpuScene<M>,
+        (k, camera, background): (usize, &Camera, Vec3),
+        lr: &[f32],
+        observing: bool,
+    ) -> Result<(LossValue, Faults), FitError> {
+        let (gpu, n, timer) = (self.gpu, scene.len(), &self.timer);
+        loop {
+            let grid = self.renderer.submit(scene, camera)?;
+            let renderer = &mut self.renderer;
+            let mut enc = gpu.device.create_command_encoder(&Default::default());
+            let grad = renderer.pixel_gradients()?.clone();
+            // Words per pixel of the frame's state (not the parameters' per primitive).
+            let state_words = renderer.state_layout().words() as u32;
+            let target = (k, background, (grid.width, grid.height));
+            timer.start(&mut enc, LOSS);
+            let state = renderer.pixel_state();
+            (self.loss).record(gpu, &mut enc, target, state, state_words, &grad)?;
+            timer.end(&mut enc, LOSS);
+            gpu.queue.submit([enc.finish()]);
+            renderer.backward_on_device(scene, self.acc)?;
+
+            let mut enc = gpu.device.create_command_encoder(&Default::default());
+            let param_grads = renderer.param_gradients();
+            timer.start(&mut enc, OPTIMIZER);
+            if let Some(m) = &self.mcmc {
+                m.record_regularize(gpu, &mut enc, scene.buffer(), param_grads, n)?;
+            }
+            let adam_step = AdamStep {
+                params: scene.buffer(),
+                grads: param_grads,
+                primitives: n,
+                rates: lr,
+                held_by: Some(renderer.frame_keys()),
+            };
+            self.adam.record(gpu, &mut enc, adam_step)?;
+            timer.end(&mut enc, OPTIMIZER);
+            timer.start(&mut enc, STATISTICS);
+            if observing {
+                (self.observer).record(gpu, &mut enc, renderer, scene, self.source)?;
+            }
+            timer.end(&mut enc, STATISTICS);
+            timer.resolve(&mut enc, LOSS..NOISE);
+            gpu.queue.submit([enc.finish()]);
+            let parts = [self.loss.sums()?, self.adam.fault_words()];
+            let [sums, fault_words] = gpu.read_together(parts)?;
+            match renderer.settle(scene)? {
+                Some(_) => return Ok((self.loss.value(&sums)?, GpuAdam::faults(&fault_words))),
+                None => self.adam.take_back(),
+            }
+        }
+    }
+
+    /// The last step's stage times on the GPU: the renderer's and the loop's own (a stage not
+    /// recorded yet, MCMC's noise without MCMC or before its first step, reads zero). Zero on
+    /// an adapter without timestamps.
+    fn times(&self) -> Result<StepTimes, FitError> {
+        let r = self.renderer.stage_times()?;
+        let own = self.timer.read(self.gpu)?.unwrap_or_default();
+        let own = |s: u32| own.get(s as usize).copied().unwrap_or_default();
+        Ok(StepTimes {
+            preprocess: r.preprocess,
+            rasterize: r.rasterize,
+            shade: r.shade,
+            loss: own(LOSS),
+            blend: r.blend,
+            project: r.project,
+            optimizer: own(OPTIMIZER) + own(NOISE),
+            statistics: own(STATISTICS),
+            ..Default::default()
+        })
+    }
+}
+
+/// Where a step's screen-space gradients are read on the device, as
+/// [`super::densify::screen_gradient`] reads them: for a method with a screen gradient, the
+/// two consecutive shade float slots whose unit gradient reads as a unit screen gradient along
+/// x then y; otherwise the three consecutive parameter words whose unit gradient reads as a
+/// unit position gradient along x, y, z. `None` where they are not consecutive.
+pub fn screen_source<M: Trainable>() -> Option<ScreenSource> {
+    let slots = M::ShadeLanes::default().as_ref().len();
+    let screen = |w: &[f32]| M::screen_gradient(&M::shade_from_float_slots(w));
+    if screen(&vec![0.0; slots]).is_some() {
+        // The CPU reads the shade gradient: the device must read the same, or refuse.
+        let axes = [Vec2::X, Vec2::Y].map(Some);
+        return consecutive(slots, |w| screen(w), &axes).map(|slot| ScreenSource::Shade { slot });
+    }
+    let position = |w: &[f32]| M::position_gradient(&M::Params::read_words(w));
+    consecutive(M::Params::LEN, position, &[Vec3::X, Vec3::Y, Vec3::Z])
+        .map(|word| ScreenSource::Position { word })
+}
+
+/// The first of `axes.len()` consecutive words (of `len`) whose unit vectors `read` reads as
+/// `axes`, in order.
+fn consecutive<T: PartialEq>(len: usize, read: impl Fn(&[f32]) -> T, axes: &[T]) -> Option<usize> {
+    let unit = |k: usize| {
+        let mut w = vec![0.0; len];
+        w[k] = 1.0;
+        read(&w)
+    };
+    let first = (0..len).find(|&k| unit(k) == axes[0])?;
+    let fits = first + axes.len() <= len;
+    (fits && axes.iter().enumerate().all(|(j, a)| unit(first + j) == *a)).then_some(first)
+}
+
+/// Renders each of `views` with `params` on `gpu`, as [`super::fit::render_views`] does on
+/// the CPU.
+pub fn render_views_gpu<M: SplatMethod>(
+    gpu: &Gpu,
+    params: &[M::Params],
+    views: &[View],
+    opts: &FitOptions,
+) -> Result<Vec<Image>, FitError> {
+    let mut renderer = GpuRenderer::<M>::new(gpu, &for_training(&opts.render))?;
+    let scene = GpuScene::<M>::new(gpu, params)?;
+    render_resident(&mut renderer, &scene, views, opts.background)
+}
+
+/// Renders each of `views` from the device-resident `scene`, composited on `background`.
+fn render_resident<M: SplatMethod>(
+    renderer: &mut GpuRenderer<M>,
+    scene: &GpuScene<M>,
+    views: &[View],
+    background: Vec3,
+) -> Result<Vec<Image>, FitError> {
+    views
+        .iter()
+        .map(|v| {
+            renderer.forward(scene, &v.camera)?;
+            let frame = renderer.download_frame()?;
+            Ok(composite(frame.color, frame.alpha.as_ref(), background))
+        })
+        .collect()
+}

@@ -1,0 +1,27 @@
+//! splat-train: what training shares across methods: the photometric loss with its gradient and the
+//! evaluation metrics ([`loss`]), Adam ([`adam`]), where training starts ([`init`]), adaptive
+//! density control ([`densify`]) or MCMC ([`mcmc`]), checkpoints ([`checkpoint`]), where a
+//! step's time goes ([`step_times`]), and the loop with the trait a method implements to take
+//! part ([`fit`]), also on the GPU ([`gpu_fit`], with the loss, Adam, density control's
+//! statistics and MCMC's terms on the device in [`device`]).
+
+pub mod adam;
+pub mod checkpoint;
+pub mod densify;
+#[cfg(feature = "gpu")]
+pub mod device;
+pub mod fit;
+#[cfg(feature = "gpu")]
+pub mod gpu_fit;
+pub mod init;
+pub mod loss;
+pub mod mcmc;
+pub mod step_times;
+pub mod trainable;
+
+pub use checkpoint::Checkpoint;
+pub use densify::DensifyOptions;
+pub use fit::{FitOptions, Strategy};
+pub use mcmc::McmcOptions;
+pub use step_times::StepTimes;
+pub use trainable::{Rate, Shape, Trainable};
