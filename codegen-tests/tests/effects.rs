@@ -201,25 +201,20 @@ fn off_costs_nothing(file: &str, rules: &str, flag: &str, bindings: &[(&str, &st
 
 #[test]
 fn a_global_shutter_costs_3dgut_nothing() {
-    off_costs_nothing(
-        "unscented.rs",
-        "unscented",
-        "ROLLING_SHUTTER",
-        &[("n", "16")],
-    );
+    off_costs_nothing("gut.rs", "unscented", "ROLLING_SHUTTER", &[("n", "16")]);
 }
 
 #[test]
 fn a_global_shutter_costs_3dgeer_nothing() {
-    off_costs_nothing("exact.rs", "exact", "ROLLING_SHUTTER", &[("n", "16")]);
+    off_costs_nothing("geer.rs", "exact", "ROLLING_SHUTTER", &[("n", "16")]);
 }
 
 #[test]
 fn no_antialiasing_costs_3dgs_nothing() {
     off_costs_nothing(
-        "gaussians.rs",
+        "gs3d.rs",
         "gaussians_3d",
         "ANTIALIASED",
-        &[("n", "16")],
+        &[("n", "16"), ("called", "\"3dgs\"")],
     );
 }

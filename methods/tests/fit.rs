@@ -1115,7 +1115,7 @@ fn a_run_resumed_from_its_checkpoint_takes_the_same_steps() {
         assert!(err.to_string().contains("40-step run, not 50"), "{err}");
         let err = fit_from::<splat_methods::gut::Method>(&data, &mut other, 1.0, &opts, |_| {})
             .unwrap_err();
-        assert!(err.to_string().contains("not gut"), "{err}");
+        assert!(err.to_string().contains("not 3dgut"), "{err}");
         let sampled = FitOptions {
             densify: Some(Strategy::Mcmc(Default::default())),
             ..resumable_options()

@@ -14,7 +14,7 @@ its tile walk the CUDA extension): every valid Gaussian at every pixel in depth 
 below 1/255 skipped, the walk stopped before the pair that would take T to 1e-4 or below.
 Gradients are torch's autograd of a random linear loss on color, alpha and expected depth.
 
-Our conventions where gsplat has a choice (splat's DESIGN.md §6 and `methods/src/gaussians.rs`):
+Our conventions where gsplat has a choice (splat's DESIGN.md §6 and `methods/src/gs3d.rs`):
 alpha clamped at 0.99 (INRIA's; gsplat's is 0.999), and the camera centre for the SH directions
 as -R^T t (gsplat inverts the view matrix: the same point, but as a function of R's nine
 entries its derivative differs off the rotation group, and the check differentiates by entry).

@@ -156,8 +156,50 @@ mod tests {
             ),
         )
         .to_string();
-        assert!(out.contains("this attribute takes no arguments"), "{out}");
+        assert!(out.contains("takes one optional argument"), "{out}");
         assert!(out.contains("expected `mod`"), "{out}");
+    }
+
+    #[test]
+    fn a_method_takes_only_a_name() {
+        let expand = |kind, attr: proc_macro2::TokenStream| {
+            crate::expand(
+                kind,
+                attr,
+                quote::quote!(
+                    mod m {}
+                ),
+            )
+            .to_string()
+        };
+        for (kind, attr, error) in [
+            (
+                crate::Kind::Method,
+                quote::quote!(label = "x"),
+                "takes one optional argument, `name = \\\"...\\\"`",
+            ),
+            (
+                crate::Kind::Method,
+                quote::quote!(name = 3),
+                "takes one optional argument",
+            ),
+            (
+                crate::Kind::Method,
+                quote::quote!(name = "two words"),
+                "non-empty, without spaces",
+            ),
+            (
+                crate::Kind::Functions,
+                quote::quote!(name = "x"),
+                "this attribute takes no arguments",
+            ),
+        ] {
+            let out = expand(kind, attr);
+            assert!(out.contains(error), "{out}");
+        }
+        // A good name is no error (the module's own errors aside: it has no functions).
+        let out = expand(crate::Kind::Method, quote::quote!(name = "3dgs-aa"));
+        assert!(!out.contains("optional argument"), "{out}");
     }
 
     #[test]

@@ -59,11 +59,9 @@ pub struct Compiled {
 /// Expands an annotated module; errors become `compile_error!`s at their spans.
 pub fn expand(kind: Kind, attr: TokenStream, item: TokenStream) -> TokenStream {
     let diag = Diag::default();
-    if !attr.is_empty() {
-        diag.error_at(&attr, "this attribute takes no arguments");
-    }
+    let name = method_name(kind, attr, &diag);
     let out = match syn::parse2::<syn::ItemMod>(item) {
-        Ok(m) => expand_module(kind, m, &diag),
+        Ok(m) => expand_module(kind, m, name.as_deref(), &diag),
         Err(e) => {
             diag.push_error(e);
             None
@@ -72,6 +70,50 @@ pub fn expand(kind: Kind, attr: TokenStream, item: TokenStream) -> TokenStream {
     match diag.into_compile_errors() {
         Some(errors) => errors,
         None => out.unwrap_or_default(),
+    }
+}
+
+/// The name `#[splat_method(name = "...")]` gives the method (what users see in messages,
+/// `--explain` and checkpoints; the module's own name when none is given). `#[splat_functions]`
+/// takes no arguments.
+fn method_name(kind: Kind, attr: TokenStream, diag: &Diag) -> Option<String> {
+    if attr.is_empty() {
+        return None;
+    }
+    let usage = match kind {
+        Kind::Functions => "this attribute takes no arguments",
+        Kind::Method => {
+            "`#[splat_method]` takes one optional argument, `name = \"...\"`: the method's name in messages and checkpoints (default: the module's)"
+        }
+    };
+    let parsed = syn::parse2::<syn::MetaNameValue>(attr.clone()).ok();
+    let name = parsed
+        .filter(|_| kind == Kind::Method)
+        .filter(|nv| nv.path.is_ident("name"))
+        .and_then(|nv| {
+            // A name passed through a `macro_rules!` arrives in an invisible group.
+            let mut value = nv.value;
+            while let syn::Expr::Group(g) = value {
+                value = *g.expr;
+            }
+            match value {
+                syn::Expr::Lit(syn::ExprLit {
+                    lit: syn::Lit::Str(s),
+                    ..
+                }) => Some(s.value()),
+                _ => None,
+            }
+        });
+    match name {
+        Some(n) if !n.is_empty() && !n.contains(char::is_whitespace) => Some(n),
+        Some(_) => {
+            diag.error_at(&attr, "a method's name must be non-empty, without spaces");
+            None
+        }
+        None => {
+            diag.error_at(&attr, usage);
+            None
+        }
     }
 }
 
@@ -229,7 +271,12 @@ fn build_kernel<'m>(
     Some((kernel, l.model_slot))
 }
 
-fn expand_module(kind: Kind, item: syn::ItemMod, diag: &Diag) -> Option<TokenStream> {
+fn expand_module(
+    kind: Kind,
+    item: syn::ItemMod,
+    name: Option<&str>,
+    diag: &Diag,
+) -> Option<TokenStream> {
     let m = Module::parse(item, diag)?;
     let checked = check::check(kind, &m, diag)?;
     let typed = typeck::typeck(&m, diag);
@@ -303,7 +350,8 @@ fn expand_module(kind: Kind, item: syn::ItemMod, diag: &Diag) -> Option<TokenStr
         });
     }
     if let Some(roles) = &checked.roles {
-        items.extend(emit::method::method_impl(&m, roles, &kernels));
+        let name = name.map_or_else(|| m.name.to_string(), str::to_string);
+        items.extend(emit::method::method_impl(&name, roles, &kernels));
     }
     let (wgsl, signatures) = match emit::naga::wgsl(&wgsl_kernels(&kernels)) {
         Ok(w) => w,

@@ -77,7 +77,7 @@ pub fn lower_sh_degree_matches_full<Full: SplatMethod, Low: SplatMethod>(
             assert!(
                 w[kept..].iter().all(|v| *v == 0.0),
                 "{label}: primitive {i} has SH coefficients beyond {}'s degree",
-                Low::NAME
+                std::any::type_name::<Low>()
             );
             Low::Params::read_words(&w[..kept])
         })
@@ -123,8 +123,9 @@ pub fn lower_sh_degree_matches_full<Full: SplatMethod, Low: SplatMethod>(
     for (backend, (full_frame, full_grad, full_cam), (low_frame, low_grad, low_cam)) in runs {
         let what = format!(
             "{label}: {} against {} on the {backend}",
-            Low::NAME,
-            Full::NAME
+            // The instances by their modules: every instance of a method shares its name.
+            std::any::type_name::<Low>(),
+            std::any::type_name::<Full>()
         );
         outputs_close(&what, &full_frame, &low_frame, 1e-6, 1e-5);
         let kept_grad: Vec<f32> = full_grad

@@ -15,11 +15,13 @@ use splat_runtime::io::Outputs;
 use splat_runtime::io::dataset::Dataset;
 use splat_runtime::io::image::stage_image;
 use splat_runtime::io::ply::{self, GaussianCloud, ToStored};
-use splat_runtime::train::fit::{Evaluation, FitOptions, StepReport, fit_from, render_views};
+use splat_runtime::train::fit::{
+    Evaluation, FitError, FitOptions, StepReport, fit_from, render_views,
+};
 use splat_runtime::train::gpu_fit::{fit_gpu_from, render_views_gpu};
 use splat_runtime::train::loss::LossValue;
 use splat_runtime::train::{Checkpoint, McmcOptions, StepTimes, Strategy, Trainable, init};
-use splat_runtime::{Effects, Flat, GradientSet, RenderOptions, param_groups};
+use splat_runtime::{Effects, Flat, GradientSet, Image, RenderOptions, param_groups};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -172,14 +174,9 @@ impl Fit<'_> {
             args,
             ref gpu,
             data,
-            ref resume,
-            points,
-            mid,
-            extent,
-            init_extent,
-            opts,
+            ..
         } = *self;
-        let opts = &trained_groups::<M>(opts, &args.freeze, &args.method)?;
+        let opts = &trained_groups::<M>(self.opts, &args.freeze, &args.method)?;
         if args.explain {
             explain::<M>(data, opts);
         }
@@ -187,39 +184,7 @@ impl Fit<'_> {
             Some(gpu) => render_views_gpu::<M>(gpu, params, &data.test, opts),
             None => render_views::<M>(params, &data.test, opts),
         };
-        let (mut state, mut log) = match resume {
-            Some(c) if c.method != M::NAME => bail!(
-                "{} is a checkpoint of {}, not of {} (--method {})",
-                args.out.join(CHECKPOINT).display(),
-                c.method,
-                M::NAME,
-                args.method
-            ),
-            Some(c) if c.step > 0 && c.strategy != Strategy::name(opts.densify.as_ref()) => bail!(
-                "{} is a checkpoint of a run with --strategy {}, not {}",
-                args.out.join(CHECKPOINT).display(),
-                c.strategy,
-                Strategy::name(opts.densify.as_ref())
-            ),
-            Some(c) => (c.clone(), Log::read_csv(&args.out.join(METRICS), c.step)?),
-            None => {
-                let half = init_extent * extent;
-                let first = init::Start {
-                    size: args.init_size,
-                    color: args.init_color,
-                };
-                let mut params = start::<M>(data, points, mid, half, first, args.seed)?;
-                if let Some(Strategy::Mcmc(_)) = opts.densify {
-                    McmcOptions::prepare::<M>(&mut params);
-                }
-                let before = Evaluation::of(&test_images(&params)?, &data.test)?;
-                let log = Log {
-                    evaluations: vec![(0, before)],
-                    ..Default::default()
-                };
-                (Checkpoint::start::<M>(&params, opts.steps, args.seed), log)
-            }
-        };
+        let (mut state, log) = self.begin::<M>(opts, &test_images)?;
         // The cap bounds growth (as gsplat's): a start above it is kept, and ADC may prune it
         // below; MCMC never removes primitives.
         if let Some(cap) = opts.densify.as_ref().map(Strategy::max_primitives)
@@ -230,74 +195,7 @@ impl Fit<'_> {
                 state.primitives()
             );
         }
-        let before = log.evaluations.first().map(|e| e.1).unwrap_or_default();
-        let checkpoint_path = args.out.join(CHECKPOINT);
-        let metrics = args.out.join(METRICS);
-        let mut saved = Ok(());
-        let bar = ProgressBar::new(opts.steps as u64).with_style(
-            ProgressStyle::with_template("{bar:40} {pos}/{len} steps, {elapsed} (eta {eta}) {msg}")
-                .expect("a valid template"),
-        );
-        bar.set_position(state.step as u64);
-        let first = state.step;
-        let mut faulty_steps = 0usize;
-        let mut times = StepTimes::default();
-        let line_every = (opts.steps - first).div_ceil(20).next_multiple_of(10);
-        let t = Instant::now();
-        let report = |r: &StepReport| {
-            bar.inc(1);
-            log.record(r);
-            times += r.times;
-            if r.faults.any() {
-                faulty_steps += 1;
-                match faulty_steps {
-                    ..=FAULTS_SHOWN => bar.println(format!(
-                        "warning: step {}: {}",
-                        r.step + 1,
-                        r.faults.describe::<M>()
-                    )),
-                    FAULTS_AFTER_SHOWN => bar.println(
-                        "warning: later steps with words left alone are counted, not shown",
-                    ),
-                    _ => {}
-                }
-            }
-            // With the checkpoint, the metrics up to it (a resumed run keeps them). One that
-            // cannot be written stops nothing now; the run reports it at its end.
-            if let Some(c) = r.checkpoint
-                && saved.is_ok()
-            {
-                let mut outputs = Outputs::default();
-                saved = (outputs.stage(&checkpoint_path, |w| c.write_to(w)))
-                    .with_context(|| format!("writing {}", checkpoint_path.display()))
-                    .and_then(|()| log.stage_csv(&mut outputs, &metrics))
-                    .and_then(|()| Ok(outputs.commit()?));
-            }
-            // Without a terminal (a log, a batch job) the bar draws nothing: a line every
-            // twentieth of the run instead.
-            let done = r.step + 1 - first;
-            let line = bar.is_hidden() && done.is_multiple_of(line_every);
-            if r.step.is_multiple_of(10) || r.refinement.is_some() || r.evaluation.is_some() || line
-            {
-                let v = r.loss;
-                // The last measured: the final evaluation comes after the last step's line.
-                let (at, test) =
-                    (log.evaluations.last()).map_or((0, before.psnr), |e| (e.0, e.1.psnr));
-                let status = format!(
-                    "loss {:.4} (L1 {:.4}, SSIM {:.3}), test PSNR {test:.2} dB at step {at}, {} primitives",
-                    v.loss, v.l1, v.ssim, r.primitives
-                );
-                if line {
-                    let ms = t.elapsed().as_secs_f64() * 1e3 / done as f64;
-                    println!(
-                        "step {}/{}: {ms:.2} ms per step, {status}",
-                        r.step + 1,
-                        opts.steps
-                    );
-                }
-                bar.set_message(status);
-            }
-        };
+        let mut progress = Progress::new(opts.steps, state.step, log, &args.out);
         // Ctrl-C or SIGTERM during the steps ends the run after the step in progress, with its
         // checkpoint.
         let listening = crate::interrupt::listen();
@@ -305,13 +203,14 @@ impl Fit<'_> {
             stop: listening.as_ref().map(Listening::flag),
             ..opts.clone()
         };
+        let report = |r: &StepReport| progress.record::<M>(r);
         let place = match &gpu {
             Some(gpu) => {
-                fit_gpu_from::<M>(gpu, data, &mut state, extent, opts, report)?;
+                fit_gpu_from::<M>(gpu, data, &mut state, self.extent, opts, report)?;
                 format!("the GPU ({})", gpu.adapter)
             }
             None => {
-                fit_from::<M>(data, &mut state, extent, opts, report)?;
+                fit_from::<M>(data, &mut state, self.extent, opts, report)?;
                 "the CPU".to_string()
             }
         };
@@ -327,10 +226,10 @@ impl Fit<'_> {
         };
         let stopped = state.step < opts.steps;
         match stopped {
-            true => bar.abandon(),
-            false => bar.finish(),
+            true => progress.bar.abandon(),
+            false => progress.bar.finish(),
         }
-        saved?;
+        std::mem::replace(&mut progress.saved, Ok(()))?;
         if stopped {
             bail!(
                 "stopped by {} after step {} of {}; {}",
@@ -340,13 +239,15 @@ impl Fit<'_> {
                 kept()
             );
         }
-        if faulty_steps > 0 {
+        if progress.faulty_steps > 0 {
             println!(
-                "warning: {faulty_steps} steps left parameter words alone (non-finite gradients or steps); the scene stayed finite"
+                "warning: {} steps left parameter words alone (non-finite gradients or steps); the scene stayed finite",
+                progress.faulty_steps
             );
         }
         let params = state.params::<M>();
-        let per_step = t.elapsed().as_secs_f64() / (opts.steps - first).max(1) as f64;
+        let taken = opts.steps - progress.first;
+        let per_step = progress.started.elapsed().as_secs_f64() / taken.max(1) as f64;
         let images = test_images(&params)?;
         let after = Evaluation::of(&images, &data.test)?;
         if let Some(by) = stopped_by() {
@@ -357,16 +258,17 @@ impl Fit<'_> {
             );
         }
         drop(listening);
+        let log = &mut progress.log;
         if log.evaluations.last().is_none_or(|e| e.0 < opts.steps) {
             log.evaluations.push((opts.steps, after));
         }
-        let taken = opts.steps - first;
         let pace = match taken {
             0 => format!("no steps to take on {place}"),
             1 => format!("1 step on {place}, {:.1} ms", per_step * 1e3),
             n => format!("{n} steps on {place}, {:.1} ms per step", per_step * 1e3),
         };
         let views = crate::count(after.views, "test view");
+        let before = progress.before;
         println!(
             "{pace}, {} primitives; {views}: PSNR {:.2} -> {:.2} dB, SSIM {:.3} -> {:.3}",
             params.len(),
@@ -376,30 +278,174 @@ impl Fit<'_> {
             after.ssim
         );
         if taken > 0 {
-            print_step_times(&times, taken, gpu.as_ref());
+            print_step_times(&progress.times, taken, gpu.as_ref());
         }
-        let out = &args.out;
-        let ply_path = out.join(SCENE);
-        let cloud = GaussianCloud {
-            sh_degree: 3,
-            gaussians: params.iter().map(ToStored::to_stored).collect(),
-            folded_3d_filter: false,
-        };
-        // The result, its renders, the metrics and the curve appear together.
-        let mut outputs = Outputs::default();
-        (outputs.stage(&ply_path, |w| ply::write_to(w, &cloud)))
-            .with_context(|| format!("writing {}", ply_path.display()))?;
-        for (k, image) in images.iter().enumerate() {
-            let path = out.join("test").join(crate::render_name(k));
-            stage_image(&mut outputs, &path, image)
-                .with_context(|| format!("writing {}", path.display()))?;
+        write_results(&args.out, &params, &images, &progress.log)
+    }
+
+    /// Where the run starts: the checkpoint it resumes from (refused if it is of another
+    /// method or strategy) with the metrics up to it, or the first primitives and the test
+    /// views' evaluation before any step.
+    fn begin<M: Trainable>(
+        &self,
+        opts: &FitOptions,
+        test_images: &impl Fn(&[M::Params]) -> Result<Vec<Image>, FitError>,
+    ) -> Result<(Checkpoint, Log)> {
+        let Fit { args, data, .. } = *self;
+        Ok(match &self.resume {
+            Some(c) if c.method != M::NAME => bail!(
+                "{} is a checkpoint of {}, not of {} (--method {})",
+                args.out.join(CHECKPOINT).display(),
+                c.method,
+                M::NAME,
+                args.method
+            ),
+            Some(c) if c.step > 0 && c.strategy != Strategy::name(opts.densify.as_ref()) => bail!(
+                "{} is a checkpoint of a run with --strategy {}, not {}",
+                args.out.join(CHECKPOINT).display(),
+                c.strategy,
+                Strategy::name(opts.densify.as_ref())
+            ),
+            Some(c) => (c.clone(), Log::read_csv(&args.out.join(METRICS), c.step)?),
+            None => {
+                let half = self.init_extent * self.extent;
+                let first = init::Start {
+                    size: args.init_size,
+                    color: args.init_color,
+                };
+                let mut params = start::<M>(data, self.points, self.mid, half, first, args.seed)?;
+                if let Some(Strategy::Mcmc(_)) = opts.densify {
+                    McmcOptions::prepare::<M>(&mut params);
+                }
+                let before = Evaluation::of(&test_images(&params)?, &data.test)?;
+                let log = Log {
+                    evaluations: vec![(0, before)],
+                    ..Default::default()
+                };
+                (Checkpoint::start::<M>(&params, opts.steps, args.seed), log)
+            }
+        })
+    }
+}
+
+/// The result of a run in `out`: the scene, the test views' renders, the metrics and the curve,
+/// all appearing together.
+fn write_results<P: ToStored>(out: &Path, params: &[P], images: &[Image], log: &Log) -> Result<()> {
+    let ply_path = out.join(SCENE);
+    let cloud = GaussianCloud {
+        sh_degree: 3,
+        gaussians: params.iter().map(ToStored::to_stored).collect(),
+        folded_3d_filter: false,
+    };
+    let mut outputs = Outputs::default();
+    (outputs.stage(&ply_path, |w| ply::write_to(w, &cloud)))
+        .with_context(|| format!("writing {}", ply_path.display()))?;
+    for (k, image) in images.iter().enumerate() {
+        let path = out.join("test").join(crate::render_name(k));
+        stage_image(&mut outputs, &path, image)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    log.stage_csv(&mut outputs, &out.join(METRICS))?;
+    log.plot(&mut outputs, &out.join(CURVE))?;
+    outputs.commit()?;
+    crate::remove_stale_renders(&out.join("test"), images.len())?;
+    crate::wrote(out);
+    Ok(())
+}
+
+/// What a run shows and keeps as its steps report: the progress bar (or, without a terminal,
+/// a line every twentieth of the run), the metrics, the stage times, the steps that left words
+/// alone, and each checkpoint with the metrics up to it.
+struct Progress {
+    bar: ProgressBar,
+    log: Log,
+    times: StepTimes,
+    faulty_steps: usize,
+    /// The first checkpoint that could not be written: it stops nothing then, and the run
+    /// reports it at its end.
+    saved: Result<()>,
+    checkpoint_path: PathBuf,
+    metrics: PathBuf,
+    /// The step the run started from, when, and the test views' evaluation before it.
+    first: usize,
+    started: Instant,
+    before: Evaluation,
+    steps: usize,
+    line_every: usize,
+}
+
+impl Progress {
+    fn new(steps: usize, first: usize, log: Log, out: &Path) -> Progress {
+        let bar = ProgressBar::new(steps as u64).with_style(
+            ProgressStyle::with_template("{bar:40} {pos}/{len} steps, {elapsed} (eta {eta}) {msg}")
+                .expect("a valid template"),
+        );
+        bar.set_position(first as u64);
+        Progress {
+            bar,
+            before: log.evaluations.first().map(|e| e.1).unwrap_or_default(),
+            log,
+            times: StepTimes::default(),
+            faulty_steps: 0,
+            saved: Ok(()),
+            checkpoint_path: out.join(CHECKPOINT),
+            metrics: out.join(METRICS),
+            first,
+            started: Instant::now(),
+            steps,
+            line_every: (steps - first).div_ceil(20).next_multiple_of(10),
         }
-        log.stage_csv(&mut outputs, &metrics)?;
-        log.plot(&mut outputs, &out.join(CURVE))?;
-        outputs.commit()?;
-        crate::remove_stale_renders(&out.join("test"), images.len())?;
-        crate::wrote(out);
-        Ok(())
+    }
+
+    fn record<M: Trainable>(&mut self, r: &StepReport) {
+        self.bar.inc(1);
+        self.log.record(r);
+        self.times += r.times;
+        if r.faults.any() {
+            self.faulty_steps += 1;
+            match self.faulty_steps {
+                ..=FAULTS_SHOWN => self.bar.println(format!(
+                    "warning: step {}: {}",
+                    r.step + 1,
+                    r.faults.describe::<M>()
+                )),
+                FAULTS_AFTER_SHOWN => self
+                    .bar
+                    .println("warning: later steps with words left alone are counted, not shown"),
+                _ => {}
+            }
+        }
+        // With the checkpoint, the metrics up to it (a resumed run keeps them).
+        if let Some(c) = r.checkpoint
+            && self.saved.is_ok()
+        {
+            let mut outputs = Outputs::default();
+            self.saved = (outputs.stage(&self.checkpoint_path, |w| c.write_to(w)))
+                .with_context(|| format!("writing {}", self.checkpoint_path.display()))
+                .and_then(|()| self.log.stage_csv(&mut outputs, &self.metrics))
+                .and_then(|()| Ok(outputs.commit()?));
+        }
+        let done = r.step + 1 - self.first;
+        let line = self.bar.is_hidden() && done.is_multiple_of(self.line_every);
+        if r.step.is_multiple_of(10) || r.refinement.is_some() || r.evaluation.is_some() || line {
+            let v = r.loss;
+            // The last measured: the final evaluation comes after the last step's line.
+            let (at, test) =
+                (self.log.evaluations.last()).map_or((0, self.before.psnr), |e| (e.0, e.1.psnr));
+            let status = format!(
+                "loss {:.4} (L1 {:.4}, SSIM {:.3}), test PSNR {test:.2} dB at step {at}, {} primitives",
+                v.loss, v.l1, v.ssim, r.primitives
+            );
+            if line {
+                let ms = self.started.elapsed().as_secs_f64() * 1e3 / done as f64;
+                println!(
+                    "step {}/{}: {ms:.2} ms per step, {status}",
+                    r.step + 1,
+                    self.steps
+                );
+            }
+            self.bar.set_message(status);
+        }
     }
 }
 

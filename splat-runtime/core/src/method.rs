@@ -74,7 +74,8 @@ pub struct Twin {
 
 /// A point-based differentiable rendering method.
 pub trait SplatMethod: Send + Sync + 'static {
-    /// The module name the method was declared with.
+    /// The method's name in messages, `--explain` and checkpoints:
+    /// `#[splat_method(name = "...")]`, else the module's name.
     const NAME: &'static str;
     /// Whether the method declared `tile_cull` (otherwise every bbox tile is kept).
     const HAS_TILE_CULL: bool;

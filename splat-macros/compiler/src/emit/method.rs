@@ -4,7 +4,7 @@
 use super::api::{Kernel, pack, slot_access};
 use crate::check::Roles;
 use crate::ir::Scalar;
-use crate::model::{FnDef, Module};
+use crate::model::FnDef;
 use crate::types::{Ty, plain_builtin};
 use proc_macro2::{Literal, TokenStream};
 use quote::quote;
@@ -73,8 +73,9 @@ fn call_args(def: &FnDef, names: &[TokenStream], by_value: &[bool]) -> Vec<Token
         .collect()
 }
 
-pub fn method_impl(m: &Module, roles: &Roles, kernels: &[Kernel]) -> TokenStream {
-    let module_name = m.name.to_string();
+/// The `Method` struct and its `SplatMethod` impl; `name` is what users see
+/// (`SplatMethod::NAME`).
+pub fn method_impl(name: &str, roles: &Roles, kernels: &[Kernel]) -> TokenStream {
     let kernel = |def: &FnDef| {
         let k = kernels.iter().find(|k| std::ptr::eq(k.def, def));
         k.expect("every role function of a checked method is a kernel")
@@ -296,7 +297,7 @@ pub fn method_impl(m: &Module, roles: &Roles, kernels: &[Kernel]) -> TokenStream
 
         #[allow(unused_variables, clippy::all)]
         impl #rt::SplatMethod for Method {
-            const NAME: &'static str = #module_name;
+            const NAME: &'static str = #name;
             const HAS_TILE_CULL: bool = #has_tc;
             const HAS_PIXEL_INFO: bool = #has_pi;
             const PIXELS_BY_MODEL: bool = #pixels_by_model;

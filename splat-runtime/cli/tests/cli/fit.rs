@@ -430,7 +430,7 @@ fn fit_resumes_from_its_checkpoint() {
     );
     refused(
         &["--method", "3dgut"],
-        "out/checkpoint.bin is a checkpoint of gs3d, not of gut",
+        "out/checkpoint.bin is a checkpoint of 3dgs, not of 3dgut",
     );
     refused(
         &["--strategy", "mcmc"],

@@ -1,37 +1,37 @@
-//! 3DGEER (Huang et al. 2025): the exact ray integral of each Gaussian, with the particle bounding
-//! frustum (PBF, App. D.1) for the bounding box and for the per-tile association, on every
-//! camera model.
-//!
-//! - `evaluate`: in the Gaussian's canonical frame the density integrated along the whole line
-//!   is exp(-D²/2), D² = |o_u × d_u|² / |d_u|² (eq. B.7, B.9), computed through the cross
-//!   product (App. C.7: the expanded |o_u|²|d_u|² - (o_u·d_u)² cancels catastrophically for
-//!   flat Gaussians). The ray starts at the camera, so the integral over t >= 0 is that times
-//!   Φ(s*), the normal CDF of the signed canonical distance s* = -o_u·d_u / |d_u| of the
-//!   closest point: 1 for particles well in front, 0 behind the camera, continuous between.
-//! - `project`: the tangent planes of the λ-contour through the camera give the horizontal and
-//!   vertical angular bounds (eq. 10); each root is taken on the branch nearest the centre's
-//!   angle (the mirror transform of App. D.2), so bounds past 90° stay ordered. The box is their
-//!   image: exact for the pinhole and equiangular (BEAP) models; for the fisheye, the image of
-//!   the cone around the centre's direction that holds the contour.
-//! - `tile_cull`: the contour against the four planes through the camera and the tile's edges
-//!   (the PBF-CSF test); exact for pinhole and BEAP, every tile kept for the fisheye, whose
-//!   tile edges are not planes.
-//!
-//! - A rolling shutter, as for 3DGUT, is an instance of its own: `geer_rs` integrates each
-//!   pixel along the ray of the pose the camera had when its row was read (`cam.shutter_time`);
-//!   the box holds the boxes seen from the first and the last row's pose; the tile cull tests
-//!   the contour seen from the first row's pose, grown by how far any of its points can move
-//!   by the tile's last row (the slide, plus the turn's angle times the distance: the planes
-//!   of a tile's rays pass through the camera centre of the moment); color and opacity are
-//!   those seen from the first row's pose.
-//!
-//! The SH degree is one instance per degree, as for 3DGS: `geer_sh0` .. `geer_sh2`, and `geer`
-//! for degree 3 (and the rolling shutter).
+// 3DGEER (Huang et al. 2025): the exact ray integral of each Gaussian, with the particle bounding
+// frustum (PBF, App. D.1) for the bounding box and for the per-tile association, on every
+// camera model.
+//
+// - `evaluate`: in the Gaussian's canonical frame the density integrated along the whole line
+//   is exp(-D²/2), D² = |o_u × d_u|² / |d_u|² (eq. B.7, B.9), computed through the cross
+//   product (App. C.7: the expanded |o_u|²|d_u|² - (o_u·d_u)² cancels catastrophically for
+//   flat Gaussians). The ray starts at the camera, so the integral over t >= 0 is that times
+//   Φ(s*), the normal CDF of the signed canonical distance s* = -o_u·d_u / |d_u| of the
+//   closest point: 1 for particles well in front, 0 behind the camera, continuous between.
+// - `project`: the tangent planes of the λ-contour through the camera give the horizontal and
+//   vertical angular bounds (eq. 10); each root is taken on the branch nearest the centre's
+//   angle (the mirror transform of App. D.2), so bounds past 90° stay ordered. The box is their
+//   image: exact for the pinhole and equiangular (BEAP) models; for the fisheye, the image of
+//   the cone around the centre's direction that holds the contour.
+// - `tile_cull`: the contour against the four planes through the camera and the tile's edges
+//   (the PBF-CSF test); exact for pinhole and BEAP, every tile kept for the fisheye, whose
+//   tile edges are not planes.
+//
+// - A rolling shutter, as for 3DGUT, is an instance of its own: `geer_rs` integrates each
+//   pixel along the ray of the pose the camera had when its row was read (`cam.shutter_time`);
+//   the box holds the boxes seen from the first and the last row's pose; the tile cull tests
+//   the contour seen from the first row's pose, grown by how far any of its points can move
+//   by the tile's last row (the slide, plus the turn's angle times the distance: the planes
+//   of a tile's rays pass through the camera centre of the moment); color and opacity are
+//   those seen from the first row's pose.
+//
+// The SH degree is one instance per degree, as for 3DGS: `geer_sh0` .. `geer_sh2`, and `geer`
+// for degree 3 (and the rolling shutter).
 
 /// One 3DGEER method with `$n` SH coefficients per channel, with or without a rolling shutter.
 macro_rules! exact {
     ($name:ident, sh_coefficients = $n:literal, rolling_shutter = $rs:literal) => {
-        #[splat_macros::splat_method]
+        #[splat_macros::splat_method(name = "3dgeer")]
         pub mod $name {
             use splat_runtime::prelude::*;
 

@@ -1,27 +1,27 @@
-//! 3D Gaussian Splatting (Kerbl et al. 2023) with EWA splatting and the StopThePop tile cull
-//! (XPR, Rhyner et al. 2026, Listing 1 and §A.1.1), in the conventions of gsplat's "classic"
-//! mode: OpenCV camera, pixel centres at +0.5, 0.3 px dilation, tangent clamp,
-//! near plane 0.01, pairs below 1/255 skipped, SH + 0.5 clamped at 0; but alpha <= 0.99, as
-//! the original 3DGS rasterizer (gsplat: 0.999; the one rule where trained scenes differ).
-//!
-//! The SH degree is a compile-time property of the method: `gaussians_3d!` instantiates one
-//! method per degree (`gs3d_sh0` .. `gs3d_sh2`, and `gs3d` for degree 3), so a scene without
-//! view-dependent color carries and evaluates no higher-order coefficients.
-//!
-//! So is anti-aliasing (Mip-Splatting's 2D filter, gsplat's `antialiased` mode): the 0.3 px
-//! dilation that every 3DGS footprint gets also scales the opacity by
-//! sqrt(det(cov) / det(cov + 0.3 I)), so a Gaussian smaller than a pixel fades instead of
-//! growing. `gs3d_aa` has it; in the others the constant `ANTIALIASED` is false and the
-//! compensation folds away.
+// 3D Gaussian Splatting (Kerbl et al. 2023) with EWA splatting and the StopThePop tile cull
+// (XPR, Rhyner et al. 2026, Listing 1 and §A.1.1), in the conventions of gsplat's "classic"
+// mode: OpenCV camera, pixel centres at +0.5, 0.3 px dilation, tangent clamp,
+// near plane 0.01, pairs below 1/255 skipped, SH + 0.5 clamped at 0; but alpha <= 0.99, as
+// the original 3DGS rasterizer (gsplat: 0.999; the one rule where trained scenes differ).
+//
+// The SH degree is a compile-time property of the method: `gaussians_3d!` instantiates one
+// method per degree (`gs3d_sh0` .. `gs3d_sh2`, and `gs3d` for degree 3), so a scene without
+// view-dependent color carries and evaluates no higher-order coefficients.
+//
+// So is anti-aliasing (Mip-Splatting's 2D filter, gsplat's `antialiased` mode): the 0.3 px
+// dilation that every 3DGS footprint gets also scales the opacity by
+// sqrt(det(cov) / det(cov + 0.3 I)), so a Gaussian smaller than a pixel fades instead of
+// growing. `gs3d_aa` has it; in the others the constant `ANTIALIASED` is false and the
+// compensation folds away.
 
 /// One 3DGS method with `$n` SH coefficients per channel ((degree + 1)^2), with or without
 /// anti-aliasing.
 macro_rules! gaussians_3d {
-    ($name:ident, sh_coefficients = $n:literal) => {
-        gaussians_3d!($name, sh_coefficients = $n, antialiased = false);
+    ($name:ident, $called:literal, sh_coefficients = $n:literal) => {
+        gaussians_3d!($name, $called, sh_coefficients = $n, antialiased = false);
     };
-    ($name:ident, sh_coefficients = $n:literal, antialiased = $aa:literal) => {
-        #[splat_macros::splat_method]
+    ($name:ident, $called:literal, sh_coefficients = $n:literal, antialiased = $aa:literal) => {
+        #[splat_macros::splat_method(name = $called)]
         pub mod $name {
             use splat_runtime::prelude::*;
 
@@ -230,8 +230,8 @@ macro_rules! gaussians_3d {
     };
 }
 
-gaussians_3d!(gs3d, sh_coefficients = 16);
-gaussians_3d!(gs3d_sh0, sh_coefficients = 1);
-gaussians_3d!(gs3d_sh1, sh_coefficients = 4);
-gaussians_3d!(gs3d_sh2, sh_coefficients = 9);
-gaussians_3d!(gs3d_aa, sh_coefficients = 16, antialiased = true);
+gaussians_3d!(gs3d, "3dgs", sh_coefficients = 16);
+gaussians_3d!(gs3d_sh0, "3dgs", sh_coefficients = 1);
+gaussians_3d!(gs3d_sh1, "3dgs", sh_coefficients = 4);
+gaussians_3d!(gs3d_sh2, "3dgs", sh_coefficients = 9);
+gaussians_3d!(gs3d_aa, "3dgs-aa", sh_coefficients = 16, antialiased = true);

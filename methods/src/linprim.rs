@@ -1,10 +1,10 @@
-//! LinPrim (von Lützow and Nießner 2025; as in XPR, Rhyner et al. 2026, §A.1.3): octahedra
-//! of homogeneous density, linearized into the (x_px, y_px, distance) frame, where each is the intersection of four
-//! slab pairs; evaluated by the chord of the pixel's ray through the slabs (Beer-Lambert
-//! opacity), and culled per tile by the chord upper bound of XPR eq. 2. The projection is
-//! the pinhole Jacobian, so the method is pinhole-only.
+// LinPrim (von Lützow and Nießner 2025; as in XPR, Rhyner et al. 2026, §A.1.3): octahedra
+// of homogeneous density, linearized into the (x_px, y_px, distance) frame, where each is the intersection of four
+// slab pairs; evaluated by the chord of the pixel's ray through the slabs (Beer-Lambert
+// opacity), and culled per tile by the chord upper bound of XPR eq. 2. The projection is
+// the pinhole Jacobian, so the method is pinhole-only.
 
-#[splat_macros::splat_method]
+#[splat_macros::splat_method(name = "linprim")]
 pub mod linprim {
     use splat_runtime::prelude::*;
 

@@ -1,21 +1,21 @@
-//! 3DGUT (Wu et al. 2025; as in XPR, Rhyner et al. 2026, §A.1.2): the 3DGS primitive
-//! projected by the unscented transform instead of the EWA Jacobian, and evaluated in 3D along each pixel's camera ray
-//! (the Gaussian's maximum response on the ray), so it works with every camera model.
-//!
-//! A rolling shutter is an instance of its own: `gut_rs` sees each row from the pose the camera
-//! had when the sensor read it (`cam.shutter_time`, `cam.rotation_at`), so each pixel's ray
-//! starts where the camera was; `gut`'s constant `ROLLING_SHUTTER` is false and that code folds
-//! away. Per Gaussian, the box holds the footprints at the first and the last row's pose, and
-//! the color and opacity are those seen from the first row's pose (they change little over a
-//! readout).
-//!
-//! The SH degree is one instance per degree, as for 3DGS: `gut_sh0` .. `gut_sh2`, and `gut` for
-//! degree 3 (and the rolling shutter).
+// 3DGUT (Wu et al. 2025; as in XPR, Rhyner et al. 2026, §A.1.2): the 3DGS primitive
+// projected by the unscented transform instead of the EWA Jacobian, and evaluated in 3D along each pixel's camera ray
+// (the Gaussian's maximum response on the ray), so it works with every camera model.
+//
+// A rolling shutter is an instance of its own: `gut_rs` sees each row from the pose the camera
+// had when the sensor read it (`cam.shutter_time`, `cam.rotation_at`), so each pixel's ray
+// starts where the camera was; `gut`'s constant `ROLLING_SHUTTER` is false and that code folds
+// away. Per Gaussian, the box holds the footprints at the first and the last row's pose, and
+// the color and opacity are those seen from the first row's pose (they change little over a
+// readout).
+//
+// The SH degree is one instance per degree, as for 3DGS: `gut_sh0` .. `gut_sh2`, and `gut` for
+// degree 3 (and the rolling shutter).
 
 /// One 3DGUT method with `$n` SH coefficients per channel, with or without a rolling shutter.
 macro_rules! unscented {
     ($name:ident, sh_coefficients = $n:literal, rolling_shutter = $rs:literal) => {
-        #[splat_macros::splat_method]
+        #[splat_macros::splat_method(name = "3dgut")]
         pub mod $name {
             use splat_runtime::prelude::*;
 
