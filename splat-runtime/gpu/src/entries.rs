@@ -21,6 +21,8 @@ use splat_core::types::{Camera, CameraModel};
 /// How `backward` adds its gradients: an option of its entry point.
 pub use super::scatter::{Accumulation, Reduction};
 
+use crate::frame_info::WGSL as FRAME_INFO;
+
 const TILES: &str = include_str!("shaders/tiles.wgsl");
 /// `fn finite`, for the shaders that test their inputs.
 pub const FINITE: &str = include_str!("shaders/finite.wgsl");
@@ -144,9 +146,9 @@ pub fn tiles<M: SplatMethod>(entry: TilesEntry, use_cull: bool) -> Result<String
         TilesEntry::Count => (COUNT, ""),
         TilesEntry::Emit => (
             EMIT,
-            // Past the buffers' room (frame[1].w) the frame is cut and rendered again.
-            "if (first + n < frame[1].w) {
-                    keys[first + n] = ty * frame[1].x + tx;
+            // Past the buffers' room (frame.room) the frame is cut and rendered again.
+            "if (first + n < frame.room) {
+                    keys[first + n] = ty * frame.tiles_x + tx;
                     vals[first + n] = i;
                 }",
         ),
@@ -160,7 +162,9 @@ pub fn tiles<M: SplatMethod>(entry: TilesEntry, use_cull: bool) -> Result<String
             ("ENTRY", entry.into()),
         ],
     );
-    Ok(format!("{wgsl}\n{FINITE}\n{PIXEL_SPAN}\n{body}"))
+    Ok(format!(
+        "{wgsl}\n{FRAME_INFO}\n{FINITE}\n{PIXEL_SPAN}\n{body}"
+    ))
 }
 
 /// Workgroup sizes and batch sizes of a blend pass.
@@ -258,7 +262,9 @@ pub(crate) fn shade_pack<M: SplatMethod>(pairs: &[(&str, String)]) -> Result<Str
             ("ENTRY", entry),
         ],
     );
-    Ok(format!("{FINITE}\n{PIXEL_SPAN}\n{HALF}\n{body}"))
+    Ok(format!(
+        "{FRAME_INFO}\n{FINITE}\n{PIXEL_SPAN}\n{HALF}\n{body}"
+    ))
 }
 
 fn tile_pass(
@@ -310,7 +316,7 @@ fn tile_pass(
             ),
         ],
     );
-    format!("{FINITE}\n{HALF}\n{pass}")
+    format!("{FRAME_INFO}\n{FINITE}\n{HALF}\n{pass}")
 }
 
 /// `shade_tiles`: the forward blend under the camera `model`, one workgroup per tile of
@@ -482,7 +488,7 @@ pub fn backward<M: SplatMethod>(
             format!(
                 "    if (at.inside) {{
         for (var k = 0u; k < {np}u; k++) {{
-            pixel_cotangent[(at.y * frame[0].y + at.x) * {np}u + k] = bitcast<u32>(d_pixel[k]);
+            pixel_cotangent[(at.y * frame.width + at.x) * {np}u + k] = bitcast<u32>(d_pixel[k]);
         }}
     }}"
             ),
@@ -605,7 +611,7 @@ pub fn raster<M: SplatMethod>(
             ("WRITE", write),
         ],
     );
-    Ok(format!("{wgsl}\n{body}"))
+    Ok(format!("{wgsl}\n{FRAME_INFO}\n{body}"))
 }
 
 /// The float slots of `M::Params` (gradient words per primitive): `project_adjoint`'s

@@ -14,6 +14,7 @@
 
 use super::device::{Grown, Kernel, as_bytes, dispatch};
 use super::entries::{self, Layout, TilesEntry};
+use super::frame_info::{self, FrameInfo};
 use super::per_model::PerModel;
 use super::scene::{GpuScene, words_of};
 use super::sort::{RadixSort, Scan, tile_bits};
@@ -102,13 +103,13 @@ impl Front {
                 &entries::tiles::<M>(TilesEntry::Count, use_cull)?,
                 "count_tiles",
             )?,
-            settle: gpu.kernel(SETTLE, "settle_count")?,
+            settle: gpu.kernel(&format!("{}\n{SETTLE}", frame_info::WGSL), "settle_count")?,
             emit: gpu.kernel(
                 &entries::tiles::<M>(TilesEntry::Emit, use_cull)?,
                 "emit_tiles",
             )?,
             camera: gpu.buffer("camera", Camera::LEN)?,
-            frame_info: gpu.uniform_buffer(8),
+            frame_info: gpu.uniform_buffer(FrameInfo::WORDS),
             count_info: gpu.uniform_buffer(4),
             projected: grown("projected primitives", 1)?,
             depth_keys: grown("depth keys", 1)?,
@@ -169,19 +170,17 @@ impl Front {
         self.scan.prepare(gpu, n32)?;
         gpu.write(&self.primitives, &[n32]);
         gpu.write(&self.camera, &words_of(std::slice::from_ref(camera)));
-        // All but the last word, the room, which only `reserve` writes.
-        gpu.write(
-            &self.frame_info,
-            &[
-                n32,
-                grid.width,
-                grid.height,
-                grid.size,
-                grid.tiles_x,
-                p_max,
-                self.tiles,
-            ],
-        );
+        let info = FrameInfo {
+            primitives: n32,
+            width: grid.width,
+            height: grid.height,
+            tile_size: grid.size,
+            tiles_x: grid.tiles_x,
+            p_max,
+            tiles: self.tiles,
+            room: self.room as u32,
+        };
+        gpu.write(&self.frame_info, &info.words());
         gpu.write(&self.count_info, &[n32, 0, 0, 0]);
 
         enc.clear_buffer(&self.totals, 0, None);
@@ -253,7 +252,7 @@ impl Front {
         // The frame's uniform says how many keys fit (recorded frames read it when they run).
         let room = [self.room as u32];
         gpu.queue
-            .write_buffer(&self.frame_info, 28, as_bytes(&room));
+            .write_buffer(&self.frame_info, FrameInfo::ROOM, as_bytes(&room));
         Ok(())
     }
 

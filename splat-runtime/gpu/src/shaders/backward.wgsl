@@ -62,7 +62,7 @@ fn backward_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
     let py = f32(at.y) + 0.5;
     {{PIXEL}}
     // Pixels past the image edge read pixel 0 and stay done.
-    let pix = select(0u, at.y * frame[0].y + at.x, at.inside);
+    let pix = select(0u, at.y * frame.width + at.x, at.inside);
     let grad_at = pix * (CHANNELS + 2u);
     var d_color: array<f32, CHANNELS>;
     for (var c = 0u; c < CHANNELS; c++) {

@@ -14,7 +14,7 @@ fn count_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_
         atomicStore(&group_visible, 0u);
     }
     workgroupBarrier();
-    if (j < frame[0].x) {
+    if (j < frame.primitives) {
         let i = order[j];
         let rect = tile_rect(i);
         var n = 0u;

@@ -7,7 +7,7 @@
 @compute @workgroup_size(256)
 fn depth_keys(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let i = (wid.y * 65535u + wid.x) * 256u + lid;
-    if (i >= frame[0].x) {
+    if (i >= frame.primitives) {
         return;
     }
     keys[i] = bitcast<u32>(max(word(i, 1u), 0.0));

@@ -7,7 +7,7 @@
 @compute @workgroup_size(256)
 fn emit_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let j = (wid.y * 65535u + wid.x) * 256u + lid;
-    if (j >= frame[0].x) {
+    if (j >= frame.primitives) {
         return;
     }
     let i = order[j];

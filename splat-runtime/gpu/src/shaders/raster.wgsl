@@ -11,8 +11,7 @@ const ALPHA_MIN: f32 = {{ALPHA_MIN}};
 @group(0) @binding(0) var<storage, read> projected: array<u32>;
 // The visible primitives, front to back.
 @group(0) @binding(1) var<storage, read> order: array<u32>;
-// frame[0] = (primitives, width, height, ..)
-@group(0) @binding(2) var<uniform> frame: array<vec4<u32>, 2>;
+@group(0) @binding(2) var<uniform> frame: FrameInfo;
 {{CAMERA_BINDING}}
 
 struct Quad {
@@ -30,7 +29,7 @@ fn word(i: u32, k: u32) -> f32 {
 @vertex
 fn quad_vertex(@builtin(vertex_index) v: u32, @builtin(instance_index) k: u32) -> Quad {
     let i = order[k];
-    let size = vec2<f32>(f32(frame[0].y), f32(frame[0].z));
+    let size = vec2<f32>(f32(frame.width), f32(frame.height));
     let lo = clamp(vec2<f32>(word(i, 2u), word(i, 3u)), vec2<f32>(0.0), size);
     let hi = clamp(vec2<f32>(word(i, 4u), word(i, 5u)), vec2<f32>(0.0), size);
     let p = mix(lo, hi, vec2<f32>(f32(v & 1u), f32(v >> 1u)));

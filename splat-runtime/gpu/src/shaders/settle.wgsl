@@ -4,14 +4,13 @@
 
 // (intersections low word, high word, primitives with a tile rectangle), from count_tiles.
 @group(0) @binding(0) var<storage, read> totals: array<u32>;
-// frame[1].w = the keys the buffers hold.
-@group(0) @binding(1) var<uniform> frame: array<vec4<u32>, 2>;
+@group(0) @binding(1) var<uniform> frame: FrameInfo;
 // (keys to sort, 1 if the lists are cut).
 @group(0) @binding(2) var<storage, read_write> key_count: array<u32>;
 
 @compute @workgroup_size(1)
 fn settle_count() {
-    let room = frame[1].w;
+    let room = frame.room;
     let cut = totals[1] != 0u || totals[0] > room;
     key_count[0] = select(totals[0], room, cut);
     key_count[1] = u32(cut);

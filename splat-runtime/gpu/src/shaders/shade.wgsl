@@ -44,7 +44,7 @@ fn shade_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_
         }
     }
     if (at.inside) {
-        let pix = at.y * frame[0].y + at.x;
+        let pix = at.y * frame.width + at.x;
         var v: array<f32, CHANNELS + 2u>;
         for (var c = 0u; c < CHANNELS; c++) {
             v[c] = color[c];

@@ -40,7 +40,7 @@ fn shade_range(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_
         atomicStore(&group_keys[lid], 0u);
     }
     workgroupBarrier();
-    if (i < frame[0].x) {
+    if (i < frame.primitives) {
         let rect = tile_rect(i);
         if (rect.z > rect.x) {
 {{WIDEN}}
@@ -88,7 +88,7 @@ fn unit_code(x: f32, steps: f32) -> u32 {
 fn shade_pack(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let i = (wid.y * 65535u + wid.x) * 256u + lid;
 {{WRITE_RANGES}}
-    if (i >= frame[0].x) {
+    if (i >= frame.primitives) {
         return;
     }
     let at = i * PACKED;

@@ -18,8 +18,7 @@ const ALPHA_MIN: f32 = {{ALPHA_MIN}};
 @group(0) @binding(1) var<storage, read> tile_prims: array<u32>;
 @group(0) @binding(2) var<storage, read> tile_ranges: array<u32>;
 @group(0) @binding(3) var<storage, read> tile_order: array<u32>;
-// frame[0] = (primitives, width, height, tile size), frame[1] = (tiles_x, P_max, tiles, ..)
-@group(0) @binding(4) var<uniform> frame: array<vec4<u32>, 2>;
+@group(0) @binding(4) var<uniform> frame: FrameInfo;
 {{SHADE_BINDINGS}}
 
 var<workgroup> batch_words: array<u32, {{BATCH_WORDS}}>;
@@ -42,15 +41,15 @@ fn tile_pixel(wid: vec3<u32>, lid: u32) -> TilePixel {
     let slot = wid.y * 65535u + wid.x;
     // A dispatch past 65,535 workgroups is rounded up to whole rows: a spare one takes no
     // tile (its pixels are outside, its list empty).
-    if (slot >= frame[1].z) {
+    if (slot >= frame.tiles) {
         return TilePixel(0u, 0u, false, 0u, 0u);
     }
     let tile = tile_order[slot];
-    let x = (tile % frame[1].x) * TILE + lid % TILE;
-    let y = (tile / frame[1].x) * TILE + lid / TILE;
+    let x = (tile % frame.tiles_x) * TILE + lid % TILE;
+    let y = (tile / frame.tiles_x) * TILE + lid / TILE;
     let start = tile_ranges[2u * tile];
-    let end = start + min(tile_ranges[2u * tile + 1u] - start, frame[1].y);
-    return TilePixel(x, y, x < frame[0].y && y < frame[0].z, start, end);
+    let end = start + min(tile_ranges[2u * tile + 1u] - start, frame.p_max);
+    return TilePixel(x, y, x < frame.width && y < frame.height, start, end);
 }
 
 // Starts the walk of the list: no pixel is done yet but those for which `done` holds already

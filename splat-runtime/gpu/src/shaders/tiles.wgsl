@@ -10,9 +10,7 @@ const CULL_AT: u32 = 6u;
 @group(0) @binding(0) var<storage, read> projected: array<u32>;
 // Per primitive front to back: its kept tiles, then (scanned) its first key.
 @group(0) @binding(1) var<storage, read_write> counts: array<u32>;
-// frame[0] = (primitives, width, height, tile size), frame[1] = (tiles_x, P_max, tiles, keys the
-// buffers hold)
-@group(0) @binding(2) var<uniform> frame: array<vec4<u32>, 2>;
+@group(0) @binding(2) var<uniform> frame: FrameInfo;
 
 fn word(i: u32, k: u32) -> f32 {
     return bitcast<f32>(projected[i * STRIDE + k]);
@@ -23,25 +21,25 @@ fn word(i: u32, k: u32) -> f32 {
 fn tile_rect(i: u32) -> vec4<u32> {
     let lo = vec2<f32>(word(i, 2u), word(i, 3u));
     let hi = vec2<f32>(word(i, 4u), word(i, 5u));
-    let size = vec2<f32>(f32(frame[0].y), f32(frame[0].z));
+    let size = vec2<f32>(f32(frame.width), f32(frame.height));
     let span = pixel_span(projected[i * STRIDE], word(i, 1u), lo, hi, size);
     if (!spans_a_pixel(span)) {
         return vec4<u32>(0u);
     }
-    let tile = frame[0].w;
+    let tile = frame.tile_size;
     return vec4<u32>(vec2<u32>(span.xy) / tile, vec2<u32>(span.zw) / tile + 1u);
 }
 
 // Visits the tiles of `rect` that tile_cull keeps; returns how many (emitting from `first`).
 fn kept_tiles(i: u32, rect: vec4<u32>, first: u32) -> u32 {
-    let size = frame[0].w;
+    let size = frame.tile_size;
     var n = 0u;
     for (var ty = rect.y; ty < rect.w; ty++) {
         for (var tx = rect.x; tx < rect.z; tx++) {
             let x0 = tx * size;
             let y0 = ty * size;
-            let x1 = min(x0 + size, frame[0].y);
-            let y1 = min(y0 + size, frame[0].z);
+            let x1 = min(x0 + size, frame.width);
+            let y1 = min(y0 + size, frame.height);
             let lo = vec2<f32>(f32(x0) + 0.5, f32(y0) + 0.5);
             let hi = vec2<f32>(f32(x1) - 0.5, f32(y1) - 0.5);
             if ({{KEEP}}) {
