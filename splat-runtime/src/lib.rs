@@ -15,6 +15,78 @@
 //!   training loop on the CPU and (feature `gpu`) the GPU.
 //! - splat-checks ([`checks`]): a method's checks (reference renderer, finite differences,
 //!   reference adjoint, extremes, fixtures, GPU parity).
+//!
+//! # Rendering and its gradients
+//!
+//! Three Gaussians rendered with 3DGS on the CPU, then the gradient of the image's red sum with
+//! respect to every parameter:
+//!
+//! ```
+//! use splat_methods::gs3d::{Method, Params};
+//! use splat_runtime::glam::{Mat3, Vec2, Vec3, Vec4};
+//! use splat_runtime::{Camera, FrameGrad, RenderOptions, backward, render_for_backward};
+//!
+//! let gaussian = |x: f32, color: Vec3| Params {
+//!     mean: Vec3::new(x, 0.0, 4.0),
+//!     log_scale: Vec3::splat(-1.5),
+//!     rotation: Vec4::new(1.0, 0.0, 0.0, 0.0), // (w, x, y, z)
+//!     opacity_logit: 2.0,
+//!     sh: std::array::from_fn(|i| if i == 0 { color } else { Vec3::ZERO }),
+//! };
+//! let params = [gaussian(-0.6, Vec3::X), gaussian(0.0, Vec3::Y), gaussian(0.6, Vec3::Z)];
+//! let camera = Camera {
+//!     rotation: Mat3::IDENTITY, // world to camera, OpenCV axes: looking down +z
+//!     translation: Vec3::ZERO,
+//!     focal: Vec2::splat(64.0),
+//!     principal: Vec2::new(32.0, 24.0),
+//!     size: Vec2::new(64.0, 48.0),
+//!     ..Default::default()
+//! };
+//! let opts = RenderOptions::default();
+//! let (frame, state) = render_for_backward::<Method>(&params, &camera, &opts)?;
+//! let image = &frame.color; // 64 x 48 x RGB, rows top to bottom
+//! assert_eq!((image.width, image.height, image.channels), (64, 48, 3));
+//!
+//! // d(sum of red) / d(red value) is one at every pixel.
+//! let red = (0..image.data.len()).map(|i| (i % 3 == 0) as u32 as f32).collect();
+//! let grad = FrameGrad { color: red, alpha: None, depth: None };
+//! let gradients = backward::<Method>(&state, &params, &camera, &grad)?;
+//! // More red DC coefficient, more red.
+//! assert!(gradients.params[0].sh[0].x > 0.0);
+//! # Ok::<(), splat_runtime::RenderError>(())
+//! ```
+//!
+//! The same on the GPU, with the scene uploaded once and the renderer's buffers kept across
+//! frames ([`gpu::GpuRenderer`]):
+//!
+//! ```
+//! # use splat_methods::gs3d::{Method, Params};
+//! # use splat_runtime::glam::{Mat3, Vec2, Vec3, Vec4};
+//! # use splat_runtime::{Camera, RenderOptions};
+//! use splat_runtime::gpu::{GpuRenderer, GpuScene};
+//! # let params = [Params {
+//! #     mean: Vec3::new(0.0, 0.0, 4.0),
+//! #     log_scale: Vec3::splat(-1.5),
+//! #     rotation: Vec4::new(1.0, 0.0, 0.0, 0.0),
+//! #     opacity_logit: 2.0,
+//! #     sh: [Vec3::ONE; 16],
+//! # }];
+//! # let camera = Camera {
+//! #     focal: Vec2::splat(64.0),
+//! #     principal: Vec2::new(32.0, 24.0),
+//! #     size: Vec2::new(64.0, 48.0),
+//! #     ..Default::default()
+//! # };
+//! // `None` without an adapter (set SPLAT_REQUIRE_GPU=1 to make that an error).
+//! let Some(gpu) = splat_runtime::gpu::adapter_or_skip() else { return Ok(()) };
+//! let scene = GpuScene::<Method>::new(&gpu, &params)?;
+//! let mut renderer = GpuRenderer::<Method>::new(&gpu, &RenderOptions::default())?;
+//! let info = renderer.forward(&scene, &camera)?;
+//! assert_eq!(info.visible, 1);
+//! let frame = renderer.download_frame()?;
+//! assert_eq!(frame.color.data.len(), 64 * 48 * 3);
+//! # Ok::<(), splat_runtime::gpu::GpuRenderError>(())
+//! ```
 
 pub use splat_core::{
     blend, cameras, effects, flat, frame, grid, lanes, math, method, precision, prelude, types,

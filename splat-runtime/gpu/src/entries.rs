@@ -21,7 +21,7 @@ use splat_core::types::{Camera, CameraModel};
 /// How `backward` adds its gradients: an option of its entry point.
 pub use super::scatter::{Accumulation, Reduction};
 
-use crate::frame_info::WGSL as FRAME_INFO;
+use crate::frame_uniform::WGSL as FRAME_UNIFORM;
 
 const TILES: &str = include_str!("shaders/tiles.wgsl");
 /// `fn finite`, for the shaders that test their inputs.
@@ -163,7 +163,7 @@ pub fn tiles<M: SplatMethod>(entry: TilesEntry, use_cull: bool) -> Result<String
         ],
     );
     Ok(format!(
-        "{wgsl}\n{FRAME_INFO}\n{FINITE}\n{PIXEL_SPAN}\n{body}"
+        "{wgsl}\n{FRAME_UNIFORM}\n{FINITE}\n{PIXEL_SPAN}\n{body}"
     ))
 }
 
@@ -263,7 +263,7 @@ pub(crate) fn shade_pack<M: SplatMethod>(pairs: &[(&str, String)]) -> Result<Str
         ],
     );
     Ok(format!(
-        "{FRAME_INFO}\n{FINITE}\n{PIXEL_SPAN}\n{HALF}\n{body}"
+        "{FRAME_UNIFORM}\n{FINITE}\n{PIXEL_SPAN}\n{HALF}\n{body}"
     ))
 }
 
@@ -316,7 +316,7 @@ fn tile_pass(
             ),
         ],
     );
-    format!("{FRAME_INFO}\n{FINITE}\n{HALF}\n{pass}")
+    format!("{FRAME_UNIFORM}\n{FINITE}\n{HALF}\n{pass}")
 }
 
 /// `shade_tiles`: the forward blend under the camera `model`, one workgroup per tile of
@@ -611,7 +611,7 @@ pub fn raster<M: SplatMethod>(
             ("WRITE", write),
         ],
     );
-    Ok(format!("{wgsl}\n{FRAME_INFO}\n{body}"))
+    Ok(format!("{wgsl}\n{FRAME_UNIFORM}\n{body}"))
 }
 
 /// The float slots of `M::Params` (gradient words per primitive): `project_adjoint`'s

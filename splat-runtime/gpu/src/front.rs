@@ -14,7 +14,7 @@
 
 use super::device::{Grown, Kernel, as_bytes, dispatch};
 use super::entries::{self, Layout, TilesEntry};
-use super::frame_info::{self, FrameInfo};
+use super::frame_uniform::{self, FrameUniform};
 use super::per_model::PerModel;
 use super::scene::{GpuScene, words_of};
 use super::sort::{RadixSort, Scan, tile_bits};
@@ -58,7 +58,7 @@ pub(crate) struct Front {
     emit: Kernel,
     pub camera: wgpu::Buffer,
     /// (primitives, width, height, tile size), (tiles_x, P_max, tiles, keys the buffers hold).
-    pub frame_info: wgpu::Buffer,
+    pub frame_uniform: wgpu::Buffer,
     /// (primitives, 0, 0, 0).
     pub count_info: wgpu::Buffer,
     pub projected: Grown,
@@ -103,13 +103,16 @@ impl Front {
                 &entries::tiles::<M>(TilesEntry::Count, use_cull)?,
                 "count_tiles",
             )?,
-            settle: gpu.kernel(&format!("{}\n{SETTLE}", frame_info::WGSL), "settle_count")?,
+            settle: gpu.kernel(
+                &format!("{}\n{SETTLE}", frame_uniform::WGSL),
+                "settle_count",
+            )?,
             emit: gpu.kernel(
                 &entries::tiles::<M>(TilesEntry::Emit, use_cull)?,
                 "emit_tiles",
             )?,
             camera: gpu.buffer("camera", Camera::LEN)?,
-            frame_info: gpu.uniform_buffer(FrameInfo::WORDS),
+            frame_uniform: gpu.uniform_buffer(FrameUniform::WORDS),
             count_info: gpu.uniform_buffer(4),
             projected: grown("projected primitives", 1)?,
             depth_keys: grown("depth keys", 1)?,
@@ -170,7 +173,7 @@ impl Front {
         self.scan.prepare(gpu, n32)?;
         gpu.write(&self.primitives, &[n32]);
         gpu.write(&self.camera, &words_of(std::slice::from_ref(camera)));
-        let info = FrameInfo {
+        let info = FrameUniform {
             primitives: n32,
             width: grid.width,
             height: grid.height,
@@ -180,7 +183,7 @@ impl Front {
             tiles: self.tiles,
             room: self.room as u32,
         };
-        gpu.write(&self.frame_info, &info.words());
+        gpu.write(&self.frame_uniform, &info.words());
         gpu.write(&self.count_info, &[n32, 0, 0, 0]);
 
         enc.clear_buffer(&self.totals, 0, None);
@@ -201,7 +204,7 @@ impl Front {
             &self.depth,
             &[
                 ("projected", &self.projected),
-                ("frame", &self.frame_info),
+                ("frame", &self.frame_uniform),
                 ("keys", &self.depth_keys),
                 ("order", &self.order),
             ],
@@ -214,7 +217,7 @@ impl Front {
             &[
                 ("projected", &self.projected),
                 ("counts", &self.counts),
-                ("frame", &self.frame_info),
+                ("frame", &self.frame_uniform),
                 ("totals", &self.totals),
                 ("order", &self.order),
             ],
@@ -252,7 +255,7 @@ impl Front {
         // The frame's uniform says how many keys fit (recorded frames read it when they run).
         let room = [self.room as u32];
         gpu.queue
-            .write_buffer(&self.frame_info, FrameInfo::ROOM, as_bytes(&room));
+            .write_buffer(&self.frame_uniform, FrameUniform::ROOM, as_bytes(&room));
         Ok(())
     }
 
@@ -270,7 +273,7 @@ impl Front {
             &self.settle,
             &[
                 ("totals", &self.totals),
-                ("frame", &self.frame_info),
+                ("frame", &self.frame_uniform),
                 ("key_count", &self.key_count),
             ],
         )?;
@@ -280,7 +283,7 @@ impl Front {
             &[
                 ("projected", &self.projected),
                 ("counts", &self.counts),
-                ("frame", &self.frame_info),
+                ("frame", &self.frame_uniform),
                 ("keys", &self.keys),
                 ("vals", &self.prims),
                 ("order", &self.order),

@@ -7,7 +7,7 @@
 //!   trip-count binning.
 //! - [`entries`]: the method-specific entry points (project, count/emit with `tile_cull`,
 //!   per-tile shading, backward blend, `project`'s adjoint) around the generated WGSL.
-//! - [`frame_info`]: the frame's uniform, one struct in WGSL and its `#[repr(C)]` Rust twin.
+//! - [`frame_uniform`]: the frame's uniform, one struct in WGSL and its `#[repr(C)]` Rust twin.
 //! - [`resident`]: the device-resident pipeline: [`GpuScene`] (parameters on the device) and
 //!   [`GpuRenderer`] (kernels built once, buffers kept across frames, forward and backward).
 //! - [`raster`]: the hardware-rasterized forward pass: quads drawn in depth order, blended
@@ -22,7 +22,7 @@
 pub mod device;
 pub mod dispatch;
 pub mod entries;
-pub mod frame_info;
+pub mod frame_uniform;
 mod front;
 pub mod kernel;
 mod packing;

@@ -169,7 +169,7 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
         let mut inputs: Vec<(&str, &wgpu::Buffer)> = vec![
             ("projected", &self.front.projected),
             ("order", &self.front.prims),
-            ("frame", &self.front.frame_info),
+            ("frame", &self.front.frame_uniform),
         ];
         if M::HAS_PIXEL_INFO {
             inputs.push(("camera_words", &self.front.camera));

@@ -620,7 +620,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             ("tile_prims", &*self.front.prims),
             ("tile_ranges", &*self.tiles.ranges),
             ("tile_order", &*self.tiles.order),
-            ("frame", &self.front.frame_info),
+            ("frame", &self.front.frame_uniform),
         ];
         if let Some(packer) = &self.packer {
             inputs.push(("packed_shade", &packer.packed));

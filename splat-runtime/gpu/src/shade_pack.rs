@@ -74,7 +74,7 @@ impl ShadePacker {
         let groups = (n as u32).div_ceil(256);
         let mut inputs: Vec<(&str, &wgpu::Buffer)> = vec![
             ("projected", &front.projected),
-            ("frame", &front.frame_info),
+            ("frame", &front.frame_uniform),
         ];
         if let Some(range) = &self.range {
             inputs.push(("shade_ranges", &self.ranges));

@@ -7,6 +7,25 @@
 //! filter. It is folded in at reading, as Mip-Splatting's own fused export does: the
 //! filter convolved with the Gaussian adds filter² to each squared scale, and the opacity
 //! is scaled by the ratio of the determinants so that the Gaussian's integral is unchanged.
+//!
+//! ```
+//! use splat_io::ply::{self, GaussianCloud, StoredGaussian};
+//! use glam::{Vec3, Vec4};
+//!
+//! let gaussian = StoredGaussian {
+//!     mean: Vec3::new(0.0, 0.0, 4.0),
+//!     log_scale: Vec3::splat(-1.5),
+//!     rotation: Vec4::new(1.0, 0.0, 0.0, 0.0),
+//!     opacity_logit: 2.0,
+//!     sh: std::array::from_fn(|i| Vec3::splat(i as f32 / 16.0)),
+//! };
+//! let cloud = GaussianCloud { sh_degree: 3, gaussians: vec![gaussian], folded_3d_filter: false };
+//! let dir = tempfile::tempdir()?;
+//! let path = dir.path().join("scene.ply");
+//! ply::write(&path, &cloud)?; // through a temporary file and a rename
+//! assert_eq!(ply::read(&path)?, cloud);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 use glam::{Vec3, Vec4};
 use std::collections::HashMap;

@@ -11,7 +11,7 @@ const ALPHA_MIN: f32 = {{ALPHA_MIN}};
 @group(0) @binding(0) var<storage, read> projected: array<u32>;
 // The visible primitives, front to back.
 @group(0) @binding(1) var<storage, read> order: array<u32>;
-@group(0) @binding(2) var<uniform> frame: FrameInfo;
+@group(0) @binding(2) var<uniform> frame: FrameUniform;
 {{CAMERA_BINDING}}
 
 struct Quad {

@@ -4,7 +4,7 @@
 
 // (intersections low word, high word, primitives with a tile rectangle), from count_tiles.
 @group(0) @binding(0) var<storage, read> totals: array<u32>;
-@group(0) @binding(1) var<uniform> frame: FrameInfo;
+@group(0) @binding(1) var<uniform> frame: FrameUniform;
 // (keys to sort, 1 if the lists are cut).
 @group(0) @binding(2) var<storage, read_write> key_count: array<u32>;
 

@@ -18,7 +18,7 @@ const ALPHA_MIN: f32 = {{ALPHA_MIN}};
 @group(0) @binding(1) var<storage, read> tile_prims: array<u32>;
 @group(0) @binding(2) var<storage, read> tile_ranges: array<u32>;
 @group(0) @binding(3) var<storage, read> tile_order: array<u32>;
-@group(0) @binding(4) var<uniform> frame: FrameInfo;
+@group(0) @binding(4) var<uniform> frame: FrameUniform;
 {{SHADE_BINDINGS}}
 
 var<workgroup> batch_words: array<u32, {{BATCH_WORDS}}>;

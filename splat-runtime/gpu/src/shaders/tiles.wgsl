@@ -10,7 +10,7 @@ const CULL_AT: u32 = 6u;
 @group(0) @binding(0) var<storage, read> projected: array<u32>;
 // Per primitive front to back: its kept tiles, then (scanned) its first key.
 @group(0) @binding(1) var<storage, read_write> counts: array<u32>;
-@group(0) @binding(2) var<uniform> frame: FrameInfo;
+@group(0) @binding(2) var<uniform> frame: FrameUniform;
 
 fn word(i: u32, k: u32) -> f32 {
     return bitcast<f32>(projected[i * STRIDE + k]);

@@ -1,7 +1,7 @@
-// The frame's uniform: what the passes of one frame share. Its Rust twin is `FrameInfo`
-// (frame_info.rs), whose fields and byte offsets a test compares with this struct's through
+// The frame's uniform: what the passes of one frame share. Its Rust twin is `FrameUniform`
+// (frame_uniform.rs), whose fields and byte offsets a test compares with this struct's through
 // naga's reflection of this file.
-struct FrameInfo {
+struct FrameUniform {
     // The scene's primitives.
     primitives: u32,
     // The image's size, pixels.

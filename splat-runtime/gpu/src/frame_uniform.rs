@@ -1,8 +1,8 @@
-//! The frame's uniform (`FrameInfo` in `shaders/frame_info.wgsl`), read by name in every pass
+//! The frame's uniform (`FrameUniform` in `shaders/frame_uniform.wgsl`), read by name in every pass
 //! that needs the frame's sizes, and its Rust twin, written as one value.
 
-/// `shaders/frame_info.wgsl`, put before each shader that binds the frame's uniform.
-pub const WGSL: &str = include_str!("shaders/frame_info.wgsl");
+/// `shaders/frame_uniform.wgsl`, put before each shader that binds the frame's uniform.
+pub const WGSL: &str = include_str!("shaders/frame_uniform.wgsl");
 
 /// A `#[repr(C)]` struct of `u32` fields, with its fields' names and byte offsets (compared
 /// with the WGSL struct's by a test) and its words in field order (what the buffer holds).
@@ -29,8 +29,8 @@ macro_rules! uniform_struct {
 }
 
 uniform_struct! {
-    /// What the passes of one frame share (WGSL `FrameInfo`).
-    pub struct FrameInfo {
+    /// What the passes of one frame share (WGSL `FrameUniform`).
+    pub struct FrameUniform {
         pub primitives: u32,
         pub width: u32,
         pub height: u32,
@@ -38,14 +38,14 @@ uniform_struct! {
         pub tiles_x: u32,
         pub p_max: u32,
         pub tiles: u32,
-        /// The tile keys the buffers hold: written alone when they grow ([`FrameInfo::ROOM`]).
+        /// The tile keys the buffers hold: written alone when they grow ([`FrameUniform::ROOM`]).
         pub room: u32,
     }
 }
 
-impl FrameInfo {
+impl FrameUniform {
     /// The byte offset of `room`, which the front writes on its own.
-    pub const ROOM: u64 = std::mem::offset_of!(FrameInfo, room) as u64;
+    pub const ROOM: u64 = std::mem::offset_of!(FrameUniform, room) as u64;
 }
 
 #[cfg(test)]
@@ -72,12 +72,12 @@ mod tests {
 
     #[test]
     fn the_rust_twin_lays_out_as_the_wgsl_struct() {
-        let rust: Vec<(String, usize)> = FrameInfo::FIELDS
+        let rust: Vec<(String, usize)> = FrameUniform::FIELDS
             .iter()
             .map(|(n, o)| (n.to_string(), *o))
             .collect();
-        assert_eq!(rust, wgsl_fields(WGSL, "FrameInfo"));
-        assert_eq!(FrameInfo::WORDS * 4, std::mem::size_of::<FrameInfo>());
+        assert_eq!(rust, wgsl_fields(WGSL, "FrameUniform"));
+        assert_eq!(FrameUniform::WORDS * 4, std::mem::size_of::<FrameUniform>());
     }
 
     #[test]
@@ -87,10 +87,10 @@ mod tests {
             "    height: u32,\n    width: u32,",
         );
         assert_ne!(swapped, WGSL);
-        let rust: Vec<(String, usize)> = FrameInfo::FIELDS
+        let rust: Vec<(String, usize)> = FrameUniform::FIELDS
             .iter()
             .map(|(n, o)| (n.to_string(), *o))
             .collect();
-        assert_ne!(rust, wgsl_fields(&swapped, "FrameInfo"));
+        assert_ne!(rust, wgsl_fields(&swapped, "FrameUniform"));
     }
 }
