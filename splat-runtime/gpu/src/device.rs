@@ -250,8 +250,22 @@ impl Gpu {
 
     /// The compute pipeline of `entry` in `source`, compiled on first use.
     pub fn pipeline(&self, source: &str, entry: &str) -> Result<wgpu::ComputePipeline, GpuError> {
+        self.pipeline_with(source, entry, &[])
+    }
+
+    /// The compute pipeline of `entry` in `source` with its `override` constants set to
+    /// `constants` (name, value), compiled on first use for each set of values.
+    pub fn pipeline_with(
+        &self,
+        source: &str,
+        entry: &str,
+        constants: &[(&str, f64)],
+    ) -> Result<wgpu::ComputePipeline, GpuError> {
         let mut h = DefaultHasher::new();
         (source, entry).hash(&mut h);
+        for (name, value) in constants {
+            (name, value.to_bits()).hash(&mut h);
+        }
         let key = h.finish();
         if let Some(p) = self.pipelines.lock().unwrap().get(&key) {
             return Ok(p.clone());
@@ -265,7 +279,10 @@ impl Gpu {
                 layout: None,
                 module: &module,
                 entry_point: Some(entry),
-                compilation_options: Default::default(),
+                compilation_options: wgpu::PipelineCompilationOptions {
+                    constants,
+                    ..Default::default()
+                },
                 cache: None,
             });
         if let Some(e) = pollster::block_on(scope.pop()) {
@@ -278,8 +295,18 @@ impl Gpu {
     /// The pipeline of `entry` in `source` (compiled on first use), with the binding slot of
     /// every variable the source declares, so its buffers are bound by name.
     pub fn kernel(&self, source: &str, entry: &str) -> Result<Kernel, GpuError> {
+        self.kernel_with(source, entry, &[])
+    }
+
+    /// [`Gpu::kernel`] with its `override` constants set to `constants` (name, value).
+    pub fn kernel_with(
+        &self,
+        source: &str,
+        entry: &str,
+        constants: &[(&str, f64)],
+    ) -> Result<Kernel, GpuError> {
         Ok(Kernel {
-            pipeline: self.pipeline(source, entry)?,
+            pipeline: self.pipeline_with(source, entry, constants)?,
             slots: binding_slots(source),
             entry: entry.to_string(),
         })

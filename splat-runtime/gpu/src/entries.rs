@@ -267,13 +267,7 @@ pub(crate) fn shade_pack<M: SplatMethod>(pairs: &[(&str, String)]) -> Result<Str
     ))
 }
 
-fn tile_pass(
-    layout: &Layout,
-    tile: u32,
-    b: &BlendSizes,
-    rule: Blend,
-    packing: Option<&ShadePacking>,
-) -> String {
+fn tile_pass(layout: &Layout, tile: u32, b: &BlendSizes, packing: Option<&ShadePacking>) -> String {
     let (bindings, stage) = match packing {
         None => (
             String::new(),
@@ -308,8 +302,6 @@ fn tile_pass(
             ("STRIDE", layout.stride.to_string()),
             ("SHADE_AT", layout.shade_at.to_string()),
             ("CHANNELS", layout.channels.to_string()),
-            ("T_MIN", format!("{:?}", rule.stop_at())),
-            ("ALPHA_MIN", format!("{:?}", rule.alpha_min)),
             (
                 "BATCH_WORDS",
                 (b.batch as usize * layout.shade_words.max(1)).to_string(),
@@ -327,7 +319,6 @@ pub fn shade<M: SplatMethod>(
     model: CameraModel,
     tile: u32,
     want_depth: bool,
-    rule: Blend,
     state: PixelState,
     packing: Option<&ShadePacking>,
 ) -> Result<String, GpuError> {
@@ -366,15 +357,15 @@ pub fn shade<M: SplatMethod>(
     );
     Ok(format!(
         "{wgsl}\n{}\n{body}",
-        tile_pass(&layout, tile, &b, rule, packing)
+        tile_pass(&layout, tile, &b, packing)
     ))
 }
 
 /// `backward_tiles`: the backward blend under the camera `model` with the gradient
 /// accumulation `acc`, replaying against the pixels stored as `state` says (the shade data
-/// packed as `packing` says, as in the forward pass), for the tile size,
-/// blend and gradient groups of `opts` (the groups a constant of the pipeline: `evaluate`'s
-/// adjoint branches on them fold).
+/// packed as `packing` says, as in the forward pass), for the tile size and gradient groups of
+/// `opts` (the groups a constant of the pipeline: `evaluate`'s adjoint branches on them fold;
+/// the blend's thresholds its override constants, [`blend_constants`]).
 pub fn backward<M: SplatMethod>(
     gpu: &Gpu,
     model: CameraModel,
@@ -384,7 +375,7 @@ pub fn backward<M: SplatMethod>(
     state: PixelState,
     packing: Option<&ShadePacking>,
 ) -> Result<String, GpuError> {
-    let (tile, rule) = (opts.tile_size, opts.blend);
+    let tile = opts.tile_size;
     let wgsl = M::SOURCE.wgsl;
     let layout = Layout::of::<M>();
     let b = blend_sizes(gpu, tile, &layout, acc.reduce == Reduction::Workgroup)?;
@@ -551,7 +542,7 @@ pub fn backward<M: SplatMethod>(
     );
     Ok(format!(
         "{wgsl}\n{}\n{body}",
-        tile_pass(&layout, tile, &b, rule, packing)
+        tile_pass(&layout, tile, &b, packing)
     ))
 }
 
@@ -564,14 +555,19 @@ pub fn raster_color_targets<M: SplatMethod>() -> usize {
     M::Color::LEN.div_ceil(RASTER_VALUES)
 }
 
+/// The blend's thresholds as the `override` constants of the tile passes (`shade`, `backward`:
+/// `T_MIN`, `ALPHA_MIN`), set when their pipelines are compiled.
+pub fn blend_constants(rule: Blend) -> [(&'static str, f64); 2] {
+    [
+        ("T_MIN", f64::from(rule.stop_at())),
+        ("ALPHA_MIN", f64::from(rule.alpha_min)),
+    ]
+}
+
 /// The hardware-rasterized forward pass under the camera `model` (`quad_vertex`,
 /// `splat_fragment`): the color channels in `color_targets` targets, then (with `depth`) the
 /// depth in one more target ([`raster_color_targets`] of them for the colors).
-pub fn raster<M: SplatMethod>(
-    model: CameraModel,
-    depth: bool,
-    rule: Blend,
-) -> Result<String, GpuError> {
+pub fn raster<M: SplatMethod>(model: CameraModel, depth: bool) -> Result<String, GpuError> {
     let wgsl = M::SOURCE.wgsl;
     let layout = Layout::of::<M>();
     let (camera, pixel_code, pixel_args) = pixel::<M>(3, model)?;
@@ -601,7 +597,6 @@ pub fn raster<M: SplatMethod>(
         &[
             ("STRIDE", layout.stride.to_string()),
             ("SHADE_AT", layout.shade_at.to_string()),
-            ("ALPHA_MIN", format!("{:?}", rule.alpha_min)),
             ("CAMERA_BINDING", camera),
             ("TARGETS", decls),
             ("PIXEL", pixel_code),

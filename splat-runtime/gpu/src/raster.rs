@@ -176,8 +176,8 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
         }
         let (model, opts, formats) = (camera.model, self.opts, &self.formats);
         let (pipeline, slots) = self.pipelines.get(model, || {
-            let source = entries::raster::<M>(model, opts.depth, opts.blend)?;
-            let pipeline = build_pipeline(gpu, &source, formats)?;
+            let source = entries::raster::<M>(model, opts.depth)?;
+            let pipeline = build_pipeline(gpu, &source, formats, opts.blend.alpha_min)?;
             Ok::<_, GpuError>((pipeline, super::device::binding_slots(&source)))
         })?;
         let layout = pipeline.get_bind_group_layout(0);
@@ -304,7 +304,10 @@ fn build_pipeline(
     gpu: &Gpu,
     source: &str,
     formats: &[wgpu::TextureFormat],
+    alpha_min: f32,
 ) -> Result<wgpu::RenderPipeline, GpuError> {
+    // The fragment's `override ALPHA_MIN`: pairs below it are skipped.
+    let constants = [("ALPHA_MIN", f64::from(alpha_min))];
     let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
     let module = gpu.shader_module("splat quads", source);
     let under = wgpu::BlendComponent {
@@ -345,7 +348,10 @@ fn build_pipeline(
             fragment: Some(wgpu::FragmentState {
                 module: &module,
                 entry_point: Some("splat_fragment"),
-                compilation_options: Default::default(),
+                compilation_options: wgpu::PipelineCompilationOptions {
+                    constants: &constants,
+                    ..Default::default()
+                },
                 targets: &targets,
             }),
             multiview_mask: None,

@@ -251,8 +251,8 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         let packing = self.packer.as_ref().map(ShadePacker::packing);
         let shade = self.shade.get(model, || {
             let (tile, depth, blend) = (opts.tile_size, opts.depth, opts.blend);
-            let source = entries::shade::<M>(gpu, model, tile, depth, blend, state, packing)?;
-            gpu.kernel(&source, "shade_tiles")
+            let source = entries::shade::<M>(gpu, model, tile, depth, state, packing)?;
+            gpu.kernel_with(&source, "shade_tiles", &entries::blend_constants(blend))
         })?;
         let mut inputs = self.tile_pass_inputs();
         inputs.push(("pixel_out", &self.pixels));
@@ -646,7 +646,8 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         let packing = self.packer.as_ref().map(ShadePacker::packing);
         let source =
             entries::backward::<M>(gpu, key.0, &self.opts, want_depth, acc, self.state, packing)?;
-        let k = gpu.kernel(&source, "backward_tiles")?;
+        let constants = entries::blend_constants(self.opts.blend);
+        let k = gpu.kernel_with(&source, "backward_tiles", &constants)?;
         self.blends.insert(key, k.clone());
         Ok(k)
     }

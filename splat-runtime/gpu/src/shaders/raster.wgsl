@@ -6,7 +6,8 @@
 
 const STRIDE: u32 = {{STRIDE}}u; // projected words per primitive
 const SHADE_AT: u32 = {{SHADE_AT}}u;
-const ALPHA_MIN: f32 = {{ALPHA_MIN}};
+// Set when the pipeline is compiled.
+override ALPHA_MIN: f32;
 
 @group(0) @binding(0) var<storage, read> projected: array<u32>;
 // The visible primitives, front to back.

@@ -9,10 +9,11 @@ const NS: u32 = {{NS}}u; // shade words per primitive
 const STRIDE: u32 = {{STRIDE}}u; // projected words per primitive
 const SHADE_AT: u32 = {{SHADE_AT}}u;
 const CHANNELS: u32 = {{CHANNELS}}u;
-// The blend's thresholds (the CPU's `shade::Blend`): stop once transmittance would fall to
+// The blend's thresholds (`splat_core::blend::Blend`): stop once transmittance would fall to
 // T_MIN; skip pairs whose alpha is below ALPHA_MIN.
-const T_MIN: f32 = {{T_MIN}};
-const ALPHA_MIN: f32 = {{ALPHA_MIN}};
+// Set when the pipeline is compiled (`entries::blend_constants`).
+override T_MIN: f32;
+override ALPHA_MIN: f32;
 
 @group(0) @binding(0) var<storage, read> projected: array<u32>;
 @group(0) @binding(1) var<storage, read> tile_prims: array<u32>;
