@@ -36,7 +36,8 @@ pub struct Gpu {
     /// part of what the compiled pipelines are, so only set through that.
     shader_checks: bool,
     limits: wgpu::Limits,
-    pipelines: Mutex<HashMap<u64, wgpu::ComputePipeline>>,
+    /// Kernels by (source, entry point, override constants).
+    pipelines: Mutex<HashMap<u64, Kernel>>,
 }
 
 pub(crate) fn as_bytes(words: &[u32]) -> &[u8] {
@@ -248,27 +249,28 @@ impl Gpu {
             })
     }
 
-    /// The compute pipeline of `entry` in `source`, compiled on first use.
-    pub fn pipeline(&self, source: &str, entry: &str) -> Result<wgpu::ComputePipeline, GpuError> {
-        self.pipeline_with(source, entry, &[])
+    /// The pipeline of `entry` in `source` (compiled on first use), with the binding slot of
+    /// every variable the source declares, so its buffers are bound by name.
+    pub fn kernel(&self, source: &str, entry: &str) -> Result<Kernel, GpuError> {
+        self.kernel_with(source, entry, &[])
     }
 
-    /// The compute pipeline of `entry` in `source` with its `override` constants set to
-    /// `constants` (name, value), compiled on first use for each set of values.
-    pub fn pipeline_with(
+    /// [`Gpu::kernel`] with its `override` constants set to `constants` (name, value):
+    /// compiled on first use for each set of values.
+    pub fn kernel_with(
         &self,
         source: &str,
         entry: &str,
         constants: &[(&str, f64)],
-    ) -> Result<wgpu::ComputePipeline, GpuError> {
+    ) -> Result<Kernel, GpuError> {
         let mut h = DefaultHasher::new();
         (source, entry).hash(&mut h);
         for (name, value) in constants {
             (name, value.to_bits()).hash(&mut h);
         }
         let key = h.finish();
-        if let Some(p) = self.pipelines.lock().unwrap().get(&key) {
-            return Ok(p.clone());
+        if let Some(k) = self.pipelines.lock().unwrap().get(&key) {
+            return Ok(k.clone());
         }
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = self.shader_module(entry, source);
@@ -288,28 +290,13 @@ impl Gpu {
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Shader(format!("{entry}: {e}")));
         }
-        self.pipelines.lock().unwrap().insert(key, pipeline.clone());
-        Ok(pipeline)
-    }
-
-    /// The pipeline of `entry` in `source` (compiled on first use), with the binding slot of
-    /// every variable the source declares, so its buffers are bound by name.
-    pub fn kernel(&self, source: &str, entry: &str) -> Result<Kernel, GpuError> {
-        self.kernel_with(source, entry, &[])
-    }
-
-    /// [`Gpu::kernel`] with its `override` constants set to `constants` (name, value).
-    pub fn kernel_with(
-        &self,
-        source: &str,
-        entry: &str,
-        constants: &[(&str, f64)],
-    ) -> Result<Kernel, GpuError> {
-        Ok(Kernel {
-            pipeline: self.pipeline_with(source, entry, constants)?,
-            slots: binding_slots(source),
+        let kernel = Kernel {
+            pipeline,
+            slots: binding_slots(source)?,
             entry: entry.to_string(),
-        })
+        };
+        self.pipelines.lock().unwrap().insert(key, kernel.clone());
+        Ok(kernel)
     }
 
     /// A bind group for `kernel` with each buffer at the slot its name is declared with (name
@@ -439,23 +426,19 @@ pub struct Kernel {
     entry: String,
 }
 
-/// The binding declarations of a runtime shader: `@binding(N) var<...> name: ...` lines.
-pub fn binding_slots(source: &str) -> Vec<(String, u32)> {
-    source
-        .lines()
-        .filter_map(|line| {
-            let rest = line.split("@binding(").nth(1)?;
-            let (slot, rest) = rest.split_once(')')?;
-            let decl = rest.split_once("var")?.1;
-            let decl = decl.trim_start();
-            let decl = match decl.strip_prefix('<') {
-                Some(d) => d.split_once('>')?.1,
-                None => decl,
-            };
-            let name = decl.split(':').next()?.trim();
-            Some((name.to_string(), slot.trim().parse().ok()?))
-        })
-        .collect()
+/// The binding slot of every resource `source` declares (`@group(0) @binding(N) var ... name`),
+/// by name, as naga parses the module that is compiled: the source without the functions no
+/// entry point reaches ([`reachable_only`](super::prune::reachable_only); those may call
+/// functions the source leaves out).
+pub fn binding_slots(source: &str) -> Result<Vec<(String, u32)>, GpuError> {
+    let source = super::prune::reachable_only(source);
+    let module = naga::front::wgsl::parse_str(&source)
+        .map_err(|e| GpuError::Shader(e.emit_to_string(&source)))?;
+    Ok(module
+        .global_variables
+        .iter()
+        .filter_map(|(_, v)| Some((v.name.clone()?, v.binding.as_ref()?.binding)))
+        .collect())
 }
 
 /// A storage buffer that persists across frames: re-created only when a frame needs more
@@ -572,7 +555,7 @@ mod tests {
 // @binding is mentioned here without a declaration
 @group(0) @binding(8) var<storage, read_write> issued: array<atomic<u32>, 2>;";
         assert_eq!(
-            binding_slots(source),
+            binding_slots(source).unwrap(),
             [
                 ("keys".to_string(), 0),
                 ("info".into(), 2),

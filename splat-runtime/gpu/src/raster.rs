@@ -178,7 +178,7 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
         let (pipeline, slots) = self.pipelines.get(model, || {
             let source = entries::raster::<M>(model, opts.depth)?;
             let pipeline = build_pipeline(gpu, &source, formats, opts.blend.alpha_min)?;
-            Ok::<_, GpuError>((pipeline, super::device::binding_slots(&source)))
+            Ok::<_, GpuError>((pipeline, super::device::binding_slots(&source)?))
         })?;
         let layout = pipeline.get_bind_group_layout(0);
         let bind = gpu.bind_slots("splat_fragment", &layout, &slots, &inputs)?;
