@@ -426,23 +426,7 @@ pub fn backward<M: SplatMethod>(
         .collect();
     let scatter = scatter::scatter(acc.reduce, layout.grad_words, b.rc as usize);
     let sums = Sums::at(opts.gradient_precision);
-    let (grad_atomic, atomic_add) = if sums.half {
-        ("atomic<u32>", Sums::WGSL_ADD_HALF)
-    } else if acc.float_atomics {
-        ("atomic<f32>", "    atomicAdd(&grads[i], v);")
-    } else {
-        (
-            "atomic<u32>",
-            "    var old = atomicLoad(&grads[i]);
-    loop {
-        let r = atomicCompareExchangeWeak(&grads[i], old, bitcast<u32>(bitcast<f32>(old) + v));
-        if (r.exchanged) {
-            break;
-        }
-        old = r.old_value;
-    }",
-        )
-    };
+    let (grad_atomic, add_grad) = sums.wgsl_add(acc.float_atomics);
     let note = match acc.reduce {
         Reduction::Workgroup => {
             "each entry's gradient is first summed over the workgroup in workgroup memory (one atomic per tile, entry and word)."
@@ -509,7 +493,7 @@ pub fn backward<M: SplatMethod>(
             ),
             ("LANE", lane.into()),
             ("SUM_BINDING", sum_binding(sums, 13)),
-            ("ATOMIC_ADD", atomic_add.into()),
+            ("ADD_GRAD", add_grad.into()),
             ("WG", b.wg.to_string()),
             ("PIXEL", pixel_code),
             ("EVALUATE", call),
@@ -678,7 +662,7 @@ pub fn project_backward<M: SplatMethod>(
             ),
             ("WRITE", write),
             ("SUM_BINDING", sum_binding(sums, 7)),
-            ("GRAD_READ", sums.wgsl_read()),
+            ("GRAD_READ", sums.wgsl_read().into()),
         ],
     );
     Ok(format!("{wgsl}\n{FINITE}\n{HALF}\n{body}"))

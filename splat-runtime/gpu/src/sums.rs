@@ -12,6 +12,11 @@ use half::f16;
 use splat_core::precision::{Precision, sum_format, sum_scale};
 
 const LARGEST: &str = include_str!("shaders/largest.wgsl");
+const ADD_F16: &str = include_str!("shaders/sums/add_f16.wgsl");
+const ADD_F32_ATOMIC: &str = include_str!("shaders/sums/add_f32_atomic.wgsl");
+const ADD_F32_EXCHANGE: &str = include_str!("shaders/sums/add_f32_exchange.wgsl");
+const READ_F16: &str = include_str!("shaders/sums/read_f16.wgsl");
+const READ_F32: &str = include_str!("shaders/sums/read_f32.wgsl");
 
 /// How the sums are held: f32 (one word each, f32 atomics or a compare-exchange loop) or f16.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -35,44 +40,23 @@ impl Sums {
         }
     }
 
-    /// WGSL of `fn add_grad(i: u32, v: f32)` for f16 sums in `grads` (`atomic<u32>`), with
-    /// the largest output gradient's bits in `grad_largest[0]` (needs `half.wgsl`, `finite`).
-    pub(crate) const WGSL_ADD_HALF: &'static str = "    let word = i / 2u;
-    let shift = (i % 2u) * 16u;
-    let scaled = v * sum_scale(grad_largest[0]);
-    var old = atomicLoad(&grads[word]);
-    loop {
-        let sum = saturate_half(from_half((old >> shift) & 0xffffu) + scaled);
-        let held = (old & ~(0xffffu << shift)) | (to_half(sum) << shift);
-        let r = atomicCompareExchangeWeak(&grads[word], old, held);
-        if (r.exchanged) {
-            break;
+    /// `fn add_grad(i: u32, v: f32)` for these sums in `grads` (`shaders/sums/add_*.wgsl`),
+    /// and the type of `grads`' elements it needs: f16 sums, or f32 ones by the adapter's f32
+    /// atomics where it has them (`float_atomics`), else by compare-exchange.
+    pub(crate) fn wgsl_add(self, float_atomics: bool) -> (&'static str, &'static str) {
+        match (self.half, float_atomics) {
+            (true, _) => ("atomic<u32>", ADD_F16),
+            (false, true) => ("atomic<f32>", ADD_F32_ATOMIC),
+            (false, false) => ("atomic<u32>", ADD_F32_EXCHANGE),
         }
-        old = r.old_value;
-    }";
+    }
 
-    /// WGSL of `fn grad(at: u32) -> f32` (sum `at`, unscaled) and `fn grad_bits(at: u32) ->
-    /// u32` (nonzero where the sum is) over the `u32` array `grads`.
-    pub(crate) fn wgsl_read(self) -> String {
+    /// `fn grad(at: u32) -> f32` (sum `at`, unscaled) and `fn grad_bits(at: u32) -> u32`
+    /// (nonzero where the sum is) over the `u32` array `grads` (`shaders/sums/read_*.wgsl`).
+    pub(crate) fn wgsl_read(self) -> &'static str {
         match self.half {
-            false => "fn grad(at: u32) -> f32 {
-    return bitcast<f32>(grads[at]);
-}
-
-fn grad_bits(at: u32) -> u32 {
-    return grads[at];
-}
-"
-            .into(),
-            true => "fn grad(at: u32) -> f32 {
-    return from_half(grad_bits(at)) / sum_scale(grad_largest[0]);
-}
-
-fn grad_bits(at: u32) -> u32 {
-    return (grads[at / 2u] >> ((at % 2u) * 16u)) & 0xffffu;
-}
-"
-            .into(),
+            false => READ_F32,
+            true => READ_F16,
         }
     }
 

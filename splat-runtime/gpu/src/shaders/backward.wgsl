@@ -51,9 +51,7 @@ fn longest_walk(lid: u32, end: u32) -> u32 {
     return workgroupUniformLoad(&walk_len);
 }
 
-fn add_grad(i: u32, v: f32) {
-{{ATOMIC_ADD}}
-}
+{{ADD_GRAD}}
 
 @compute @workgroup_size({{WG}})
 fn backward_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32{{LANE}}) {
