@@ -846,18 +846,23 @@ fn the_gpu_loop_trains_like_the_cpu_loop() {
     let mut prepared = random_start();
     splat_runtime::train::McmcOptions::prepare::<Method>(&mut prepared);
     let before = evaluate::<Method>(&prepared, &data.test, &options(0)).unwrap();
+    let unsampled = run(None, prepared.clone());
     let sampled = run(Some(test_mcmc()), prepared);
     println!(
-        "GPU from {} primitives: fixed {fixed:?}, density control {densified:?}; MCMC from 60 random: {:.2} dB before, {sampled:?} after",
+        "GPU from {} primitives: fixed {fixed:?}, density control {densified:?}; MCMC from 60 random: {:.2} dB before, {unsampled:?} without MCMC, {sampled:?} with",
         sparse.len(),
         before.psnr
     );
     assert!(densified.1 > 3 * sparse.len(), "the count grows");
     assert!(densified.0 > fixed.0 + 3.0, "and the fit improves");
     assert_eq!(sampled.1, 240, "MCMC grows to its cap");
+    // What MCMC adds, against the same start trained without it (17.48 dB in every run). With
+    // it the result is chaotic in the GPU's atomic order (the gradient sums' last bits steer
+    // which primitives are relocated): 19.0 to 21.3 dB over nine runs on lavapipe, so an
+    // absolute bound (it was before + 5.5 dB) failed one CI run in several at 19.02.
     assert!(
-        sampled.0 > before.psnr + 5.5,
-        "and fits the held-out views (measured +6.2 dB)"
+        sampled.0 > unsampled.0 + 1.0,
+        "and fits the held-out views better than the same start without it (measured +1.5 to +3.8 dB)"
     );
 }
 
