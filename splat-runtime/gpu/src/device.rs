@@ -132,11 +132,18 @@ impl Gpu {
     }
 
     /// A shader module of WGSL `source` (its functions the entry points do not reach pruned),
-    /// with or without run-time checks as [`Gpu::shader_checks`] says.
-    pub fn shader_module(&self, label: &str, source: &str) -> wgpu::ShaderModule {
+    /// with or without run-time checks as [`Gpu::shader_checks`] says, and the binding slot of
+    /// every resource it declares ([`binding_slots`]), so its buffers are bound by name.
+    pub fn shader_module(
+        &self,
+        label: &str,
+        source: &str,
+    ) -> Result<(wgpu::ShaderModule, Vec<(String, u32)>), GpuError> {
+        let source = super::prune::reachable_only(source);
+        let slots = binding_slots(&source)?;
         let desc = wgpu::ShaderModuleDescriptor {
             label: Some(label),
-            source: wgpu::ShaderSource::Wgsl(super::prune::reachable_only(source).into()),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
         };
         let checks = match self.shader_checks {
             true => wgpu::ShaderRuntimeChecks::checked(),
@@ -144,7 +151,8 @@ impl Gpu {
         };
         // SAFETY: the runtime's shaders stay within their arrays, end every loop and divide
         // by nonzero sizes (`with_shader_checks` says why).
-        unsafe { self.device.create_shader_module_trusted(desc, checks) }
+        let module = unsafe { self.device.create_shader_module_trusted(desc, checks) };
+        Ok((module, slots))
     }
 
     /// The device's limits (those of the adapter).
@@ -273,7 +281,7 @@ impl Gpu {
             return Ok(k.clone());
         }
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let module = self.shader_module(entry, source);
+        let (module, slots) = self.shader_module(entry, source)?;
         let pipeline = self
             .device
             .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
@@ -292,7 +300,7 @@ impl Gpu {
         }
         let kernel = Kernel {
             pipeline,
-            slots: binding_slots(source)?,
+            slots,
             entry: entry.to_string(),
         };
         self.pipelines.lock().unwrap().insert(key, kernel.clone());
@@ -427,13 +435,12 @@ pub struct Kernel {
 }
 
 /// The binding slot of every resource `source` declares (`@group(0) @binding(N) var ... name`),
-/// by name, as naga parses the module that is compiled: the source without the functions no
-/// entry point reaches ([`reachable_only`](super::prune::reachable_only); those may call
-/// functions the source leaves out).
+/// by name, as naga parses it. `source` is the module as compiled: pruned
+/// ([`reachable_only`](super::prune::reachable_only)), since the functions no entry point
+/// reaches may call functions the source leaves out.
 pub fn binding_slots(source: &str) -> Result<Vec<(String, u32)>, GpuError> {
-    let source = super::prune::reachable_only(source);
-    let module = naga::front::wgsl::parse_str(&source)
-        .map_err(|e| GpuError::Shader(e.emit_to_string(&source)))?;
+    let module = naga::front::wgsl::parse_str(source)
+        .map_err(|e| GpuError::Shader(e.emit_to_string(source)))?;
     Ok(module
         .global_variables
         .iter()

@@ -177,8 +177,7 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
         let (model, opts, formats) = (camera.model, self.opts, &self.formats);
         let (pipeline, slots) = self.pipelines.get(model, || {
             let source = entries::raster::<M>(model, opts.depth)?;
-            let pipeline = build_pipeline(gpu, &source, formats, opts.blend.alpha_min)?;
-            Ok::<_, GpuError>((pipeline, super::device::binding_slots(&source)?))
+            build_pipeline(gpu, &source, formats, opts.blend.alpha_min)
         })?;
         let layout = pipeline.get_bind_group_layout(0);
         let bind = gpu.bind_slots("splat_fragment", &layout, &slots, &inputs)?;
@@ -299,17 +298,18 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
     }
 }
 
-/// The quad pipeline: triangle strips, front-to-back ("under") blending into every target.
+/// The quad pipeline: triangle strips, front-to-back ("under") blending into every target;
+/// with the binding slots of its module.
 fn build_pipeline(
     gpu: &Gpu,
     source: &str,
     formats: &[wgpu::TextureFormat],
     alpha_min: f32,
-) -> Result<wgpu::RenderPipeline, GpuError> {
+) -> Result<(wgpu::RenderPipeline, Vec<(String, u32)>), GpuError> {
     // The fragment's `override ALPHA_MIN`: pairs below it are skipped.
     let constants = [("ALPHA_MIN", f64::from(alpha_min))];
     let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
-    let module = gpu.shader_module("splat quads", source);
+    let (module, slots) = gpu.shader_module("splat quads", source)?;
     let under = wgpu::BlendComponent {
         src_factor: wgpu::BlendFactor::OneMinusDstAlpha,
         dst_factor: wgpu::BlendFactor::One,
@@ -360,7 +360,7 @@ fn build_pipeline(
     if let Some(e) = pollster::block_on(scope.pop()) {
         return Err(GpuError::Shader(format!("splat quads: {e}")));
     }
-    Ok(pipeline)
+    Ok((pipeline, slots))
 }
 
 /// Every target's texels as f32, four per pixel, row after row.
