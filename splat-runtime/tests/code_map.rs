@@ -6,15 +6,13 @@
 //! the file's, or a folder holding it, mentions the rest of its path in its description (a
 //! crate's `src/` may be left out). `lib.rs`, `main.rs` and `mod.rs` stand for their folder.
 
+mod architecture;
+
 use std::path::{Path, PathBuf};
 
 /// Each entry's full path (with `/` for folders) and its text, path and description together.
 fn entries(map: &str) -> Vec<(String, String)> {
-    let block = map
-        .split("## Code map")
-        .nth(1)
-        .and_then(|rest| rest.split("```").nth(1))
-        .expect("ARCHITECTURE.md has a code map in a fenced block under `## Code map`");
+    let block = architecture::fenced_block(map, "Code map");
     // The parents of the current entry: (indent, full path).
     let mut parents: Vec<(usize, String)> = vec![];
     let mut out: Vec<(String, String)> = vec![];
@@ -97,8 +95,7 @@ fn sources(root: &Path) -> Vec<String> {
 #[test]
 fn the_code_map_names_every_source_file() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
-    let map = std::fs::read_to_string(root.join("ARCHITECTURE.md")).unwrap();
-    let entries = entries(&map);
+    let entries = entries(&architecture::text());
     let files = sources(root);
     assert!(files.len() > 90, "{} source files found", files.len());
     let missing: Vec<&String> = files.iter().filter(|f| !named(f, &entries)).collect();

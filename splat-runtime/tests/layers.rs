@@ -1,20 +1,17 @@
 //! The layers' dependency rules, read from ARCHITECTURE.md's table under "Layers": each crate of
-//! the workspace may depend on the splat crates its row names and on no other. A crate that gains an edge it must
-//! not have (the contract on a backend, the GPU backend on the CPU pipeline, IO on training)
-//! fails here, naming the edge; a new crate fails until it has a row.
+//! the workspace may depend on the splat crates its row names and on no other. A crate that
+//! gains an edge it must not have (the contract on a backend, the GPU backend on the CPU
+//! pipeline, IO on training) fails here, naming the edge; a new crate fails until it has a row.
+
+mod architecture;
 
 use std::collections::BTreeMap;
 use std::process::Command;
 
 /// Each crate's row of ARCHITECTURE.md's table under `## Layers`: its name and the splat crates
 /// it may depend on ("-" for none; a note in parentheses, like "(feature `gpu`)", is dropped).
-fn rules(architecture: &str) -> BTreeMap<String, Vec<String>> {
-    let block = architecture
-        .split("## Layers")
-        .nth(1)
-        .and_then(|rest| rest.split("```").nth(1))
-        .expect("ARCHITECTURE.md has the layers' table in a fenced block under `## Layers`");
-    block
+fn rules(doc: &str) -> BTreeMap<String, Vec<String>> {
+    architecture::fenced_block(doc, "Layers")
         .lines()
         .skip(2) // the fence's end of line and the header
         .filter_map(|line| {
@@ -92,11 +89,7 @@ fn every_crate_depends_only_on_the_layers_below_it() {
     let metadata: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let edges = workspace_edges(&metadata);
     assert!(edges.len() >= 14, "{} workspace crates found", edges.len());
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .unwrap();
-    let architecture = std::fs::read_to_string(root.join("ARCHITECTURE.md")).unwrap();
-    let bad = violations(&edges, &rules(&architecture));
+    let bad = violations(&edges, &rules(&architecture::text()));
     assert!(bad.is_empty(), "edges the layers forbid: {bad:#?}");
 }
 

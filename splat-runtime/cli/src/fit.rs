@@ -258,6 +258,7 @@ impl Fit<'_> {
             );
         }
         drop(listening);
+        let before = progress.before();
         let log = &mut progress.log;
         if log.evaluations.last().is_none_or(|e| e.0 < opts.steps) {
             log.evaluations.push((opts.steps, after));
@@ -268,7 +269,6 @@ impl Fit<'_> {
             n => format!("{n} steps on {place}, {:.1} ms per step", per_step * 1e3),
         };
         let views = crate::count(after.views, "test view");
-        let before = progress.before;
         println!(
             "{pace}, {} primitives; {views}: PSNR {:.2} -> {:.2} dB, SSIM {:.3} -> {:.3}",
             params.len(),
@@ -366,10 +366,9 @@ struct Progress {
     saved: Result<()>,
     checkpoint_path: PathBuf,
     metrics: PathBuf,
-    /// The step the run started from, when, and the test views' evaluation before it.
+    /// The step the run started from, and when.
     first: usize,
     started: Instant,
-    before: Evaluation,
     steps: usize,
     line_every: usize,
 }
@@ -383,7 +382,6 @@ impl Progress {
         bar.set_position(first as u64);
         Progress {
             bar,
-            before: log.evaluations.first().map(|e| e.1).unwrap_or_default(),
             log,
             times: StepTimes::default(),
             faulty_steps: 0,
@@ -395,6 +393,15 @@ impl Progress {
             steps,
             line_every: (steps - first).div_ceil(20).next_multiple_of(10),
         }
+    }
+
+    /// The test views' evaluation before the first step (the log's first).
+    fn before(&self) -> Evaluation {
+        self.log
+            .evaluations
+            .first()
+            .map(|e| e.1)
+            .unwrap_or_default()
     }
 
     fn record<M: Trainable>(&mut self, r: &StepReport) {
@@ -431,7 +438,7 @@ impl Progress {
             let v = r.loss;
             // The last measured: the final evaluation comes after the last step's line.
             let (at, test) =
-                (self.log.evaluations.last()).map_or((0, self.before.psnr), |e| (e.0, e.1.psnr));
+                (self.log.evaluations.last()).map_or((0, self.before().psnr), |e| (e.0, e.1.psnr));
             let status = format!(
                 "loss {:.4} (L1 {:.4}, SSIM {:.3}), test PSNR {test:.2} dB at step {at}, {} primitives",
                 v.loss, v.l1, v.ssim, r.primitives

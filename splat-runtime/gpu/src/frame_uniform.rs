@@ -70,13 +70,15 @@ mod tests {
             .collect()
     }
 
+    /// The Rust twin's fields and byte offsets, as [`wgsl_fields`] lists them.
+    fn rust_fields() -> Vec<(String, usize)> {
+        let fields = FrameUniform::FIELDS.iter();
+        fields.map(|(n, o)| (n.to_string(), *o)).collect()
+    }
+
     #[test]
     fn the_rust_twin_lays_out_as_the_wgsl_struct() {
-        let rust: Vec<(String, usize)> = FrameUniform::FIELDS
-            .iter()
-            .map(|(n, o)| (n.to_string(), *o))
-            .collect();
-        assert_eq!(rust, wgsl_fields(WGSL, "FrameUniform"));
+        assert_eq!(rust_fields(), wgsl_fields(WGSL, "FrameUniform"));
         assert_eq!(FrameUniform::WORDS * 4, std::mem::size_of::<FrameUniform>());
     }
 
@@ -87,10 +89,6 @@ mod tests {
             "    height: u32,\n    width: u32,",
         );
         assert_ne!(swapped, WGSL);
-        let rust: Vec<(String, usize)> = FrameUniform::FIELDS
-            .iter()
-            .map(|(n, o)| (n.to_string(), *o))
-            .collect();
-        assert_ne!(rust, wgsl_fields(&swapped, "FrameUniform"));
+        assert_ne!(rust_fields(), wgsl_fields(&swapped, "FrameUniform"));
     }
 }
