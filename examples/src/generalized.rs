@@ -56,54 +56,27 @@ pub mod generalized {
     }
 
     pub fn project(p: &Params, cam: &Camera) -> Projected<Cull, Shade> {
-        let t = cam.rotation * p.mean + cam.translation;
-        let z = t.z.max(NEAR);
-        let (f, c, size) = (cam.focal, cam.principal, cam.size);
-        let mean = Vec3::new(t.x, t.y, z);
-        // EWA: the projection's Jacobian at the mean (any camera model), on the pinhole at the
-        // tangent clamp of 3DGS.
-        let lim_pos = (size - c) / f + size * 0.15 / f;
-        let lim_neg = c / f + size * 0.15 / f;
-        let tx = (t.x / z).clamp(-lim_neg.x, lim_pos.x) * z;
-        let ty = (t.y / z).clamp(-lim_neg.y, lim_pos.y) * z;
-        let at = select(cam.is_pinhole(), Vec3::new(tx, ty, z), mean);
-        let (_, d) = jacobian(|q| cam.project_point(q), at);
-        let j = Mat3::from_cols(
-            Vec3::new(d[0].x, d[1].x, 0.0),
-            Vec3::new(d[0].y, d[1].y, 0.0),
-            Vec3::new(d[0].z, d[1].z, 0.0),
-        );
-        let rot =
-            Quat::from_xyzw(p.rotation.y, p.rotation.z, p.rotation.w, p.rotation.x).normalize();
-        let m = cam.rotation * Mat3::from_quat(rot) * Mat3::from_diagonal(p.log_scale.exp());
-        let cov = j * (m * m.transpose()) * j.transpose();
-        let (a, b, d) = (cov.x_axis.x + 0.3, cov.y_axis.x, cov.y_axis.y + 0.3);
-        let det = a * d - b * b;
+        let g = blocks::gaussian_footprint(p.mean, p.log_scale, p.rotation, cam, NEAR, 0.3);
         let opacity = sigmoid(p.opacity_logit);
         let shape = 2.0 * p.log_shape_half.exp();
         // alpha = ALPHA_MIN where q^(β/2) = 2 ln(opacity / ALPHA_MIN); 0.1% slack absorbs the
         // f32 rounding of ln / exp, so the box and the tile cull never drop a kept pixel.
         let power_max = (2.0 * (opacity / ALPHA_MIN).ln()).max(1e-30);
         let q_max = 1.001 * (2.0 / shape * power_max.ln()).exp();
-        // Farthest along the major axis (eigenvalue `lambda`, rounded up by the 0.1 floor).
-        let mid = 0.5 * (a + d);
-        let lambda = mid + (mid * mid - det).max(0.1).sqrt();
-        let radius = (q_max * lambda).sqrt().min(MAX_RADIUS).ceil();
-        let center = cam.project_point(mean);
-        let conic = Vec3::new(d, -b, a) / det;
+        let radius = blocks::footprint_radius(g.cov, q_max).min(MAX_RADIUS);
         Projected {
-            visible: t.z > NEAR && det > 0.0 && opacity >= ALPHA_MIN,
-            depth: t.z,
-            bbox_min: center - radius,
-            bbox_max: center + radius,
+            visible: g.visible && opacity >= ALPHA_MIN,
+            depth: g.depth,
+            bbox_min: g.center - radius,
+            bbox_max: g.center + radius,
             cull: Cull {
-                center,
-                conic,
+                center: g.center,
+                conic: g.conic,
                 q_max,
             },
             shade: Shade {
-                center,
-                conic,
+                center: g.center,
+                conic: g.conic,
                 opacity,
                 shape,
                 color: (spherical_harmonics(p.sh, p.mean - cam.center()) + 0.5).max(Vec3::ZERO),
@@ -111,23 +84,12 @@ pub mod generalized {
         }
     }
 
-    /// StopThePop as in 3DGS: the smallest q over the tile's pixel centres is at the centre or
-    /// on an edge facing it. Alpha falls monotonically with q, so q <= q_max keeps exactly the
-    /// tiles that hold a pixel the alpha threshold keeps (plus the slack).
     pub fn tile_cull(tile: &Tile, g: &Cull) -> bool {
-        let (mu, k) = (g.center, g.conic);
-        let dx = mu.x - mu.x.clamp(tile.min.x, tile.max.x);
-        let dy1 = mu.y - (mu.y + k.y * dx / k.z).clamp(tile.min.y, tile.max.y);
-        let dy = mu.y - mu.y.clamp(tile.min.y, tile.max.y);
-        let dx2 = mu.x - (mu.x + k.y * dy / k.x).clamp(tile.min.x, tile.max.x);
-        let p1 = k.x * dx * dx + 2.0 * k.y * dx * dy1 + k.z * dy1 * dy1;
-        let p2 = k.x * dx2 * dx2 + 2.0 * k.y * dx2 * dy + k.z * dy * dy;
-        p1.min(p2) <= g.q_max
+        blocks::conic_tile_cull(tile, g.center, g.conic, g.q_max)
     }
 
     pub fn evaluate(px: Vec2, s: &Shade) -> Contribution<Vec3> {
-        let d = px - s.center;
-        let q = s.conic.x * d.x * d.x + 2.0 * s.conic.y * d.x * d.y + s.conic.z * d.y * d.y;
+        let q = blocks::conic_distance2(px - s.center, s.conic);
         // q^(β/2) = exp(β/2 ln q); `select` differentiates ln(q) only where q > Q_MIN.
         let power = select(q > Q_MIN, (0.5 * s.shape * q.ln()).exp(), 0.0);
         let alpha = (s.opacity * (-0.5 * power).exp()).min(0.99);

@@ -5,3 +5,4 @@ pub mod features;
 pub mod generalized;
 pub mod isotropic;
 pub mod rays;
+pub mod student;

@@ -161,7 +161,7 @@ fn gradient_sets<M: SplatMethod>() -> Vec<(String, GradientSet)> {
         GradientSet::ALL.with_camera(false),
     )];
     for (name, _) in param_groups::<M>() {
-        let set = GradientSet::params::<M>(&[&name]).unwrap();
+        let set = GradientSet::params::<M>(&[name]).unwrap();
         sets.push((format!("`{name}` alone"), set));
     }
     sets

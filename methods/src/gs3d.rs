@@ -60,59 +60,34 @@ macro_rules! gaussians_3d {
             }
 
             pub fn project(p: &Params, cam: &Camera) -> Projected<Cull, Shade> {
-                let t = cam.rotation * p.mean + cam.translation;
-                let z = t.z.max(NEAR);
-                let (f, c, size) = (cam.focal, cam.principal, cam.size);
-                let mean = Vec3::new(t.x, t.y, z);
-                // EWA: the projection's Jacobian at the mean, derived by the compiler for every
-                // camera model; on the pinhole at the tangent clamp of 3DGS / gsplat (a Gaussian
-                // far off the image is not stretched without bound).
-                let lim_pos = (size - c) / f + size * 0.15 / f;
-                let lim_neg = c / f + size * 0.15 / f;
-                let tx = (t.x / z).clamp(-lim_neg.x, lim_pos.x) * z;
-                let ty = (t.y / z).clamp(-lim_neg.y, lim_pos.y) * z;
-                let at = select(cam.is_pinhole(), Vec3::new(tx, ty, z), mean);
-                let (_, d) = jacobian(|q| cam.project_point(q), at);
-                let j = Mat3::from_cols(
-                    Vec3::new(d[0].x, d[1].x, 0.0),
-                    Vec3::new(d[0].y, d[1].y, 0.0),
-                    Vec3::new(d[0].z, d[1].z, 0.0),
+                let g = blocks::gaussian_footprint(
+                    p.mean,
+                    p.log_scale,
+                    p.rotation,
+                    cam,
+                    NEAR,
+                    DILATION,
                 );
-                let q = Quat::from_xyzw(p.rotation.y, p.rotation.z, p.rotation.w, p.rotation.x)
-                    .normalize();
-                let m = cam.rotation * Mat3::from_quat(q) * Mat3::from_diagonal(p.log_scale.exp());
-                let cov = j * (m * m.transpose()) * j.transpose();
-                let (a0, b, d0) = (cov.x_axis.x, cov.y_axis.x, cov.y_axis.y);
-                let (a, d) = (a0 + DILATION, d0 + DILATION);
-                let det = a * d - b * b;
-                let conic = Vec3::new(d, -b, a) / det;
-                let compensation = if ANTIALIASED {
-                    ((a0 * d0 - b * b) / det).max(0.0).sqrt()
-                } else {
-                    1.0
-                };
-                // Opacity-aware extent: every pixel where alpha >= ALPHA_MIN lies within `radius` of
-                // the centre (0.5 d^T conic d <= max_power along the major axis), so the box culls
-                // nothing the threshold would keep.
+                let compensation = if ANTIALIASED { g.compensation } else { 1.0 };
+                // Opacity-aware extent: every pixel where alpha >= ALPHA_MIN lies within `radius`
+                // of the centre (0.5 d^T conic d <= max_power along the major axis), so the box
+                // culls nothing the threshold would keep.
                 let opacity = sigmoid(p.opacity_logit) * compensation;
                 let max_power = (opacity / ALPHA_MIN).ln();
-                let mid = 0.5 * (a + d);
-                let lambda = mid + (mid * mid - det).max(0.1).sqrt();
-                let radius = (2.0 * max_power.max(0.0) * lambda).sqrt().ceil();
-                let center = cam.project_point(mean);
+                let radius = blocks::footprint_radius(g.cov, 2.0 * max_power.max(0.0));
                 Projected {
-                    visible: t.z > NEAR && cam.can_project(t) && det > 0.0 && opacity >= ALPHA_MIN,
-                    depth: t.z,
-                    bbox_min: center - radius,
-                    bbox_max: center + radius,
+                    visible: g.visible && opacity >= ALPHA_MIN,
+                    depth: g.depth,
+                    bbox_min: g.center - radius,
+                    bbox_max: g.center + radius,
                     cull: Cull {
-                        center,
-                        conic,
+                        center: g.center,
+                        conic: g.conic,
                         max_power,
                     },
                     shade: Shade {
-                        center,
-                        conic,
+                        center: g.center,
+                        conic: g.conic,
                         opacity,
                         color: (spherical_harmonics(p.sh, p.mean - cam.center()) + 0.5)
                             .max(Vec3::ZERO),
@@ -120,18 +95,10 @@ macro_rules! gaussians_3d {
                 }
             }
 
-            /// StopThePop: keep the tile iff the Gaussian's largest alpha over the tile's pixel centres
-            /// reaches ALPHA_MIN. That maximum is at the centre, or on an edge facing it, where the
-            /// 1D minimum of the quadratic form along the edge is clamped to the edge.
+            /// StopThePop: keep the tile iff the Gaussian's largest alpha over the tile's pixel
+            /// centres reaches ALPHA_MIN.
             pub fn tile_cull(tile: &Tile, g: &Cull) -> bool {
-                let (mu, k) = (g.center, g.conic);
-                let dx = mu.x - mu.x.clamp(tile.min.x, tile.max.x);
-                let dy1 = mu.y - (mu.y + k.y * dx / k.z).clamp(tile.min.y, tile.max.y);
-                let dy = mu.y - mu.y.clamp(tile.min.y, tile.max.y);
-                let dx2 = mu.x - (mu.x + k.y * dy / k.x).clamp(tile.min.x, tile.max.x);
-                let p1 = k.x * dx * dx + 2.0 * k.y * dx * dy1 + k.z * dy1 * dy1;
-                let p2 = k.x * dx2 * dx2 + 2.0 * k.y * dx2 * dy + k.z * dy * dy;
-                0.5 * p1.min(p2) <= g.max_power
+                blocks::conic_tile_cull(tile, g.center, g.conic, 2.0 * g.max_power)
             }
 
             pub fn evaluate(px: Vec2, s: &Shade) -> Contribution<Vec3> {

@@ -23,4 +23,5 @@ mod linprim;
 mod precision;
 mod reference;
 mod rolling_shutter;
+mod suite;
 mod variants;

@@ -59,9 +59,7 @@ pub mod surfel {
     }
 
     pub fn project(p: &Params, cam: &Camera) -> Projected<f32, Shade> {
-        let rot =
-            Quat::from_xyzw(p.rotation.y, p.rotation.z, p.rotation.w, p.rotation.x).normalize();
-        let axes = cam.rotation * Mat3::from_quat(rot);
+        let axes = cam.rotation * blocks::rotation_matrix(p.rotation);
         let scale = p.log_scale.exp();
         let a = homogeneous(axes.x_axis * scale.x, cam);
         let b = homogeneous(axes.y_axis * scale.y, cam);

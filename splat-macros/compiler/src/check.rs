@@ -119,6 +119,9 @@ fn adjoints<'m>(m: &'m Module, diag: &Diag) -> Option<Vec<(&'m FnDef, &'m FnDef)
     ok.then_some(out)
 }
 
+const LIBRARY_STRUCT: &str = "a building block's struct, which lives only inside kernels: \
+     give the method a struct of its own with the fields it keeps";
+
 /// A method's roles against `splat_runtime::SplatMethod`'s contract.
 fn roles<'m>(m: &'m Module, diag: &Diag) -> Option<Roles<'m>> {
     let missing = |what: &str, returns: &str| {
@@ -156,6 +159,15 @@ fn roles<'m>(m: &'m Module, diag: &Diag) -> Option<Roles<'m>> {
         );
         return None;
     };
+    for (what, t) in [("cull", &cull), ("shade", &shade)] {
+        if let Some(block) = crate::blocks::struct_in(t) {
+            diag.error_at(
+                &project.item.sig.output,
+                format!("the {what} data of `project` holds `{block}`, {LIBRARY_STRUCT}"),
+            );
+            return None;
+        }
+    }
     check_params(
         evaluate,
         &[("the pixel data", None), ("the shade data", Some(&shade))],
@@ -274,6 +286,13 @@ fn check_params(def: &FnDef, want: &[(&str, Option<&Ty>)], diag: &Diag) -> Optio
         return None;
     }
     for (i, (p, (what, ty))) in def.params.iter().zip(want).enumerate() {
+        if let Some(block) = crate::blocks::struct_in(&p.ty) {
+            diag.error_at(
+                &written_type(def, i),
+                format!("{what} of `{}` holds `{block}`, {LIBRARY_STRUCT}", def.name),
+            );
+            return None;
+        }
         if let Some(t) = ty
             && p.ty != **t
         {

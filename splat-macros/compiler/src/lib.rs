@@ -19,6 +19,7 @@
 //! `splat-macros/README.md`.
 
 pub mod ad;
+pub mod blocks;
 pub mod builtins;
 pub mod check;
 pub mod diag;

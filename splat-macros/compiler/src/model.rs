@@ -22,6 +22,8 @@ pub struct Module {
 pub struct StructDef {
     pub item: syn::ItemStruct,
     pub ty: Rc<StructTy>,
+    /// One of the building blocks' structs (`blocks`): a value inside kernels, never emitted.
+    pub library: bool,
 }
 
 pub struct ConstDef {
@@ -119,17 +121,21 @@ impl Module {
         unique_names(struct_items.iter().map(|s| &s.ident), diag);
         let values = const_items.iter().map(|c| &c.ident);
         unique_names(values.chain(fn_items.iter().map(|f| &f.sig.ident)), diag);
+        let (library_structs, library_fns) = crate::blocks::items();
+        let user_structs = struct_items.len();
+        struct_items.extend(library_structs);
         let mut resolver = Resolver {
             items: &struct_items,
             done: HashMap::new(),
             consts: &const_items,
         };
         let mut structs = vec![];
-        for s in &struct_items {
+        for (i, s) in struct_items.iter().enumerate() {
             if let Some(ty) = resolver.resolve_struct(s, diag, &mut vec![]) {
                 structs.push(StructDef {
                     item: s.clone(),
                     ty,
+                    library: i >= user_structs,
                 });
             }
         }
@@ -155,7 +161,10 @@ impl Module {
             }
         }
         let errors_before = diag.count();
-        for f in crate::builtins::builtin_items() {
+        for f in crate::builtins::builtin_items()
+            .into_iter()
+            .chain(library_fns)
+        {
             if let Some(def) = parse_fn(f, &mut resolver, diag) {
                 fns.push(FnDef {
                     builtin: true,
@@ -358,6 +367,14 @@ impl Resolver<'_> {
                     continue;
                 }
             };
+            if let Some(block) = crate::blocks::struct_in(&ty)
+                && crate::blocks::display(&name).is_none()
+            {
+                let why = "a building block's struct lives only inside kernels, not in a module's";
+                diag.error_at(&f.ty, format!("`{block}`: {why} structs"));
+                ok = false;
+                continue;
+            }
             out.push((fname, ty));
         }
         stack.pop();
@@ -366,7 +383,7 @@ impl Resolver<'_> {
         }
         let ident = &s.ident;
         let ty = Rc::new(StructTy {
-            display: name.clone(),
+            display: crate::blocks::display(&name).unwrap_or_else(|| name.clone()),
             path: TokenStreamEq(quote!(#ident)),
             fields: out,
         });
@@ -409,7 +426,14 @@ impl Resolver<'_> {
             }
             syn::Type::Path(p) if p.qself.is_none() => {
                 let seg = p.path.segments.last().expect("non-empty path");
-                let name = seg.ident.to_string();
+                let name = match p.path.segments.first() {
+                    Some(owner)
+                        if p.path.segments.len() == 2 && owner.ident == crate::blocks::PATH =>
+                    {
+                        crate::blocks::internal(&seg.ident.to_string())
+                    }
+                    _ => seg.ident.to_string(),
+                };
                 let args: Vec<Ty> = match &seg.arguments {
                     syn::PathArguments::None => vec![],
                     syn::PathArguments::AngleBracketed(a) => {

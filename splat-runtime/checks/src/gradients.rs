@@ -416,7 +416,7 @@ pub fn gradient_subsets_match_the_full_pass<M: SplatMethod>(
     );
     let grad = frame_grad(&weights(n, <M::Color as Flat>::LEN));
     let groups = splat_core::param_groups::<M>();
-    let names: Vec<&str> = groups.iter().map(|(g, _)| g.as_str()).collect();
+    let names: Vec<&str> = groups.iter().map(|(g, _)| *g).collect();
     let mut sets = vec![(
         "everything but the camera".to_string(),
         GradientSet::ALL.with_camera(false),

@@ -41,6 +41,10 @@ pub mod fixture;
 pub mod forward;
 pub mod gradients;
 pub mod reference;
+pub mod scenes;
+pub mod suite;
+
+pub use suite::{check_method, check_method_with};
 pub mod variants;
 
 use splat_core::blend::Blend;

@@ -517,7 +517,7 @@ fn trained_groups<M: Trainable>(
     method: &str,
 ) -> Result<FitOptions> {
     let groups = param_groups::<M>();
-    let names: Vec<&str> = groups.iter().map(|(name, _)| name.as_str()).collect();
+    let names: Vec<&str> = groups.iter().map(|(name, _)| *name).collect();
     let (frozen, trained) = frozen_and_trained(&names, freeze, method)?;
     let gradients = GradientSet::params::<M>(&trained).map_err(|e| anyhow!(e))?;
     if !frozen.is_empty() {

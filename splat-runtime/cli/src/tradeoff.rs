@@ -334,7 +334,7 @@ impl<'a> Tradeoff<'a> {
                     let group = words
                         .chunks(len)
                         .flat_map(|p| p[range.clone()].iter().copied());
-                    (name.clone(), group.collect())
+                    (name.to_string(), group.collect())
                 })
                 .collect();
             out.push(outcome);

@@ -220,13 +220,13 @@ pub trait SplatMethod: Send + Sync + 'static {
 /// The fields of `M::Params` as word ranges, named as the method declared them (`mean`,
 /// `log_scale`, `sh`, ...): its gradient groups, in the order of their bits in a
 /// [`GradientSet`].
-pub fn param_groups<M: SplatMethod>() -> Vec<(String, std::ops::Range<usize>)> {
+pub fn param_groups<M: SplatMethod>() -> Vec<(&'static str, std::ops::Range<usize>)> {
     let mut at = 0;
     M::PARAM_FIELDS
         .iter()
-        .map(|(name, words)| {
+        .map(|&(name, words)| {
             at += words;
-            (name.to_string(), at - words..at)
+            (name, at - words..at)
         })
         .collect()
 }
@@ -235,7 +235,7 @@ pub fn param_groups<M: SplatMethod>() -> Vec<(String, std::ops::Range<usize>)> {
 pub fn param_group<M: SplatMethod>(name: &str) -> Option<std::ops::Range<usize>> {
     param_groups::<M>()
         .into_iter()
-        .find(|(n, _)| n == name)
+        .find(|(n, _)| *n == name)
         .map(|(_, range)| range)
 }
 
@@ -318,7 +318,7 @@ impl GradientSet {
         let mut bits = 0;
         for name in names {
             let k = groups.iter().position(|(g, _)| g == name).ok_or_else(|| {
-                let known: Vec<&str> = groups.iter().map(|(g, _)| g.as_str()).collect();
+                let known: Vec<&str> = groups.iter().map(|(g, _)| *g).collect();
                 format!(
                     "{} has no parameter group `{name}`: its groups are {}",
                     M::NAME,

@@ -568,7 +568,7 @@ pub(crate) fn rates_for<M: Trainable>(
     let shape = shape_words::<M>();
     let frozen_shape: Vec<&str> = (frozen.iter())
         .filter(|(_, r)| r.clone().any(|k| shape.contains(&k)))
-        .map(|(name, _)| name.as_str())
+        .map(|(name, _)| *name)
         .collect();
     if opts.densify.is_some() && !frozen_shape.is_empty() {
         return Err(FitError::Unsupported(format!(
@@ -631,7 +631,7 @@ fn check_run<M: SplatMethod>(
 /// cap on primitives, the frozen groups. A run resumed with others would train another way.
 pub fn settings<M: SplatMethod>(opts: &FitOptions) -> String {
     let b = opts.background;
-    let frozen: Vec<String> = frozen_groups::<M>(opts).into_iter().map(|g| g.0).collect();
+    let frozen: Vec<&str> = frozen_groups::<M>(opts).into_iter().map(|g| g.0).collect();
     format!(
         "on background {} {} {}{}{}{}",
         b.x,
@@ -655,7 +655,9 @@ pub fn settings<M: SplatMethod>(opts: &FitOptions) -> String {
 
 /// The parameter groups of `M` that a run of `opts` does not train (`opts.render.gradients`
 /// leaves them out).
-pub fn frozen_groups<M: SplatMethod>(opts: &FitOptions) -> Vec<(String, std::ops::Range<usize>)> {
+pub fn frozen_groups<M: SplatMethod>(
+    opts: &FitOptions,
+) -> Vec<(&'static str, std::ops::Range<usize>)> {
     param_groups::<M>()
         .into_iter()
         .enumerate()

@@ -14,6 +14,7 @@ pub mod fit;
 #[cfg(feature = "gpu")]
 pub mod gpu_fit;
 pub mod init;
+pub mod like_3dgs;
 pub mod loss;
 pub mod mcmc;
 pub mod step_times;
@@ -25,3 +26,11 @@ pub use fit::{FitOptions, Strategy};
 pub use mcmc::McmcOptions;
 pub use step_times::StepTimes;
 pub use trainable::{Rate, Shape, Trainable};
+
+/// What [`like_3dgs!`] expands to names, from the crates it does not re-export.
+#[doc(hidden)]
+pub mod __private {
+    pub use splat_core::glam::{Vec2, Vec3};
+    pub use splat_core::method::SplatMethod;
+    pub use splat_io::ply::{FromStored, StoredGaussian, ToStored};
+}

@@ -14,7 +14,7 @@ use quote::quote;
 /// The user's structs, re-emitted with the derives the runtime needs and a `Flat` impl.
 pub fn structs(module: &Module) -> TokenStream {
     let mut out = TokenStream::new();
-    for s in &module.structs {
+    for s in module.structs.iter().filter(|s| !s.library) {
         let mut item = s.item.clone();
         item.attrs.retain(|a| !a.path().is_ident("derive"));
         if let syn::Fields::Named(named) = &mut item.fields {

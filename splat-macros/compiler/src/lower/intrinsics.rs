@@ -257,6 +257,12 @@ impl Lowerer<'_> {
             return self.free_intrinsic(name, c, &spans, span);
         }
         let (owner, item) = (&segs[segs.len() - 2], &segs[segs.len() - 1]);
+        if owner == crate::blocks::PATH {
+            let def = (self.module.find_fn(&crate::blocks::internal(item)))
+                .unwrap_or_else(|| unchecked("an unknown block"));
+            let args = self.args_of(&c.args)?;
+            return self.call_helper(def, args, span);
+        }
         let mut args = self.args_of(&c.args)?;
         match rules::path_call(owner, item) {
             Some(rules::Path::Constructor(sig)) => Ok(self.constructor(owner, item, sig.ret, args)),

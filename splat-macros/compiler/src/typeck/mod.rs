@@ -10,6 +10,7 @@
 
 pub mod rules;
 
+use crate::blocks;
 use crate::builtins::{SH_COEFFICIENTS, camera_helper, sh_helper};
 use crate::diag::{Diag, Failed, R};
 use crate::ir::Unary;
@@ -764,6 +765,15 @@ impl<'m> Checker<'m> {
             return self.free_intrinsic(name, c, span);
         }
         let (owner, item) = (&segs[segs.len() - 2], &segs[segs.len() - 1]);
+        if let [blocks::PATH, name] = [owner.as_str(), item.as_str()] {
+            return match self.module.find_fn(&blocks::internal(name)) {
+                Some(def) => {
+                    let args = self.args_of(&c.args)?;
+                    self.call_helper(def, &args, span)
+                }
+                None => self.err(span, unknown_block(name)),
+            };
+        }
         let args = self.args_of(&c.args)?;
         let spans: Vec<Span> = c.args.iter().map(|a| a.span()).collect();
         match rules::path_call(owner, item) {
@@ -785,7 +795,7 @@ impl<'m> Checker<'m> {
                 let recv = args[0].clone();
                 self.method(item, recv, &args[1..], &spans[1..], span)
             }
-            None => self.err(span, format!("unknown function `{owner}::{item}`")),
+            None => self.err(span, unknown_path(owner, item)),
         }
     }
 
@@ -920,4 +930,32 @@ fn macro_name(m: &syn::Macro) -> String {
         .last()
         .map(|s| s.ident.to_string())
         .unwrap_or_default()
+}
+
+/// `blocks::name` where the library has no `name`: what it has.
+fn unknown_block(name: &str) -> String {
+    format!(
+        "splat's building blocks have no `{name}`; they are:\n{}",
+        block_list()
+    )
+}
+
+/// A call of `owner::item` that is neither a constructor, a method in path form nor a block:
+/// usually a function of another module, which a kernel cannot see.
+fn unknown_path(owner: &str, item: &str) -> String {
+    format!(
+        "unknown function `{owner}::{item}`: a kernel calls only the functions of its own \
+         module, the intrinsics (`sqrt(x)`, `sigmoid(x)`, `spherical_harmonics(sh, dir)`, ...), \
+         the camera's methods (`cam.project_point(p)`, ...) and splat's building blocks:\n{}\n\
+         To share functions of your own between methods, write the modules with one \
+         `macro_rules!` that emits both (as `methods/src/gs3d.rs` does for its five variants).",
+        block_list()
+    )
+}
+
+fn block_list() -> String {
+    let lines: Vec<String> = (blocks::signatures().iter())
+        .map(|s| format!("    {}::{s}", blocks::PATH))
+        .collect();
+    lines.join("\n")
 }
