@@ -8,8 +8,6 @@
 //! at 0, and multiplicative steps (β 1 -> 2 and 4 -> 8 are the same distance).
 
 use splat_macros::splat_method;
-use splat_runtime::glam::{Vec2, Vec3, Vec4};
-use splat_runtime::train::Shape;
 
 #[splat_method]
 pub mod generalized {
@@ -101,74 +99,10 @@ pub mod generalized {
     }
 }
 
-/// A PLY scene's Gaussians as splats of shape 2 with their degree-1 colors (how `splat render
-/// --scene` reads a scene for this method).
-impl splat_runtime::io::ply::FromStored for generalized::Params {
-    fn from_stored(g: &splat_runtime::io::ply::StoredGaussian) -> Self {
-        generalized::Params {
-            mean: g.mean,
-            log_scale: g.log_scale,
-            rotation: g.rotation,
-            opacity_logit: g.opacity_logit,
-            log_shape_half: 0.0,
-            sh: [g.sh[0], g.sh[1], g.sh[2], g.sh[3]],
-        }
-    }
-}
-
-/// How GES trains (`splat fit`): 3DGS's rates, the shape at 1e-3, the degree-1 band from step
-/// 1,000; a primitive starts as a Gaussian (β = 2).
-impl splat_runtime::train::Trainable for generalized::Method {
-    fn learning_rates(extent: f32) -> Vec<splat_runtime::train::Rate> {
-        use splat_runtime::train::Rate;
-        let fixed = |lr: f32, n: usize| std::iter::repeat_n(Rate::fixed(lr), n);
-        let position = Rate {
-            first: 1.6e-4 * extent,
-            last: 1.6e-6 * extent,
-            from_step: 0,
-        };
-        let band1 = Rate {
-            from_step: 1000,
-            ..Rate::fixed(2.5e-3 / 20.0)
-        };
-        let rates = std::iter::repeat_n(position, 3).chain(fixed(5e-3, 3));
-        let rates = rates.chain(fixed(1e-3, 4)).chain(fixed(5e-2, 1));
-        let rates = rates.chain(fixed(1e-3, 1)).chain(fixed(2.5e-3, 3));
-        rates.chain(std::iter::repeat_n(band1, 9)).collect()
-    }
-
-    fn from_point(point: Vec3, color: Vec3, scale: f32) -> generalized::Params {
-        let c0 = splat_runtime::prelude::spherical_harmonics([Vec3::ONE], Vec3::Z).x;
-        generalized::Params {
-            mean: point,
-            log_scale: Vec3::splat(scale.max(1e-7).ln()),
-            rotation: Vec4::new(1.0, 0.0, 0.0, 0.0),
-            opacity_logit: (0.1f32 / 0.9).ln(),
-            log_shape_half: 0.0,
-            sh: [(color - 0.5) / c0, Vec3::ZERO, Vec3::ZERO, Vec3::ZERO],
-        }
-    }
-
-    fn shape(p: &generalized::Params) -> Shape {
-        Shape::from_gaussian(p.mean, p.log_scale, p.rotation, p.opacity_logit)
-    }
-
-    fn with_shape(p: &generalized::Params, s: &Shape) -> generalized::Params {
-        let (mean, log_scale, rotation, opacity_logit) = s.to_gaussian();
-        generalized::Params {
-            mean,
-            log_scale,
-            rotation,
-            opacity_logit,
-            ..*p
-        }
-    }
-
-    fn position_gradient(g: &generalized::Params) -> Vec3 {
-        g.mean
-    }
-
-    fn screen_gradient(g: &generalized::Shade) -> Option<Vec2> {
-        Some(g.center)
-    }
-}
+// How GES reads a PLY scene (its Gaussians as splats of shape 2) and trains (`splat fit`):
+// 3DGS's rates, initialization and density control, the shape at 1e-3 from β = 2.
+splat_runtime::train::like_3dgs!(
+    generalized,
+    own: { log_shape_half: splat_runtime::train::Rate::fixed(1e-3) => 0.0 },
+    screen: center,
+);

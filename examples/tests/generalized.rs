@@ -484,3 +484,18 @@ fn every_camera_model_renders_and_differentiates() {
         gpu_gradients_match_cpu::<Method>(&label, &params, &cam);
     }
 }
+
+/// GES's shape is a field 3DGS does not train: `gaussian_rates` names it unless given its rate
+/// (as `like_3dgs!` gives it, 1e-3, after the opacity).
+#[test]
+fn the_shape_needs_a_rate_of_its_own() {
+    use splat_runtime::train::Rate;
+    use splat_runtime::train::like_3dgs::gaussian_rates;
+    let err = gaussian_rates::<Method>(1.0, &[]).unwrap_err();
+    assert!(err.contains("`log_shape_half`"), "{err}");
+    let rates = gaussian_rates::<Method>(1.0, &[("log_shape_half", Rate::fixed(0.5))]).unwrap();
+    assert_eq!(
+        (rates.len(), rates[11].first, rates[12].first),
+        (24, 0.5, 2.5e-3)
+    );
+}

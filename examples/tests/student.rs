@@ -1,18 +1,45 @@
 //! Student's t splats (a new falloff on splat's building blocks) through every public check in
 //! one call: renders against the f64 reference, boxes and tile cull, gradients against finite
-//! differences and the reference's adjoint, the extremes, the GPU against the CPU.
+//! differences and the reference's adjoint, the extremes, the GPU against the CPU; and trained
+//! by its one `like_3dgs!` line.
 
 use splat_examples::student::student::Method;
-use splat_runtime::checks::{check_method_with, suite};
 
 #[test]
 fn student_splats_pass_every_check() {
-    // 1,000 on one pixel instead of 10,000: the heavy tails stack into a wide ring of pixels
-    // whose transmittance ends near the T-stop, which the reference cannot call either way
-    // (10,000: 15 of 384 pixels, past the 2% a check accepts).
-    let suite = suite::Suite {
-        stack: 1000,
-        ..suite::gaussian_suite::<Method>()
-    };
-    check_method_with::<Method>("student", &suite);
+    splat_runtime::checks::check_method::<Method>("student");
+}
+
+/// Trained by its one `like_3dgs!` line: `splat fit` on the built-in dataset (300 steps on the
+/// CPU) gains on the held-out views and writes the scene as a PLY.
+#[test]
+fn student_splats_train_through_the_command_line() {
+    use splat_cli::{Instance, Method as Offered, run_with_args};
+    let offered = [Offered::new(
+        "student",
+        "Student's t splats",
+        Instance::trainable::<Method>(),
+    )];
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("fit");
+    let args = [
+        "splat",
+        "fit",
+        "--backend",
+        "cpu",
+        "--steps",
+        "300",
+        "--eval-every",
+        "0",
+    ];
+    let out_args = ["--out", out.to_str().unwrap()];
+    run_with_args(&offered, args.iter().chain(&out_args)).unwrap();
+    let metrics = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
+    let psnr: Vec<f64> = (metrics.lines().skip(1))
+        .filter_map(|l| l.split(',').nth(5)?.parse().ok())
+        .collect();
+    println!("test PSNR {psnr:?}");
+    assert!(psnr.len() == 2 && psnr[1] > psnr[0] + 8.0, "{metrics}");
+    let scene = splat_runtime::io::ply::read(&out.join("scene.ply")).unwrap();
+    assert!(!scene.gaussians.is_empty());
 }

@@ -114,86 +114,9 @@ macro_rules! gaussians_3d {
             }
         }
 
-        /// 3DGS's learning rates (positions scaled by the scene's extent and decayed 100x, the
-        /// higher SH bands 20x slower than the DC term, band b trained from step 1,000 b) and
-        /// its initialization: an isotropic Gaussian of opacity 0.1 with the point's color as
-        /// the DC term.
-        impl splat_runtime::train::Trainable for $name::Method {
-            fn learning_rates(extent: f32) -> Vec<splat_runtime::train::Rate> {
-                use splat_runtime::train::Rate;
-                let fixed = |lr: f32, n: usize| std::iter::repeat_n(Rate::fixed(lr), n);
-                let position = Rate {
-                    first: 1.6e-4 * extent,
-                    last: 1.6e-6 * extent,
-                    from_step: 0,
-                };
-                // Coefficient i (after the DC term) belongs to band floor(sqrt(i)).
-                let bands = (1..$n).flat_map(|i: usize| {
-                    let band = (i as f32).sqrt() as usize;
-                    std::iter::repeat_n(
-                        Rate {
-                            from_step: 1000 * band,
-                            ..Rate::fixed(2.5e-3 / 20.0)
-                        },
-                        3,
-                    )
-                });
-                std::iter::repeat_n(position, 3)
-                    .chain(fixed(5e-3, 3))
-                    .chain(fixed(1e-3, 4))
-                    .chain(fixed(5e-2, 1))
-                    .chain(fixed(2.5e-3, 3))
-                    .chain(bands)
-                    .collect()
-            }
-
-            fn from_point(
-                point: splat_runtime::glam::Vec3,
-                color: splat_runtime::glam::Vec3,
-                scale: f32,
-            ) -> $name::Params {
-                use splat_runtime::glam::{Vec3, Vec4};
-                // The DC basis function's value (constant over directions).
-                let c0 = splat_runtime::prelude::spherical_harmonics([Vec3::ONE], Vec3::Z).x;
-                let mut sh = [Vec3::ZERO; $n];
-                sh[0] = (color - 0.5) / c0;
-                $name::Params {
-                    mean: point,
-                    log_scale: Vec3::splat(scale.max(1e-7).ln()),
-                    rotation: Vec4::new(1.0, 0.0, 0.0, 0.0),
-                    opacity_logit: (0.1f32 / 0.9).ln(),
-                    sh,
-                }
-            }
-
-            fn shape(p: &$name::Params) -> splat_runtime::train::Shape {
-                splat_runtime::train::Shape::from_gaussian(
-                    p.mean,
-                    p.log_scale,
-                    p.rotation,
-                    p.opacity_logit,
-                )
-            }
-
-            fn with_shape(p: &$name::Params, s: &splat_runtime::train::Shape) -> $name::Params {
-                let (mean, log_scale, rotation, opacity_logit) = s.to_gaussian();
-                $name::Params {
-                    mean,
-                    log_scale,
-                    rotation,
-                    opacity_logit,
-                    ..*p
-                }
-            }
-
-            fn position_gradient(g: &$name::Params) -> splat_runtime::glam::Vec3 {
-                g.mean
-            }
-
-            fn screen_gradient(g: &$name::Shade) -> Option<splat_runtime::glam::Vec2> {
-                Some(g.center)
-            }
-        }
+        // 3DGS's learning rates, initialization and density control (grown from the projected
+        // centre's gradient), and PLY scenes: `splat_runtime::train::like_3dgs`.
+        splat_runtime::train::like_3dgs!($name, screen: center);
     };
 }
 

@@ -45,11 +45,6 @@ macro_rules! stored_as_is {
 }
 
 stored_as_is!(
-    gs3d::Params,
-    gs3d_sh0::Params,
-    gs3d_sh1::Params,
-    gs3d_sh2::Params,
-    gs3d_aa::Params,
     gut::Params,
     gut_sh0::Params,
     gut_sh1::Params,

@@ -242,6 +242,18 @@ fn sh_bands_unlock_every_thousand_steps() {
     let position = rates[0];
     assert!((position.at(0, 100) - 3.2e-4).abs() < 1e-9);
     assert!((position.at(100, 100) - 3.2e-6).abs() < 1e-11);
+    // By field name (`like_3dgs!`): log scales, rotation, opacity, the DC term.
+    let fixed = |k: usize| (rates[k].first, rates[k].last, rates[k].from_step);
+    for (words, lr) in [
+        (3..6, 5e-3),
+        (6..10, 1e-3),
+        (10..11, 5e-2),
+        (11..14, 2.5e-3),
+    ] {
+        for k in words {
+            assert_eq!(fixed(k), (lr, lr, 0), "word {k}");
+        }
+    }
 }
 
 #[test]

@@ -192,23 +192,12 @@ impl ToStored for surfel::Params {
     }
 }
 
-/// How surfels train (`fit`): 3DGS's rates; densification sees each disk as its flat Gaussian.
+/// How surfels train (`fit`): 3DGS's rates (by field name: two log scales); densification sees
+/// each disk as its flat Gaussian.
 impl Trainable for surfel::Method {
     fn learning_rates(extent: f32) -> Vec<Rate> {
-        let position = Rate {
-            first: 1.6e-4 * extent,
-            last: 1.6e-6 * extent,
-            from_step: 0,
-        };
-        let band1 = Rate {
-            from_step: 1000,
-            ..Rate::fixed(2.5e-3 / 20.0)
-        };
-        let fixed = |lr: f32, n: usize| std::iter::repeat_n(Rate::fixed(lr), n);
-        let rates = std::iter::repeat_n(position, 3).chain(fixed(5e-3, 2));
-        let rates = rates.chain(fixed(1e-3, 4)).chain(fixed(5e-2, 1));
-        let rates = rates.chain(fixed(2.5e-3, 3));
-        rates.chain(std::iter::repeat_n(band1, 9)).collect()
+        splat_runtime::train::like_3dgs::gaussian_rates::<surfel::Method>(extent, &[])
+            .expect("a surfel's fields are a Gaussian's")
     }
 
     /// A disk of radius `scale`, opacity 0.1, facing a direction hashed from the point (a

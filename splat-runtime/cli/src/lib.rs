@@ -22,6 +22,7 @@ mod fit;
 mod interrupt;
 mod memory;
 mod methods;
+mod new_crate;
 mod plot;
 mod render;
 mod scene;
@@ -103,6 +104,18 @@ enum Command {
     /// Measure a scene on a dataset's views as `splat fit` measures its result: PSNR and SSIM
     /// per view and their mean, with the renders and a CSV in --out.
     Eval(commands::eval::EvalArgs),
+    /// Write a crate for a new method (a 3D Gaussian whose falloff is yours to change) that
+    /// builds and passes every check at once, with the whole command line.
+    New {
+        /// The crate's and the method's name (lowercase letters, digits, `-`, `_`).
+        name: String,
+        /// Where to write it (default: ./NAME); must not exist.
+        #[arg(long)]
+        dir: Option<PathBuf>,
+        /// The splat checkout to build on (default: the one this binary was built from).
+        #[arg(long)]
+        splat: Option<PathBuf>,
+    },
     /// Print the Rust or WGSL the #[splat_method] compiler generated for a method.
     Inspect {
         #[arg(long)]
@@ -265,6 +278,15 @@ fn dispatch(cli: Cli, methods: &[Method]) -> Result<()> {
         }
         Command::Gallery { out, width, height } => {
             commands::render::gallery(&out, width, height, methods)
+        }
+        Command::New { name, dir, splat } => {
+            let dir = new_crate::new_crate(&name, dir.as_deref(), splat.as_deref())?;
+            println!(
+                "wrote {0}: `cd {0} && cargo test --offline` runs every check, \
+                 `cargo run --release -- fit` trains it",
+                dir.display()
+            );
+            Ok(())
         }
         Command::Inspect { method, lang } => {
             let source = methods::find(methods, &method)?.full().source;

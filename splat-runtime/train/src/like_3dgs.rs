@@ -1,8 +1,7 @@
 //! Training in one line for a method whose parameters are a 3DGS Gaussian's fields (`mean`,
 //! `log_scale`, `rotation`, `opacity_logit`, `sh`) plus any of its own: [`like_3dgs!`] gives it
 //! 3DGS's learning rates ([`gaussian_rates`]), initialization ([`gaussian_from_point`]) and
-//! density control, and PLY scenes (`FromStored` / `ToStored`: its own fields start at their
-//! given values and are not stored).
+//! density control, and PLY scenes.
 
 use crate::trainable::Rate;
 use splat_core::glam::{Vec3, Vec4};
@@ -76,8 +75,10 @@ pub fn gaussian_from_point(point: Vec3, color: Vec3, scale: f32) -> (Vec3, Vec3,
 
 /// Makes a `#[splat_method]` module `$m`, whose `Params` holds a 3DGS Gaussian's fields
 /// (`mean: Vec3`, `log_scale: Vec3`, `rotation: Vec4`, `opacity_logit: f32`,
-/// `sh: [Vec3; N]`) and maybe fields of its own, train as 3DGS does and read and write PLY
-/// scenes:
+/// `sh: [Vec3; N]`) and maybe fields of its own, train as 3DGS does (`Trainable`) and read PLY
+/// scenes (`FromStored`, its own fields at their start); one without fields of its own also
+/// writes them (`ToStored`: a PLY has no place for the others, and `splat fit` does not drop
+/// what it trained).
 ///
 /// ```ignore
 /// splat_runtime::train::like_3dgs!(student);
@@ -87,21 +88,9 @@ pub fn gaussian_from_point(point: Vec3, color: Vec3, scale: f32) -> (Vec3, Vec3,
 /// ```
 #[macro_export]
 macro_rules! like_3dgs {
-    ($m:ident $(, own: { $($field:ident: $rate:expr => $init:expr),* $(,)? })? $(, screen: $screen:ident)? $(,)?) => {
-        impl $crate::__private::FromStored for $m::Params {
-            #[allow(clippy::needless_update)]
-            fn from_stored(g: &$crate::__private::StoredGaussian) -> Self {
-                $m::Params {
-                    mean: g.mean,
-                    log_scale: g.log_scale,
-                    rotation: g.rotation,
-                    opacity_logit: g.opacity_logit,
-                    sh: ::std::array::from_fn(|i| g.sh[i]),
-                    $($($field: $init,)*)?
-                    ..::std::default::Default::default()
-                }
-            }
-        }
+    ($m:ident $(, screen: $screen:ident)? $(,)?) => {
+        $crate::like_3dgs!(@read $m {});
+        $crate::like_3dgs!(@train $m {} $($screen)?);
 
         impl $crate::__private::ToStored for $m::Params {
             fn to_stored(&self) -> $crate::__private::StoredGaussian {
@@ -116,10 +105,31 @@ macro_rules! like_3dgs {
                 }
             }
         }
-
+    };
+    ($m:ident, own: { $($field:ident: $rate:expr => $init:expr),* $(,)? } $(, screen: $screen:ident)? $(,)?) => {
+        $crate::like_3dgs!(@read $m { $($field: $rate => $init),* });
+        $crate::like_3dgs!(@train $m { $($field: $rate => $init),* } $($screen)?);
+    };
+    (@read $m:ident { $($field:ident: $rate:expr => $init:expr),* }) => {
+        impl $crate::__private::FromStored for $m::Params {
+            #[allow(clippy::needless_update)]
+            fn from_stored(g: &$crate::__private::StoredGaussian) -> Self {
+                $m::Params {
+                    mean: g.mean,
+                    log_scale: g.log_scale,
+                    rotation: g.rotation,
+                    opacity_logit: g.opacity_logit,
+                    sh: ::std::array::from_fn(|i| g.sh[i]),
+                    $($field: $init,)*
+                    ..::std::default::Default::default()
+                }
+            }
+        }
+    };
+    (@train $m:ident { $($field:ident: $rate:expr => $init:expr),* } $($screen:ident)?) => {
         impl $crate::Trainable for $m::Method {
             fn learning_rates(extent: f32) -> ::std::vec::Vec<$crate::Rate> {
-                let own: &[(&str, $crate::Rate)] = &[$($((stringify!($field), $rate)),*)?];
+                let own: &[(&str, $crate::Rate)] = &[$((stringify!($field), $rate)),*];
                 $crate::like_3dgs::gaussian_rates::<Self>(extent, own)
                     .unwrap_or_else(|e| panic!("{e}"))
             }
@@ -140,7 +150,7 @@ macro_rules! like_3dgs {
                     rotation,
                     opacity_logit,
                     sh,
-                    $($($field: $init,)*)?
+                    $($field: $init,)*
                     ..::std::default::Default::default()
                 }
             }
@@ -164,7 +174,9 @@ macro_rules! like_3dgs {
                 g.mean
             }
 
-            $(fn screen_gradient(g: &<$m::Method as $crate::__private::SplatMethod>::Shade) -> Option<$crate::__private::Vec2> {
+            $(fn screen_gradient(
+                g: &<$m::Method as $crate::__private::SplatMethod>::Shade,
+            ) -> Option<$crate::__private::Vec2> {
                 Some(g.$screen)
             })?
         }
