@@ -7,9 +7,10 @@
 use anyhow::{Context, Result, bail};
 use std::path::{Path, PathBuf};
 
-/// The crate's files: (path inside the crate, template).
+/// The crate's files: (path inside the crate, template). The manifest's template is
+/// `Cargo.toml.in`: cargo leaves a folder holding a `Cargo.toml` out of splat-cli's package.
 const FILES: [(&str, &str); 7] = [
-    ("Cargo.toml", include_str!("../templates/Cargo.toml")),
+    ("Cargo.toml", include_str!("../templates/Cargo.toml.in")),
     (
         ".cargo/config.toml",
         include_str!("../templates/config.toml"),
