@@ -43,3 +43,15 @@ fn student_splats_train_through_the_command_line() {
     let scene = splat_runtime::io::ply::read(&out.join("scene.ply")).unwrap();
     assert!(!scene.gaussians.is_empty());
 }
+
+/// The falloff as first written, `(1 + q / ν)^(-(ν + 2) / 2)` with ν a constant, costs what the
+/// hand-written `rsqrt(r) / (r * r)` does: the compiler knows the exponent (-2.5) and computes
+/// no `pow` (`codegen-tests/benches/powers.rs` times the forms).
+#[test]
+fn the_naive_falloff_calls_no_pow() {
+    let wgsl = splat_examples::student::student::GENERATED_WGSL;
+    let evaluate = wgsl.split("fn ").find(|f| f.starts_with("evaluate("));
+    let evaluate = evaluate.expect("an evaluate kernel");
+    assert!(!evaluate.contains("pow("), "{evaluate}");
+    assert!(evaluate.contains("sqrt("), "{evaluate}");
+}

@@ -18,6 +18,7 @@
 
 mod bench;
 mod commands;
+mod cost;
 mod fit;
 mod interrupt;
 mod memory;
@@ -39,7 +40,7 @@ use splat_runtime::CameraModel;
 use splat_runtime::glam::Vec3;
 use splat_runtime::gpu::Gpu;
 use splat_runtime::io::{Outputs, camera as camera_io, dataset, ply};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 #[derive(Parser)]
@@ -122,6 +123,10 @@ enum Command {
         method: String,
         #[arg(long, value_enum, default_value_t = Lang::Rust)]
         lang: Lang,
+        /// Instead, count what each kernel computes (exp, ln, pow, trig, sqrt, divisions,
+        /// every operation): where a method's time goes, line by line.
+        #[arg(long)]
+        cost: bool,
     },
 }
 
@@ -210,8 +215,55 @@ where
             })
         });
     }
+    let args: Vec<T> = args.into_iter().collect();
+    if let Some(bin) = (args.first().cloned())
+        .map(Into::<std::ffi::OsString>::into)
+        .and_then(|a| Some(Path::new(&a).file_stem()?.to_str()?.to_string()))
+        .filter(|bin| bin != "splat")
+    {
+        command = named(command, &bin);
+    }
     let cli = Cli::from_arg_matches(&command.try_get_matches_from(args)?)?;
     dispatch(cli, methods)
+}
+
+/// `command` as the binary `bin` (a user crate's own command line; clap names it from the
+/// arguments already): `splat` in its help texts (`splat fit`) as `bin`.
+fn named(command: clap::Command, bin: &str) -> clap::Command {
+    let rename =
+        |text: &clap::builder::StyledStr| text.to_string().replace("`splat ", &format!("`{bin} "));
+    let mut command = command;
+    if let Some(about) = command.get_about().map(rename) {
+        command = command.about(about);
+    }
+    if let Some(about) = command.get_long_about().map(rename) {
+        command = command.long_about(about);
+    }
+    let args: Vec<(String, Option<String>, Option<String>)> = (command.get_arguments())
+        .map(|a| {
+            let id = a.get_id().to_string();
+            (id, a.get_help().map(rename), a.get_long_help().map(rename))
+        })
+        .collect();
+    for (id, help, long) in args {
+        command = command.mut_arg(id, |a| {
+            let a = match help {
+                Some(h) => a.help(h),
+                None => a,
+            };
+            match long {
+                Some(h) => a.long_help(h),
+                None => a,
+            }
+        });
+    }
+    let subs: Vec<String> = (command.get_subcommands())
+        .map(|s| s.get_name().to_string())
+        .collect();
+    for sub in subs {
+        command = command.mut_subcommand(sub, |s| named(s, bin));
+    }
+    command
 }
 
 fn dispatch(cli: Cli, methods: &[Method]) -> Result<()> {
@@ -288,11 +340,12 @@ fn dispatch(cli: Cli, methods: &[Method]) -> Result<()> {
             );
             Ok(())
         }
-        Command::Inspect { method, lang } => {
+        Command::Inspect { method, lang, cost } => {
             let source = methods::find(methods, &method)?.full().source;
-            let text = match lang {
-                Lang::Wgsl => source.wgsl,
-                Lang::Rust => source.rust,
+            let text = match (cost, lang) {
+                (true, _) => &cost::table(&cost::costs(source.wgsl)?),
+                (false, Lang::Wgsl) => source.wgsl,
+                (false, Lang::Rust) => source.rust,
             };
             // A reader that stops early (`| head`) is not an error.
             match std::io::Write::write_all(&mut std::io::stdout(), text.as_bytes()) {

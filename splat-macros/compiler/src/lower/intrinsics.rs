@@ -102,14 +102,8 @@ impl Lowerer<'_> {
                     self.bin(Binary::Min, lo, arg(1)[i])
                 })
                 .collect(),
-            (Ty::F32, "atan2" | "powf") => {
-                let op = if name == "atan2" {
-                    Binary::Atan2
-                } else {
-                    Binary::Powf
-                };
-                vec![self.bin(op, x, arg(0)[0])]
-            }
+            (Ty::F32, "atan2") => vec![self.bin(Binary::Atan2, x, arg(0)[0])],
+            (Ty::F32, "powf") => vec![self.powf(x, arg(0)[0])],
             (Ty::F32, "powi") => {
                 let Some(n) = self.int_const(&args[0]) else {
                     return self.err(
@@ -148,7 +142,7 @@ impl Lowerer<'_> {
             }
             (Ty::Vec(_), "powf") => {
                 let e = arg(0)[0];
-                r.iter().map(|&c| self.bin(Binary::Powf, c, e)).collect()
+                r.iter().map(|&c| self.powf(c, e)).collect()
             }
             (Ty::Vec(_), "lerp") => {
                 let t = arg(1)[0];
@@ -606,6 +600,53 @@ impl Lowerer<'_> {
         }
     }
 
+    /// x^y: for an exponent known at compile time (a literal, a constant, exact arithmetic on
+    /// them) that is an integer or half an odd integer within [`CHEAP_POWERS`], the cheaper
+    /// form of [`Self::power_of_constant`]; otherwise `powf` (through `exp` and `ln`).
+    fn powf(&mut self, x: Var, y: Var) -> Var {
+        if let Some(Const::F(e)) = self.const_of(y)
+            && let Some(v) = self.power_of_constant(x, e)
+        {
+            return v;
+        }
+        self.bin(Binary::Powf, x, y)
+    }
+
+    /// x^e by multiplications and one square root (half-integer e) or division (negative e):
+    /// x^n as [`Self::powi`], x^(n + 1/2) = x^n sqrt(x), x^-(n + 1/2) = rsqrt(x) / x^n. Within
+    /// 4 ulp of the exact power for |e| <= 4.5 (the rounding of up to 3 multiplications, a
+    /// square root and a division; `codegen-tests/tests/powers.rs` measures it), where
+    /// libm's `powf` is within 1; the same at ±0 (0 or +infinity), for negative x (NaN for a
+    /// half-integer, the signed power for an integer) and in the gradient (zero where `powf`'s
+    /// is guarded). `None` for any other exponent.
+    fn power_of_constant(&mut self, x: Var, e: f64) -> Option<Var> {
+        let twice = e * 2.0;
+        if e.abs() > CHEAP_POWERS || twice.fract() != 0.0 {
+            return None;
+        }
+        if e.fract() == 0.0 {
+            return Some(self.powi(x, e as i64));
+        }
+        // x + 0 is x but for -0, which becomes +0: powf(-0, -1/2) is +infinity, and
+        // 1 / sqrt(-0) would be -infinity.
+        let zero = self.fconst(0.0);
+        let x = self.bin(Binary::Add, x, zero);
+        let n = e.abs().floor() as i64;
+        let power = |s: &mut Self| s.powi(x, n);
+        Some(match (e > 0.0, n) {
+            (true, 0) => self.un(Unary::Sqrt, x),
+            (true, _) => {
+                let (p, r) = (power(self), self.un(Unary::Sqrt, x));
+                self.bin(Binary::Mul, p, r)
+            }
+            (false, 0) => self.un(Unary::Rsqrt, x),
+            (false, _) => {
+                let (r, p) = (self.un(Unary::Rsqrt, x), power(self));
+                self.bin(Binary::Div, r, p)
+            }
+        })
+    }
+
     /// x^n for a compile-time integer n, by repeated squaring.
     fn powi(&mut self, x: Var, n: i64) -> Var {
         if n == 0 {
@@ -654,3 +695,7 @@ impl Lowerer<'_> {
         v.map(|v| v.comps[0]).unwrap_or(x)
     }
 }
+
+/// The largest |exponent| `powf` by a constant is computed without `powf`
+/// ([`Lowerer::power_of_constant`]): past it the multiplications' rounding outgrows libm's.
+pub const CHEAP_POWERS: f64 = 4.5;

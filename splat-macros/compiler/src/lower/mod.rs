@@ -297,6 +297,23 @@ impl<'m> Lowerer<'m> {
                         Binary::Ne => B(x != y),
                         _ => return None,
                     },
+                    // Float arithmetic folds only where it is exact in f32 (operands and
+                    // result f32 values, the f64 result equal to the f32 one), so the f32
+                    // kernels and their f64 twins compute what they did unfolded.
+                    (F(x), F(y)) => {
+                        let r = match op {
+                            Binary::Add => x + y,
+                            Binary::Sub => x - y,
+                            Binary::Mul => x * y,
+                            Binary::Div => x / y,
+                            _ => return None,
+                        };
+                        let exact = |v: f64| v.is_finite() && (v as f32) as f64 == v;
+                        if !(exact(x) && exact(y) && exact(r)) {
+                            return None;
+                        }
+                        F(r)
+                    }
                     (B(x), B(y)) => match op {
                         Binary::And => B(x & y),
                         Binary::Or => B(x | y),
