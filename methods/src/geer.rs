@@ -256,9 +256,7 @@ macro_rules! exact {
             }
 
             pub fn project(p: &Params, cam: &Camera) -> Projected<Cull, Shade> {
-                let q = Quat::from_xyzw(p.rotation.y, p.rotation.z, p.rotation.w, p.rotation.x)
-                    .normalize();
-                let rot = Mat3::from_quat(q);
+                let rot = blocks::rotation_matrix(p.rotation);
                 let scale = p.log_scale.exp();
                 let opacity = sigmoid(p.opacity_logit);
                 // λ-contour: where exp(-λ²/2) opacity = ALPHA_MIN.

@@ -110,9 +110,7 @@ macro_rules! unscented {
             }
 
             pub fn project(p: &Params, cam: &Camera) -> Projected<f32, Shade> {
-                let q = Quat::from_xyzw(p.rotation.y, p.rotation.z, p.rotation.w, p.rotation.x)
-                    .normalize();
-                let rot = Mat3::from_quat(q);
+                let rot = blocks::rotation_matrix(p.rotation);
                 let scale = p.log_scale.exp();
                 let seen = footprint(p, rot, scale, cam.rotation, cam.translation, cam);
                 let cov = seen.cov;

@@ -65,9 +65,8 @@ pub mod linprim {
             Vec3::new(0.0, f.y / z, t.y / dist),
             Vec3::new(-f.x * t.x / (z * z), -f.y * t.y / (z * z), t.z / dist),
         );
-        let q = Quat::from_xyzw(p.rotation.y, p.rotation.z, p.rotation.w, p.rotation.x).normalize();
         let scale = p.log_scale.exp();
-        let a = j * cam.rotation * Mat3::from_quat(q) * Mat3::from_diagonal(scale);
+        let a = j * cam.rotation * blocks::rotation_matrix(p.rotation) * Mat3::from_diagonal(scale);
         let opacity = sigmoid(p.opacity_logit).min(0.999);
         let sigma = -(1.0 - 0.99 * opacity).ln() / (2.0 * scale.min_element());
         // The vertices are the centre ± the columns of A.
