@@ -5,4 +5,3 @@ pub mod features;
 pub mod generalized;
 pub mod isotropic;
 pub mod rays;
-pub mod student;

@@ -52,6 +52,22 @@ fn a_crate_made_by_splat_new_passes_its_checks_with_a_new_falloff() {
     std::fs::write(&lib, student).unwrap();
     let report = cargo_test(&made);
     assert!(report.contains("test result: ok. 2 passed"), "{report}");
+    // The falloff as first written costs what `rsqrt(r) / (r * r)` does: its kernel calls no
+    // `pow` (`inspect --cost` of the crate's own binary, which `cargo test` built).
+    let target = Path::new(env!("CARGO_TARGET_TMPDIR")).parent().unwrap();
+    let cost = Command::new(target.join("debug/student-splats"))
+        .args(["inspect", "--method", "student-splats", "--cost"])
+        .output()
+        .unwrap();
+    let table = String::from_utf8_lossy(&cost.stdout);
+    let evaluate = table.lines().find(|l| l.starts_with("| evaluate |"));
+    // | kernel | runs per | exp | ln | pow | trig | sqrt | ...
+    let cells: Vec<&str> = evaluate
+        .expect("an evaluate row")
+        .split('|')
+        .map(str::trim)
+        .collect();
+    assert_eq!((cells[5], cells[7]), ("0", "1"), "{table}");
 }
 
 /// `cargo test` of the crate at `dir` with the workspace's target directory; its output.
