@@ -30,6 +30,7 @@ mod scene;
 mod tradeoff;
 mod tradeoff_report;
 mod view;
+mod viewer;
 mod warm_up;
 
 pub use methods::{Instance, Method};
@@ -105,6 +106,9 @@ enum Command {
     /// Measure a scene on a dataset's views as `splat fit` measures its result: PSNR and SSIM
     /// per view and their mean, with the renders and a CSV in --out.
     Eval(commands::eval::EvalArgs),
+    /// Look at a scene in the browser: serves a page on 127.0.0.1 that flies around it, each
+    /// frame rendered here as the camera moves.
+    View(commands::view::ViewArgs),
     /// Write a crate for a new method (a 3D Gaussian whose falloff is yours to change) that
     /// builds and passes every check at once, with the whole command line.
     New {
@@ -206,7 +210,9 @@ where
         .collect();
     // The methods are known only now: every `--method` lists them and defaults to the first.
     let mut command = Cli::command();
-    for sub in ["render", "bench", "tradeoff", "fit", "eval", "inspect"] {
+    for sub in [
+        "render", "bench", "tradeoff", "fit", "eval", "inspect", "view",
+    ] {
         command = command.mut_subcommand(sub, |s| {
             s.mut_arg("method", |a| {
                 a.value_parser(clap::builder::PossibleValuesParser::new(names.clone()))
@@ -273,6 +279,7 @@ fn dispatch(cli: Cli, methods: &[Method]) -> Result<()> {
         Command::Eval(args) => commands::eval::eval_cmd(&args, methods),
         Command::Bench(args) => commands::bench::bench_cmd(&args, methods),
         Command::Tradeoff(args) => commands::tradeoff::tradeoff_cmd(&args, methods),
+        Command::View(args) => commands::view::view_cmd(&args, methods),
         Command::Scene { out, camera_out } => {
             let ply = out.extension().and_then(|e| e.to_str());
             if !ply.is_some_and(|e| e.eq_ignore_ascii_case("ply")) {

@@ -66,7 +66,8 @@ pub struct RenderArgs {
 /// CPU.
 pub struct Render<'a> {
     pub(crate) cloud: &'a GaussianCloud,
-    pub(crate) cameras: &'a [Camera],
+    /// The next camera to render, until `None` (a list's, or a viewer's as they arrive).
+    pub(crate) cameras: &'a dyn Fn() -> Option<Camera>,
     pub(crate) opts: &'a RenderOptions,
     pub(crate) gpu: Option<&'a Gpu>,
     /// The hardware-rasterized forward pass (GPU only).
@@ -95,7 +96,10 @@ impl Render<'_> {
         let params: Vec<M::Params> = self.cloud.params();
         // Every camera's frame as `draw` renders it, in order.
         let mut frames = |draw: &mut dyn FnMut(&Camera) -> Result<Frame>| {
-            self.cameras.iter().try_for_each(|c| each(draw(c)?))
+            while let Some(camera) = (self.cameras)() {
+                each(draw(&camera)?)?;
+            }
+            Ok::<(), anyhow::Error>(())
         };
         Ok(match self.gpu {
             None if self.hardware => {

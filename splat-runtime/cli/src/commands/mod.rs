@@ -8,3 +8,4 @@ pub(crate) mod eval;
 pub(crate) mod fit;
 pub(crate) mod render;
 pub(crate) mod tradeoff;
+pub(crate) mod view;

@@ -46,9 +46,14 @@ pub(crate) fn render_views(
     let instance = |c: &Camera| method.instance(cloud.sh_degree, c);
     let mut place = String::new();
     for run in cameras.chunk_by(|a, b| std::ptr::eq(instance(a), instance(b))) {
+        let next = std::cell::Cell::new(0);
+        let cameras = || {
+            next.set(next.get() + 1);
+            run.get(next.get() - 1).copied()
+        };
         let task = Render {
             cloud,
-            cameras: run,
+            cameras: &cameras,
             opts,
             gpu,
             hardware,

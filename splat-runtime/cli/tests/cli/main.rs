@@ -12,3 +12,4 @@ mod inspect;
 mod outputs;
 mod render;
 mod tradeoff;
+mod view;
