@@ -19,6 +19,10 @@ const PAGE: &str = include_str!("viewer/page.html");
 /// The largest message a client may send: a camera is a few hundred bytes.
 const MOST_MESSAGE_BYTES: usize = 64 << 10;
 
+/// How long a request may take to arrive: a client that connects and sends nothing does not
+/// hold its thread for good (a WebSocket session, once open, waits as long as its tab).
+const REQUEST_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(10);
+
 /// The most pixels a frame may have (4K): larger requests are refused with a message.
 pub const MOST_PIXELS: u32 = 3840 * 2160;
 
@@ -65,14 +69,16 @@ pub fn serve(listener: &TcpListener, session: &(dyn Fn(&Session) -> Result<()> +
 }
 
 fn connection(stream: TcpStream, session: &dyn Fn(&Session) -> Result<()>) -> Result<()> {
+    stream.set_read_timeout(Some(REQUEST_TIMEOUT))?;
     let mut head = [0u8; 8];
-    let n = stream.peek(&mut head)?;
+    let n = (stream.peek(&mut head)).context("a client that connected sent no request")?;
     if head[..n].starts_with(b"GET /ws ") || head[..n].starts_with(b"GET /ws?") {
         let config = WebSocketConfig::default()
             .max_message_size(Some(MOST_MESSAGE_BYTES))
             .max_frame_size(Some(MOST_MESSAGE_BYTES));
         let socket = tungstenite::accept_with_config(stream, Some(config))
             .map_err(|e| anyhow::anyhow!("WebSocket handshake: {e}"))?;
+        socket.get_ref().set_read_timeout(None)?;
         let s = Session {
             socket: RefCell::new(socket),
         };
@@ -92,7 +98,7 @@ fn page(mut stream: TcpStream) -> Result<()> {
     let mut request = Vec::new();
     let mut chunk = [0u8; 1024];
     while !request.windows(4).any(|w| w == b"\r\n\r\n") && request.len() < 16 << 10 {
-        let n = stream.read(&mut chunk)?;
+        let n = (stream.read(&mut chunk)).context("a request that did not arrive whole")?;
         if n == 0 {
             break;
         }
