@@ -77,8 +77,17 @@ pub struct Render<'a> {
 /// What receives each frame of a [`Render`], in the cameras' order.
 pub(crate) type Frames<'f> = &'f mut dyn FnMut(Frame) -> Result<()>;
 
+/// Where frames render: "the CPU", "GPU, <adapter>" or "GPU (hardware rasterizer), <adapter>".
+pub(crate) fn place(gpu: Option<&Gpu>, hardware: bool) -> String {
+    match (gpu, hardware) {
+        (None, _) => "the CPU".to_string(),
+        (Some(gpu), false) => format!("GPU, {}", gpu.adapter),
+        (Some(gpu), true) => format!("GPU (hardware rasterizer), {}", gpu.adapter),
+    }
+}
+
 /// A precision by its name.
-fn parse_precision(name: &str) -> Result<Precision, String> {
+pub(crate) fn parse_precision(name: &str) -> Result<Precision, String> {
     let all = Precision::ALL;
     all.into_iter().find(|p| p.name() == name).ok_or_else(|| {
         let names: Vec<&str> = all.iter().map(|p| p.name()).collect();
@@ -112,11 +121,11 @@ impl Render<'_> {
                     renderer.forward(&scene, camera)?;
                     Ok(renderer.download_frame()?)
                 })?;
-                format!("GPU (hardware rasterizer), {}", gpu.adapter)
+                place(Some(gpu), true)
             }
             None => {
                 frames(&mut |camera| Ok(render::<M>(&params, camera, self.opts)?))?;
-                "the CPU".to_string()
+                place(None, false)
             }
             Some(gpu) => {
                 let mut renderer = GpuRenderer::<M>::new(gpu, self.opts)?;
@@ -125,7 +134,7 @@ impl Render<'_> {
                     renderer.forward(&scene, camera)?;
                     Ok(renderer.download_frame()?)
                 })?;
-                format!("GPU, {}", gpu.adapter)
+                place(Some(gpu), false)
             }
         })
     }

@@ -1,17 +1,20 @@
 //! `splat view`'s server: one page built into the binary (`viewer/page.html`) and a WebSocket
-//! per tab on which the page sends cameras (JSON, the format of camera files) and the server
-//! answers each with the frame as a JPEG and a line of stats. Only the page is served: no path
-//! from a request reaches the file system. A camera that arrives while a frame renders replaces
-//! the one waiting, so a slow client is sent the newest view, never a queue of old ones.
+//! per tab (`viewer::tab`) on which the page asks for frames and turns knobs; every tab's
+//! frames come from one shared renderer (`viewer::station`). Only the page is served: no path
+//! from a request reaches the file system. Bound to 127.0.0.1 unless asked otherwise; a server
+//! open to the network asks for a random token in the URL (as Jupyter does).
+
+mod picture;
+mod station;
+mod tab;
+
+pub use station::{Settings, Station};
+pub use tab::Scene;
 
 use anyhow::{Context, Result, bail};
-use splat_runtime::io::camera::CameraFile;
-use splat_runtime::{Camera, Frame};
-use std::cell::RefCell;
 use std::io::{ErrorKind, Read, Write};
-use std::net::{TcpListener, TcpStream};
+use std::net::{IpAddr, TcpListener, TcpStream};
 use tungstenite::protocol::WebSocketConfig;
-use tungstenite::{Message, WebSocket};
 
 /// The page, built into the binary.
 const PAGE: &str = include_str!("viewer/page.html");
@@ -23,78 +26,74 @@ const MOST_MESSAGE_BYTES: usize = 64 << 10;
 /// hold its thread for good (a WebSocket session, once open, waits as long as its tab).
 const REQUEST_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(10);
 
-/// The most pixels a frame may have (4K): larger requests are refused with a message.
-pub const MOST_PIXELS: u32 = 3840 * 2160;
-
 /// How many ports past the asked one are tried when it is taken.
 const PORTS_TRIED: u16 = 20;
 
-/// Listens on `127.0.0.1:port`, or the next free port (saying so); port 0 takes any free one.
-pub fn bind(port: u16) -> Result<TcpListener> {
+/// Listens on `host:port`, or the next free port (saying so); port 0 takes any free one.
+pub fn bind(host: IpAddr, port: u16) -> Result<TcpListener> {
     let last = if port == 0 {
         0
     } else {
         port.saturating_add(PORTS_TRIED)
     };
     for p in port..=last {
-        match TcpListener::bind(("127.0.0.1", p)) {
+        match TcpListener::bind((host, p)) {
             Ok(listener) => return Ok(listener),
             Err(e) if e.kind() == ErrorKind::AddrInUse && p < last => {
                 eprintln!("port {p} is taken; trying {}", p + 1);
             }
-            Err(e) => return Err(e).with_context(|| format!("listening on 127.0.0.1:{p}")),
+            Err(e) => return Err(e).with_context(|| format!("listening on {host}:{p}")),
         }
     }
     bail!("ports {port} to {last} are all taken: give a free one with --port")
 }
 
-/// A tab's stream of frames: the cameras it sends, the frames it is sent.
-pub struct Session {
-    socket: RefCell<WebSocket<TcpStream>>,
+/// A token of 128 random bits, as hex: what a URL must carry to reach a server open to the
+/// network.
+pub fn new_token() -> Result<String> {
+    let mut bits = [0u8; 16];
+    getrandom::fill(&mut bits).map_err(|e| anyhow::anyhow!("no random token: {e}"))?;
+    Ok(bits.iter().map(|b| format!("{b:02x}")).collect())
 }
 
 /// Serves each connection of `listener` on a thread of its own: the page, or (on `/ws`) a
-/// session handed to `session` (which renders until it returns).
-pub fn serve(listener: &TcpListener, session: &(dyn Fn(&Session) -> Result<()> + Sync)) {
+/// tab's session; with a `token`, only to requests that carry it (`?token=...`). Renders
+/// every tab's frames on `scene`'s station, on this thread's scope, for good.
+pub fn serve(listener: &TcpListener, scene: &Scene, token: Option<&str>) -> ! {
     std::thread::scope(|scope| {
+        scope.spawn(|| scene.station.run());
         for stream in listener.incoming() {
             let Ok(stream) = stream else { continue };
             scope.spawn(move || {
-                if let Err(e) = connection(stream, session) {
+                if let Err(e) = connection(stream, scene, token) {
                     eprintln!("viewer: {e:#}");
                 }
             });
         }
-    });
+        unreachable!("a listener's connections never end")
+    })
 }
 
-fn connection(stream: TcpStream, session: &dyn Fn(&Session) -> Result<()>) -> Result<()> {
+fn connection(stream: TcpStream, scene: &Scene, token: Option<&str>) -> Result<()> {
     stream.set_read_timeout(Some(REQUEST_TIMEOUT))?;
-    let mut head = [0u8; 8];
+    let mut head = [0u8; 1024];
     let n = (stream.peek(&mut head)).context("a client that connected sent no request")?;
-    if head[..n].starts_with(b"GET /ws ") || head[..n].starts_with(b"GET /ws?") {
+    let line = String::from_utf8_lossy(&head[..n]);
+    let target = line.lines().next().and_then(|l| l.split(' ').nth(1));
+    let target = target.unwrap_or("");
+    let (path, query) = target.split_once('?').unwrap_or((target, ""));
+    let allowed = token.is_none_or(|t| carries(query, t));
+    if allowed && path == "/ws" {
         let config = WebSocketConfig::default()
             .max_message_size(Some(MOST_MESSAGE_BYTES))
             .max_frame_size(Some(MOST_MESSAGE_BYTES));
         let socket = tungstenite::accept_with_config(stream, Some(config))
             .map_err(|e| anyhow::anyhow!("WebSocket handshake: {e}"))?;
         socket.get_ref().set_read_timeout(None)?;
-        let s = Session {
-            socket: RefCell::new(socket),
-        };
-        let result = session(&s);
-        s.socket.borrow_mut().close(None).ok();
-        return match result {
-            // The tab went away: not an error of the server's.
-            Err(e) if e.downcast_ref::<Closed>().is_some() => Ok(()),
-            other => other,
-        };
+        return tab::run(socket, scene);
     }
-    page(stream)
-}
-
-/// Answers an HTTP request: the page at `/`, 404 for anything else.
-fn page(mut stream: TcpStream) -> Result<()> {
+    // Read the whole request before answering, so the client sees the answer, not a reset.
+    let mut stream = stream;
     let mut request = Vec::new();
     let mut chunk = [0u8; 1024];
     while !request.windows(4).any(|w| w == b"\r\n\r\n") && request.len() < 16 << 10 {
@@ -104,12 +103,31 @@ fn page(mut stream: TcpStream) -> Result<()> {
         }
         request.extend_from_slice(&chunk[..n]);
     }
-    let line = String::from_utf8_lossy(&request);
-    let path = line.split_whitespace().nth(1).unwrap_or("");
-    let (status, kind, body) = match path {
-        "/" | "/index.html" => ("200 OK", "text/html; charset=utf-8", PAGE),
-        _ => ("404 Not Found", "text/plain", "not found\n"),
-    };
+    match path {
+        _ if !allowed => respond(stream, "403 Forbidden", "text/plain", FORBIDDEN),
+        "/" | "/index.html" => respond(stream, "200 OK", "text/html; charset=utf-8", PAGE),
+        _ => respond(stream, "404 Not Found", "text/plain", "not found\n"),
+    }
+}
+
+const FORBIDDEN: &str = "this splat view is open to the network and asks for its token: \
+                         open the URL it printed (with ?token=...)\n";
+
+/// Whether the query string `query` holds `token=<token>` (compared in constant time).
+fn carries(query: &str, token: &str) -> bool {
+    query.split('&').any(|pair| {
+        pair.strip_prefix("token=").is_some_and(|given| {
+            given.len() == token.len()
+                && given
+                    .bytes()
+                    .zip(token.bytes())
+                    .fold(0, |d, (a, b)| d | (a ^ b))
+                    == 0
+        })
+    })
+}
+
+fn respond(mut stream: TcpStream, status: &str, kind: &str, body: &str) -> Result<()> {
     write!(
         stream,
         "HTTP/1.1 {status}\r\nContent-Type: {kind}\r\nContent-Length: {}\r\n\
@@ -117,120 +135,4 @@ fn page(mut stream: TcpStream) -> Result<()> {
         body.len()
     )?;
     Ok(())
-}
-
-/// The tab closed its socket.
-#[derive(Debug)]
-struct Closed;
-
-impl std::fmt::Display for Closed {
-    fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
-        f.write_str("the tab closed")
-    }
-}
-
-impl std::error::Error for Closed {}
-
-impl Session {
-    /// The newest camera the tab sent, waiting for one if none is pending; `None` when the tab
-    /// has gone. A message that is not a camera is answered with an error and skipped.
-    pub fn next_camera(&self) -> Option<Camera> {
-        let mut latest = None;
-        loop {
-            let pending = latest.is_some();
-            if pending {
-                self.socket.borrow().get_ref().set_nonblocking(true).ok()?;
-            }
-            let read = self.socket.borrow_mut().read();
-            if pending {
-                self.socket.borrow().get_ref().set_nonblocking(false).ok()?;
-            }
-            match read {
-                Ok(Message::Text(text)) => match parse_camera(text.as_str()) {
-                    Ok(c) => latest = Some(c),
-                    Err(e) => self.send_text(&error_json(&e.to_string())).ok()?,
-                },
-                Ok(Message::Binary(_)) => {
-                    self.send_text(&error_json("send the camera as JSON text"))
-                        .ok()?;
-                }
-                Ok(Message::Close(_)) => return None,
-                Ok(_) => {}
-                Err(tungstenite::Error::Io(e)) if e.kind() == ErrorKind::WouldBlock => {
-                    return latest;
-                }
-                Err(tungstenite::Error::Capacity(e)) => {
-                    self.send_text(&error_json(&format!("message refused: {e}")))
-                        .ok()?;
-                    return None;
-                }
-                Err(_) => return None,
-            }
-        }
-    }
-
-    /// Sends `frame`'s color as a JPEG, then a line of stats about it.
-    pub fn send_frame(&self, frame: &Frame, place: &str) -> Result<()> {
-        let jpeg = encode_jpeg(frame)?;
-        let mut socket = self.socket.borrow_mut();
-        socket.send(Message::binary(jpeg)).map_err(|_| Closed)?;
-        let s = &frame.stats;
-        let stats = serde_json::json!({
-            "visible": s.visible,
-            "intersections": s.intersections,
-            "width": frame.color.width,
-            "height": frame.color.height,
-            "on": place,
-            "ms": {
-                "preprocess": s.preprocess.as_secs_f64() * 1e3,
-                "rasterize": s.rasterize.as_secs_f64() * 1e3,
-                "shade": s.shade.as_secs_f64() * 1e3,
-            },
-        });
-        socket
-            .send(Message::text(stats.to_string()))
-            .map_err(|_| Closed)?;
-        Ok(())
-    }
-
-    fn send_text(&self, text: &str) -> Result<()> {
-        let mut socket = self.socket.borrow_mut();
-        socket.send(Message::text(text)).map_err(|_| Closed)?;
-        Ok(())
-    }
-}
-
-fn error_json(message: &str) -> String {
-    serde_json::json!({ "error": message }).to_string()
-}
-
-/// A camera in the format of camera files, with at most [`MOST_PIXELS`].
-pub fn parse_camera(text: &str) -> Result<Camera> {
-    let file: CameraFile = serde_json::from_str(text).context("not a camera")?;
-    if file.width.saturating_mul(file.height) > MOST_PIXELS {
-        bail!(
-            "{}x{} is past the viewer's {MOST_PIXELS} pixels: ask for less",
-            file.width,
-            file.height
-        );
-    }
-    Ok(file.to_camera()?)
-}
-
-/// `frame`'s color as a JPEG of quality 90.
-fn encode_jpeg(frame: &Frame) -> Result<Vec<u8>> {
-    let c = &frame.color;
-    let bytes: Vec<u8> = (c.data.iter())
-        .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
-        .collect();
-    let mut out = Vec::new();
-    let encoder = image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, 90);
-    image::ImageEncoder::write_image(
-        encoder,
-        &bytes,
-        c.width,
-        c.height,
-        image::ExtendedColorType::Rgb8,
-    )?;
-    Ok(out)
 }
