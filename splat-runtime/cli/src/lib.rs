@@ -17,6 +17,7 @@
 //! The project's own `splat` binary is this entry point with the built-in methods.
 
 mod bench;
+mod camera_path;
 mod commands;
 mod cost;
 mod fit;
@@ -24,11 +25,14 @@ mod interrupt;
 mod memory;
 mod methods;
 mod new_crate;
+mod orbit;
 mod plot;
 mod render;
 mod scene;
+mod source;
 mod tradeoff;
 mod tradeoff_report;
+mod video;
 mod view;
 mod viewer;
 mod warm_up;
@@ -109,6 +113,9 @@ enum Command {
     /// Look at a scene in the browser: serves a page on 127.0.0.1 that flies around it, each
     /// frame rendered here as the camera moves.
     View(commands::view::ViewArgs),
+    /// Render a scene along a camera path (an orbit, a dataset's views, or keyframes saved
+    /// from `splat view`) into an H.264 MP4 that browsers play.
+    Video(commands::video::VideoArgs),
     /// Write a crate for a new method (a 3D Gaussian whose falloff is yours to change) that
     /// builds and passes every check at once, with the whole command line.
     New {
@@ -280,6 +287,7 @@ fn dispatch(cli: Cli, methods: &[Method]) -> Result<()> {
         Command::Bench(args) => commands::bench::bench_cmd(&args, methods),
         Command::Tradeoff(args) => commands::tradeoff::tradeoff_cmd(&args, methods),
         Command::View(args) => commands::view::view_cmd(&args, methods),
+        Command::Video(args) => commands::video::video_cmd(&args, methods),
         Command::Scene { out, camera_out } => {
             let ply = out.extension().and_then(|e| e.to_str());
             if !ply.is_some_and(|e| e.eq_ignore_ascii_case("ply")) {

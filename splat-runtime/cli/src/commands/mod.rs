@@ -8,4 +8,5 @@ pub(crate) mod eval;
 pub(crate) mod fit;
 pub(crate) mod render;
 pub(crate) mod tradeoff;
+pub(crate) mod video;
 pub(crate) mod view;

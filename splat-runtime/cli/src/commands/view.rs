@@ -1,37 +1,31 @@
-//! `splat view [PATH]`: serves a scene (a PLY, a `splat fit` output folder, the built-in one,
-//! or a dataset's views with `--scene`) to a browser page that flies around it, each frame
+//! `splat view [PATH]`: serves a scene (`crate::source`: a PLY, a `splat fit` output folder,
+//! the built-in one, or a dataset's views with `--scene`) to a browser page that flies around it, each frame
 //! rendered by the method on the GPU (or the CPU) as the page's camera moves (`crate::viewer`).
 
 use crate::methods::{self, Method};
-use crate::view::{Downscale, Split};
-use crate::{Backend, pick_gpu, scene, viewer};
-use anyhow::{Result, bail};
+use crate::orbit::Orbit;
+use crate::source::{Source, SourceArgs};
+use crate::view::Split;
+use crate::{Backend, pick_gpu, viewer};
+use anyhow::Result;
 use splat_runtime::glam::Vec3;
 use splat_runtime::io::dataset;
 use splat_runtime::io::ply::GaussianCloud;
 use splat_runtime::precision::Precision;
 use std::net::IpAddr;
-use std::path::{Path, PathBuf};
 
 #[derive(clap::Args)]
 pub struct ViewArgs {
-    /// An INRIA PLY scene or a `splat fit` output folder (its scene.ply); with --scene, a
-    /// dataset (Blender, nerfstudio or COLMAP) whose views the page can snap to, each beside
-    /// its picture [default: the built-in scene].
-    pub path: Option<PathBuf>,
-    /// The scene to show on the dataset PATH's views.
-    #[arg(long, requires = "path")]
-    pub scene: Option<PathBuf>,
+    #[command(flatten)]
+    pub source: SourceArgs,
     #[arg(long)]
     pub method: String,
     /// With a dataset: which of its views the page offers (the splits `splat fit` uses).
-    #[arg(long, value_enum, default_value_t = Split::Test, requires = "scene")]
+    #[arg(long, value_enum, default_value_t = Split::Test)]
     pub split: Split,
     /// With a dataset: compare on white instead of black (as `splat fit --white`).
-    #[arg(long, requires = "scene")]
+    #[arg(long)]
     pub white: bool,
-    #[command(flatten)]
-    pub downscale: Downscale,
     /// The address to listen on. Anything but the loopback opens the scene to the network:
     /// the page then asks for a random token, printed in its URL.
     #[arg(long, default_value = "127.0.0.1")]
@@ -45,25 +39,7 @@ pub struct ViewArgs {
 
 pub(crate) fn view_cmd(args: &ViewArgs, methods: &[Method]) -> Result<()> {
     let method = methods::find(methods, &args.method)?;
-    let (cloud, views, source) = match (&args.path, &args.scene) {
-        (Some(dataset), Some(ply)) => {
-            let shots = args.split.of(dataset::read_shots(dataset)?);
-            let shots = dataset::downscaled(shots, args.downscale.factor)?;
-            if shots.is_empty() {
-                bail!("{}: no {} views", dataset.display(), args.split.name());
-            }
-            let source = format!(
-                "{}, {} {} views of {}",
-                ply.display(),
-                shots.len(),
-                args.split.name(),
-                dataset.display()
-            );
-            (scene::read(ply)?, shots, source)
-        }
-        (Some(path), None) => (read_scene(path)?, vec![], path.display().to_string()),
-        (None, _) => (scene::planet(), vec![], "the built-in scene".to_string()),
-    };
+    let Source { cloud, views, name } = args.source.read(Some(args.split))?;
     let gpu = pick_gpu(args.backend)?;
     let background = if args.white { Vec3::ONE } else { Vec3::ZERO };
     let settings = viewer::Settings::new(method.name, cloud.sh_degree);
@@ -86,7 +62,7 @@ pub(crate) fn view_cmd(args: &ViewArgs, methods: &[Method]) -> Result<()> {
         None => format!("http://{address}/"),
     };
     println!(
-        "splat view: {url} ({}, {} Gaussians from {source}; Ctrl-C ends it)",
+        "splat view: {url} ({}, {} Gaussians from {name}; Ctrl-C ends it)",
         method.name,
         cloud.gaussians.len()
     );
@@ -99,25 +75,11 @@ pub(crate) fn view_cmd(args: &ViewArgs, methods: &[Method]) -> Result<()> {
     viewer::serve(&listener, &scene, token.as_deref())
 }
 
-/// A PLY, or the scene.ply of a `splat fit` output folder.
-fn read_scene(path: &Path) -> Result<GaussianCloud> {
-    if path.is_dir() {
-        let ply = path.join("scene.ply");
-        if !ply.is_file() {
-            bail!(
-                "{} is a folder without scene.ply (what `splat fit` writes); for a dataset, \
-                 give the scene with --scene",
-                path.display()
-            );
-        }
-        return scene::read(&ply);
-    }
-    scene::read(path)
-}
-
 /// What a page is told on connecting: the scene, the views it can snap to, the choices of
 /// each knob.
 fn intro(methods: &[Method], cloud: &GaussianCloud, views: &[dataset::Shot]) -> serde_json::Value {
+    let cameras: Vec<_> = views.iter().map(|s| s.camera).collect();
+    let means: Vec<_> = cloud.gaussians.iter().map(|g| g.mean).collect();
     let names: Vec<String> = (views.iter().enumerate())
         .map(|(k, s)| match s.path.file_name() {
             Some(n) => format!("{k}: {}", n.to_string_lossy()),
@@ -128,7 +90,7 @@ fn intro(methods: &[Method], cloud: &GaussianCloud, views: &[dataset::Shot]) -> 
         "primitives": cloud.gaussians.len(),
         "sh_degree": cloud.sh_degree,
         "views": names,
-        "orbit": viewer::Scene::orbit(views, cloud.gaussians.iter().map(|g| g.mean)),
+        "orbit": Orbit::of(&cameras, &means).json(),
         "methods": methods.iter().map(|m| m.name).collect::<Vec<_>>(),
         "precisions": Precision::ALL.iter().map(|p| p.name()).collect::<Vec<_>>(),
     })

@@ -11,7 +11,7 @@ use super::picture::{self, Compare};
 use super::station::{Output, Rendered, Station};
 use anyhow::{Context, Result, anyhow, bail};
 use serde::Deserialize;
-use splat_runtime::glam::{Mat3, Vec3};
+use splat_runtime::glam::Vec3;
 use splat_runtime::io::camera::CameraFile;
 use splat_runtime::io::dataset::Shot;
 use splat_runtime::train::{fit::composite, loss};
@@ -32,55 +32,6 @@ pub struct Scene<'a> {
     pub background: Vec3,
     /// What the page is told first: the scene, its views, the choices it offers.
     pub intro: serde_json::Value,
-}
-
-impl Scene<'_> {
-    /// The orbit a page starts from: about the point the views look at (or the middle of
-    /// the primitives, without two views that cross), up as the views' pictures have it (or
-    /// +y without views).
-    pub fn orbit(views: &[Shot], means: impl Iterator<Item = Vec3>) -> serde_json::Value {
-        let means: Vec<Vec3> = means.collect();
-        let median = |axis: usize| {
-            let mut v: Vec<f32> = means.iter().map(|m| m[axis]).collect();
-            v.sort_by(f32::total_cmp);
-            v.get(v.len() / 2).copied().unwrap_or(0.0)
-        };
-        let middle = Vec3::new(median(0), median(1), median(2));
-        let eye = |c: &Camera| -(c.rotation.transpose() * c.translation);
-        // The point nearest every view's optical axis (least squares).
-        let (mut a, mut b) = (Mat3::ZERO, Vec3::ZERO);
-        for c in views.iter().map(|s| &s.camera) {
-            let d = c.rotation.row(2);
-            let away = Mat3::IDENTITY - Mat3::from_cols(d * d.x, d * d.y, d * d.z);
-            a += away;
-            b += away * eye(c);
-        }
-        let target = match a.determinant().abs() > 1e-3 * views.len().pow(3) as f32 {
-            true => a.inverse() * b,
-            false => middle,
-        };
-        let up = -views.iter().map(|s| s.camera.rotation.row(1)).sum::<Vec3>();
-        let up = up.try_normalize().unwrap_or(Vec3::Y);
-        let distance = match views.len() {
-            0 => {
-                let mut far: Vec<f32> = means.iter().map(|m| (*m - target).length()).collect();
-                far.sort_by(f32::total_cmp);
-                3.0 * far.get(far.len() * 9 / 10).copied().unwrap_or(1.0)
-            }
-            n => {
-                views
-                    .iter()
-                    .map(|s| (eye(&s.camera) - target).length())
-                    .sum::<f32>()
-                    / n as f32
-            }
-        };
-        serde_json::json!({
-            "target": target.to_array(),
-            "up": up.to_array(),
-            "distance": distance.max(1e-3),
-        })
-    }
 }
 
 /// What a tab asks for a frame of.

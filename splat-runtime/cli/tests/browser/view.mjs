@@ -1,7 +1,8 @@
 // Drives `splat view`'s page in headless Chromium (playwright-core): waits for the first frame,
 // writes a screenshot of it with the camera the page rendered it from, drags to orbit and
 // waits for the frame of the new camera, then turns a knob (P_max) and screenshots the frame it
-// brings. Prints a JSON line of what it saw.
+// brings, then saves a camera path of two keyframes (path.json). Prints a JSON line of what it
+// saw.
 // node view.mjs URL OUT_DIR  (CHROMIUM: the browser, default /usr/bin/chromium)
 import { chromium } from "playwright-core";
 import { writeFileSync } from "node:fs";
@@ -46,6 +47,15 @@ try {
   await page.waitForTimeout(500);
   await screenshot("knob.png");
   const knobCamera = await page.textContent("#camera");
+  // A camera path: two keyframes with a drag between them, saved as the page downloads it.
+  await page.click("#key");
+  await page.mouse.move(500, 300);
+  await page.mouse.down();
+  await page.mouse.move(420, 280, { steps: 5 });
+  await page.mouse.up();
+  await page.click("#key");
+  const [download] = await Promise.all([page.waitForEvent("download"), page.click("#save")]);
+  await download.saveAs(`${out}/path.json`);
   console.log(JSON.stringify({
     frames: seen,
     moved: moved !== first,

@@ -229,3 +229,13 @@ pub fn csv_rows(path: &Path) -> Vec<Vec<String>> {
     };
     text.lines().skip(1).map(fields).collect()
 }
+
+/// The mean and the largest difference per channel of two images, in [0, 1].
+pub fn difference(got: &image::RgbImage, want: &image::RgbImage) -> (f64, f64) {
+    assert_eq!(got.dimensions(), want.dimensions());
+    let diffs: Vec<f64> = (got.as_raw().iter().zip(want.as_raw()))
+        .map(|(a, b)| (*a as f64 - *b as f64).abs() / 255.0)
+        .collect();
+    let mean = diffs.iter().sum::<f64>() / diffs.len() as f64;
+    (mean, diffs.iter().fold(0.0f64, |m, d| m.max(*d)))
+}

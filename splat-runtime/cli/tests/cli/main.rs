@@ -12,4 +12,5 @@ mod inspect;
 mod outputs;
 mod render;
 mod tradeoff;
+mod video;
 mod view;

@@ -110,16 +110,6 @@ fn off_splat_render(dir: &Path, got: &image::RgbImage, knobs: &[&str]) -> (f64, 
     difference(got, &want)
 }
 
-/// The mean and the largest difference per channel of two images, in [0, 1].
-fn difference(got: &image::RgbImage, want: &image::RgbImage) -> (f64, f64) {
-    assert_eq!(got.dimensions(), want.dimensions());
-    let diffs: Vec<f64> = (got.as_raw().iter().zip(want.as_raw()))
-        .map(|(a, b)| (*a as f64 - *b as f64).abs() / 255.0)
-        .collect();
-    let mean = diffs.iter().sum::<f64>() / diffs.len() as f64;
-    (mean, diffs.iter().fold(0.0f64, |m, d| m.max(*d)))
-}
-
 /// The next message of kind `kind` ("frame", "settings", "scene" or "error"), as JSON; frames'
 /// images and other messages are passed over.
 fn next(ws: &mut Socket, kind: &str) -> serde_json::Value {
@@ -460,4 +450,20 @@ fn the_page_shows_splat_renders_in_chromium() {
         apart > 4.0 * mean,
         "P_max 2 moved the frame by only {apart}"
     );
+
+    // The path the page saved is one `splat video` flies.
+    let args = [
+        "video",
+        "--method",
+        "3dgs",
+        "--path",
+        "path.json",
+        "--frames",
+        "4",
+    ];
+    let out = ok(&splat(
+        &[&args[..], &["--out", "path.mp4", "--backend", "cpu"]].concat(),
+        dir.path(),
+    ));
+    assert!(out.contains("4 frames of 640x400"), "{out}");
 }
