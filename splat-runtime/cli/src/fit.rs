@@ -3,6 +3,7 @@
 //! training; the result written as an INRIA PLY beside the test renders, the metrics as CSV
 //! and the training curve as a plot.
 
+use crate::fit_view::FitView;
 use crate::interrupt::Listening;
 use crate::view::Downscale;
 use crate::{memory, plot};
@@ -111,6 +112,17 @@ pub struct FitArgs {
     /// and the gradients its backward pass computes.
     #[arg(long)]
     pub(crate) explain: bool,
+    /// Serve `splat view`'s page while training: the scene as it trains (taken every
+    /// --view-every steps), the loss and test PSNR curves, the primitive count, pause and
+    /// resume. The page goes when the run ends (`splat view OUT` shows the result).
+    #[arg(long)]
+    pub(crate) view: bool,
+    /// With --view: hand the page the scene after every this many steps (on the GPU each is
+    /// a download of the parameters).
+    #[arg(long, default_value_t = 50, value_parser = clap::value_parser!(u32).range(1..))]
+    pub(crate) view_every: u32,
+    #[command(flatten)]
+    pub(crate) serve: crate::commands::view::ServeArgs,
     /// Where to train: the GPU (the device-resident loop), the CPU, or `auto` (a hardware
     /// GPU when there is one).
     #[arg(long, value_enum, default_value_t = crate::Backend::Auto)]
@@ -150,6 +162,8 @@ pub(crate) const CURVE: &str = "curve.png";
 /// A training run, for any method.
 pub struct Fit<'a> {
     pub(crate) args: &'a FitArgs,
+    /// Every method the command line offers (a page of the run, `--view`, offers them too).
+    pub(crate) methods: &'a [crate::methods::Method],
     /// Where it trains: a GPU, or the CPU.
     pub(crate) gpu: Option<Gpu>,
     pub(crate) data: &'a Dataset,
@@ -203,17 +217,44 @@ impl Fit<'_> {
             stop: listening.as_ref().map(Listening::flag),
             ..opts.clone()
         };
-        let report = |r: &StepReport| progress.record::<M>(r);
-        let place = match &gpu {
-            Some(gpu) => {
-                fit_gpu_from::<M>(gpu, data, &mut state, self.extent, opts, report)?;
-                format!("the GPU ({})", gpu.adapter)
-            }
-            None => {
-                fit_from::<M>(data, &mut state, self.extent, opts, report)?;
-                "the CPU".to_string()
+        let page = match args.view {
+            true => Some(FitView::new::<M>(
+                self.methods,
+                &args.method,
+                gpu.as_ref(),
+                &state,
+                &args.serve,
+            )?),
+            false => None,
+        };
+        let opts = &FitOptions {
+            share_every: page.as_ref().map(|_| args.view_every as usize),
+            ..opts.clone()
+        };
+        let report = |r: &StepReport| {
+            progress.record::<M>(r);
+            if let Some(page) = &page {
+                page.step::<M>(r, &|| opts.stop_requested());
             }
         };
+        let place = std::thread::scope(|scope| {
+            if let Some(page) = &page {
+                scope.spawn(|| {
+                    page.serve()
+                        .inspect_err(|e| eprintln!("splat fit --view: {e:#}"))
+                });
+            }
+            let trained = match &gpu {
+                Some(gpu) => fit_gpu_from::<M>(gpu, data, &mut state, self.extent, opts, report)
+                    .map(|()| format!("the GPU ({})", gpu.adapter)),
+                None => fit_from::<M>(data, &mut state, self.extent, opts, report)
+                    .map(|()| "the CPU".to_string()),
+            };
+            if let Some(page) = &page {
+                page.close();
+            }
+            trained
+        })?;
         // Still listening through the final evaluation: a signal there ends the run with the
         // last step's checkpoint, as one during the steps does.
         let stopped_by = || listening.as_ref().and_then(Listening::stopped_by);

@@ -21,6 +21,7 @@ mod camera_path;
 mod commands;
 mod cost;
 mod fit;
+mod fit_view;
 mod interrupt;
 mod memory;
 mod methods;

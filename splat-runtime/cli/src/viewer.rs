@@ -4,10 +4,12 @@
 //! from a request reaches the file system. Bound to 127.0.0.1 unless asked otherwise; a server
 //! open to the network asks for a random token in the URL (as Jupyter does).
 
+mod live;
 mod picture;
 mod station;
 mod tab;
 
+pub use live::Live;
 pub use station::{Settings, Station};
 pub use tab::Scene;
 
@@ -58,21 +60,34 @@ pub fn new_token() -> Result<String> {
 
 /// Serves each connection of `listener` on a thread of its own: the page, or (on `/ws`) a
 /// tab's session; with a `token`, only to requests that carry it (`?token=...`). Renders
-/// every tab's frames on `scene`'s station, on this thread's scope, for good.
-pub fn serve(listener: &TcpListener, scene: &Scene, token: Option<&str>) -> ! {
+/// every tab's frames on `scene`'s station, until the station closes.
+pub fn serve(listener: &TcpListener, scene: &Scene, token: Option<&str>) -> Result<()> {
+    // Polled, so that a closed station ends the loop.
+    listener.set_nonblocking(true)?;
     std::thread::scope(|scope| {
         scope.spawn(|| scene.station.run());
-        for stream in listener.incoming() {
-            let Ok(stream) = stream else { continue };
+        while !scene.station.closed() {
+            let stream = match listener.accept() {
+                Ok((stream, _)) => stream,
+                Err(e) if e.kind() == ErrorKind::WouldBlock => {
+                    std::thread::sleep(ACCEPT_POLL);
+                    continue;
+                }
+                Err(_) => continue,
+            };
             scope.spawn(move || {
-                if let Err(e) = connection(stream, scene, token) {
+                let served = stream.set_nonblocking(false).map_err(Into::into);
+                if let Err(e) = served.and_then(|()| connection(stream, scene, token)) {
                     eprintln!("viewer: {e:#}");
                 }
             });
         }
-        unreachable!("a listener's connections never end")
-    })
+    });
+    Ok(())
 }
+
+/// How often a listener with no connection waiting looks again.
+const ACCEPT_POLL: std::time::Duration = std::time::Duration::from_millis(20);
 
 fn connection(stream: TcpStream, scene: &Scene, token: Option<&str>) -> Result<()> {
     stream.set_read_timeout(Some(REQUEST_TIMEOUT))?;

@@ -54,6 +54,9 @@ pub struct FitOptions {
     /// Report the run's state (to save as a checkpoint) after every this many steps and after
     /// the last.
     pub checkpoint_every: Option<usize>,
+    /// Hand the scene to the caller after every this many steps ([`StepReport::scene`]):
+    /// what a live viewer shows. On the GPU each costs a download of the parameters.
+    pub share_every: Option<usize>,
     /// Once set (by a signal handler, another thread), the run ends after the step in
     /// progress: that step's state is reported as a checkpoint (where checkpoints are on) and
     /// left in the loop's `state`, whose `step` then falls short of `steps`.
@@ -85,6 +88,7 @@ impl Default for FitOptions {
             densify: Some(Strategy::Adc(DensifyOptions::default())),
             eval_every: None,
             checkpoint_every: None,
+            share_every: None,
             stop: None,
         }
     }
@@ -280,6 +284,9 @@ pub struct StepReport<'a> {
     /// The run's state after this step, on the steps `FitOptions::checkpoint_every` asks for
     /// (and the last).
     pub checkpoint: Option<&'a Checkpoint>,
+    /// The parameters after this step (`M::Params::LEN` words per primitive), on the steps
+    /// `FitOptions::share_every` asks for.
+    pub scene: Option<&'a [f32]>,
     /// Where this step's time went.
     pub times: StepTimes,
 }
@@ -451,6 +458,7 @@ pub fn fit_from<M: Trainable>(
             faults,
             evaluation,
             checkpoint: save.then_some(&*state),
+            scene: after_every(opts.share_every, step).then_some(&flat[..]),
             times: StepTimes {
                 wall: started.elapsed(),
                 ..times

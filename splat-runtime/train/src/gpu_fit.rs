@@ -202,6 +202,10 @@ pub fn fit_gpu_from<M: Trainable>(
             };
             state.rng = rng.get_seed();
         }
+        let shared = match after_every(opts.share_every, step) {
+            true => Some(flatten(&scene.download(gpu)?)),
+            false => None,
+        };
         progress(&StepReport {
             step,
             loss: &value,
@@ -210,6 +214,7 @@ pub fn fit_gpu_from<M: Trainable>(
             faults,
             evaluation,
             checkpoint: save.then_some(&*state),
+            scene: shared.as_deref(),
             times: StepTimes {
                 wall: started.elapsed(),
                 ..times

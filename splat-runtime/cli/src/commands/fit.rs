@@ -249,6 +249,7 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
     }
     train(&Fit {
         args,
+        methods,
         gpu,
         data: &data,
         resume,

@@ -1,7 +1,7 @@
 //! The one renderer every tab of `splat view` shares: the scene is uploaded once per setting
-//! and one renderer draws the frames the tabs ask for, in turn. The settings (method, SH
-//! degree, the knobs of `splat tradeoff`, the output shown) are the server's, shared by every
-//! tab: a change made in one tab shows in all.
+//! (and per version of a scene in training) and one renderer draws the frames the tabs ask
+//! for, in turn. The settings (method, SH degree, the knobs of `splat tradeoff`, the output
+//! shown) are the server's, shared by every tab: a change made in one tab shows in all.
 
 use crate::methods::{self, Method};
 use crate::render::{self, Render};
@@ -14,8 +14,9 @@ use splat_runtime::{Camera, Frame, RenderOptions};
 use std::borrow::Cow;
 use std::cell::RefCell;
 use std::collections::VecDeque;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{SyncSender, sync_channel};
-use std::sync::{Condvar, Mutex};
+use std::sync::{Arc, Condvar, Mutex};
 
 /// What a frame shows.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -125,6 +126,8 @@ pub struct Rendered {
     pub explain: String,
     /// Where it ran ("the CPU", "GPU, <adapter>").
     pub place: String,
+    /// Which version of the scene it shows ([`Station::replace`] counts them).
+    pub scene_version: u64,
 }
 
 /// A camera a tab waits on a frame of.
@@ -135,42 +138,72 @@ struct Ticket {
 
 struct State {
     settings: Settings,
-    /// Counts settings changes: a renderer built for older settings stops.
+    cloud: Arc<GaussianCloud>,
+    /// Counts the scene's replacements.
+    scene_version: u64,
+    /// Counts changes of the settings and the scene: a renderer built before one stops.
     generation: u64,
     queue: VecDeque<Ticket>,
 }
 
 pub struct Station<'a> {
     methods: &'a [Method],
-    cloud: &'a GaussianCloud,
     gpu: Option<&'a Gpu>,
     /// Render the alpha output with every frame (to composite views on a background).
     alpha: bool,
     state: Mutex<State>,
-    /// Signalled when a camera is queued or the settings change.
+    /// Signalled when a camera is queued, the settings or the scene change, or the station
+    /// closes.
     asked: Condvar,
+    closed: AtomicBool,
 }
 
 impl<'a> Station<'a> {
     pub fn new(
         methods: &'a [Method],
-        cloud: &'a GaussianCloud,
+        cloud: GaussianCloud,
         gpu: Option<&'a Gpu>,
         settings: Settings,
         alpha: bool,
     ) -> Station<'a> {
         Station {
             methods,
-            cloud,
             gpu,
             alpha,
             state: Mutex::new(State {
                 settings,
+                cloud: Arc::new(cloud),
+                scene_version: 0,
                 generation: 0,
                 queue: VecDeque::new(),
             }),
             asked: Condvar::new(),
+            closed: AtomicBool::new(false),
         }
+    }
+
+    /// Shows `cloud` from now on (a scene in training, as it is now).
+    pub fn replace(&self, cloud: GaussianCloud) {
+        let mut state = self.lock();
+        state.cloud = Arc::new(cloud);
+        state.scene_version += 1;
+        state.generation += 1;
+        self.asked.notify_all();
+    }
+
+    pub fn scene_version(&self) -> u64 {
+        self.lock().scene_version
+    }
+
+    /// Ends [`Station::run`] and, as they notice ([`Station::closed`]), the server's loops.
+    pub fn close(&self) {
+        self.closed.store(true, Ordering::Relaxed);
+        let _state = self.lock();
+        self.asked.notify_all();
+    }
+
+    pub fn closed(&self) -> bool {
+        self.closed.load(Ordering::Relaxed)
     }
 
     pub fn settings(&self) -> Settings {
@@ -181,9 +214,8 @@ impl<'a> Station<'a> {
     /// on use them. Refused, with the settings left as they were, when a field is not valid.
     pub fn change(&self, change: &serde_json::Value) -> Result<Settings> {
         let mut state = self.lock();
-        let new = state
-            .settings
-            .changed(change, self.methods, self.cloud.sh_degree)?;
+        let most_degree = state.cloud.sh_degree;
+        let new = state.settings.changed(change, self.methods, most_degree)?;
         if new != state.settings {
             state.settings = new.clone();
             state.generation += 1;
@@ -195,7 +227,13 @@ impl<'a> Station<'a> {
     /// Renders `camera` with the current settings, after the frames other tabs asked first.
     pub fn render(&self, camera: Camera) -> Result<Rendered> {
         let (reply, frame) = sync_channel(1);
-        self.lock().queue.push_back(Ticket { camera, reply });
+        {
+            let mut state = self.lock();
+            if self.closed() {
+                bail!("the viewer is closing");
+            }
+            state.queue.push_back(Ticket { camera, reply });
+        }
         self.asked.notify_all();
         frame.recv().map_err(|_| anyhow!("the renderer stopped"))?
     }
@@ -206,23 +244,26 @@ impl<'a> Station<'a> {
         self.state.lock().unwrap_or_else(|e| e.into_inner())
     }
 
-    /// Renders the frames tabs ask for, for good: one renderer and one upload of the scene
-    /// serve every frame until the settings change (or a camera needs another of the
-    /// method's instances).
-    pub fn run(&self) -> ! {
+    /// Renders the frames tabs ask for until the station closes: one renderer and one upload
+    /// of the scene serve every frame until the settings or the scene change (or a camera
+    /// needs another of the method's instances).
+    pub fn run(&self) {
         loop {
-            let (settings, generation, first) = {
+            let (settings, scene, generation, first) = {
                 let mut state = self.lock();
-                while state.queue.is_empty() {
+                while state.queue.is_empty() && !self.closed() {
                     state = self.asked.wait(state).unwrap_or_else(|e| e.into_inner());
                 }
-                (
-                    state.settings.clone(),
-                    state.generation,
-                    state.queue[0].camera,
-                )
+                if self.closed() {
+                    // Whoever still waits hears so (their tickets dropped).
+                    state.queue.clear();
+                    return;
+                }
+                let scene = (Arc::clone(&state.cloud), state.scene_version);
+                let first = state.queue[0].camera;
+                (state.settings.clone(), scene, state.generation, first)
             };
-            if let Err(e) = self.serve_run(&settings, generation, &first) {
+            if let Err(e) = self.serve_run(&settings, &scene, generation, &first) {
                 // An error before any frame (the renderer for these settings, or a camera the
                 // method cannot render) answers the first camera waiting.
                 if let Some(ticket) = self.lock().queue.pop_front() {
@@ -234,11 +275,17 @@ impl<'a> Station<'a> {
 
     /// Renders queued cameras with one renderer built for `settings` and `first`'s instance
     /// of the method, while they last; an error before the first frame is returned.
-    fn serve_run(&self, settings: &Settings, generation: u64, first: &Camera) -> Result<()> {
+    fn serve_run(
+        &self,
+        settings: &Settings,
+        (cloud, scene_version): &(Arc<GaussianCloud>, u64),
+        generation: u64,
+        first: &Camera,
+    ) -> Result<()> {
         let method = methods::find(self.methods, &settings.method)?;
         methods::check_camera(method, self.methods, first)?;
         let opts = settings.options(self.alpha)?;
-        let cloud = lower_degree(self.cloud, settings.sh_degree);
+        let cloud = lower_degree(cloud, settings.sh_degree);
         let instance = method.instance(cloud.sh_degree, first);
         // The camera being rendered and the tab waiting on it.
         type InFlight = Option<(Camera, SyncSender<Result<Rendered>>)>;
@@ -248,7 +295,7 @@ impl<'a> Station<'a> {
         let cameras = || {
             let mut state = self.lock();
             loop {
-                if state.generation != generation {
+                if state.generation != generation || self.closed() {
                     return None;
                 }
                 if let Some(next) = state.queue.front() {
@@ -279,6 +326,7 @@ impl<'a> Station<'a> {
                     settings: settings.clone(),
                     explain: (instance.effects)(&camera, &opts).to_string(),
                     place: place.clone(),
+                    scene_version: *scene_version,
                 };
                 reply.send(Ok(rendered)).ok();
             }

@@ -5,8 +5,11 @@
 //! `{"settings": ...}`; anything it cannot do with `{"error": why}`, the session going on. On
 //! connecting the page is sent `{"scene": ...}`: what it shows and offers. A camera that
 //! arrives while a frame renders replaces the one waiting, so a slow client is sent the newest
-//! view, never a queue of old ones.
+//! view, never a queue of old ones. While a scene trains (`splat fit --view`), the tab is sent
+//! `{"training": status}` as the run moves and the last frame again as the scene changes;
+//! `{"pause": true | false}` holds and resumes the run.
 
+use super::live::Live;
 use super::picture::{self, Compare};
 use super::station::{Output, Rendered, Station};
 use anyhow::{Context, Result, anyhow, bail};
@@ -23,6 +26,9 @@ use tungstenite::{Message, WebSocket};
 /// The most pixels a frame may have (4K): larger requests are refused with a message.
 pub const MOST_PIXELS: u32 = 3840 * 2160;
 
+/// How often a tab of a scene in training looks for a newer scene and status.
+const LIVE_POLL: std::time::Duration = std::time::Duration::from_millis(200);
+
 /// What the tabs of one `splat view` look at.
 pub struct Scene<'a> {
     pub station: Station<'a>,
@@ -32,9 +38,12 @@ pub struct Scene<'a> {
     pub background: Vec3,
     /// What the page is told first: the scene, its views, the choices it offers.
     pub intro: serde_json::Value,
+    /// The run training the scene, if it trains.
+    pub live: Option<Live>,
 }
 
 /// What a tab asks for a frame of.
+#[derive(Clone, Copy)]
 enum Ask {
     Camera(Camera),
     View { index: usize, compare: Compare },
@@ -48,23 +57,33 @@ struct ViewAsk {
     compare: Compare,
 }
 
-/// A tab's socket, and the last view's picture it loaded.
+/// A tab's socket, the last view's picture it loaded, what it was last sent.
 struct Tab<'s> {
     socket: WebSocket<TcpStream>,
     scene: &'s Scene<'s>,
     picture: Option<(usize, Image)>,
+    /// The last frame asked for, and the version of the scene it showed.
+    shown: Option<(Ask, u64)>,
+    /// The version of the training status last sent.
+    status: u64,
 }
 
-/// Serves one tab until it closes.
+/// Serves one tab until it closes (or the station does).
 pub fn run(socket: WebSocket<TcpStream>, scene: &Scene) -> Result<()> {
+    if scene.live.is_some() {
+        socket.get_ref().set_read_timeout(Some(LIVE_POLL))?;
+    }
     let mut tab = Tab {
         socket,
         scene,
         picture: None,
+        shown: None,
+        status: 0,
     };
     let mut intro = scene.intro.clone();
     intro["settings"] = serde_json::to_value(scene.station.settings())?;
-    let sent = tab.send(Message::text(
+    intro["training"] = scene.live.as_ref().map(Live::json).into();
+    let mut sent = tab.send(Message::text(
         serde_json::json!({ "scene": intro }).to_string(),
     ));
     while sent.is_ok() {
@@ -73,17 +92,14 @@ pub fn run(socket: WebSocket<TcpStream>, scene: &Scene) -> Result<()> {
             Ask::Camera(camera) => tab.frame(camera),
             Ask::View { index, compare } => tab.view(index, compare),
         };
-        let sent = match answer {
-            Ok((image, stats)) => (tab.send(Message::binary(image))).and_then(|_| {
-                tab.send(Message::text(
-                    serde_json::json!({ "frame": stats }).to_string(),
-                ))
-            }),
+        sent = match answer {
+            Ok((image, stats, version)) => {
+                tab.shown = Some((ask, version));
+                let stats = serde_json::json!({ "frame": stats }).to_string();
+                (tab.send(Message::binary(image))).and_then(|_| tab.send(Message::text(stats)))
+            }
             Err(e) => tab.send_error(&format!("{e:#}")),
         };
-        if sent.is_err() {
-            break;
-        }
     }
     tab.socket.close(None).ok();
     Ok(())
@@ -107,15 +123,19 @@ fn stats(r: &Rendered) -> serde_json::Value {
 }
 
 impl Tab<'_> {
-    /// A frame of `camera` as the settings show it, and its stats.
-    fn frame(&self, camera: Camera) -> Result<(Vec<u8>, serde_json::Value)> {
+    /// A frame of `camera` as the settings show it, its stats and the scene's version.
+    fn frame(&self, camera: Camera) -> Result<(Vec<u8>, serde_json::Value, u64)> {
         let r = self.scene.station.render(camera)?;
         let image = picture::shown(&r.frame, r.settings.output)?;
-        Ok((picture::jpeg(&image)?, stats(&r)))
+        Ok((picture::jpeg(&image)?, stats(&r), r.scene_version))
     }
 
     /// A frame of dataset view `index` shown against its picture, with its PSNR.
-    fn view(&mut self, index: usize, compare: Compare) -> Result<(Vec<u8>, serde_json::Value)> {
+    fn view(
+        &mut self,
+        index: usize,
+        compare: Compare,
+    ) -> Result<(Vec<u8>, serde_json::Value, u64)> {
         let views = &self.scene.views;
         let Some(shot) = views.get(index) else {
             bail!(match views.len() {
@@ -152,7 +172,7 @@ impl Tab<'_> {
             "compare": format!("{compare:?}").to_lowercase(),
             "camera": CameraFile::from_camera(&shot.camera),
         });
-        Ok((picture::jpeg(&image)?, stats))
+        Ok((picture::jpeg(&image)?, stats, r.scene_version))
     }
 
     fn send(&mut self, message: Message) -> Result<()> {
@@ -190,8 +210,16 @@ impl Tab<'_> {
                 Ok(Message::Binary(_)) => self.send_error("send JSON text").ok()?,
                 Ok(Message::Close(_)) => return None,
                 Ok(_) => {}
-                Err(tungstenite::Error::Io(e)) if e.kind() == ErrorKind::WouldBlock => {
+                Err(tungstenite::Error::Io(e)) if e.kind() == ErrorKind::WouldBlock && pending => {
                     return latest;
+                }
+                // Nothing from the tab for a while, while the scene trains.
+                Err(tungstenite::Error::Io(e))
+                    if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) =>
+                {
+                    if let Some(again) = self.poll_live().ok()? {
+                        return Some(again);
+                    }
                 }
                 Err(tungstenite::Error::Capacity(e)) => {
                     self.send_error(&format!("message refused: {e}")).ok()?;
@@ -202,6 +230,27 @@ impl Tab<'_> {
         }
     }
 
+    /// While the scene trains: sends the run's status if it moved; the last frame asked for
+    /// again if the scene changed since. An error once the station closes.
+    fn poll_live(&mut self) -> Result<Option<Ask>> {
+        let station = &self.scene.station;
+        if station.closed() {
+            bail!("the viewer closed");
+        }
+        let Some(live) = &self.scene.live else {
+            return Ok(None);
+        };
+        if live.version() != self.status {
+            self.status = live.version();
+            let status = serde_json::json!({ "training": live.json() }).to_string();
+            self.send(Message::text(status))?;
+        }
+        Ok(match self.shown {
+            Some((ask, version)) if version != station.scene_version() => Some(ask),
+            _ => None,
+        })
+    }
+
     /// A message taken in: a frame asked for, or a settings change made (and answered).
     fn take(&mut self, text: &str) -> Result<Option<Ask>> {
         let message: serde_json::Value = serde_json::from_str(text).context("not JSON")?;
@@ -209,6 +258,15 @@ impl Tab<'_> {
             let settings = self.scene.station.change(change)?;
             let answer = serde_json::json!({ "settings": settings }).to_string();
             self.send(Message::text(answer))?;
+            return Ok(None);
+        }
+        if let Some(pause) = message.get("pause") {
+            let (Some(live), Some(pause)) = (&self.scene.live, pause.as_bool()) else {
+                bail!(
+                    "pause (true or false) holds a run of `splat fit --view`; this scene does not train"
+                );
+            };
+            live.pause(pause);
             return Ok(None);
         }
         if message.get("view").is_some() {

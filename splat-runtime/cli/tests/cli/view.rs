@@ -32,19 +32,26 @@ fn start() -> Server {
     start_with(&["--port", "0", "--backend", "cpu"], Path::new("."))
 }
 
-/// `splat view ARGS` run in `dir`, once it prints its URL; the port, and the URL's query.
+/// `splat view ARGS` run in `dir`, once it prints its URL.
 fn start_with(args: &[&str], dir: &Path) -> Server {
+    serving(&[&["view"], args].concat(), dir)
+}
+
+/// `splat ARGS` run in `dir`, once it prints a URL: its port and that line.
+fn serving(args: &[&str], dir: &Path) -> Server {
     let mut child = Command::new(env!("CARGO_BIN_EXE_splat"))
-        .arg("view")
         .args(args)
         .current_dir(dir)
         .env_remove("XDG_RUNTIME_DIR")
         .stdout(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    let mut line = String::new();
     let mut stdout = BufReader::new(child.stdout.take().unwrap());
-    stdout.read_line(&mut line).unwrap();
+    let mut line = String::new();
+    while !line.contains("http://") {
+        line.clear();
+        assert!(stdout.read_line(&mut line).unwrap() > 0, "no URL printed");
+    }
     let port = line
         .split("http://")
         .nth(1)
@@ -382,6 +389,107 @@ fn open_to_the_network_it_asks_for_a_token() {
     let mut ws = tungstenite::connect(url).unwrap().0;
     ws.send(Message::text(json(&camera(32, 24)))).unwrap();
     assert_eq!(next_frame(&mut ws).dimensions(), (32, 24));
+}
+
+/// `splat fit --view`: the page shows the scene as it trains (frames come again, changed, with
+/// no camera sent), the run's status, and holds the run while paused; the run ends as it
+/// would without the page.
+#[test]
+fn fit_view_shows_the_run_as_it_trains_and_pauses_it() {
+    let dir = temp();
+    let args = [
+        "fit",
+        "--steps",
+        "400",
+        "--view",
+        "--view-every",
+        "10",
+        "--port",
+        "0",
+    ];
+    let mut server = serving(
+        &[&args[..], &["--backend", "cpu", "--out", "out"]].concat(),
+        dir.path(),
+    );
+    let mut ws = connect(server.1);
+    let scene = next(&mut ws, "scene");
+    assert_eq!(scene["training"]["steps"], 400, "{scene}");
+    ws.send(Message::text(json(&camera(64, 48)))).unwrap();
+    let first = next_frame(&mut ws);
+    // Frames of the scene as it trains arrive with no camera sent again.
+    let mut later = next_frame(&mut ws);
+    for _ in 0..5 {
+        later = next_frame(&mut ws);
+    }
+    let (apart, _) = difference(&first, &later);
+    assert!(
+        apart > 0.0,
+        "the frames did not change as the scene trained"
+    );
+
+    send(&mut ws, serde_json::json!({ "pause": true }));
+    let held = loop {
+        let t = next(&mut ws, "training");
+        if t["paused"] == true {
+            break t["step"].as_u64().unwrap();
+        }
+    };
+    // For 1.5 s no step runs: every status that comes says at most the step held (and the
+    // one in progress when the pause arrived).
+    for t in statuses_within(&mut ws, std::time::Duration::from_millis(1500)) {
+        assert!(
+            t["step"].as_u64().unwrap() <= held + 1,
+            "{t} after pausing at {held}"
+        );
+    }
+    send(&mut ws, serde_json::json!({ "pause": false }));
+    let status = loop {
+        let t = next(&mut ws, "training");
+        if t["paused"] == false && t["step"].as_u64().unwrap() > held + 1 {
+            break t;
+        }
+    };
+    assert!(status["loss"].as_array().unwrap().len() > 2, "{status}");
+    assert!(status["primitives"].as_u64().unwrap() > 0, "{status}");
+    // The run goes on to its end and writes its results; the page goes with it.
+    assert!(server.0.wait().unwrap().success());
+    let csv = std::fs::read_to_string(dir.path().join("out/metrics.csv")).unwrap();
+    // The header, the test views before the first step, a row per step.
+    assert_eq!(csv.lines().count(), 2 + 400);
+    assert!(dir.path().join("out/scene.ply").is_file());
+}
+
+/// The training statuses that arrive over `time`.
+fn statuses_within(ws: &mut Socket, time: std::time::Duration) -> Vec<serde_json::Value> {
+    let tcp = |ws: &mut Socket| match ws.get_mut() {
+        tungstenite::stream::MaybeTlsStream::Plain(s) => s.try_clone().unwrap(),
+        _ => unreachable!("a plain connection"),
+    };
+    let end = std::time::Instant::now() + time;
+    let mut seen = vec![];
+    while let Some(left) = end.checked_duration_since(std::time::Instant::now()) {
+        tcp(ws)
+            .set_read_timeout(Some(left.max(std::time::Duration::from_millis(1))))
+            .unwrap();
+        match ws.read() {
+            Ok(Message::Text(t)) => {
+                let m: serde_json::Value = serde_json::from_str(&t).unwrap();
+                seen.extend(m.get("training").cloned());
+            }
+            Ok(_) => {}
+            Err(tungstenite::Error::Io(e))
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                ) =>
+            {
+                break;
+            }
+            Err(e) => panic!("{e}"),
+        }
+    }
+    tcp(ws).set_read_timeout(None).unwrap();
+    seen
 }
 
 /// The page in a real browser (headless Chromium driven by `tests/browser/view.mjs`): the first
