@@ -6,6 +6,7 @@ use anyhow::{Result, bail};
 use plotters::style::colors::colormaps::{ColorMap, ViridisRGB};
 use serde::Deserialize;
 use splat_runtime::{Frame, Image};
+use std::borrow::Cow;
 
 /// How a dataset view's render is shown beside its picture.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Deserialize)]
@@ -26,7 +27,7 @@ pub const DIFFERENCE_GAIN: f32 = 4.0;
 /// The output `output` of `frame` as RGB: color as rendered; alpha as grey; depth colored
 /// (viridis, near dark) between the 1st and 99th percentile of the covered pixels' depths, the
 /// uncovered black.
-pub fn shown(frame: &Frame, output: Output) -> Result<Image> {
+pub fn shown(frame: &Frame, output: Output) -> Result<Cow<'_, Image>> {
     let grey = |image: &Image, value: &dyn Fn(usize, f32) -> [f32; 3]| Image {
         width: image.width,
         height: image.height,
@@ -35,8 +36,8 @@ pub fn shown(frame: &Frame, output: Output) -> Result<Image> {
             .flat_map(|(i, v)| value(i, *v))
             .collect(),
     };
-    Ok(match output {
-        Output::Rgb => frame.color.clone(),
+    Ok(Cow::Owned(match output {
+        Output::Rgb => return Ok(Cow::Borrowed(&frame.color)),
         Output::Alpha => match &frame.alpha {
             Some(alpha) => grey(alpha, &|_, a| [a; 3]),
             None => bail!("the frame has no alpha output"),
@@ -51,7 +52,7 @@ pub fn shown(frame: &Frame, output: Output) -> Result<Image> {
                 .map(|(_, d)| *d)
                 .collect();
             if seen.is_empty() {
-                return Ok(grey(depth, &|_, _| [0.0; 3]));
+                return Ok(Cow::Owned(grey(depth, &|_, _| [0.0; 3])));
             }
             seen.sort_by(f32::total_cmp);
             let at = |q: f64| seen[((seen.len() - 1) as f64 * q) as usize];
@@ -64,7 +65,7 @@ pub fn shown(frame: &Frame, output: Output) -> Result<Image> {
                 [c.0, c.1, c.2].map(|v| v as f32 / 255.0)
             })
         }
-    })
+    }))
 }
 
 /// `render` shown against `picture` (same size) as `compare` asks.
@@ -91,19 +92,20 @@ pub fn compared(render: Image, picture: &Image, compare: Compare) -> Image {
     }
 }
 
-/// `image` (RGB in [0, 1]) as a JPEG of quality 90.
+/// `image` (RGB in [0, 1]) as a JPEG of quality 90 (color at full resolution).
 pub fn jpeg(image: &Image) -> Result<Vec<u8>> {
     let bytes: Vec<u8> = (image.data.iter())
         .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
         .collect();
+    let (Ok(width), Ok(height)) = (image.width.try_into(), image.height.try_into()) else {
+        bail!(
+            "{}x{} is past a JPEG's 65535 a side",
+            image.width,
+            image.height
+        );
+    };
     let mut out = Vec::new();
-    let encoder = image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, 90);
-    image::ImageEncoder::write_image(
-        encoder,
-        &bytes,
-        image.width,
-        image.height,
-        image::ExtendedColorType::Rgb8,
-    )?;
+    let encoder = jpeg_encoder::Encoder::new(&mut out, 90);
+    encoder.encode(&bytes, width, height, jpeg_encoder::ColorType::Rgb)?;
     Ok(out)
 }

@@ -21,6 +21,7 @@ use splat_runtime::train::{fit::composite, loss};
 use splat_runtime::{Camera, Image};
 use std::io::ErrorKind;
 use std::net::TcpStream;
+use std::time::Instant;
 use tungstenite::{Message, WebSocket};
 
 /// The most pixels a frame may have (4K): larger requests are refused with a message.
@@ -125,9 +126,17 @@ fn stats(r: &Rendered) -> serde_json::Value {
 impl Tab<'_> {
     /// A frame of `camera` as the settings show it, its stats and the scene's version.
     fn frame(&self, camera: Camera) -> Result<(Vec<u8>, serde_json::Value, u64)> {
+        let asked = Instant::now();
         let r = self.scene.station.render(camera)?;
+        let rendered = asked.elapsed();
         let image = picture::shown(&r.frame, r.settings.output)?;
-        Ok((picture::jpeg(&image)?, stats(&r), r.scene_version))
+        let jpeg = picture::jpeg(&image)?;
+        let mut stats = stats(&r);
+        stats["wall_ms"] = serde_json::json!({
+            "render": rendered.as_secs_f64() * 1e3,
+            "encode": (asked.elapsed() - rendered).as_secs_f64() * 1e3,
+        });
+        Ok((jpeg, stats, r.scene_version))
     }
 
     /// A frame of dataset view `index` shown against its picture, with its PSNR.
@@ -161,7 +170,7 @@ impl Tab<'_> {
         let psnr = loss::psnr(&color, picture)?;
         let image = match (compare, r.settings.output) {
             (Compare::Difference, _) | (_, Output::Rgb) => color,
-            _ => picture::shown(&r.frame, r.settings.output)?,
+            _ => picture::shown(&r.frame, r.settings.output)?.into_owned(),
         };
         let image = picture::compared(image, picture, compare);
         let mut stats = stats(&r);

@@ -364,6 +364,34 @@ fn dataset_views_show_beside_their_pictures_with_eval_psnr() {
     assert!(next_text(&mut ws).contains("no dataset views"));
 }
 
+/// A scene that does not load is refused before anything is served, naming the file.
+#[test]
+fn a_scene_that_does_not_load_is_refused() {
+    let dir = temp();
+    write(
+        dir.path(),
+        "broken.ply",
+        b"ply\nformat ascii 1.0\nend_header\n",
+    );
+    let nothing = dir.path().join("nothing");
+    let args = ["view", "broken.ply", "--method", "3dgs", "--port", "0"];
+    fails(&splat(&args, dir.path()), "broken.ply", &nothing);
+    std::fs::create_dir(dir.path().join("empty")).unwrap();
+    let args = ["view", "empty", "--method", "3dgs", "--port", "0"];
+    fails(&splat(&args, dir.path()), "without scene.ply", &nothing);
+    let args = [
+        "view",
+        "empty",
+        "--scene",
+        "broken.ply",
+        "--method",
+        "3dgs",
+        "--port",
+        "0",
+    ];
+    fails(&splat(&args, dir.path()), "empty", &nothing);
+}
+
 /// Open to the network, the page and its socket ask for the token printed in the URL.
 #[test]
 fn open_to_the_network_it_asks_for_a_token() {
