@@ -7,7 +7,8 @@
 #   .gl/   the Vulkan loader debs (see the device README);
 #   .dev/  `splat.xz` (cargo build --release -p splat-cli; strip; xz: 73 MB stripped, over
 #          the 64 MiB a call carries), `gpu-bench.xz` (the executable `cargo bench -p
-#          splat-methods --bench gpu --no-run` prints; strip; xz),
+#          splat-methods --bench gpu --no-run` prints; strip; xz), `viewer-bench.xz` (the same
+#          for `cargo bench -p splat-cli --bench viewer --no-run`),
 #          shared/bench/{make_scene,gsplat_bench,gsplat_train}.py,
 #          gsplat-1.5.3-py3-none-any.whl (pip download --no-deps) and `stilllife/`
 #          (methods/benches/mitsuba_dataset.py .dev/stilllife).
@@ -33,7 +34,7 @@ part() { echo; echo "=== $1 ($(date +%T))"; }
 # Each part's time limit, in seconds on the H200 (SLOW times that on lavapipe).
 limit() { timeout $(($1 * SLOW)) "${@:2}"; }
 mkdir -p /tmp/bin
-for x in splat gpu-bench; do
+for x in splat gpu-bench viewer-bench; do
     python3 -c 'import lzma, shutil, sys; shutil.copyfileobj(lzma.open(sys.argv[1]), open(sys.argv[2], "wb"))' \
         .dev/$x.xz /tmp/bin/$x && chmod +x /tmp/bin/$x
 done
@@ -59,6 +60,9 @@ runpy.run_path(sys.argv[0], run_name="__main__")
 print(f"gsplat peak CUDA memory allocated: {torch.cuda.max_memory_allocated() / 2**20:.1f} MiB")' \
         .dev/gsplat_bench.py "$scene" $ITERS
 fi
+
+part "issue 59: splat view's frame latency and splat fit --view's cost, $N Gaussians at ${W}x$H on the GPU"
+limit 90 env SPLAT=$splat /tmp/bin/viewer-bench gpu $N $W $H
 
 # The comparison with gsplat 1.5.3's trainer as shared/bench/gsplat_train.py runs it: 100,000
 # random points in a cube of half-side 1.5, each of size 0.02 and gray, scene scale 1.3

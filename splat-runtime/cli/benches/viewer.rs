@@ -9,7 +9,8 @@
 //! (its baseline in the same run). Then `splat fit` on the built-in dataset without and with
 //! `--view` (a tab open, following the scene as it trains).
 //!
-//! `cargo bench -p splat-cli --bench viewer [-- gpu] [-- N]`
+//! `cargo bench -p splat-cli --bench viewer [-- gpu] [-- N WIDTH HEIGHT]` (300000 1280 720;
+//! `SPLAT`: the `splat` binary, default the one built beside the bench).
 
 #[path = "../../../methods/benches/common/mod.rs"]
 mod common;
@@ -23,13 +24,18 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 use tungstenite::Message;
 
+/// The `splat` binary: `SPLAT`, or the one built with the bench.
+fn splat() -> String {
+    std::env::var("SPLAT").unwrap_or_else(|_| env!("CARGO_BIN_EXE_splat").to_string())
+}
+
 type Socket = tungstenite::WebSocket<tungstenite::stream::MaybeTlsStream<TcpStream>>;
 
 const FRAMES: usize = 20;
 
 /// `splat ARGS`, once it prints its page's URL: the process and the page's port.
 fn serving(args: &[&str]) -> (Child, u16) {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_splat"))
+    let mut child = Command::new(splat())
         .args(args)
         .stdout(Stdio::piped())
         .spawn()

@@ -114,6 +114,8 @@ enum Command {
     /// Look at a scene in the browser: serves a page on 127.0.0.1 that flies around it, each
     /// frame rendered here as the camera moves.
     View(commands::view::ViewArgs),
+    /// Convert a scene between formats (.ply, .splat), each named by its file's extension.
+    Convert(commands::convert::ConvertArgs),
     /// Render a scene along a camera path (an orbit, a dataset's views, or keyframes saved
     /// from `splat view`) into an H.264 MP4 that browsers play.
     Video(commands::video::VideoArgs),
@@ -289,6 +291,7 @@ fn dispatch(cli: Cli, methods: &[Method]) -> Result<()> {
         Command::Tradeoff(args) => commands::tradeoff::tradeoff_cmd(&args, methods),
         Command::View(args) => commands::view::view_cmd(&args, methods),
         Command::Video(args) => commands::video::video_cmd(&args, methods),
+        Command::Convert(args) => commands::convert::convert_cmd(&args),
         Command::Scene { out, camera_out } => {
             let ply = out.extension().and_then(|e| e.to_str());
             if !ply.is_some_and(|e| e.eq_ignore_ascii_case("ply")) {

@@ -147,9 +147,10 @@ pub fn given_or_built_in(
     Ok((cloud, camera))
 }
 
-/// The PLY scene at `path`, with a note when the reader folded Mip-Splatting's 3D filter in.
+/// The scene at `path` (any format `splat convert` knows, by its extension), with a note when
+/// the reader folded Mip-Splatting's 3D filter in.
 pub fn read(path: &std::path::Path) -> anyhow::Result<GaussianCloud> {
-    let cloud = splat_runtime::io::ply::read(path)?;
+    let cloud = splat_runtime::io::formats::read(path)?;
     if cloud.folded_3d_filter {
         eprintln!(
             "note: {} holds Mip-Splatting's 3D filter (filter_3D), folded into its scales and \

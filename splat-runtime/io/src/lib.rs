@@ -1,9 +1,10 @@
-//! File formats: INRIA 3DGS PLY scenes, JSON cameras, posed-image datasets (Blender,
+//! File formats: scenes (INRIA 3DGS PLY, antimatter15's .splat), JSON cameras, posed-image datasets (Blender,
 //! nerfstudio, COLMAP), and image outputs (PNG, EXR, NPY), all written atomically (a temporary
 //! file in the target's folder, then a rename).
 
 pub mod camera;
 pub mod dataset;
+pub mod formats;
 pub mod image;
 mod picture;
 pub mod ply;

@@ -4,6 +4,7 @@
 //! method or a command, so the methods' table can hold them.
 
 pub(crate) mod bench;
+pub(crate) mod convert;
 pub(crate) mod eval;
 pub(crate) mod fit;
 pub(crate) mod render;

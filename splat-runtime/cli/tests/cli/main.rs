@@ -4,6 +4,7 @@
 
 mod bench;
 mod common;
+mod convert;
 mod dataset;
 mod eval;
 mod fit;

@@ -1,0 +1,162 @@
+//! `splat convert`: scenes between formats, cross-checked against an independent
+//! implementation (PlayCanvas's splat-transform from npm: `npm install` in `tests/formats`,
+//! which `.ci/run` does); bad input refused with nothing written.
+
+use crate::common::*;
+use splat_runtime::io::ply::{GaussianCloud, read};
+
+/// splat-transform, or `None` (an error with `SPLAT_REQUIRE_NPM=1`) when not installed.
+fn splat_transform() -> Option<PathBuf> {
+    let bin = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/formats/node_modules/.bin/splat-transform");
+    if bin.exists() {
+        return Some(bin);
+    }
+    let required = std::env::var("SPLAT_REQUIRE_NPM").is_ok_and(|v| v == "1");
+    assert!(
+        !required,
+        "no {}: npm install in tests/formats",
+        bin.display()
+    );
+    eprintln!("skipped: no splat-transform (npm install in tests/formats)");
+    None
+}
+
+fn run_splat_transform(bin: &Path, args: &[&str], dir: &Path) {
+    let out = Command::new(bin)
+        .args(["-q", "-w"])
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "splat-transform {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// The largest differences between two clouds' Gaussians, in order: position, log scale, DC
+/// color (as `0.5 + SH_C0 dc`, clamped to [0, 1]), opacity (after the sigmoid), unit rotation.
+fn largest_differences(a: &GaussianCloud, b: &GaussianCloud) -> [f32; 5] {
+    assert_eq!(a.gaussians.len(), b.gaussians.len());
+    let sigmoid = |x: f32| 1.0 / (1.0 + (-x).exp());
+    let color = |v: splat_runtime::glam::Vec3| {
+        (v * 0.282_094_8 + 0.5).clamp(
+            splat_runtime::glam::Vec3::ZERO,
+            splat_runtime::glam::Vec3::ONE,
+        )
+    };
+    let mut most = [0.0f32; 5];
+    for (x, y) in a.gaussians.iter().zip(&b.gaussians) {
+        let d = [
+            (x.mean - y.mean).abs().max_element(),
+            (x.log_scale - y.log_scale).abs().max_element(),
+            (color(x.sh[0]) - color(y.sh[0])).abs().max_element(),
+            (sigmoid(x.opacity_logit) - sigmoid(y.opacity_logit)).abs(),
+            (x.rotation.normalize() - y.rotation.normalize())
+                .abs()
+                .max_element(),
+        ];
+        for (m, d) in most.iter_mut().zip(d) {
+            *m = m.max(d);
+        }
+    }
+    most
+}
+
+/// `.splat` written here reads in splat-transform as the scene it came from (within a byte's
+/// step), and splat-transform's `.splat` reads here as its scene; a render of either equals
+/// one of ours.
+#[test]
+fn dot_splat_agrees_with_splat_transform_both_ways() {
+    let Some(st) = splat_transform() else { return };
+    let dir = temp();
+    let d = dir.path();
+    ok(&splat(&["scene", "--out", "planet.ply"], d));
+    let out = ok(&splat(&["convert", "planet.ply", "ours.splat"], d));
+    assert!(
+        out.contains("9400 Gaussians") && out.contains("32.0 bytes a Gaussian"),
+        "{out}"
+    );
+    let original = read(&d.join("planet.ply")).unwrap();
+
+    // Ours, read by theirs.
+    run_splat_transform(&st, &["ours.splat", "theirs-read.ply"], d);
+    let theirs = read(&d.join("theirs-read.ply")).unwrap();
+    let [pos, scale, color, alpha, rot] = largest_differences(&original, &theirs);
+    println!(
+        "ours -> splat-transform: position {pos}, log scale {scale}, color {color}, alpha {alpha}, rotation {rot}"
+    );
+    assert_eq!(pos, 0.0);
+    assert!(scale < 1e-5, "{scale}");
+    // Half a byte step, rounded here (and splat-transform's logit clamp at 1e-6).
+    assert!(
+        color <= 0.5 / 255.0 + 1e-5 && alpha <= 0.5 / 255.0 + 1e-5,
+        "{color} {alpha}"
+    );
+    // splat-transform reads a rotation byte as b / 127.5 - 1 where it was written as
+    // q 128 + 128: about 0.004 apart, then renormalized.
+    assert!(rot < 0.012, "{rot}");
+
+    // Theirs, read by ours.
+    run_splat_transform(&st, &["planet.ply", "theirs.splat"], d);
+    ok(&splat(&["convert", "theirs.splat", "ours-read.ply"], d));
+    let ours = read(&d.join("ours-read.ply")).unwrap();
+    let [pos, scale, color, alpha, rot] = largest_differences(&original, &ours);
+    println!(
+        "splat-transform -> ours: position {pos}, log scale {scale}, color {color}, alpha {alpha}, rotation {rot}"
+    );
+    assert_eq!(pos, 0.0);
+    assert!(scale < 1e-5, "{scale}");
+    // splat-transform truncates: within a whole step.
+    assert!(
+        color <= 1.0 / 255.0 + 1e-5 && alpha <= 1.0 / 255.0 + 1e-5,
+        "{color} {alpha}"
+    );
+    assert!(rot < 1.5 / 128.0, "{rot}");
+
+    // The same scene, read by either: their reading of our file renders as ours does.
+    let render = |scene: &str, out: &str| {
+        ok(&splat(
+            &["render", "--scene", scene, "--out", out, "--backend", "cpu"],
+            d,
+        ))
+    };
+    render("ours.splat", "a.png");
+    render("theirs-read.ply", "b.png");
+    let (a, b) = (
+        image::open(d.join("a.png")).unwrap().to_rgb8(),
+        image::open(d.join("b.png")).unwrap().to_rgb8(),
+    );
+    let (mean, most) = difference(&a, &b);
+    println!(
+        "a render of ours.splat against one of splat-transform's reading of it: mean {mean:.5}, largest {most:.3}"
+    );
+    assert!(mean < 0.002, "mean {mean}, largest {most}");
+}
+
+#[test]
+fn bad_input_is_refused_with_nothing_written() {
+    let dir = temp();
+    let d = dir.path();
+    ok(&splat(&["scene", "--out", "planet.ply"], d));
+    fails(
+        &splat(&["convert", "planet.ply", "x.obj"], d),
+        "unknown scene format",
+        &d.join("x.obj"),
+    );
+    fails(
+        &splat(&["convert", "nothing.ply", "x.splat"], d),
+        "nothing.ply",
+        &d.join("x.splat"),
+    );
+    write(d, "odd.splat", &[0; 40]);
+    fails(
+        &splat(&["convert", "odd.splat", "x.ply"], d),
+        "40 bytes are not a .splat file",
+        &d.join("x.ply"),
+    );
+    let out = ok(&splat(&["convert", "planet.ply", "p.splat"], d));
+    assert!(out.contains("keeps SH to degree 0"), "{out}");
+}

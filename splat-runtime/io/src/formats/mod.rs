@@ -1,0 +1,91 @@
+//! Scenes in every format splat reads and writes, chosen by the file's extension: the INRIA
+//! PLY ([`crate::ply`]) and antimatter15's `.splat` ([`dot_splat`]). What each keeps and drops:
+//! `docs/formats.md`.
+
+pub mod dot_splat;
+
+use crate::ply::{self, GaussianCloud, PlyError};
+use std::path::Path;
+
+/// A scene file's format.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    /// The INRIA 3DGS PLY: every value as f32, SH up to degree 3.
+    Ply,
+    /// antimatter15's `.splat`: 32 bytes a Gaussian, no SH beyond the DC term.
+    Splat,
+}
+
+impl Format {
+    pub const ALL: [Format; 2] = [Format::Ply, Format::Splat];
+
+    /// The format `path`'s extension names.
+    pub fn of(path: &Path) -> Result<Format, SceneError> {
+        let name = path
+            .file_name()
+            .unwrap_or_default()
+            .to_string_lossy()
+            .to_ascii_lowercase();
+        let found = Format::ALL
+            .into_iter()
+            .find(|f| name.ends_with(f.extension()));
+        found.ok_or_else(|| SceneError::Unknown {
+            path: path.display().to_string(),
+        })
+    }
+
+    pub fn extension(self) -> &'static str {
+        match self {
+            Format::Ply => ".ply",
+            Format::Splat => ".splat",
+        }
+    }
+
+    /// The highest SH degree it keeps.
+    pub fn most_sh_degree(self) -> u32 {
+        match self {
+            Format::Ply => 3,
+            Format::Splat => 0,
+        }
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    #[error(transparent)]
+    Ply(#[from] PlyError),
+    #[error("cannot read {path}: {error}")]
+    Io { path: String, error: std::io::Error },
+    #[error("{path}: {why}")]
+    Format { path: String, why: String },
+    #[error("{path}: unknown scene format (the extension names it: .ply or .splat)")]
+    Unknown { path: String },
+}
+
+/// The scene at `path`, in the format its extension names.
+pub fn read(path: &Path) -> Result<GaussianCloud, SceneError> {
+    match Format::of(path)? {
+        Format::Ply => Ok(ply::read(path)?),
+        Format::Splat => {
+            let shown = || path.display().to_string();
+            let bytes = std::fs::read(path).map_err(|error| SceneError::Io {
+                path: shown(),
+                error,
+            })?;
+            dot_splat::parse(&bytes).map_err(|why| SceneError::Format { path: shown(), why })
+        }
+    }
+}
+
+/// Writes `cloud` to `path` (atomically) in the format its extension names.
+pub fn write(path: &Path, cloud: &GaussianCloud) -> Result<(), SceneError> {
+    let format = Format::of(path)?;
+    let written = crate::write_atomic(path, |w| match format {
+        Format::Ply => ply::write_to(w, cloud),
+        Format::Splat => dot_splat::write_to(w, cloud),
+    });
+    written.map_err(|error| SceneError::Io {
+        path: path.display().to_string(),
+        error,
+    })
+}
