@@ -7,9 +7,9 @@ use std::path::PathBuf;
 
 #[derive(clap::Args)]
 pub struct ConvertArgs {
-    /// The scene to read: .ply (INRIA 3DGS) or .splat.
+    /// The scene to read: .ply (INRIA 3DGS), .splat or .spz.
     pub input: PathBuf,
-    /// The scene to write, in the format its extension names: .ply or .splat.
+    /// The scene to write, in the format its extension names: .ply, .splat or .spz.
     pub output: PathBuf,
 }
 

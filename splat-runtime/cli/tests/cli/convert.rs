@@ -1,4 +1,4 @@
-//! `splat convert`: scenes between formats, cross-checked against an independent
+//! `splat convert`: scenes between formats (.splat, SPZ), cross-checked against an independent
 //! implementation (PlayCanvas's splat-transform from npm: `npm install` in `tests/formats`,
 //! which `.ci/run` does); bad input refused with nothing written.
 
@@ -136,6 +136,74 @@ fn dot_splat_agrees_with_splat_transform_both_ways() {
     assert!(mean < 0.002, "mean {mean}, largest {most}");
 }
 
+/// The largest difference of two clouds' SH coefficients past the DC term.
+fn largest_sh_difference(a: &GaussianCloud, b: &GaussianCloud) -> f32 {
+    (a.gaussians.iter().zip(&b.gaussians))
+        .flat_map(|(x, y)| (1..16).map(move |k| (x.sh[k] - y.sh[k]).abs().max_element()))
+        .fold(0.0, f32::max)
+}
+
+/// SPZ written here (version 4) reads in splat-transform as the scene it came from, within
+/// SPZ's quantization, and splat-transform's SPZ (through Adobe's build of Niantic's library)
+/// reads here the same; renders of either reading agree.
+#[test]
+fn spz_agrees_with_splat_transform_both_ways() {
+    let Some(st) = splat_transform() else { return };
+    let dir = temp();
+    let d = dir.path();
+    ok(&splat(&["scene", "--out", "planet.ply"], d));
+    let out = ok(&splat(&["convert", "planet.ply", "ours.spz"], d));
+    assert!(out.contains("9400 Gaussians (SH degree 1)"), "{out}");
+    let original = read(&d.join("planet.ply")).unwrap();
+    // Half a step of each quantity: 1/4096 positions, 1/16 log scales, DC color bytes of 1/38.25
+    // (times SH_C0 as compared), opacity bytes, degree-1 SH in buckets of 8/128 after
+    // rounding to 1/128.
+    let within = |label: &str, got: &GaussianCloud| {
+        let [pos, scale, color, alpha, rot] = largest_differences(&original, got);
+        let sh = largest_sh_difference(&original, got);
+        println!(
+            "{label}: position {pos}, log scale {scale}, color {color}, alpha {alpha}, rotation {rot}, SH {sh}"
+        );
+        assert!(pos <= 0.5 / 4096.0 + 1e-5, "{pos}");
+        assert!(scale <= 0.5 / 16.0 + 1e-5, "{scale}");
+        assert!(
+            color <= 0.5 / 38.25 * 0.2821 + 1e-5 && alpha <= 0.5 / 255.0 + 1e-5,
+            "{color} {alpha}"
+        );
+        assert!(rot < 3e-3, "{rot}");
+        assert!(sh <= 4.5 / 128.0 + 1e-5, "{sh}");
+    };
+    run_splat_transform(&st, &["ours.spz", "theirs-read.ply"], d);
+    within(
+        "ours -> splat-transform",
+        &read(&d.join("theirs-read.ply")).unwrap(),
+    );
+    run_splat_transform(&st, &["planet.ply", "theirs.spz"], d);
+    ok(&splat(&["convert", "theirs.spz", "ours-read.ply"], d));
+    within(
+        "splat-transform -> ours",
+        &read(&d.join("ours-read.ply")).unwrap(),
+    );
+
+    let render = |scene: &str, out: &str| {
+        ok(&splat(
+            &["render", "--scene", scene, "--out", out, "--backend", "cpu"],
+            d,
+        ))
+    };
+    render("ours.spz", "a.png");
+    render("theirs-read.ply", "b.png");
+    let (a, b) = (
+        image::open(d.join("a.png")).unwrap().to_rgb8(),
+        image::open(d.join("b.png")).unwrap().to_rgb8(),
+    );
+    let (mean, most) = difference(&a, &b);
+    println!(
+        "a render of ours.spz against one of splat-transform's reading of it: mean {mean:.5}, largest {most:.3}"
+    );
+    assert!(mean < 0.002, "mean {mean}, largest {most}");
+}
+
 #[test]
 fn bad_input_is_refused_with_nothing_written() {
     let dir = temp();
@@ -152,6 +220,12 @@ fn bad_input_is_refused_with_nothing_written() {
         &d.join("x.splat"),
     );
     write(d, "odd.splat", &[0; 40]);
+    write(d, "junk.spz", b"not an spz file");
+    fails(
+        &splat(&["convert", "junk.spz", "x.ply"], d),
+        "not an SPZ file",
+        &d.join("x.ply"),
+    );
     fails(
         &splat(&["convert", "odd.splat", "x.ply"], d),
         "40 bytes are not a .splat file",

@@ -1,8 +1,9 @@
 //! Scenes in every format splat reads and writes, chosen by the file's extension: the INRIA
-//! PLY ([`crate::ply`]) and antimatter15's `.splat` ([`dot_splat`]). What each keeps and drops:
-//! `docs/formats.md`.
+//! PLY ([`crate::ply`]), antimatter15's `.splat` ([`dot_splat`]) and Niantic's SPZ ([`spz`]).
+//! What each keeps and drops: `docs/formats.md`.
 
 pub mod dot_splat;
+pub mod spz;
 
 use crate::ply::{self, GaussianCloud, PlyError};
 use std::path::Path;
@@ -14,10 +15,12 @@ pub enum Format {
     Ply,
     /// antimatter15's `.splat`: 32 bytes a Gaussian, no SH beyond the DC term.
     Splat,
+    /// Niantic's SPZ: about 10x smaller than the PLY, SH kept in 4-5 bits.
+    Spz,
 }
 
 impl Format {
-    pub const ALL: [Format; 2] = [Format::Ply, Format::Splat];
+    pub const ALL: [Format; 3] = [Format::Ply, Format::Splat, Format::Spz];
 
     /// The format `path`'s extension names.
     pub fn of(path: &Path) -> Result<Format, SceneError> {
@@ -38,6 +41,7 @@ impl Format {
         match self {
             Format::Ply => ".ply",
             Format::Splat => ".splat",
+            Format::Spz => ".spz",
         }
     }
 
@@ -46,6 +50,7 @@ impl Format {
         match self {
             Format::Ply => 3,
             Format::Splat => 0,
+            Format::Spz => 3,
         }
     }
 }
@@ -58,7 +63,7 @@ pub enum SceneError {
     Io { path: String, error: std::io::Error },
     #[error("{path}: {why}")]
     Format { path: String, why: String },
-    #[error("{path}: unknown scene format (the extension names it: .ply or .splat)")]
+    #[error("{path}: unknown scene format (the extension names it: .ply, .splat or .spz)")]
     Unknown { path: String },
 }
 
@@ -66,13 +71,17 @@ pub enum SceneError {
 pub fn read(path: &Path) -> Result<GaussianCloud, SceneError> {
     match Format::of(path)? {
         Format::Ply => Ok(ply::read(path)?),
-        Format::Splat => {
+        format => {
             let shown = || path.display().to_string();
             let bytes = std::fs::read(path).map_err(|error| SceneError::Io {
                 path: shown(),
                 error,
             })?;
-            dot_splat::parse(&bytes).map_err(|why| SceneError::Format { path: shown(), why })
+            let parsed = match format {
+                Format::Spz => spz::parse(&bytes),
+                _ => dot_splat::parse(&bytes),
+            };
+            parsed.map_err(|why| SceneError::Format { path: shown(), why })
         }
     }
 }
@@ -83,6 +92,7 @@ pub fn write(path: &Path, cloud: &GaussianCloud) -> Result<(), SceneError> {
     let written = crate::write_atomic(path, |w| match format {
         Format::Ply => ply::write_to(w, cloud),
         Format::Splat => dot_splat::write_to(w, cloud),
+        Format::Spz => spz::write_to(w, cloud),
     });
     written.map_err(|error| SceneError::Io {
         path: path.display().to_string(),
