@@ -13,7 +13,7 @@
 use splat_runtime::Image;
 use splat_runtime::glam::Vec3;
 use splat_runtime::io::dataset::{self, colmap};
-use splat_runtime::io::{camera, image, ply};
+use splat_runtime::io::{camera, formats, image, ply};
 use std::path::{Path, PathBuf};
 
 /// Joins the files of a multi-file input.
@@ -24,6 +24,8 @@ pub const SEPARATOR: &[u8] = b"\n%%splat-fuzz-next-file%%\n";
 pub enum Target {
     /// An INRIA 3DGS PLY scene.
     Ply,
+    /// antimatter15's `.splat` scene.
+    Splat,
     /// A camera JSON file.
     Camera,
     /// A COLMAP sparse model, binary: `cameras.bin`, `images.bin`, `points3D.bin`.
@@ -37,8 +39,9 @@ pub enum Target {
 }
 
 impl Target {
-    pub const ALL: [Target; 6] = [
+    pub const ALL: [Target; 7] = [
         Target::Ply,
+        Target::Splat,
         Target::Camera,
         Target::ColmapBinary,
         Target::ColmapText,
@@ -50,6 +53,7 @@ impl Target {
     pub fn name(self) -> &'static str {
         match self {
             Target::Ply => "ply",
+            Target::Splat => "splat",
             Target::Camera => "camera",
             Target::ColmapBinary => "colmap_binary",
             Target::ColmapText => "colmap_text",
@@ -76,6 +80,7 @@ impl Target {
         let background = Vec3::ZERO;
         match self {
             Target::Ply => ply::parse(&mut &bytes[..]).is_ok(),
+            Target::Splat => formats::dot_splat::parse(bytes).is_ok(),
             Target::Camera => {
                 let path = dir.join("camera.json");
                 write(&path, bytes);

@@ -19,6 +19,9 @@ const ZSTD_LEVEL: i32 = 12;
 /// A DC color byte is `dc 0.15 255 + 127.5` (a scale below SH_C0's, so colors past [0, 1]
 /// keep some room).
 const COLOR_SCALE: f32 = 0.15;
+/// How many times its size a file may unpack to (Niantic's reader's bound on the Gaussians a
+/// file may claim, 1024 / 9 a byte, at 9 bytes or more each).
+const MOST_RATIO: usize = 1024;
 /// The largest |position| 24 bits of 1/4096 hold.
 const MOST_POSITION: f32 = (1 << 23) as f32 / (1 << FRACTIONAL_BITS) as f32;
 
@@ -48,12 +51,16 @@ pub fn parse(bytes: &[u8]) -> Result<GaussianCloud, String> {
         [0x4E, 0x47, 0x53, 0x50, ..] => parse_streams(bytes),
         [0x1F, 0x8B, ..] => {
             let mut body = vec![];
-            let mut gz = flate2::read::GzDecoder::new(bytes);
-            // At most what the largest cloud the header may claim takes: no bomb fills memory.
-            (&mut gz)
-                .take(1 << 32)
+            let gz = flate2::read::GzDecoder::new(bytes);
+            // Niantic's reader takes at most 1024 / 9 Gaussians a byte of the file: a file
+            // that unpacks to more is refused before it fills memory.
+            let most = bytes.len().saturating_mul(MOST_RATIO) as u64;
+            (gz.take(most + 1))
                 .read_to_end(&mut body)
                 .map_err(|e| format!("gzip: {e}"))?;
+            if body.len() as u64 > most {
+                return Err(format!("unpacks to more than {MOST_RATIO} times its size"));
+            }
             parse_legacy(&body)
         }
         _ => Err("not an SPZ file (it starts with neither NGSP nor gzip's 1f 8b)".to_string()),
@@ -114,6 +121,12 @@ fn parse_streams(file: &[u8]) -> Result<GaussianCloud, String> {
         ));
     }
     let (n, degree) = check_header(u32_at(file, 8), file[12])?;
+    if n.saturating_mul(9) > file.len().saturating_mul(MOST_RATIO) {
+        return Err(format!(
+            "{n} Gaussians in {} bytes: more than SPZ packs",
+            file.len()
+        ));
+    }
     let streams = file[15] as usize;
     let toc = u32_at(file, 16) as usize;
     let lengths = block_lengths(n, degree, version);
