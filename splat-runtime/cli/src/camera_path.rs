@@ -130,16 +130,10 @@ pub fn through(keys: &[Camera], frames: usize, (width, height): (u32, u32)) -> V
             let turn = catmull_rom(turns[a], turns[b], turns[c], turns[d], t).normalize();
             let rotation = Mat3::from_quat(Quat::from_vec4(turn));
             let span = spans[b] + (spans[c] - spans[b]) * t;
-            let f = 0.5 * size.y / span;
             Camera {
-                rotation,
-                translation: -(rotation * eye),
-                focal: Vec2::splat(f),
-                principal: size / 2.0,
-                size,
                 distortion: keys[0].distortion,
                 model: keys[0].model,
-                ..Default::default()
+                ..crate::orbit::pinhole(rotation, eye, size, 0.5 * size.y / span)
             }
         })
         .collect()

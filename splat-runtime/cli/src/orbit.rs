@@ -88,15 +88,25 @@ impl Orbit {
         let down = forward.cross(right);
         let rotation = Mat3::from_cols(right, down, forward).transpose();
         let size = Vec2::new(width as f32, height as f32);
-        let f = 0.5 * size.y / (0.5 * fov.to_radians()).tan();
-        Camera {
+        pinhole(
             rotation,
-            translation: -(rotation * eye),
-            focal: Vec2::splat(f),
-            principal: size / 2.0,
+            eye,
             size,
-            ..Default::default()
-        }
+            0.5 * size.y / (0.5 * fov.to_radians()).tan(),
+        )
+    }
+}
+
+/// A pinhole camera at `eye` turned by `rotation` (world to camera), `size` pixels with focal
+/// length `focal` and its principal point in the middle.
+pub fn pinhole(rotation: Mat3, eye: Vec3, size: Vec2, focal: f32) -> Camera {
+    Camera {
+        rotation,
+        translation: -(rotation * eye),
+        focal: Vec2::splat(focal),
+        principal: size / 2.0,
+        size,
+        ..Default::default()
     }
 }
 

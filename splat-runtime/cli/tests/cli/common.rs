@@ -239,3 +239,25 @@ pub fn difference(got: &image::RgbImage, want: &image::RgbImage) -> (f64, f64) {
     let mean = diffs.iter().sum::<f64>() / diffs.len() as f64;
     (mean, diffs.iter().fold(0.0f64, |m, d| m.max(*d)))
 }
+
+/// `tests/browser`, where node drives headless Chromium (playwright-core), or `None` without
+/// Chromium or `npm install` there (an error when `SPLAT_REQUIRE_BROWSER=1`).
+pub fn browser() -> Option<PathBuf> {
+    let browser = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/browser");
+    let ready = browser.join("node_modules/playwright-core").is_dir()
+        && Path::new(&std::env::var("CHROMIUM").unwrap_or("/usr/bin/chromium".into())).exists();
+    if ready {
+        return Some(browser);
+    }
+    let required = std::env::var("SPLAT_REQUIRE_BROWSER").is_ok_and(|v| v == "1");
+    assert!(
+        !required,
+        "no Chromium or playwright-core in {}",
+        browser.display()
+    );
+    eprintln!(
+        "skipped: no Chromium or `npm install` in {}",
+        browser.display()
+    );
+    None
+}

@@ -117,22 +117,18 @@ fn dot_splat_agrees_with_splat_transform_both_ways() {
     assert!(rot < 1.5 / 128.0, "{rot}");
 
     // The same scene, read by either: their reading of our file renders as ours does.
+    renders_agree(d, "ours.splat", "theirs-read.ply");
+}
+
+/// `ours` and `theirs` (scenes in `d`) render alike: a mean difference below 0.002.
+fn renders_agree(d: &Path, ours: &str, theirs: &str) {
     let render = |scene: &str, out: &str| {
-        ok(&splat(
-            &["render", "--scene", scene, "--out", out, "--backend", "cpu"],
-            d,
-        ))
+        let args = ["render", "--scene", scene, "--out", out, "--backend", "cpu"];
+        ok(&splat(&args, d));
+        image::open(d.join(out)).unwrap().to_rgb8()
     };
-    render("ours.splat", "a.png");
-    render("theirs-read.ply", "b.png");
-    let (a, b) = (
-        image::open(d.join("a.png")).unwrap().to_rgb8(),
-        image::open(d.join("b.png")).unwrap().to_rgb8(),
-    );
-    let (mean, most) = difference(&a, &b);
-    println!(
-        "a render of ours.splat against one of splat-transform's reading of it: mean {mean:.5}, largest {most:.3}"
-    );
+    let (mean, most) = difference(&render(ours, "a.png"), &render(theirs, "b.png"));
+    println!("a render of {ours} against one of {theirs}: mean {mean:.5}, largest {most:.3}");
     assert!(mean < 0.002, "mean {mean}, largest {most}");
 }
 
@@ -185,23 +181,8 @@ fn spz_agrees_with_splat_transform_both_ways() {
         &read(&d.join("ours-read.ply")).unwrap(),
     );
 
-    let render = |scene: &str, out: &str| {
-        ok(&splat(
-            &["render", "--scene", scene, "--out", out, "--backend", "cpu"],
-            d,
-        ))
-    };
-    render("ours.spz", "a.png");
-    render("theirs-read.ply", "b.png");
-    let (a, b) = (
-        image::open(d.join("a.png")).unwrap().to_rgb8(),
-        image::open(d.join("b.png")).unwrap().to_rgb8(),
-    );
-    let (mean, most) = difference(&a, &b);
-    println!(
-        "a render of ours.spz against one of splat-transform's reading of it: mean {mean:.5}, largest {most:.3}"
-    );
-    assert!(mean < 0.002, "mean {mean}, largest {most}");
+    // The same scene, read by either: their reading of our file renders as ours does.
+    renders_agree(d, "ours.spz", "theirs-read.ply");
 }
 
 #[test]

@@ -26,22 +26,7 @@ fn camera(eye: Vec3) -> CameraFile {
 /// `tests/browser/video.mjs` prints; `None` without Chromium or `npm install` (an error when
 /// `SPLAT_REQUIRE_BROWSER=1`).
 fn played_in_chromium(video: &Path, dir: &Path) -> Option<serde_json::Value> {
-    let browser = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/browser");
-    let ready = browser.join("node_modules/playwright-core").is_dir()
-        && Path::new(&std::env::var("CHROMIUM").unwrap_or("/usr/bin/chromium".into())).exists();
-    if !ready {
-        let required = std::env::var("SPLAT_REQUIRE_BROWSER").is_ok_and(|v| v == "1");
-        assert!(
-            !required,
-            "no Chromium or playwright-core in {}",
-            browser.display()
-        );
-        eprintln!(
-            "skipped: no Chromium or `npm install` in {}",
-            browser.display()
-        );
-        return None;
-    }
+    let browser = browser()?;
     let run = Command::new("node")
         .arg(browser.join("video.mjs"))
         .args([video, dir])

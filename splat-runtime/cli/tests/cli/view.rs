@@ -527,22 +527,7 @@ fn statuses_within(ws: &mut Socket, time: std::time::Duration) -> Vec<serde_json
 /// `SPLAT_REQUIRE_BROWSER=1`.
 #[test]
 fn the_page_shows_splat_renders_in_chromium() {
-    let browser = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/browser");
-    let ready = browser.join("node_modules/playwright-core").is_dir()
-        && Path::new(&std::env::var("CHROMIUM").unwrap_or("/usr/bin/chromium".into())).exists();
-    if !ready {
-        let required = std::env::var("SPLAT_REQUIRE_BROWSER").is_ok_and(|v| v == "1");
-        assert!(
-            !required,
-            "no Chromium or playwright-core in {}",
-            browser.display()
-        );
-        eprintln!(
-            "skipped: no Chromium or `npm install` in {}",
-            browser.display()
-        );
-        return;
-    }
+    let Some(browser) = browser() else { return };
     let dir = temp();
     let server = start();
     let url = format!("http://127.0.0.1:{}/", server.1);
