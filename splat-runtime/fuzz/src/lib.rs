@@ -26,6 +26,10 @@ pub enum Target {
     Ply,
     /// antimatter15's `.splat` scene.
     Splat,
+    /// Niantic's SPZ scene (every version: gzip or per-attribute zstd streams).
+    Spz,
+    /// PlayCanvas's compressed PLY scene.
+    CompressedPly,
     /// A camera JSON file.
     Camera,
     /// A COLMAP sparse model, binary: `cameras.bin`, `images.bin`, `points3D.bin`.
@@ -39,9 +43,11 @@ pub enum Target {
 }
 
 impl Target {
-    pub const ALL: [Target; 7] = [
+    pub const ALL: [Target; 9] = [
         Target::Ply,
         Target::Splat,
+        Target::Spz,
+        Target::CompressedPly,
         Target::Camera,
         Target::ColmapBinary,
         Target::ColmapText,
@@ -54,6 +60,8 @@ impl Target {
         match self {
             Target::Ply => "ply",
             Target::Splat => "splat",
+            Target::Spz => "spz",
+            Target::CompressedPly => "compressed_ply",
             Target::Camera => "camera",
             Target::ColmapBinary => "colmap_binary",
             Target::ColmapText => "colmap_text",
@@ -73,6 +81,18 @@ impl Target {
             .join(self.name())
     }
 
+    /// The bytes its reader may hold at once per byte of input. A compressed format's scene
+    /// is rightly larger than its file: SPZ unpacks to at most 1024 times its size (Niantic's
+    /// bound), 20 bytes or more a Gaussian of 236 bytes in memory, so 1024 (its streams) plus
+    /// 1024 / 20 x 236 (its Gaussians) = 13,108 a byte. The other readers hold a bounded
+    /// multiple of what the file holds (a JSON number of two bytes becomes a 32-byte value).
+    pub fn most_per_byte(self) -> usize {
+        match self {
+            Target::Spz => 13_108,
+            _ => 64,
+        }
+    }
+
     /// Reads `bytes` as this target's files; whether the reader accepts them is its business,
     /// only a panic (or a hang, or a huge allocation) is a finding. Returns whether it accepted.
     pub fn run(self, scratch: &Scratch, bytes: &[u8]) -> bool {
@@ -81,6 +101,8 @@ impl Target {
         match self {
             Target::Ply => ply::parse(&mut &bytes[..]).is_ok(),
             Target::Splat => formats::dot_splat::parse(bytes).is_ok(),
+            Target::Spz => formats::spz::parse(bytes).is_ok(),
+            Target::CompressedPly => formats::compressed_ply::parse(bytes).is_ok(),
             Target::Camera => {
                 let path = dir.join("camera.json");
                 write(&path, bytes);

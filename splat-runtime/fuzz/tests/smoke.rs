@@ -1,7 +1,7 @@
 //! CI's short fuzz run: every target reads its seed corpus (`valid-*` seeds are accepted,
 //! `bad-*` ones refused, so the harness is known to reach the reader) and deterministic
 //! mutations of each seed, under an allocator that counts. No input may panic, nor hold more
-//! than `ALLOWANCE` plus `PER_BYTE` times its size at once: a header that claims more than the
+//! than `ALLOWANCE` plus `Target::most_per_byte` times its size at once: a header that claims more than the
 //! file holds is refused before anything is allocated for it. The coverage-guided runs are
 //! AFL++'s (docs/testing.md).
 
@@ -13,8 +13,6 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 const MUTANTS: usize = 1500;
 /// What a reader may allocate whatever the input: buffers, a picture's decoder, rayon's pool.
 const ALLOWANCE: usize = 2 << 20;
-/// What it may allocate per input byte (a JSON number of two bytes becomes a 32-byte value).
-const PER_BYTE: usize = 64;
 
 struct Counting;
 
@@ -56,7 +54,7 @@ fn run(target: Target, scratch: &Scratch, input: &[u8], what: &str) -> bool {
     PEAK.store(base, Ordering::Relaxed);
     let accepted = target.run(scratch, input);
     let held = PEAK.load(Ordering::Relaxed).saturating_sub(base);
-    let bound = ALLOWANCE + PER_BYTE * input.len();
+    let bound = ALLOWANCE + target.most_per_byte() * input.len();
     assert!(
         held <= bound,
         "{} on {what}: held {held} bytes at once for a {}-byte input (bound {bound})",

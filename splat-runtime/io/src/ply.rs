@@ -366,6 +366,7 @@ pub fn write_to(w: &mut dyn Write, cloud: &GaussianCloud) -> std::io::Result<()>
             cloud.sh_degree
         ));
     }
+    cloud.check_finite()?;
     let per_channel = sh_coefficients(cloud.sh_degree) - 1;
     let mut header = format!(
         "ply\nformat binary_little_endian 1.0\nelement vertex {}\n",
@@ -389,7 +390,7 @@ pub fn write_to(w: &mut dyn Write, cloud: &GaussianCloud) -> std::io::Result<()>
     }
     header.push_str("end_header\n");
     w.write_all(header.as_bytes())?;
-    for (i, g) in cloud.gaussians.iter().enumerate() {
+    for g in &cloud.gaussians {
         let mut row: Vec<f32> = vec![g.mean.x, g.mean.y, g.mean.z, 0.0, 0.0, 0.0];
         row.extend(g.sh[0].to_array());
         for ch in 0..3 {
@@ -398,9 +399,6 @@ pub fn write_to(w: &mut dyn Write, cloud: &GaussianCloud) -> std::io::Result<()>
         row.push(g.opacity_logit);
         row.extend(g.log_scale.to_array());
         row.extend(g.rotation.to_array());
-        if row.iter().any(|v| !v.is_finite()) {
-            return refuse(format!("Gaussian {i} has a NaN or infinite value"));
-        }
         for v in row {
             w.write_all(&v.to_le_bytes())?;
         }
@@ -408,7 +406,28 @@ pub fn write_to(w: &mut dyn Write, cloud: &GaussianCloud) -> std::io::Result<()>
     Ok(())
 }
 
+impl StoredGaussian {
+    pub fn is_finite(&self) -> bool {
+        let mut vectors = [self.mean, self.log_scale].into_iter().chain(self.sh);
+        vectors.all(|v| v.is_finite())
+            && self.rotation.is_finite()
+            && self.opacity_logit.is_finite()
+    }
+}
+
 impl GaussianCloud {
+    /// An error naming the first Gaussian with a NaN or infinite value, which no format
+    /// stores; what every writer checks first.
+    pub fn check_finite(&self) -> std::io::Result<()> {
+        match self.gaussians.iter().position(|g| !g.is_finite()) {
+            None => Ok(()),
+            Some(i) => Err(std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                format!("Gaussian {i} has a NaN or infinite value"),
+            )),
+        }
+    }
+
     /// The cloud as a method's parameters.
     pub fn params<P: FromStored>(&self) -> Vec<P> {
         self.gaussians.iter().map(P::from_stored).collect()

@@ -7,9 +7,10 @@ use std::path::PathBuf;
 
 #[derive(clap::Args)]
 pub struct ConvertArgs {
-    /// The scene to read: .ply (INRIA 3DGS), .splat or .spz.
+    /// The scene to read: .ply (INRIA 3DGS, or a compressed PLY), .compressed.ply, .splat or .spz.
     pub input: PathBuf,
-    /// The scene to write, in the format its extension names: .ply, .splat or .spz.
+    /// The scene to write, in the format its extension names: .ply, .compressed.ply, .splat or
+    /// .spz.
     pub output: PathBuf,
 }
 

@@ -60,16 +60,8 @@ pub fn parse(bytes: &[u8]) -> Result<GaussianCloud, String> {
 /// infinite value.
 pub fn write_to(w: &mut dyn Write, cloud: &GaussianCloud) -> std::io::Result<()> {
     let byte = |v: f32| (v * 255.0).round().clamp(0.0, 255.0) as u8;
-    for (i, g) in cloud.gaussians.iter().enumerate() {
-        let finite = g.mean.is_finite()
-            && g.log_scale.is_finite()
-            && g.rotation.is_finite()
-            && g.opacity_logit.is_finite()
-            && g.sh[0].is_finite();
-        if !finite {
-            let why = format!("Gaussian {i} has a NaN or infinite value");
-            return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, why));
-        }
+    cloud.check_finite()?;
+    for g in &cloud.gaussians {
         let mut record = [0u8; RECORD];
         let scale = g.log_scale.exp();
         for (k, v) in g

@@ -1,11 +1,14 @@
 //! Scenes in every format splat reads and writes, chosen by the file's extension: the INRIA
-//! PLY ([`crate::ply`]), antimatter15's `.splat` ([`dot_splat`]) and Niantic's SPZ ([`spz`]).
+//! PLY ([`crate::ply`]), PlayCanvas's compressed PLY ([`compressed_ply`], also read from a
+//! plain `.ply` name), antimatter15's `.splat` ([`dot_splat`]) and Niantic's SPZ ([`spz`]).
 //! What each keeps and drops: `docs/formats.md`.
 
+pub mod compressed_ply;
 pub mod dot_splat;
 pub mod spz;
 
 use crate::ply::{self, GaussianCloud, PlyError};
+use std::io::Read;
 use std::path::Path;
 
 /// A scene file's format.
@@ -13,6 +16,9 @@ use std::path::Path;
 pub enum Format {
     /// The INRIA 3DGS PLY: every value as f32, SH up to degree 3.
     Ply,
+    /// PlayCanvas's compressed PLY: chunks of 256 quantized within their ranges, 16 bytes a
+    /// Gaussian and a byte an SH coefficient.
+    CompressedPly,
     /// antimatter15's `.splat`: 32 bytes a Gaussian, no SH beyond the DC term.
     Splat,
     /// Niantic's SPZ: about 10x smaller than the PLY, SH kept in 4-5 bits.
@@ -20,7 +26,13 @@ pub enum Format {
 }
 
 impl Format {
-    pub const ALL: [Format; 3] = [Format::Ply, Format::Splat, Format::Spz];
+    /// Every format, those whose extension ends another's first.
+    pub const ALL: [Format; 4] = [
+        Format::CompressedPly,
+        Format::Ply,
+        Format::Splat,
+        Format::Spz,
+    ];
 
     /// The format `path`'s extension names.
     pub fn of(path: &Path) -> Result<Format, SceneError> {
@@ -40,6 +52,7 @@ impl Format {
     pub fn extension(self) -> &'static str {
         match self {
             Format::Ply => ".ply",
+            Format::CompressedPly => ".compressed.ply",
             Format::Splat => ".splat",
             Format::Spz => ".spz",
         }
@@ -48,7 +61,7 @@ impl Format {
     /// The highest SH degree it keeps.
     pub fn most_sh_degree(self) -> u32 {
         match self {
-            Format::Ply => 3,
+            Format::Ply | Format::CompressedPly => 3,
             Format::Splat => 0,
             Format::Spz => 3,
         }
@@ -63,27 +76,38 @@ pub enum SceneError {
     Io { path: String, error: std::io::Error },
     #[error("{path}: {why}")]
     Format { path: String, why: String },
-    #[error("{path}: unknown scene format (the extension names it: .ply, .splat or .spz)")]
+    #[error(
+        "{path}: unknown scene format (the extension names it: .ply, .compressed.ply, .splat or .spz)"
+    )]
     Unknown { path: String },
 }
 
-/// The scene at `path`, in the format its extension names.
+/// The scene at `path`, in the format its extension names (a compressed PLY also under a
+/// plain `.ply` name: its header tells).
 pub fn read(path: &Path) -> Result<GaussianCloud, SceneError> {
-    match Format::of(path)? {
-        Format::Ply => Ok(ply::read(path)?),
-        format => {
-            let shown = || path.display().to_string();
-            let bytes = std::fs::read(path).map_err(|error| SceneError::Io {
-                path: shown(),
-                error,
-            })?;
-            let parsed = match format {
-                Format::Spz => spz::parse(&bytes),
-                _ => dot_splat::parse(&bytes),
-            };
-            parsed.map_err(|why| SceneError::Format { path: shown(), why })
-        }
+    let shown = || path.display().to_string();
+    let format = Format::of(path)?;
+    if format == Format::Ply && !is_compressed_ply(path) {
+        return Ok(ply::read(path)?);
     }
+    let bytes = std::fs::read(path).map_err(|error| SceneError::Io {
+        path: shown(),
+        error,
+    })?;
+    let parsed = match format {
+        Format::Ply | Format::CompressedPly => compressed_ply::parse(&bytes),
+        Format::Spz => spz::parse(&bytes),
+        Format::Splat => dot_splat::parse(&bytes),
+    };
+    parsed.map_err(|why| SceneError::Format { path: shown(), why })
+}
+
+/// Whether the PLY file at `path` is a compressed one (false where it cannot be read: the
+/// INRIA reader says why).
+fn is_compressed_ply(path: &Path) -> bool {
+    let mut head = Vec::with_capacity(4096);
+    let read = std::fs::File::open(path).and_then(|f| f.take(64 << 10).read_to_end(&mut head));
+    read.is_ok() && compressed_ply::is_compressed(&head)
 }
 
 /// Writes `cloud` to `path` (atomically) in the format its extension names.
@@ -91,6 +115,7 @@ pub fn write(path: &Path, cloud: &GaussianCloud) -> Result<(), SceneError> {
     let format = Format::of(path)?;
     let written = crate::write_atomic(path, |w| match format {
         Format::Ply => ply::write_to(w, cloud),
+        Format::CompressedPly => compressed_ply::write_to(w, cloud),
         Format::Splat => dot_splat::write_to(w, cloud),
         Format::Spz => spz::write_to(w, cloud),
     });

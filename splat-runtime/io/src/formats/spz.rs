@@ -284,6 +284,7 @@ pub fn write_to(w: &mut dyn Write, cloud: &GaussianCloud) -> std::io::Result<()>
     if n == 0 || n > i32::MAX as usize {
         return refuse(format!("{n} Gaussians: SPZ holds 1 to 2^31 - 1"));
     }
+    cloud.check_finite()?;
     let degree = cloud.sh_degree.min(3);
     let byte = |v: f32| v.round().clamp(0.0, 255.0) as u8;
     let [
@@ -295,10 +296,6 @@ pub fn write_to(w: &mut dyn Write, cloud: &GaussianCloud) -> std::io::Result<()>
         mut sh,
     ] = block_lengths(n, degree, VERSION).map(Vec::with_capacity);
     for (i, g) in cloud.gaussians.iter().enumerate() {
-        let values = [g.mean, g.log_scale, g.sh[0]].iter().all(|v| v.is_finite());
-        if !values || !g.rotation.is_finite() || !g.opacity_logit.is_finite() {
-            return refuse(format!("Gaussian {i} has a NaN or infinite value"));
-        }
         if g.mean.abs().max_element() >= MOST_POSITION {
             return refuse(format!(
                 "Gaussian {i} at {} is past SPZ's ±{MOST_POSITION}",
