@@ -14,8 +14,9 @@ use splat_runtime::glam::Vec3;
 use splat_runtime::gpu::Gpu;
 use splat_runtime::io::Outputs;
 use splat_runtime::io::dataset::Dataset;
+use splat_runtime::io::formats::{self, Format};
 use splat_runtime::io::image::stage_image;
-use splat_runtime::io::ply::{self, GaussianCloud, ToStored};
+use splat_runtime::io::ply::{GaussianCloud, ToStored};
 use splat_runtime::train::fit::{
     Evaluation, FitError, FitOptions, StepReport, fit_from, render_views,
 };
@@ -123,6 +124,11 @@ pub struct FitArgs {
     pub(crate) view_every: u32,
     #[command(flatten)]
     pub(crate) serve: crate::commands::view::ServeArgs,
+    /// Also write the trained scene in these formats beside scene.ply (comma-separated):
+    /// spz, compressed-ply, splat (scene.spz, scene.compressed.ply, scene.splat), for the
+    /// web's viewers; what each keeps: docs/formats.md.
+    #[arg(long, value_delimiter = ',', value_parser = export_format)]
+    pub(crate) export: Vec<Format>,
     /// Where to train: the GPU (the device-resident loop), the CPU, or `auto` (a hardware
     /// GPU when there is one).
     #[arg(long, value_enum, default_value_t = crate::Backend::Auto)]
@@ -132,6 +138,19 @@ pub struct FitArgs {
     /// plot (curve.png).
     #[arg(long, default_value = "fit")]
     pub(crate) out: PathBuf,
+}
+
+/// A format `--export` names (scene.ply is always written).
+fn export_format(name: &str) -> Result<Format, String> {
+    match Format::from_name(name)? {
+        Format::Ply => Err("scene.ply is always written; name the others".into()),
+        format => Ok(format),
+    }
+}
+
+/// The file the run writes its scene to in `format`: scene.ply, scene.spz, ...
+pub(crate) fn scene_file(format: Format) -> String {
+    format!("scene{}", format.extension())
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -156,7 +175,6 @@ pub(crate) const FAULTS_AFTER_SHOWN: usize = FAULTS_SHOWN + 1;
 /// The names of the files a run writes into its output folder (and `test/` for renders).
 pub(crate) const CHECKPOINT: &str = "checkpoint.bin";
 pub(crate) const METRICS: &str = "metrics.csv";
-pub(crate) const SCENE: &str = "scene.ply";
 pub(crate) const CURVE: &str = "curve.png";
 
 /// A training run, for any method.
@@ -321,7 +339,7 @@ impl Fit<'_> {
         if taken > 0 {
             print_step_times(&progress.times, taken, gpu.as_ref());
         }
-        write_results(&args.out, &params, &images, &progress.log)
+        write_results(&args.out, &params, &args.export, &images, &progress.log)
     }
 
     /// Where the run starts: the checkpoint it resumes from (refused if it is of another
@@ -371,16 +389,24 @@ impl Fit<'_> {
 
 /// The result of a run in `out`: the scene, the test views' renders, the metrics and the curve,
 /// all appearing together.
-fn write_results<P: ToStored>(out: &Path, params: &[P], images: &[Image], log: &Log) -> Result<()> {
-    let ply_path = out.join(SCENE);
+fn write_results<P: ToStored>(
+    out: &Path,
+    params: &[P],
+    exports: &[Format],
+    images: &[Image],
+    log: &Log,
+) -> Result<()> {
     let cloud = GaussianCloud {
         sh_degree: 3,
         gaussians: params.iter().map(ToStored::to_stored).collect(),
         folded_3d_filter: false,
     };
     let mut outputs = Outputs::default();
-    (outputs.stage(&ply_path, |w| ply::write_to(w, &cloud)))
-        .with_context(|| format!("writing {}", ply_path.display()))?;
+    for &format in [Format::Ply].iter().chain(exports) {
+        let path = out.join(scene_file(format));
+        (outputs.stage(&path, |w| formats::write_to(format, w, &cloud)))
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
     for (k, image) in images.iter().enumerate() {
         let path = out.join("test").join(crate::render_name(k));
         stage_image(&mut outputs, &path, image)

@@ -39,7 +39,8 @@ fn main() -> ExitCode {
             "linprim",
             "LinPrim: octahedra (each Gaussian of the scene becomes one); pinhole only",
             Instance::trainable::<linprim::Method>(),
-        ),
+        )
+        .primitives("octahedra"),
         Method::per_sh_degree(
             "3dgeer",
             "3DGEER: exact ray integral, particle bounding frustums; every camera",

@@ -23,6 +23,10 @@ pub struct Method {
     /// Whether it evaluates its primitives exactly: `splat tradeoff` compares every method's
     /// render of the same Gaussians with this one's.
     pub(crate) exact: bool,
+    /// What its primitives are where they are not Gaussians (LinPrim's octahedra): its scene
+    /// is stored as the Gaussians closest to them, which `splat fit --export` refuses to ship
+    /// to viewers that would draw them as Gaussians.
+    pub(crate) not_gaussians: Option<&'static str>,
 }
 
 /// One compiled method: what each command does with it.
@@ -96,6 +100,7 @@ impl Method {
             instances,
             rolling_shutter: None,
             exact: false,
+            not_gaussians: None,
         }
     }
 
@@ -117,6 +122,14 @@ impl Method {
     pub fn exact(self) -> Method {
         Method {
             exact: true,
+            ..self
+        }
+    }
+
+    /// Says what its primitives are, where they are not Gaussians (see `not_gaussians`).
+    pub fn primitives(self, what: &'static str) -> Method {
+        Method {
+            not_gaussians: Some(what),
             ..self
         }
     }

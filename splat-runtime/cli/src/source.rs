@@ -5,6 +5,7 @@ use crate::scene;
 use crate::view::{Downscale, Split};
 use anyhow::{Result, bail};
 use splat_runtime::io::dataset::{self, Shot};
+use splat_runtime::io::formats::Format;
 use splat_runtime::io::ply::GaussianCloud;
 use std::path::{Path, PathBuf};
 
@@ -77,7 +78,7 @@ impl SourceArgs {
 /// A PLY, or the scene.ply of a `splat fit` output folder.
 fn read_scene(path: &Path) -> Result<GaussianCloud> {
     if path.is_dir() {
-        let ply = path.join("scene.ply");
+        let ply = path.join(crate::fit::scene_file(Format::Ply));
         if !ply.is_file() {
             bail!(
                 "{} is a folder without scene.ply (what `splat fit` writes); for a dataset, \

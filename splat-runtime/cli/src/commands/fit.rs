@@ -2,7 +2,7 @@
 //! and where to train, and runs its [`Fit`] job.
 
 use crate::fit::{
-    CHECKPOINT, CURVE, Fit, FitArgs, METRICS, SCENE, StrategyArg, frozen_and_trained,
+    CHECKPOINT, CURVE, Fit, FitArgs, METRICS, StrategyArg, frozen_and_trained, scene_file,
 };
 use crate::methods::{self, Method};
 use crate::view::undistorted;
@@ -12,6 +12,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use splat_runtime::frame::MAX_SIDE;
 use splat_runtime::glam::Vec3;
 use splat_runtime::io::dataset;
+use splat_runtime::io::formats::Format;
 use splat_runtime::train::fit::{CPU_STEP_BYTES_PER_PIXEL, FitOptions};
 use splat_runtime::train::loss::WINDOW;
 use splat_runtime::train::{Checkpoint, DensifyOptions, McmcOptions, Strategy};
@@ -45,9 +46,11 @@ const BUILT_IN_DEFAULTS: Defaults = Defaults {
 
 /// Refuses an output folder where one of the run's files is a folder: found now, not after
 /// hours of training.
-fn check_out_files(out: &Path) -> Result<()> {
-    for name in [CHECKPOINT, METRICS, SCENE, CURVE] {
-        let path = out.join(name);
+fn check_out_files(out: &Path, exports: &[Format]) -> Result<()> {
+    let scenes = [Format::Ply].iter().chain(exports).map(|f| scene_file(*f));
+    let names = [CHECKPOINT, METRICS, CURVE].map(String::from);
+    for name in names.into_iter().chain(scenes) {
+        let path = out.join(&name);
         if path.is_dir() {
             bail!(
                 "--out {}: {} is a folder, and the run writes its {name} there",
@@ -91,8 +94,16 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
             method.name
         );
     };
+    if let (Some(what), false) = (method.not_gaussians, args.export.is_empty()) {
+        bail!(
+            "--export: {}'s primitives are {what}, which the viewers of the other formats would \
+             draw as Gaussians; its scene.ply stores each as the Gaussian closest to it (for \
+             splat's methods to read back), and `splat convert` converts that knowingly",
+            method.name
+        );
+    }
     crate::check_out_folder(&args.out)?;
-    check_out_files(&args.out)?;
+    check_out_files(&args.out, &args.export)?;
     check_knobs(args)?;
     let groups = method.full().param_fields.iter().map(|(name, _)| *name);
     frozen_and_trained(&groups.collect::<Vec<_>>(), &args.freeze, method.name)?;

@@ -8,7 +8,7 @@ pub mod dot_splat;
 pub mod spz;
 
 use crate::ply::{self, GaussianCloud, PlyError};
-use std::io::Read;
+use std::io::{Read, Write};
 use std::path::Path;
 
 /// A scene file's format.
@@ -56,6 +56,25 @@ impl Format {
             Format::Splat => ".splat",
             Format::Spz => ".spz",
         }
+    }
+
+    /// Its name on a command line (`splat fit --export`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Format::Ply => "ply",
+            Format::CompressedPly => "compressed-ply",
+            Format::Splat => "splat",
+            Format::Spz => "spz",
+        }
+    }
+
+    /// The format named `name` (as [`Format::name`] spells it), or why not.
+    pub fn from_name(name: &str) -> Result<Format, String> {
+        let found = Format::ALL.into_iter().find(|f| f.name() == name);
+        found.ok_or_else(|| {
+            let names: Vec<&str> = Format::ALL.iter().map(|f| f.name()).collect();
+            format!("no scene format `{name}` (one of {})", names.join(", "))
+        })
     }
 
     /// The highest SH degree it keeps.
@@ -113,14 +132,19 @@ fn is_compressed_ply(path: &Path) -> bool {
 /// Writes `cloud` to `path` (atomically) in the format its extension names.
 pub fn write(path: &Path, cloud: &GaussianCloud) -> Result<(), SceneError> {
     let format = Format::of(path)?;
-    let written = crate::write_atomic(path, |w| match format {
-        Format::Ply => ply::write_to(w, cloud),
-        Format::CompressedPly => compressed_ply::write_to(w, cloud),
-        Format::Splat => dot_splat::write_to(w, cloud),
-        Format::Spz => spz::write_to(w, cloud),
-    });
+    let written = crate::write_atomic(path, |w| write_to(format, w, cloud));
     written.map_err(|error| SceneError::Io {
         path: path.display().to_string(),
         error,
     })
+}
+
+/// Writes `cloud` to `w` in `format`.
+pub fn write_to(format: Format, w: &mut dyn Write, cloud: &GaussianCloud) -> std::io::Result<()> {
+    match format {
+        Format::Ply => ply::write_to(w, cloud),
+        Format::CompressedPly => compressed_ply::write_to(w, cloud),
+        Format::Splat => dot_splat::write_to(w, cloud),
+        Format::Spz => spz::write_to(w, cloud),
+    }
 }
