@@ -1,10 +1,12 @@
 //! `splat eval`: a scene measured on a dataset's views as `splat fit` measures its result:
 //! each view rendered, composited on the background and compared with its picture (PSNR,
 //! SSIM); the mean, the worst and best views, and with `--out` the renders and a CSV. For a
-//! scene trained by `splat fit` or by another program (any INRIA 3DGS PLY).
+//! scene trained by `splat fit` or by another program, in any format splat reads. With
+//! `--formats`, what each file format costs it instead ([`crate::format_costs`]).
 
 use crate::Backend;
 use crate::commands::render;
+use crate::format_costs;
 use crate::methods::{self, Method};
 use crate::view::{Downscale, Split, undistorted};
 use anyhow::{Context, Result};
@@ -12,6 +14,7 @@ use splat_runtime::RenderOptions;
 use splat_runtime::glam::Vec3;
 use splat_runtime::io::Outputs;
 use splat_runtime::io::dataset::{self, Shot};
+use splat_runtime::io::formats::Format;
 use splat_runtime::io::image::stage_image;
 use splat_runtime::train::fit::composite;
 use splat_runtime::train::loss;
@@ -21,7 +24,8 @@ use std::path::PathBuf;
 pub struct EvalArgs {
     /// Dataset folder (Blender, nerfstudio or COLMAP, as `splat fit` reads it).
     dataset: PathBuf,
-    /// The scene to measure (INRIA 3DGS PLY; `splat fit` writes it as scene.ply).
+    /// The scene to measure (.ply, .compressed.ply, .splat or .spz; `splat fit` writes
+    /// scene.ply).
     #[arg(long)]
     scene: PathBuf,
     #[arg(long)]
@@ -36,6 +40,11 @@ pub struct EvalArgs {
     downscale: Downscale,
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     backend: Backend,
+    /// Instead, write the scene in every format splat writes, read each back and measure its
+    /// renders: file size against PSNR and SSIM to the pictures and PSNR to the PLY's renders
+    /// (with --out: formats.csv and formats.png, no renders).
+    #[arg(long)]
+    formats: bool,
     /// Output folder: every view's render (`<split>/000.png`, ... in the dataset's order) and
     /// `eval.csv` (view, picture, PSNR, SSIM).
     #[arg(long)]
@@ -62,7 +71,7 @@ pub(crate) fn eval_cmd(args: &EvalArgs, methods: &[Method]) -> Result<()> {
     for shot in &shots {
         methods::check_camera(method, methods, &shot.camera)?;
     }
-    if let Some(out) = &args.out {
+    if let Some(out) = &args.out.as_ref().filter(|_| !args.formats) {
         let pictures = shots.iter().map(|s| s.path.as_path());
         crate::check_renders_spare(&out.join(split), shots.len(), pictures)?;
     }
@@ -73,6 +82,46 @@ pub(crate) fn eval_cmd(args: &EvalArgs, methods: &[Method]) -> Result<()> {
         ..Default::default()
     };
     let gpu = crate::pick_gpu(args.backend)?;
+    if args.formats {
+        let pictures = (shots.iter())
+            .map(|s| Ok(s.load(background)?.into_image()))
+            .collect::<Result<Vec<_>>>()?;
+        let cameras: Vec<_> = shots.iter().map(|s| s.camera).collect();
+        let views = format_costs::Views {
+            method,
+            cameras: &cameras,
+            pictures: &pictures,
+            background,
+            opts: &opts,
+            gpu: gpu.as_ref(),
+        };
+        let bar = indicatif::ProgressBar::new((Format::ALL.len() * shots.len()) as u64);
+        let costs = format_costs::measure(&cloud, &views, &bar)?;
+        bar.finish_and_clear();
+        println!(
+            "{}: {} primitives (SH degree {}) from {}, {} {split} views of {}{taken}, in every format",
+            method.name,
+            cloud.gaussians.len(),
+            cloud.sh_degree,
+            args.scene.display(),
+            shots.len(),
+            args.dataset.display(),
+        );
+        format_costs::print_table(&costs, cloud.gaussians.len());
+        if let Some(out) = &args.out {
+            let mut outputs = Outputs::default();
+            let title = format!(
+                "{} on {} {split} views of {}",
+                args.scene.display(),
+                shots.len(),
+                args.dataset.display()
+            );
+            format_costs::stage_outputs(&mut outputs, out, &costs, &title)?;
+            outputs.commit()?;
+            crate::wrote(out);
+        }
+        return Ok(());
+    }
     let bar = indicatif::ProgressBar::new(shots.len() as u64);
     let mut measured = Vec::with_capacity(shots.len());
     let mut outputs = Outputs::default();

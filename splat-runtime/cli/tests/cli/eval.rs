@@ -111,3 +111,56 @@ fn eval_measures_a_scene_as_fit_did() {
     );
     assert_eq!(std::fs::read(planet.join("test/000.png")).unwrap(), truth);
 }
+
+/// `splat eval --formats` writes the scene in every format, reads each back and measures it:
+/// the table, `formats.csv` (each size the file `splat convert` writes; the PLY's PSNR a plain
+/// `splat eval`'s) and `formats.png`.
+#[test]
+fn eval_formats_measures_what_each_format_costs() {
+    let dir = temp();
+    let d = dir.path();
+    ok(&splat(&["scene", "--out", "planet.ply"], d));
+    let args = ["dataset", "--out", "data", "--views", "16"];
+    ok(&splat(&args, d));
+    let eval = ["eval", "data", "--scene", "planet.ply", "--backend", "cpu"];
+    let plain = ok(&splat(&eval, d));
+    let out = ok(&splat(
+        &[&eval[..], &["--formats", "--out", "costs"]].concat(),
+        d,
+    ));
+    assert!(out.contains("9400 primitives (SH degree 1)"), "{out}");
+    let csv = std::fs::read_to_string(d.join("costs/formats.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
+    let names: Vec<&str> = rows.iter().map(|r| r[0]).collect();
+    assert_eq!(names, ["ply", "compressed-ply", "splat", "spz"]);
+    // Each size is the file `splat convert` writes.
+    let bytes = |k: usize| rows[k][1].parse::<u64>().unwrap();
+    for (k, file) in ["a.ply", "a.compressed.ply", "a.splat", "a.spz"]
+        .iter()
+        .enumerate()
+    {
+        ok(&splat(&["convert", "planet.ply", file], d));
+        assert_eq!(
+            bytes(k),
+            std::fs::metadata(d.join(file)).unwrap().len(),
+            "{file}"
+        );
+    }
+    assert_eq!(bytes(2), 9400 * 32);
+    assert!(bytes(3) < bytes(1) && bytes(1) < bytes(0), "{csv}");
+    let psnr = |k: usize| rows[k][2].parse::<f64>().unwrap();
+    assert!(
+        plain.contains(&format!("mean PSNR {:.2} dB", psnr(0))),
+        "{plain}\n{csv}"
+    );
+    assert_eq!(rows[0][4], "", "no PSNR of the PLY to itself");
+    for row in &rows[1..] {
+        let to_ply: f64 = row[4].parse().unwrap();
+        assert!(to_ply > 35.0 && to_ply < 70.0, "{row:?}");
+    }
+    assert!(image::open(d.join("costs/formats.png")).is_ok());
+}

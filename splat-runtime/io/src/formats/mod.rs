@@ -113,12 +113,22 @@ pub fn read(path: &Path) -> Result<GaussianCloud, SceneError> {
         path: shown(),
         error,
     })?;
-    let parsed = match format {
-        Format::Ply | Format::CompressedPly => compressed_ply::parse(&bytes),
-        Format::Spz => spz::parse(&bytes),
-        Format::Splat => dot_splat::parse(&bytes),
+    // A plain `.ply` name read here holds a compressed PLY.
+    let format = match format {
+        Format::Ply => Format::CompressedPly,
+        other => other,
     };
-    parsed.map_err(|why| SceneError::Format { path: shown(), why })
+    parse(format, &bytes).map_err(|why| SceneError::Format { path: shown(), why })
+}
+
+/// A whole file's `bytes` in `format` as a cloud; why not, when they are not one.
+pub fn parse(format: Format, bytes: &[u8]) -> Result<GaussianCloud, String> {
+    match format {
+        Format::Ply => ply::parse(&mut &bytes[..]).map_err(|e| e.to_string()),
+        Format::CompressedPly => compressed_ply::parse(bytes),
+        Format::Spz => spz::parse(bytes),
+        Format::Splat => dot_splat::parse(bytes),
+    }
 }
 
 /// Whether the PLY file at `path` is a compressed one (false where it cannot be read: the
