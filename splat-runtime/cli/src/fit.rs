@@ -125,8 +125,8 @@ pub struct FitArgs {
     #[command(flatten)]
     pub(crate) serve: crate::commands::view::ServeArgs,
     /// Also write the trained scene in these formats beside scene.ply (comma-separated):
-    /// spz, compressed-ply, splat (scene.spz, scene.compressed.ply, scene.splat), for the
-    /// web's viewers; what each keeps: docs/formats.md.
+    /// spz, sog, compressed-ply, splat (scene.spz, scene.sog, ...), for the web's viewers;
+    /// what each keeps: docs/formats.md.
     #[arg(long, value_delimiter = ',', value_parser = export_format)]
     pub(crate) export: Vec<Format>,
     /// Where to train: the GPU (the device-resident loop), the CPU, or `auto` (a hardware

@@ -115,7 +115,7 @@ enum Command {
     /// Look at a scene in the browser: serves a page on 127.0.0.1 that flies around it, each
     /// frame rendered here as the camera moves.
     View(commands::view::ViewArgs),
-    /// Convert a scene between formats (.ply, .compressed.ply, .splat, .spz), each named by its file's extension.
+    /// Convert a scene between formats (.ply, .compressed.ply, .splat, .spz, .sog), each named by its file's extension.
     Convert(commands::convert::ConvertArgs),
     /// Render a scene along a camera path (an orbit, a dataset's views, or keyframes saved
     /// from `splat view`) into an H.264 MP4 that browsers play.

@@ -30,6 +30,8 @@ pub enum Target {
     Spz,
     /// PlayCanvas's compressed PLY scene.
     CompressedPly,
+    /// PlayCanvas's SOG scene (a ZIP of WebP pictures and meta.json).
+    Sog,
     /// A camera JSON file.
     Camera,
     /// A COLMAP sparse model, binary: `cameras.bin`, `images.bin`, `points3D.bin`.
@@ -43,11 +45,12 @@ pub enum Target {
 }
 
 impl Target {
-    pub const ALL: [Target; 9] = [
+    pub const ALL: [Target; 10] = [
         Target::Ply,
         Target::Splat,
         Target::Spz,
         Target::CompressedPly,
+        Target::Sog,
         Target::Camera,
         Target::ColmapBinary,
         Target::ColmapText,
@@ -62,6 +65,7 @@ impl Target {
             Target::Splat => "splat",
             Target::Spz => "spz",
             Target::CompressedPly => "compressed_ply",
+            Target::Sog => "sog",
             Target::Camera => "camera",
             Target::ColmapBinary => "colmap_binary",
             Target::ColmapText => "colmap_text",
@@ -84,11 +88,14 @@ impl Target {
     /// The bytes its reader may hold at once per byte of input. A compressed format's scene
     /// is rightly larger than its file: SPZ unpacks to at most 1024 times its size (Niantic's
     /// bound), 20 bytes or more a Gaussian of 236 bytes in memory, so 1024 (its streams) plus
-    /// 1024 / 20 x 236 (its Gaussians) = 13,108 a byte. The other readers hold a bounded
-    /// multiple of what the file holds (a JSON number of two bytes becomes a 32-byte value).
+    /// 1024 / 20 x 236 (its Gaussians) = 13,108 a byte. SOG claims at most 64 Gaussians a
+    /// byte, each 7 RGBA pixels (28 bytes) decoded and 236 in memory: 16,896. The other
+    /// readers hold a bounded multiple of what the file holds (a JSON number of two bytes
+    /// becomes a 32-byte value).
     pub fn most_per_byte(self) -> usize {
         match self {
             Target::Spz => 13_108,
+            Target::Sog => formats::sog::MOST_PER_BYTE * (7 * 4 + 236),
             _ => 64,
         }
     }
@@ -103,6 +110,7 @@ impl Target {
             Target::Splat => formats::dot_splat::parse(bytes).is_ok(),
             Target::Spz => formats::spz::parse(bytes).is_ok(),
             Target::CompressedPly => formats::compressed_ply::parse(bytes).is_ok(),
+            Target::Sog => formats::sog::parse(bytes).is_ok(),
             Target::Camera => {
                 let path = dir.join("camera.json");
                 write(&path, bytes);

@@ -112,7 +112,7 @@ fn compressed_ply_is_splat_transforms_and_reads_as_its_source() {
     let read = formats::read(&fixture("small.compressed.ply")).unwrap();
     let means: Vec<Vec3> = source.gaussians.iter().map(|g| g.mean).collect();
     let sorted = GaussianCloud {
-        gaussians: (compressed_ply::morton_order(&means).iter())
+        gaussians: (formats::morton::order(&means).iter())
             .map(|&i| source.gaussians[i])
             .collect(),
         ..source
@@ -137,4 +137,19 @@ fn compressed_ply_is_splat_transforms_and_reads_as_its_source() {
     assert!(alpha <= 0.5 / 255.0 + 1e-6 && rot < 2e-3, "{alpha} {rot}");
     // Truncated to 8 / 256, read at the step's middle.
     assert!(sh <= 4.0 / 256.0 + 1e-6, "{sh}");
+}
+
+/// splat-transform's SOG (its CPU k-means) reads here as splat-transform reads it (its PLY of
+/// it, kept beside it), to f32 rounding.
+#[test]
+fn splat_transforms_sog_reads_as_it_reads_it() {
+    let ours = formats::read(&fixture("small.sog")).unwrap();
+    let theirs = ply::read(&fixture("small.sog-read-by-splat-transform.ply")).unwrap();
+    assert_eq!(ours.sh_degree, theirs.sh_degree);
+    let [pos, scale, color, alpha, rot, sh] = largest_differences(&ours, &theirs);
+    assert!(
+        pos < 1e-5 && scale == 0.0 && color == 0.0 && sh == 0.0,
+        "{pos} {scale} {color} {sh}"
+    );
+    assert!(alpha < 1e-6 && rot < 1e-6, "{alpha} {rot}");
 }

@@ -7,10 +7,11 @@ use std::path::PathBuf;
 
 #[derive(clap::Args)]
 pub struct ConvertArgs {
-    /// The scene to read: .ply (INRIA 3DGS, or a compressed PLY), .compressed.ply, .splat or .spz.
+    /// The scene to read: .ply (INRIA 3DGS, or a compressed PLY), .compressed.ply, .splat,
+    /// .spz or .sog.
     pub input: PathBuf,
-    /// The scene to write, in the format its extension names: .ply, .compressed.ply, .splat or
-    /// .spz.
+    /// The scene to write, in the format its extension names: .ply, .compressed.ply, .splat,
+    /// .spz or .sog.
     pub output: PathBuf,
 }
 

@@ -24,8 +24,8 @@ use std::path::PathBuf;
 pub struct EvalArgs {
     /// Dataset folder (Blender, nerfstudio or COLMAP, as `splat fit` reads it).
     dataset: PathBuf,
-    /// The scene to measure (.ply, .compressed.ply, .splat or .spz; `splat fit` writes
-    /// scene.ply).
+    /// The scene to measure (.ply, .compressed.ply, .splat, .spz or .sog; `splat fit`
+    /// writes scene.ply).
     #[arg(long)]
     scene: PathBuf,
     #[arg(long)]

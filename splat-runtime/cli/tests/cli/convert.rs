@@ -1,5 +1,5 @@
 //! `splat convert` and `splat fit --export`: scenes between formats (.splat, SPZ, compressed
-//! PLY), cross-checked against an independent
+//! PLY, SOG), cross-checked against an independent
 //! implementation (PlayCanvas's splat-transform from npm: `npm install` in `tests/formats`,
 //! which `.ci/run` does); bad input refused with nothing written.
 
@@ -239,6 +239,55 @@ fn compressed_ply_is_splat_transforms_byte_for_byte() {
     renders_agree(d, "ours.compressed.ply", "planet.ply", 0.005);
 }
 
+/// SOG both ways: our `.sog` read by splat-transform is our reading of it (to f32 rounding),
+/// splat-transform's `.sog` (its CPU k-means) read here is its own reading of it; each renders
+/// near the PLY it came from.
+#[test]
+fn sog_agrees_with_splat_transform_both_ways() {
+    let Some(st) = splat_transform() else { return };
+    let dir = temp();
+    let d = dir.path();
+    ok(&splat(&["scene", "--out", "planet.ply"], d));
+    let out = ok(&splat(&["convert", "planet.ply", "ours.sog"], d));
+    assert!(out.contains("9400 Gaussians (SH degree 1)"), "{out}");
+    run_splat_transform(&st, &["-g", "cpu", "planet.ply", "theirs.sog"], d);
+    let same = |label: &str, a: &str, b: &str| {
+        let (a, b) = (read(&d.join(a)).unwrap(), read(&d.join(b)).unwrap());
+        let [pos, scale, color, alpha, rot] = largest_differences(&a, &b);
+        let sh = largest_sh_difference(&a, &b);
+        println!(
+            "{label}: position {pos}, log scale {scale}, color {color}, alpha {alpha}, rotation {rot}, SH {sh}"
+        );
+        assert!(
+            pos < 1e-4 && scale < 1e-6 && color < 1e-6,
+            "{pos} {scale} {color}"
+        );
+        assert!(
+            alpha < 1e-6 && rot < 1e-6 && sh < 1e-6,
+            "{alpha} {rot} {sh}"
+        );
+    };
+    for (file, theirs, ours) in [
+        ("ours.sog", "theirs-read-ours.ply", "ours-read-ours.ply"),
+        (
+            "theirs.sog",
+            "theirs-read-theirs.ply",
+            "ours-read-theirs.ply",
+        ),
+    ] {
+        run_splat_transform(&st, &[file, theirs], d);
+        ok(&splat(&["convert", file, ours], d));
+        same(
+            &format!("{file} read by splat-transform and here"),
+            theirs,
+            ours,
+        );
+    }
+    // What SOG costs this scene, written here and by splat-transform.
+    renders_agree(d, "ours.sog", "planet.ply", 0.004);
+    renders_agree(d, "theirs.sog", "planet.ply", 0.004);
+}
+
 /// `splat fit --export` writes the trained scene in each format beside scene.ply, each reading
 /// back as the scene within its quantization (a render near the PLY's); a
 /// method whose primitives are not Gaussians is refused before training.
@@ -255,13 +304,14 @@ fn fit_exports_the_scene_in_every_format() {
         "--points",
         "300",
     ];
-    let exports = ["--export", "spz,compressed-ply,splat", "--out", "run"];
+    let exports = ["--export", "spz,sog,compressed-ply,splat", "--out", "run"];
     ok(&splat(&[&args[..], &exports].concat(), d));
     let scene = read(&d.join("run/scene.ply")).unwrap();
-    // Measured: 0.0012, 0.0175 (its SH bytes read 0 as 1/64: 15 coefficients a channel at SH
-    // degree 3, a bias where the scene has little view-dependent color yet), 0.0006.
+    // Measured: 0.0012, 0.00055, 0.0175 (its SH bytes read 0 as 1/64: 15 coefficients a channel
+    // at SH degree 3, a bias where the scene has little view-dependent color yet), 0.0006.
     for (name, most) in [
         ("scene.spz", 0.003),
+        ("scene.sog", 0.003),
         ("scene.compressed.ply", 0.025),
         ("scene.splat", 0.003),
     ] {

@@ -136,7 +136,7 @@ fn eval_formats_measures_what_each_format_costs() {
         .map(|l| l.split(',').collect())
         .collect();
     let names: Vec<&str> = rows.iter().map(|r| r[0]).collect();
-    assert_eq!(names, ["ply", "compressed-ply", "splat", "spz"]);
+    assert_eq!(names, ["ply", "compressed-ply", "splat", "spz", "sog"]);
     // Each size is the file `splat convert` writes.
     let bytes = |k: usize| rows[k][1].parse::<u64>().unwrap();
     for (k, file) in ["a.ply", "a.compressed.ply", "a.splat", "a.spz"]

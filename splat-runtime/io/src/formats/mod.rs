@@ -1,10 +1,14 @@
 //! Scenes in every format splat reads and writes, chosen by the file's extension: the INRIA
 //! PLY ([`crate::ply`]), PlayCanvas's compressed PLY ([`compressed_ply`], also read from a
-//! plain `.ply` name), antimatter15's `.splat` ([`dot_splat`]) and Niantic's SPZ ([`spz`]).
+//! plain `.ply` name), antimatter15's `.splat` ([`dot_splat`]), Niantic's SPZ ([`spz`]) and
+//! PlayCanvas's SOG ([`sog`]).
 //! What each keeps and drops: `docs/formats.md`.
 
 pub mod compressed_ply;
 pub mod dot_splat;
+pub mod morton;
+pub mod quantize;
+pub mod sog;
 pub mod spz;
 
 use crate::ply::{self, GaussianCloud, PlyError};
@@ -23,15 +27,18 @@ pub enum Format {
     Splat,
     /// Niantic's SPZ: about 10x smaller than the PLY, SH kept in 4-5 bits.
     Spz,
+    /// PlayCanvas's SOG (bundled): lossless WebP pictures, codebooks and an SH palette.
+    Sog,
 }
 
 impl Format {
     /// Every format, those whose extension ends another's first.
-    pub const ALL: [Format; 4] = [
+    pub const ALL: [Format; 5] = [
         Format::CompressedPly,
         Format::Ply,
         Format::Splat,
         Format::Spz,
+        Format::Sog,
     ];
 
     /// The format `path`'s extension names.
@@ -55,6 +62,7 @@ impl Format {
             Format::CompressedPly => ".compressed.ply",
             Format::Splat => ".splat",
             Format::Spz => ".spz",
+            Format::Sog => ".sog",
         }
     }
 
@@ -65,6 +73,7 @@ impl Format {
             Format::CompressedPly => "compressed-ply",
             Format::Splat => "splat",
             Format::Spz => "spz",
+            Format::Sog => "sog",
         }
     }
 
@@ -80,7 +89,7 @@ impl Format {
     /// The highest SH degree it keeps.
     pub fn most_sh_degree(self) -> u32 {
         match self {
-            Format::Ply | Format::CompressedPly => 3,
+            Format::Ply | Format::CompressedPly | Format::Sog => 3,
             Format::Splat => 0,
             Format::Spz => 3,
         }
@@ -96,7 +105,7 @@ pub enum SceneError {
     #[error("{path}: {why}")]
     Format { path: String, why: String },
     #[error(
-        "{path}: unknown scene format (the extension names it: .ply, .compressed.ply, .splat or .spz)"
+        "{path}: unknown scene format (the extension names it: .ply, .compressed.ply, .splat, .spz or .sog)"
     )]
     Unknown { path: String },
 }
@@ -128,6 +137,7 @@ pub fn parse(format: Format, bytes: &[u8]) -> Result<GaussianCloud, String> {
         Format::CompressedPly => compressed_ply::parse(bytes),
         Format::Spz => spz::parse(bytes),
         Format::Splat => dot_splat::parse(bytes),
+        Format::Sog => sog::parse(bytes),
     }
 }
 
@@ -156,5 +166,6 @@ pub fn write_to(format: Format, w: &mut dyn Write, cloud: &GaussianCloud) -> std
         Format::CompressedPly => compressed_ply::write_to(w, cloud),
         Format::Splat => dot_splat::write_to(w, cloud),
         Format::Spz => spz::write_to(w, cloud),
+        Format::Sog => sog::write_to(w, cloud),
     }
 }
