@@ -197,11 +197,10 @@ fn main() {
         .unwrap_or(300_000);
     let dir = tempfile::tempdir().expect("a temporary folder");
     let ply_path = dir.path().join("procedural.ply");
-    let cloud = GaussianCloud {
-        sh_degree: 3,
-        gaussians: common::scene(n).iter().map(ToStored::to_stored).collect(),
-        folded_3d_filter: false,
-    };
+    let cloud = GaussianCloud::new(
+        3,
+        common::scene(n).iter().map(ToStored::to_stored).collect(),
+    );
     ply::write(&ply_path, &cloud).expect("the scene written");
 
     println!(

@@ -6,7 +6,7 @@
 use crate::fit_view::FitView;
 use crate::interrupt::Listening;
 use crate::view::Downscale;
-use crate::{memory, plot};
+use crate::{memory, methods, plot};
 use anyhow::{Context, Result, anyhow, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use plotters::prelude::*;
@@ -339,7 +339,12 @@ impl Fit<'_> {
         if taken > 0 {
             print_step_times(&progress.times, taken, gpu.as_ref());
         }
-        write_results(&args.out, &params, &args.export, &images, &progress.log)
+        let antialiased = methods::find(self.methods, &args.method)?.antialiased;
+        let cloud = GaussianCloud {
+            antialiased,
+            ..GaussianCloud::new(3, params.iter().map(ToStored::to_stored).collect())
+        };
+        write_results(&args.out, &cloud, &args.export, &images, &progress.log)
     }
 
     /// Where the run starts: the checkpoint it resumes from (refused if it is of another
@@ -389,22 +394,17 @@ impl Fit<'_> {
 
 /// The result of a run in `out`: the scene, the test views' renders, the metrics and the curve,
 /// all appearing together.
-fn write_results<P: ToStored>(
+fn write_results(
     out: &Path,
-    params: &[P],
+    cloud: &GaussianCloud,
     exports: &[Format],
     images: &[Image],
     log: &Log,
 ) -> Result<()> {
-    let cloud = GaussianCloud {
-        sh_degree: 3,
-        gaussians: params.iter().map(ToStored::to_stored).collect(),
-        folded_3d_filter: false,
-    };
     let mut outputs = Outputs::default();
     for &format in [Format::Ply].iter().chain(exports) {
         let path = out.join(scene_file(format));
-        (outputs.stage(&path, |w| formats::write_to(format, w, &cloud)))
+        (outputs.stage(&path, |w| formats::write_to(format, w, cloud)))
             .with_context(|| format!("writing {}", path.display()))?;
     }
     for (k, image) in images.iter().enumerate() {

@@ -27,13 +27,12 @@ pub fn cloud<M: SplatMethod>(words: &[f32]) -> GaussianCloud
 where
     M::Params: ToStored,
 {
-    GaussianCloud {
-        sh_degree: 3,
-        gaussians: (words.chunks_exact(M::Params::LEN))
+    GaussianCloud::new(
+        3,
+        (words.chunks_exact(M::Params::LEN))
             .map(|w| M::Params::read_words(w).to_stored())
             .collect(),
-        folded_3d_filter: false,
-    }
+    )
 }
 
 impl<'a> FitView<'a> {

@@ -23,7 +23,8 @@ fn main() -> ExitCode {
             "3dgs-aa",
             "3DGS anti-aliased (Mip-Splatting's 2D filter, gsplat's `antialiased`); every camera",
             Instance::trainable::<gs3d_aa::Method>(),
-        ),
+        )
+        .antialiased(),
         Method::per_sh_degree(
             "3dgut",
             "3DGUT: unscented-transform projection, evaluation along camera rays; every camera",

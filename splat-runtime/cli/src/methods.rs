@@ -7,7 +7,7 @@ use crate::fit::Fit;
 use crate::render::{Frames, Render};
 use crate::tradeoff::{Outcome, PaceFrame, Tradeoff};
 use anyhow::{Result, bail};
-use splat_runtime::io::ply::{FromStored, ToStored};
+use splat_runtime::io::ply::{FromStored, GaussianCloud, ToStored};
 use splat_runtime::train::Trainable;
 use splat_runtime::{Camera, CameraModel, Effects, GeneratedSource, RenderOptions, SplatMethod};
 
@@ -27,6 +27,9 @@ pub struct Method {
     /// is stored as the Gaussians closest to them, which `splat fit --export` refuses to ship
     /// to viewers that would draw them as Gaussians.
     pub(crate) not_gaussians: Option<&'static str>,
+    /// Whether it renders antialiased (3DGS-AA): the scenes it trains say so where a format
+    /// keeps the flag, and a scene that says so is noted when another method renders it.
+    pub(crate) antialiased: bool,
 }
 
 /// One compiled method: what each command does with it.
@@ -101,6 +104,7 @@ impl Method {
             rolling_shutter: None,
             exact: false,
             not_gaussians: None,
+            antialiased: false,
         }
     }
 
@@ -131,6 +135,23 @@ impl Method {
         Method {
             not_gaussians: Some(what),
             ..self
+        }
+    }
+
+    /// Marks the method as rendering antialiased (see `antialiased`).
+    pub fn antialiased(self) -> Method {
+        Method {
+            antialiased: true,
+            ..self
+        }
+    }
+
+    /// A note where `cloud` was trained antialiased and `method` is not (or the reverse).
+    pub(crate) fn note_antialiasing(&self, cloud: &GaussianCloud) {
+        if cloud.antialiased && !self.antialiased {
+            println!(
+                "note: the scene was trained antialiased (its file says so); --method 3dgs-aa renders it as trained"
+            );
         }
     }
 

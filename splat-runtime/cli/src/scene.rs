@@ -53,11 +53,7 @@ pub fn planet() -> GaussianCloud {
     let mut rng = Lcg(7);
     let mut gaussians = body(&mut rng);
     gaussians.extend(stars(&mut rng));
-    GaussianCloud {
-        sh_degree: 1,
-        gaussians,
-        folded_3d_filter: false,
-    }
+    GaussianCloud::new(1, gaussians)
 }
 
 /// The planet, its ring and its moon.
@@ -219,11 +215,7 @@ pub fn dataset(
     height: u32,
     background: Vec3,
 ) -> Result<Dataset, RenderError> {
-    let cloud = GaussianCloud {
-        sh_degree: 1,
-        gaussians: body(&mut Lcg(7)),
-        folded_3d_filter: false,
-    };
+    let cloud = GaussianCloud::new(1, body(&mut Lcg(7)));
     let params: Vec<gs3d::Params> = cloud.params();
     let opts = RenderOptions {
         alpha: true,

@@ -19,7 +19,7 @@
 //!     opacity_logit: 2.0,
 //!     sh: std::array::from_fn(|i| Vec3::splat(i as f32 / 16.0)),
 //! };
-//! let cloud = GaussianCloud { sh_degree: 3, gaussians: vec![gaussian], folded_3d_filter: false };
+//! let cloud = GaussianCloud::new(3, vec![gaussian]);
 //! let dir = tempfile::tempdir()?;
 //! let path = dir.path().join("scene.ply");
 //! ply::write(&path, &cloud)?; // through a temporary file and a rename
@@ -52,6 +52,10 @@ pub struct GaussianCloud {
     pub gaussians: Vec<StoredGaussian>,
     /// Whether the file held Mip-Splatting's 3D filter, now folded into the Gaussians.
     pub folded_3d_filter: bool,
+    /// Whether it was trained antialiased (Mip-Splatting's 2D filter, `--method 3dgs-aa`), as
+    /// SPZ's flag 0x1, the compressed PLY's `SplatRenderMode: mip` and SOG's `"model":
+    /// "antialiased"` say; the INRIA PLY has no place for it.
+    pub antialiased: bool,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -324,6 +328,7 @@ pub fn parse(r: &mut impl BufRead) -> Result<GaussianCloud, PlyError> {
         sh_degree,
         gaussians,
         folded_3d_filter: filter_3d.is_some(),
+        antialiased: false,
     })
 }
 
@@ -416,6 +421,16 @@ impl StoredGaussian {
 }
 
 impl GaussianCloud {
+    /// A cloud of SH degree `sh_degree`, without flags.
+    pub fn new(sh_degree: u32, gaussians: Vec<StoredGaussian>) -> GaussianCloud {
+        GaussianCloud {
+            sh_degree,
+            gaussians,
+            folded_3d_filter: false,
+            antialiased: false,
+        }
+    }
+
     /// An error naming the first Gaussian with a NaN or infinite value, which no format
     /// stores; what every writer checks first.
     pub fn check_finite(&self) -> std::io::Result<()> {
@@ -470,11 +485,7 @@ mod tests {
                 }
             })
             .collect();
-        GaussianCloud {
-            sh_degree: degree,
-            gaussians,
-            folded_3d_filter: false,
-        }
+        GaussianCloud::new(degree, gaussians)
     }
 
     #[test]

@@ -27,6 +27,12 @@ pub(crate) fn convert_cmd(args: &ConvertArgs) -> Result<()> {
             cloud.sh_degree
         );
     }
+    if cloud.antialiased && !format.keeps_antialiasing() {
+        println!(
+            "note: the scene was trained antialiased (--method 3dgs-aa); {} has no place to say so",
+            format.extension()
+        );
+    }
     formats::write(&args.output, &cloud)?;
     let bytes = std::fs::metadata(&args.output)
         .map(|m| m.len())

@@ -61,6 +61,7 @@ struct Measured {
 pub(crate) fn eval_cmd(args: &EvalArgs, methods: &[Method]) -> Result<()> {
     let method = methods::find(methods, &args.method)?;
     let cloud = crate::scene::read(&args.scene)?;
+    method.note_antialiasing(&cloud);
     let shots = args.split.of(dataset::read_shots(&args.dataset)?);
     let shots = dataset::downscaled(shots, args.downscale.factor)?;
     let taken = args.downscale.how(&shots) + &undistorted(&shots);

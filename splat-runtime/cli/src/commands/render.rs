@@ -194,6 +194,7 @@ pub(crate) fn render_cmd(args: &RenderArgs, methods: &[Method]) -> Result<()> {
         Some(path) => (scene::read(path)?, path.display().to_string()),
         None => (scene::planet(), "built-in planet".to_string()),
     };
+    method.note_antialiasing(&cloud);
     let (camera, shot) = match args.camera.read()? {
         Some(given) => (given.camera, given.shot),
         None => {

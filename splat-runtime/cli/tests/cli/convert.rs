@@ -289,8 +289,8 @@ fn sog_agrees_with_splat_transform_both_ways() {
 }
 
 /// `splat fit --export` writes the trained scene in each format beside scene.ply, each reading
-/// back as the scene within its quantization (a render near the PLY's); a
-/// method whose primitives are not Gaussians is refused before training.
+/// back as the scene within its quantization (a render near the PLY's); 3DGS-AA's says it is
+/// antialiased; a method whose primitives are not Gaussians is refused before training.
 #[test]
 fn fit_exports_the_scene_in_every_format() {
     let dir = temp();
@@ -324,6 +324,26 @@ fn fit_exports_the_scene_in_every_format() {
         );
         renders_agree(d, &format!("run/{name}"), "run/scene.ply", most);
     }
+
+    // 3DGS-AA's scene says it is antialiased where the format has the place.
+    let aa = ["--method", "3dgs-aa", "--export", "spz", "--out", "aa"];
+    ok(&splat(&[&args[..], &aa].concat(), d));
+    let render = [
+        "render",
+        "--scene",
+        "aa/scene.spz",
+        "--out",
+        "aa.png",
+        "--backend",
+        "cpu",
+    ];
+    let out = ok(&splat(&render, d));
+    assert!(
+        out.contains("trained antialiased") && out.contains("3dgs-aa"),
+        "{out}"
+    );
+    let out = ok(&splat(&["convert", "aa/scene.spz", "aa.splat"], d));
+    assert!(out.contains(".splat has no place to say so"), "{out}");
 
     let refused = |extra: &[&str], why: &str| {
         let out = d.join("refused");

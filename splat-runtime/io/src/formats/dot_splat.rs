@@ -49,11 +49,7 @@ pub fn parse(bytes: &[u8]) -> Result<GaussianCloud, String> {
             })
         })
         .collect::<Result<_, _>>()?;
-    Ok(GaussianCloud {
-        sh_degree: 0,
-        gaussians,
-        folded_3d_filter: false,
-    })
+    Ok(GaussianCloud::new(0, gaussians))
 }
 
 /// Writes `cloud` as `.splat` records (its SH beyond the DC term left out). Refused: a NaN or
@@ -107,11 +103,7 @@ mod tests {
                 }
             })
             .collect();
-        GaussianCloud {
-            sh_degree: 1,
-            gaussians,
-            folded_3d_filter: false,
-        }
+        GaussianCloud::new(1, gaussians)
     }
 
     #[test]

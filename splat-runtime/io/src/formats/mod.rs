@@ -86,6 +86,11 @@ impl Format {
         })
     }
 
+    /// Whether it says a scene renders antialiased ([`GaussianCloud::antialiased`]).
+    pub fn keeps_antialiasing(self) -> bool {
+        matches!(self, Format::Spz | Format::CompressedPly | Format::Sog)
+    }
+
     /// The highest SH degree it keeps.
     pub fn most_sh_degree(self) -> u32 {
         match self {
@@ -167,5 +172,38 @@ pub fn write_to(format: Format, w: &mut dyn Write, cloud: &GaussianCloud) -> std
         Format::Splat => dot_splat::write_to(w, cloud),
         Format::Spz => spz::write_to(w, cloud),
         Format::Sog => sog::write_to(w, cloud),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ply::StoredGaussian;
+    use glam::{Vec3, Vec4};
+
+    /// The antialiasing flag survives SPZ, the compressed PLY and SOG, which have a place for
+    /// it; the INRIA PLY and `.splat` have none.
+    #[test]
+    fn the_antialiasing_flag_goes_where_a_format_keeps_it() {
+        let g = |k: usize| StoredGaussian {
+            mean: Vec3::new(k as f32, 0.5, -1.0),
+            log_scale: Vec3::splat(-2.0),
+            rotation: Vec4::X,
+            opacity_logit: 1.0,
+            sh: [Vec3::splat(0.1); 16],
+        };
+        for antialiased in [false, true] {
+            let cloud = GaussianCloud {
+                antialiased,
+                ..GaussianCloud::new(1, (0..10).map(g).collect())
+            };
+            for format in Format::ALL {
+                let mut bytes = vec![];
+                write_to(format, &mut bytes, &cloud).unwrap();
+                let kept = format.keeps_antialiasing();
+                let read = parse(format, &bytes).unwrap();
+                assert_eq!(read.antialiased, antialiased && kept, "{}", format.name());
+            }
+        }
     }
 }

@@ -137,6 +137,9 @@ pub fn write_to(w: &mut dyn Write, cloud: &GaussianCloud) -> std::io::Result<()>
         "sh0": {"codebook": color_book.to_vec(), "files": ["sh0.webp"]},
     });
 
+    if cloud.antialiased {
+        meta["model"] = json!("antialiased");
+    }
     let degree = cloud.sh_degree.min(3);
     if degree > 0 {
         let per_channel = sh_coefficients(degree) - 1;
@@ -394,9 +397,8 @@ pub fn parse(bytes: &[u8]) -> Result<GaussianCloud, String> {
         gaussians.push(g);
     }
     Ok(GaussianCloud {
-        sh_degree: degree,
-        gaussians,
-        folded_3d_filter: false,
+        antialiased: meta["model"] == "antialiased",
+        ..GaussianCloud::new(degree, gaussians)
     })
 }
 
@@ -422,11 +424,7 @@ mod tests {
                 }
             })
             .collect();
-        GaussianCloud {
-            sh_degree: degree,
-            gaussians,
-            folded_3d_filter: false,
-        }
+        GaussianCloud::new(degree, gaussians)
     }
 
     #[test]
@@ -510,11 +508,7 @@ mod tests {
         let mut bytes = vec![];
         write_to(&mut bytes, &cloud(20, 1)).unwrap();
         assert!(parse(&bytes[..bytes.len() - 30]).is_err());
-        let empty = GaussianCloud {
-            sh_degree: 0,
-            gaussians: vec![],
-            folded_3d_filter: false,
-        };
+        let empty = GaussianCloud::new(0, vec![]);
         assert!(write_to(&mut vec![], &empty).is_err());
     }
 }

@@ -4,7 +4,7 @@
 //! and log scale in a byte each, rotations in 4 bytes (the three smallest components), SH in
 //! a byte each snapped to 5 bits (degree 1) or 4 (higher). Axes are stored as they are (as
 //! Niantic's `ply_to_spz` and splat-transform do: the format's RUB convention only applies
-//! when a writer names its frame). The antialiasing flag is read past, not kept.
+//! when a writer names its frame). The antialiasing flag (0x1) is read and written.
 
 use crate::ply::{GaussianCloud, StoredGaussian};
 use glam::{Vec3, Vec4};
@@ -14,6 +14,8 @@ const MAGIC: u32 = 0x5053_474E;
 /// The version written: per-attribute zstd streams.
 const VERSION: u32 = 4;
 const FRACTIONAL_BITS: u8 = 12;
+/// The header's flag for a scene trained antialiased.
+const ANTIALIASED: u8 = 0x1;
 /// The zstd level Niantic's writer uses.
 const ZSTD_LEVEL: i32 = 12;
 /// A DC color byte is `dc 0.15 255 + 127.5` (a scale below SH_C0's, so colors past [0, 1]
@@ -106,7 +108,7 @@ fn parse_legacy(body: &[u8]) -> Result<GaussianCloud, String> {
         blocks.push(block);
         at += len;
     }
-    decode(&blocks, n, degree, version, body[13])
+    decode(&blocks, n, degree, version, [body[13], body[14]])
 }
 
 /// Version 4: a 32-byte header, a table of contents, one zstd stream per attribute.
@@ -168,7 +170,7 @@ fn parse_streams(file: &[u8]) -> Result<GaussianCloud, String> {
     }
     let mut all: Vec<&[u8]> = blocks.iter().map(Vec::as_slice).collect();
     all.resize(6, &[]);
-    decode(&all, n, degree, version, file[13])
+    decode(&all, n, degree, version, [file[13], file[14]])
 }
 
 /// The Gaussians of the six blocks.
@@ -177,7 +179,7 @@ fn decode(
     n: usize,
     degree: u32,
     version: u32,
-    fractional: u8,
+    [fractional, flags]: [u8; 2],
 ) -> Result<GaussianCloud, String> {
     if fractional > 23 {
         return Err(format!("{fractional} fractional bits (at most 23)"));
@@ -232,9 +234,8 @@ fn decode(
         })
         .collect();
     Ok(GaussianCloud {
-        sh_degree: degree,
-        gaussians,
-        folded_3d_filter: false,
+        antialiased: flags & ANTIALIASED != 0,
+        ..GaussianCloud::new(degree, gaussians)
     })
 }
 
@@ -336,7 +337,8 @@ pub fn write_to(w: &mut dyn Write, cloud: &GaussianCloud) -> std::io::Result<()>
     header.extend_from_slice(&MAGIC.to_le_bytes());
     header.extend_from_slice(&VERSION.to_le_bytes());
     header.extend_from_slice(&(n as u32).to_le_bytes());
-    header.extend_from_slice(&[degree as u8, FRACTIONAL_BITS, 0, streams.len() as u8]);
+    let flags = if cloud.antialiased { ANTIALIASED } else { 0 };
+    header.extend_from_slice(&[degree as u8, FRACTIONAL_BITS, flags, streams.len() as u8]);
     header.extend_from_slice(&32u32.to_le_bytes());
     header.resize(32, 0);
     w.write_all(&header)?;
@@ -373,11 +375,7 @@ mod tests {
                 }
             })
             .collect();
-        GaussianCloud {
-            sh_degree: degree,
-            gaussians,
-            folded_3d_filter: false,
-        }
+        GaussianCloud::new(degree, gaussians)
     }
 
     #[test]
@@ -444,11 +442,7 @@ mod tests {
         far.gaussians[7].mean.z = 3000.0;
         let err = write_to(&mut vec![], &far).unwrap_err().to_string();
         assert!(err.contains("Gaussian 7") && err.contains("2048"), "{err}");
-        let none = GaussianCloud {
-            sh_degree: 0,
-            gaussians: vec![],
-            folded_3d_filter: false,
-        };
+        let none = GaussianCloud::new(0, vec![]);
         assert!(write_to(&mut vec![], &none).is_err());
     }
 }
