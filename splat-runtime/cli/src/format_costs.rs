@@ -183,7 +183,8 @@ fn panel(area: &plot::Area, caption: &str, points: &[(f64, f64, &str)]) -> Resul
     let mut chart = ChartBuilder::on(area)
         .caption(caption, plot::text(16))
         .margin(12)
-        .margin_right(40)
+        // Room for the rightmost point's label.
+        .margin_right(110)
         .x_label_area_size(40)
         .y_label_area_size(64)
         .build_cartesian_2d(span(|p| p.0), span(|p| p.1))
