@@ -480,24 +480,7 @@ mod tests {
     use super::*;
 
     fn cloud(n: usize, degree: u32) -> GaussianCloud {
-        let mut rng = fastrand::Rng::with_seed(5);
-        let mut r = |s: f32| (rng.f32() - 0.5) * 2.0 * s;
-        let gaussians = (0..n)
-            .map(|_| {
-                let mut sh = [Vec3::ZERO; 16];
-                for c in sh.iter_mut().take(sh_coefficients(degree)) {
-                    *c = Vec3::new(r(1.5), r(1.5), r(1.5));
-                }
-                StoredGaussian {
-                    mean: Vec3::new(r(10.0), r(10.0), r(10.0)),
-                    log_scale: Vec3::new(r(5.0), r(5.0), r(5.0)),
-                    rotation: Vec4::new(r(1.0), r(1.0), r(1.0), r(1.0)),
-                    opacity_logit: r(5.0),
-                    sh,
-                }
-            })
-            .collect();
-        GaussianCloud::new(degree, gaussians)
+        crate::formats::random_cloud(n, degree, 5, [10.0, 5.0, 1.5, 1.5])
     }
 
     /// Each quantity within half a step of its chunk's range (the range over 2^bits - 1), in

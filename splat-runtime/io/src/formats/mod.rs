@@ -175,6 +175,38 @@ pub fn write_to(format: Format, w: &mut dyn Write, cloud: &GaussianCloud) -> std
     }
 }
 
+/// A random cloud for the formats' tests: `n` Gaussians of SH degree `degree`, each value
+/// uniform within ± its range (position, log scale, DC color, the higher SH terms), opacity
+/// logits within ±5, rotations within ±1 a component (not normalized).
+#[cfg(test)]
+pub(crate) fn random_cloud(
+    n: usize,
+    degree: u32,
+    seed: u64,
+    [mean, log_scale, dc, rest]: [f32; 4],
+) -> GaussianCloud {
+    use glam::{Vec3, Vec4};
+    let mut rng = fastrand::Rng::with_seed(seed);
+    let mut r = |s: f32| (rng.f32() - 0.5) * 2.0 * s;
+    let gaussians = (0..n)
+        .map(|_| {
+            let mut sh = [Vec3::ZERO; 16];
+            for (k, c) in sh.iter_mut().take(ply::sh_coefficients(degree)).enumerate() {
+                let s = if k == 0 { dc } else { rest };
+                *c = Vec3::new(r(s), r(s), r(s));
+            }
+            crate::ply::StoredGaussian {
+                mean: Vec3::new(r(mean), r(mean), r(mean)),
+                log_scale: Vec3::new(r(log_scale), r(log_scale), r(log_scale)),
+                rotation: Vec4::new(r(1.0), r(1.0), r(1.0), r(1.0)),
+                opacity_logit: r(5.0),
+                sh,
+            }
+        })
+        .collect();
+    GaussianCloud::new(degree, gaussians)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -407,24 +407,7 @@ mod tests {
     use super::*;
 
     fn cloud(n: usize, degree: u32) -> GaussianCloud {
-        let mut rng = fastrand::Rng::with_seed(9);
-        let mut r = |s: f32| (rng.f32() - 0.5) * 2.0 * s;
-        let gaussians = (0..n)
-            .map(|_| {
-                let mut sh = [Vec3::ZERO; 16];
-                for c in sh.iter_mut().take(sh_coefficients(degree)) {
-                    *c = Vec3::new(r(1.0), r(1.0), r(1.0));
-                }
-                StoredGaussian {
-                    mean: Vec3::new(r(20.0), r(20.0), r(20.0)),
-                    log_scale: Vec3::new(r(4.0), r(4.0), r(4.0)),
-                    rotation: Vec4::new(r(1.0), r(1.0), r(1.0), r(1.0)),
-                    opacity_logit: r(5.0),
-                    sh,
-                }
-            })
-            .collect();
-        GaussianCloud::new(degree, gaussians)
+        crate::formats::random_cloud(n, degree, 9, [20.0, 4.0, 1.0, 1.0])
     }
 
     #[test]

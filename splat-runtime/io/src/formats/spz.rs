@@ -357,25 +357,7 @@ mod tests {
     use super::*;
 
     fn cloud(degree: u32) -> GaussianCloud {
-        let mut rng = fastrand::Rng::with_seed(3);
-        let mut r = |s: f32| (rng.f32() - 0.5) * 2.0 * s;
-        let gaussians = (0..300)
-            .map(|_| {
-                let mut sh = [Vec3::ZERO; 16];
-                sh[0] = Vec3::new(r(2.0), r(2.0), r(2.0));
-                for c in sh.iter_mut().take(rest(degree) + 1).skip(1) {
-                    *c = Vec3::new(r(0.5), r(0.5), r(0.5));
-                }
-                StoredGaussian {
-                    mean: Vec3::new(r(100.0), r(100.0), r(100.0)),
-                    log_scale: Vec3::new(r(5.0), r(5.0), r(5.0)),
-                    rotation: Vec4::new(r(1.0), r(1.0), r(1.0), r(1.0)),
-                    opacity_logit: r(5.0),
-                    sh,
-                }
-            })
-            .collect();
-        GaussianCloud::new(degree, gaussians)
+        crate::formats::random_cloud(300, degree, 3, [100.0, 5.0, 2.0, 0.5])
     }
 
     #[test]
