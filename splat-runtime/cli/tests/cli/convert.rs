@@ -240,8 +240,8 @@ fn compressed_ply_is_splat_transforms_byte_for_byte() {
 }
 
 /// SOG both ways: our `.sog` read by splat-transform is our reading of it (to f32 rounding),
-/// splat-transform's `.sog` (its CPU k-means) read here is its own reading of it; each renders
-/// near the PLY it came from.
+/// splat-transform's `.sog` (its CPU k-means), bundled or unbundled (a folder with meta.json),
+/// read here is its own reading of it; each renders near the PLY it came from.
 #[test]
 fn sog_agrees_with_splat_transform_both_ways() {
     let Some(st) = splat_transform() else { return };
@@ -267,12 +267,20 @@ fn sog_agrees_with_splat_transform_both_ways() {
             "{alpha} {rot} {sh}"
         );
     };
+    // And unbundled: its meta.json and pictures in a folder.
+    std::fs::create_dir(d.join("unbundled")).unwrap();
+    run_splat_transform(&st, &["-g", "cpu", "planet.ply", "unbundled/meta.json"], d);
     for (file, theirs, ours) in [
         ("ours.sog", "theirs-read-ours.ply", "ours-read-ours.ply"),
         (
             "theirs.sog",
             "theirs-read-theirs.ply",
             "ours-read-theirs.ply",
+        ),
+        (
+            "unbundled/meta.json",
+            "theirs-read-folder.ply",
+            "ours-read-folder.ply",
         ),
     ] {
         run_splat_transform(&st, &[file, theirs], d);

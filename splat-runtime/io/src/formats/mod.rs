@@ -15,6 +15,15 @@ use crate::ply::{self, GaussianCloud, PlyError};
 use std::io::{Read, Write};
 use std::path::Path;
 
+/// The file an unbundled SOG is read from (its pictures beside it).
+const UNBUNDLED_SOG: &str = "meta.json";
+
+/// Whether `path` names an unbundled SOG's meta.json.
+fn is_unbundled_sog(path: &Path) -> bool {
+    path.file_name()
+        .is_some_and(|n| n.eq_ignore_ascii_case(UNBUNDLED_SOG))
+}
+
 /// A scene file's format.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Format {
@@ -48,6 +57,10 @@ impl Format {
             .unwrap_or_default()
             .to_string_lossy()
             .to_ascii_lowercase();
+        // An unbundled SOG is read from its meta.json.
+        if name == UNBUNDLED_SOG {
+            return Ok(Format::Sog);
+        }
         let found = Format::ALL
             .into_iter()
             .find(|f| name.ends_with(f.extension()));
@@ -110,7 +123,7 @@ pub enum SceneError {
     #[error("{path}: {why}")]
     Format { path: String, why: String },
     #[error(
-        "{path}: unknown scene format (the extension names it: .ply, .compressed.ply, .splat, .spz or .sog)"
+        "{path}: unknown scene format (the extension names it: .ply, .compressed.ply, .splat, .spz or .sog; an unbundled SOG's meta.json)"
     )]
     Unknown { path: String },
 }
@@ -122,6 +135,9 @@ pub fn read(path: &Path) -> Result<GaussianCloud, SceneError> {
     let format = Format::of(path)?;
     if format == Format::Ply && !is_compressed_ply(path) {
         return Ok(ply::read(path)?);
+    }
+    if is_unbundled_sog(path) {
+        return sog::read_folder(path).map_err(|why| SceneError::Format { path: shown(), why });
     }
     let bytes = std::fs::read(path).map_err(|error| SceneError::Io {
         path: shown(),
@@ -157,6 +173,13 @@ fn is_compressed_ply(path: &Path) -> bool {
 /// Writes `cloud` to `path` (atomically) in the format its extension names.
 pub fn write(path: &Path, cloud: &GaussianCloud) -> Result<(), SceneError> {
     let format = Format::of(path)?;
+    if is_unbundled_sog(path) {
+        return Err(SceneError::Format {
+            path: path.display().to_string(),
+            why: "an unbundled SOG (meta.json and its pictures) is read, not written: write a .sog"
+                .into(),
+        });
+    }
     let written = crate::write_atomic(path, |w| write_to(format, w, cloud));
     written.map_err(|error| SceneError::Io {
         path: path.display().to_string(),

@@ -3,7 +3,8 @@
 //! 16 bits of `sign(v) ln(1 + |v|)` over its range, rotations as the three smallest components
 //! in a byte each, log scales and DC colors as byte indices into 256-entry codebooks, opacity
 //! a byte, SH past the DC term as an index into a k-means palette whose values are themselves
-//! codebook indices. Written and read here (version 1 and the unbundled folder are not read).
+//! codebook indices. Written and read here, and read unbundled (a folder: its `meta.json` and
+//! the pictures beside it); version 1 is not read.
 //! Bytes are rounded to the nearest where splat-transform truncates (positions, rotations,
 //! opacity): its readers take them the same way, without the half-step bias.
 
@@ -238,22 +239,71 @@ fn unpack_rotation(texel: &[u8]) -> Vec4 {
 pub fn parse(bytes: &[u8]) -> Result<GaussianCloud, String> {
     let mut zip = zip::ZipArchive::new(Cursor::new(bytes))
         .map_err(|e| format!("not a SOG file (a ZIP archive): {e}"))?;
-    let mut entry = |name: &str, most: usize| -> Result<Vec<u8>, String> {
+    let entry = |name: &str| -> Result<Vec<u8>, String> {
         let file = zip
             .by_name(name)
             .map_err(|e| format!("no `{name}` in the archive: {e}"))?;
-        let mut out = vec![];
-        // Stored or deflated, never more than the archive's size allows.
-        (file.take(most as u64 + 1))
-            .read_to_end(&mut out)
-            .map_err(|e| format!("`{name}`: {e}"))?;
-        if out.len() > most {
-            return Err(format!("`{name}` unpacks past {most} bytes"));
-        }
-        Ok(out)
+        // Stored or deflated, never more than the archive's size.
+        read_at_most(file, bytes.len(), name)
     };
-    let meta: Value = serde_json::from_slice(&entry("meta.json", 16 << 20)?)
-        .map_err(|e| format!("meta.json: {e}"))?;
+    decode(entry, bytes.len())
+}
+
+/// An unbundled SOG: `meta.json` at `path` and the pictures it names beside it (as
+/// splat-transform writes to a `meta.json` output); why not, when it is not one.
+pub fn read_folder(path: &std::path::Path) -> Result<GaussianCloud, String> {
+    let folder = path.parent().unwrap_or(std::path::Path::new("."));
+    let open = |name: &str| -> Result<(std::fs::File, usize), String> {
+        // The pictures lie beside meta.json: a name that climbs or descends is refused.
+        if name.contains(['/', '\\']) || name == ".." {
+            return Err(format!(
+                "meta.json names `{name}`, which is not a file beside it"
+            ));
+        }
+        let file = std::fs::File::open(folder.join(name)).map_err(|e| format!("`{name}`: {e}"))?;
+        let size = file.metadata().map_err(|e| format!("`{name}`: {e}"))?.len();
+        Ok((file, usize::try_from(size).unwrap_or(usize::MAX)))
+    };
+    let meta: Value =
+        serde_json::from_slice(&read_at_most(open("meta.json")?.0, 16 << 20, "meta.json")?)
+            .map_err(|e| format!("meta.json: {e}"))?;
+    // The files' sizes bound what they may claim, as a bundle's size bounds it.
+    let mut total = 0usize;
+    for part in ["means", "scales", "quats", "sh0", "shN"] {
+        for name in meta[part]["files"].as_array().into_iter().flatten() {
+            let name = name
+                .as_str()
+                .ok_or("meta.json: a file name is not a string")?;
+            total = total.saturating_add(open(name)?.1);
+        }
+    }
+    let entry = |name: &str| -> Result<Vec<u8>, String> {
+        let (file, size) = open(name)?;
+        read_at_most(file, size.min(total.max(16 << 20)), name)
+    };
+    decode(entry, total)
+}
+
+/// All of `file`, refused past `most` bytes.
+fn read_at_most(file: impl Read, most: usize, name: &str) -> Result<Vec<u8>, String> {
+    let mut out = vec![];
+    (file.take(most as u64 + 1))
+        .read_to_end(&mut out)
+        .map_err(|e| format!("`{name}`: {e}"))?;
+    if out.len() > most {
+        return Err(format!("`{name}` holds more than {most} bytes"));
+    }
+    Ok(out)
+}
+
+/// The cloud from the files `entry` reads by name (`meta.json` and the pictures it names),
+/// `total` bytes in all.
+fn decode(
+    mut entry: impl FnMut(&str) -> Result<Vec<u8>, String>,
+    total: usize,
+) -> Result<GaussianCloud, String> {
+    let meta: Value =
+        serde_json::from_slice(&entry("meta.json")?).map_err(|e| format!("meta.json: {e}"))?;
     let version = meta["version"].as_u64();
     if version != Some(VERSION) {
         return Err(format!(
@@ -266,10 +316,9 @@ pub fn parse(bytes: &[u8]) -> Result<GaussianCloud, String> {
     if n == 0 || height > MOST_SIDE {
         return Err(format!("{n} Gaussians: SOG holds 1 to about 268 million"));
     }
-    if n > MOST_PER_BYTE * bytes.len() {
+    if n > MOST_PER_BYTE.saturating_mul(total) {
         return Err(format!(
-            "meta.json claims {n} Gaussians in {} bytes: more than {MOST_PER_BYTE} a byte",
-            bytes.len()
+            "meta.json claims {n} Gaussians in {total} bytes: more than {MOST_PER_BYTE} a byte"
         ));
     }
     let floats = |v: &Value, what: &str, len: usize| -> Result<Vec<f32>, String> {
@@ -294,7 +343,7 @@ pub fn parse(bytes: &[u8]) -> Result<GaussianCloud, String> {
         let name = file
             .as_str()
             .ok_or("meta.json: a file name is not a string")?;
-        let webp = entry(name, bytes.len())?;
+        let webp = entry(name)?;
         let mut reader =
             image::ImageReader::with_format(Cursor::new(webp), image::ImageFormat::WebP);
         let mut limits = image::Limits::default();
@@ -479,6 +528,34 @@ mod tests {
                 assert!(near < 1.5 * std::f32::consts::SQRT_2 / 255.0, "{qa} {qb}");
             }
         }
+    }
+
+    /// The bundle's files unpacked into a folder read from its meta.json as the bundle reads;
+    /// a meta.json naming a file outside its folder is refused.
+    #[test]
+    fn an_unbundled_sog_reads_as_its_bundle() {
+        let mut bytes = vec![];
+        write_to(&mut bytes, &cloud(300, 2)).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        zip::ZipArchive::new(Cursor::new(&bytes))
+            .unwrap()
+            .extract(dir.path())
+            .unwrap();
+        let meta = dir.path().join("meta.json");
+        assert_eq!(read_folder(&meta).unwrap(), parse(&bytes).unwrap());
+        let text = std::fs::read_to_string(&meta).unwrap();
+        std::fs::write(&meta, text.replace("\"quats.webp\"", "\"../quats.webp\"")).unwrap();
+        let e = read_folder(&meta).unwrap_err();
+        assert!(
+            e.contains("`../quats.webp`, which is not a file beside it"),
+            "{e}"
+        );
+        std::fs::remove_file(dir.path().join("scales.webp")).unwrap();
+        assert!(read_folder(&meta).unwrap_err().contains("scales.webp"));
+        let e = crate::formats::write(&meta, &cloud(3, 0))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("read, not written"), "{e}");
     }
 
     #[test]
