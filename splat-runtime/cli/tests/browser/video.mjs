@@ -16,15 +16,21 @@ const browser = await chromium.launch({
 try {
   const page = await browser.newPage();
   await page.goto(`file://${page_file}`);
-  const seen = await page.evaluate(async () => {
+  // A video that never loads or ends fails the test in two minutes, rather than hanging it.
+  let timer;
+  const late = new Promise((_, fail) => {
+    timer = setTimeout(() => fail(new Error("the video did not play to its end in 120 s")), 120_000);
+  });
+  const seen = await Promise.race([late, page.evaluate(async () => {
     const v = document.getElementById("v");
     if (v.readyState < 2) {
       await new Promise((ok, fail) => { v.onloadeddata = ok; v.onerror = () => fail(new Error(`cannot play: ${v.error?.message}`)); });
     }
-    // The first frame, as the browser decoded it, once it is on screen.
+    // The first frame, as the browser decoded it, once it is on screen. One already on screen
+    // at time 0 is not presented again (no callback comes): wait a second at most.
     const presentedFirst = new Promise((ok) => v.requestVideoFrameCallback(ok));
     v.currentTime = 0;
-    await presentedFirst;
+    await Promise.race([presentedFirst, new Promise((ok) => setTimeout(ok, 1000))]);
     const canvas = document.createElement("canvas");
     canvas.width = v.videoWidth; canvas.height = v.videoHeight;
     canvas.getContext("2d").drawImage(v, 0, 0);
@@ -40,7 +46,7 @@ try {
     const quality = v.getVideoPlaybackQuality();
     return { width: v.videoWidth, height: v.videoHeight, duration: v.duration, ended: v.ended,
              decoded: quality.totalVideoFrames, dropped: quality.droppedVideoFrames, presented, first };
-  });
+  })]).finally(() => clearTimeout(timer));
   writeFileSync(`${out}/first.png`, Buffer.from(seen.first.split(",")[1], "base64"));
   delete seen.first;
   console.log(JSON.stringify(seen));
