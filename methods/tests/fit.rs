@@ -503,7 +503,7 @@ fn density_control_clones_splits_prunes_and_resets_as_3dgs_does() {
         at(0.2, 0.005, 0.5),   // quiet: kept
     ];
     // Screen-space pulls (NDC units) far above and far below the threshold of 0.0002.
-    let (strong, weak) = (Vec2::new(0.01, 0.0), Vec2::new(1e-6, 0.0));
+    let (strong, weak) = (0.01, 1e-6);
     let mut d = Densifier::new(DensifyOptions::default(), params.len());
     d.observe([(0, strong), (1, strong), (2, weak), (3, weak)]);
     let mut rng = fastrand::Rng::with_seed(5);
@@ -648,8 +648,8 @@ fn mcmc_reads_3dgs_words_and_differentiates_its_penalties() {
     let mut rng = fastrand::Rng::with_seed(2);
     let flat: Vec<f32> = (0..3 * words).map(|_| 2.0 * rng.f32() - 1.0).collect();
     let mut grads = vec![0.0; flat.len()];
-    mcmc.regularize(&flat, &mut grads, words);
-    let value = |f: &[f32]| mcmc.regularize(f, &mut vec![0.0; f.len()], words) as f64;
+    mcmc.regularize(&flat, &mut grads, words, 1);
+    let value = |f: &[f32]| mcmc.regularize(f, &mut vec![0.0; f.len()], words, 1) as f64;
     for k in 0..flat.len() {
         let h = 1e-2;
         let (mut up, mut down) = (flat.clone(), flat.clone());
@@ -1354,10 +1354,8 @@ where
     cpu.observe(state.pre.visible.iter().map(|&(i, _)| {
         let i = i as usize;
         let shade = &g.shade[i * words..(i + 1) * words];
-        (
-            i,
-            screen_gradient::<M>(&params[i], &g.params[i], shade, &cam),
-        )
+        let grad = screen_gradient::<M>(&params[i], &g.params[i], shade, &cam);
+        (i, grad.length())
     }));
     let (cpu_grad2d, cpu_seen) = cpu.statistics();
     assert_eq!(

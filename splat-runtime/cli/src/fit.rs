@@ -5,6 +5,7 @@
 
 use crate::fit_view::FitView;
 use crate::interrupt::Listening;
+use crate::ranks::Ranks;
 use crate::view::Downscale;
 use crate::{memory, methods, plot};
 use anyhow::{Context, Result, anyhow, bail};
@@ -17,8 +18,9 @@ use splat_runtime::io::dataset::Dataset;
 use splat_runtime::io::formats::{self, Format};
 use splat_runtime::io::image::stage_image;
 use splat_runtime::io::ply::{GaussianCloud, ToStored};
+use splat_runtime::train::batch::batches;
 use splat_runtime::train::fit::{
-    Evaluation, FitError, FitOptions, StepReport, fit_from, render_views,
+    Evaluation, FitError, FitOptions, StepReport, fit_shared, render_views,
 };
 use splat_runtime::train::gpu_fit::{fit_gpu_from, render_views_gpu};
 use splat_runtime::train::loss::LossValue;
@@ -41,9 +43,15 @@ pub struct FitArgs {
     /// The method to train (one that implements `Trainable`).
     #[arg(long)]
     pub(crate) method: String,
-    /// Training steps [default: 7000; 2000 on the built-in dataset].
+    /// Training steps, one view each [default: 7000; 2000 on the built-in dataset].
     #[arg(long)]
     pub(crate) steps: Option<usize>,
+    /// Views per Adam step: their losses' gradients summed, the learning rates times
+    /// sqrt(batch) and Adam's betas to the power batch (Grendel-GS's rule). --steps and every
+    /// schedule still count views: --steps 7000 --batch 4 takes 1,750 Adam steps. Under
+    /// `mpirun` the ranks share each batch's views (docs/distributed.md).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=4096))]
+    pub(crate) batch: u32,
     /// How many points to start from: at most this many of the dataset's points (evenly
     /// spaced), or as many random ones in a cube around the cameras' target when it has none
     /// (Blender and nerfstudio scenes) [default: 100000; 2000 on the built-in dataset].
@@ -182,6 +190,8 @@ pub struct Fit<'a> {
     pub(crate) args: &'a FitArgs,
     /// Every method the command line offers (a page of the run, `--view`, offers them too).
     pub(crate) methods: &'a [crate::methods::Method],
+    /// The processes it runs as: rank 0 prints and writes.
+    pub(crate) ranks: &'a Ranks,
     /// Where it trains: a GPU, or the CPU.
     pub(crate) gpu: Option<Gpu>,
     pub(crate) data: &'a Dataset,
@@ -204,6 +214,7 @@ impl Fit<'_> {
     {
         let Fit {
             args,
+            ranks,
             ref gpu,
             data,
             ..
@@ -212,11 +223,25 @@ impl Fit<'_> {
         if args.explain {
             explain::<M>(data, opts);
         }
+        // The ranks take the same steps only from the same settings (`mpirun`'s MPMD form
+        // can pass each its own).
+        let settings = FitOptions {
+            stop: None,
+            ..opts.clone()
+        };
+        let settings = format!("{} {settings:?} {}", M::NAME, self.extent);
+        let same = "give every rank the same command line";
+        ranks.agree("run", &Ok(crate::ranks::hash(&settings)), same)?;
+        if !ranks.is_root() {
+            return self.train_beside_root::<M>(opts);
+        }
         let test_images = |params: &[M::Params]| match &gpu {
             Some(gpu) => render_views_gpu::<M>(gpu, params, &data.test, opts),
             None => render_views::<M>(params, &data.test, opts),
         };
         let (mut state, log) = self.begin::<M>(opts, &test_images)?;
+        // The other ranks start from this state, bit for bit.
+        ranks.broadcast(Some(state.to_bytes()?))?;
         // The cap bounds growth (as gsplat's): a start above it is kept, and ADC may prune it
         // below; MCMC never removes primitives.
         if let Some(cap) = opts.densify.as_ref().map(Strategy::max_primitives)
@@ -265,8 +290,11 @@ impl Fit<'_> {
             let trained = match &gpu {
                 Some(gpu) => fit_gpu_from::<M>(gpu, data, &mut state, self.extent, opts, report)
                     .map(|()| format!("the GPU ({})", gpu.adapter)),
-                None => fit_from::<M>(data, &mut state, self.extent, opts, report)
-                    .map(|()| "the CPU".to_string()),
+                None => fit_shared::<M>(ranks.team(), data, &mut state, self.extent, opts, report)
+                    .map(|()| match ranks.count() {
+                        1 => "the CPU".to_string(),
+                        n => format!("the CPUs of {n} MPI ranks"),
+                    }),
             };
             if let Some(page) = &page {
                 page.close();
@@ -322,10 +350,17 @@ impl Fit<'_> {
         if log.evaluations.last().is_none_or(|e| e.0 < opts.steps) {
             log.evaluations.push((opts.steps, after));
         }
+        let batches = match opts.batch {
+            1 => String::new(),
+            b => format!(" in batches of {b}"),
+        };
         let pace = match taken {
             0 => format!("no steps to take on {place}"),
             1 => format!("1 step on {place}, {:.1} ms", per_step * 1e3),
-            n => format!("{n} steps on {place}, {:.1} ms per step", per_step * 1e3),
+            n => format!(
+                "{n} steps{batches} on {place}, {:.1} ms per step",
+                per_step * 1e3
+            ),
         };
         let views = crate::count(after.views, "test view");
         println!(
@@ -337,7 +372,15 @@ impl Fit<'_> {
             after.ssim
         );
         if taken > 0 {
-            print_step_times(&progress.times, taken, gpu.as_ref());
+            print_step_times(&progress.times, progress.batches, gpu.as_ref());
+        }
+        if let Some(t) = ranks.traffic().filter(|t| t.batches > 0) {
+            let per = |bytes: u64| bytes as f64 / t.batches as f64 / 1e6;
+            println!(
+                "rank 0 sent {:.2} MB and received {:.2} MB per batch (the views' gradients and density statistics)",
+                per(t.sent),
+                per(t.received)
+            );
         }
         let antialiased = methods::find(self.methods, &args.method)?.antialiased;
         let cloud = GaussianCloud {
@@ -345,6 +388,22 @@ impl Fit<'_> {
             ..GaussianCloud::new(3, params.iter().map(ToStored::to_stored).collect())
         };
         write_results(&args.out, &cloud, &args.export, &images, &progress.log)
+    }
+
+    /// A rank past 0 under MPI: the same steps as rank 0, from the state it hands over,
+    /// printing and writing nothing.
+    fn train_beside_root<M: Trainable>(&self, opts: &FitOptions) -> Result<()> {
+        let path = self.args.out.join(CHECKPOINT);
+        let mut state = Checkpoint::parse(&self.ranks.broadcast(None)?, &path)?;
+        let listening = crate::interrupt::listen();
+        let opts = FitOptions {
+            eval_every: None,
+            stop: listening.as_ref().map(Listening::flag),
+            ..opts.clone()
+        };
+        let team = self.ranks.team();
+        fit_shared::<M>(team, self.data, &mut state, self.extent, &opts, |_| {})?;
+        Ok(())
     }
 
     /// Where the run starts: the checkpoint it resumes from (refused if it is of another
@@ -370,7 +429,10 @@ impl Fit<'_> {
                 c.strategy,
                 Strategy::name(opts.densify.as_ref())
             ),
-            Some(c) => (c.clone(), Log::read_csv(&args.out.join(METRICS), c.step)?),
+            Some(c) => (
+                c.clone(),
+                Log::read_csv(&args.out.join(METRICS), c.step, opts.batch)?,
+            ),
             None => {
                 let half = self.init_extent * self.extent;
                 let first = init::Start {
@@ -428,6 +490,8 @@ struct Progress {
     log: Log,
     times: StepTimes,
     faulty_steps: usize,
+    /// How many reports (Adam steps) came.
+    batches: usize,
     /// The first checkpoint that could not be written: it stops nothing then, and the run
     /// reports it at its end.
     saved: Result<()>,
@@ -451,6 +515,7 @@ impl Progress {
             bar,
             log,
             times: StepTimes::default(),
+            batches: 0,
             faulty_steps: 0,
             saved: Ok(()),
             checkpoint_path: out.join(CHECKPOINT),
@@ -472,7 +537,8 @@ impl Progress {
     }
 
     fn record<M: Trainable>(&mut self, r: &StepReport) {
-        self.bar.inc(1);
+        self.bar.inc(r.views as u64);
+        self.batches += 1;
         self.log.record(r);
         self.times += r.times;
         if r.faults.any() {
@@ -499,9 +565,14 @@ impl Progress {
                 .and_then(|()| self.log.stage_csv(&mut outputs, &self.metrics))
                 .and_then(|()| Ok(outputs.commit()?));
         }
-        let done = r.step + 1 - self.first;
-        let line = self.bar.is_hidden() && done.is_multiple_of(self.line_every);
-        if r.step.is_multiple_of(10) || r.refinement.is_some() || r.evaluation.is_some() || line {
+        // The steps (views) this report covers, counted from the run's first.
+        let done = (r.step + 1 - r.views - self.first)..(r.step + 1 - self.first);
+        let line = self.bar.is_hidden()
+            && done
+                .clone()
+                .any(|d| (d + 1).is_multiple_of(self.line_every));
+        let tenth = (r.step + 1 - r.views..=r.step).any(|s| s.is_multiple_of(10));
+        if tenth || r.refinement.is_some() || r.evaluation.is_some() || line {
             let v = r.loss;
             // The last measured: the final evaluation comes after the last step's line.
             let (at, test) =
@@ -511,7 +582,7 @@ impl Progress {
                 v.loss, v.l1, v.ssim, r.primitives
             );
             if line {
-                let ms = self.started.elapsed().as_secs_f64() * 1e3 / done as f64;
+                let ms = self.started.elapsed().as_secs_f64() * 1e3 / done.end as f64;
                 println!(
                     "step {}/{}: {ms:.2} ms per step, {status}",
                     r.step + 1,
@@ -523,7 +594,8 @@ impl Progress {
     }
 }
 
-/// Where the run's steps spent their time, per stage: a table of the mean per step.
+/// Where the run's Adam steps (`steps` of them) spent their time, per stage: a table of the
+/// mean per step.
 fn print_step_times(total: &StepTimes, steps: usize, gpu: Option<&Gpu>) {
     let clocks = match gpu {
         Some(g) if g.timestamps => {
@@ -683,8 +755,9 @@ impl Log {
         }
     }
 
-    /// The rows of a run's `metrics.csv` up to step `last` (what a resumed run keeps).
-    fn read_csv(path: &Path, last: usize) -> Result<Log> {
+    /// The rows of a run's `metrics.csv` up to step `last` (what a resumed run keeps), one
+    /// per batch of `batch` views.
+    fn read_csv(path: &Path, last: usize, batch: usize) -> Result<Log> {
         let text =
             std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
         let mut log = Log::default();
@@ -723,9 +796,9 @@ impl Log {
                 log.evaluations.push((step, e));
             }
         }
-        // Written with the checkpoint, they hold every step up to it, unless edited since.
+        // Written with the checkpoint, they hold every batch up to it, unless edited since.
         let kept = log.steps.iter().map(|s| s.0);
-        if !kept.eq(1..=last) {
+        if !kept.eq(batches(0, last, batch).map(|b| b.last() + 1)) {
             println!(
                 "warning: {} holds {} of the checkpoint's {last} steps: the resumed run's metrics miss the others",
                 path.display(),

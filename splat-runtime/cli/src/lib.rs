@@ -26,9 +26,12 @@ mod format_costs;
 mod interrupt;
 mod memory;
 mod methods;
+#[cfg(feature = "mpi")]
+mod mpi_team;
 mod new_crate;
 mod orbit;
 mod plot;
+mod ranks;
 mod render;
 mod scene;
 mod source;

@@ -319,6 +319,33 @@ impl Picture {
 }
 
 impl View {
+    /// Feeds what training reads of this view to `h`: its camera, background and pixels (not
+    /// its name, which holds where it was read from), so that processes that read the same
+    /// dataset in different places hash the same.
+    pub fn fingerprint(&self, h: &mut impl std::hash::Hasher) {
+        h.write(format!("{:?} {:?}", self.camera, self.background).as_bytes());
+        match &self.pixels {
+            Pixels::Composited { image, coverage } => {
+                h.write_u32(image.width);
+                h.write_u32(image.height);
+                image.data.iter().for_each(|x| h.write_u32(x.to_bits()));
+                coverage
+                    .iter()
+                    .flatten()
+                    .for_each(|x| h.write_u32(x.to_bits()));
+            }
+            Pixels::Rgba8 {
+                width,
+                height,
+                words,
+            } => {
+                h.write_u32(*width);
+                h.write_u32(*height);
+                words.iter().for_each(|w| h.write_u32(*w));
+            }
+        }
+    }
+
     /// A view of `image` (RGB composited on `background`, with the coverage of a picture not
     /// opaque everywhere), held as it is given.
     pub fn new(

@@ -156,6 +156,13 @@ impl Checkpoint {
         splat_io::write_atomic(path, |w| self.write_to(w))
     }
 
+    /// The checkpoint's file as bytes ([`Checkpoint::parse`] reads them back).
+    pub fn to_bytes(&self) -> std::io::Result<Vec<u8>> {
+        let mut bytes = vec![];
+        self.write_to(&mut bytes)?;
+        Ok(bytes)
+    }
+
     /// The header (magic, method name, strategy name, settings, then words, step, steps,
     /// primitives, Adam's step, statistics count, generator state, the extent's bits as `u64`,
     /// the training views and their pixels, 0 and 0 for none), then the parameters, both

@@ -129,11 +129,10 @@ impl Densifier {
         (self.grad2d.clone(), self.count.clone())
     }
 
-    /// Adds one view's screen-space position gradient (NDC units, [`screen_gradient`]) of
-    /// each primitive the view shows.
-    pub fn observe(&mut self, seen: impl IntoIterator<Item = (usize, Vec2)>) {
-        for (i, g) in seen {
-            let norm = g.length();
+    /// Adds one view's screen-space position gradient norm (NDC units, [`screen_gradient`])
+    /// of each primitive the view shows.
+    pub fn observe(&mut self, seen: impl IntoIterator<Item = (usize, f32)>) {
+        for (i, norm) in seen {
             // A gradient Adam skips (not finite) does not count either.
             if norm.is_finite() {
                 self.grad2d[i] += norm;

@@ -861,7 +861,7 @@ mod tests {
         gpu.queue.submit([enc.finish()]);
 
         let (mut want_params, mut want_grads) = (params.clone(), grads.clone());
-        mcmc.regularize(&want_params, &mut want_grads, words);
+        mcmc.regularize(&want_params, &mut want_grads, words, 1);
         mcmc.perturb(&mut want_params, words, 1e-5, 77);
         let read = |b: &wgpu::Buffer| -> Vec<f32> {
             let w = gpu.read(b, prims * words).unwrap();

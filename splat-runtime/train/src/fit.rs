@@ -5,14 +5,16 @@
 //! the device.
 
 use super::adam::{Adam, Faults};
+use super::batch::{Batch, Scaling, batches};
 use super::checkpoint::{Checkpoint, ViewsFootprint};
 use super::densify::{Densifier, DensifyOptions, Refinement, screen_gradient};
 use super::loss::{self, LossError, LossValue};
 use super::mcmc::{Mcmc, McmcOptions};
 use super::step_times::StepTimes;
+use super::team::{Share, Solo, Team, ViewPass};
 use super::trainable::{Rate, Shape, Trainable};
 use glam::Vec3;
-use splat_core::flat::{Flat, flatten, read_all, write_all};
+use splat_core::flat::{Flat, flatten, read_all};
 use splat_core::frame::{FrameGrad, Image, RenderError, RenderOptions};
 use splat_core::method::{SplatMethod, param_groups, word_name};
 use splat_io::dataset::{Dataset, View};
@@ -34,7 +36,11 @@ pub(crate) fn step_rates(rates: &[Rate], step: usize, steps: usize) -> Vec<f32> 
 
 #[derive(Clone, Debug)]
 pub struct FitOptions {
+    /// How many views the run trains on (one per step, or `batch` per Adam step).
     pub steps: usize,
+    /// Views per Adam step, their losses summed ([`super::batch`]); every schedule still
+    /// counts views.
+    pub batch: usize,
     /// λ of `(1 - λ) L1 + λ (1 - SSIM)`.
     pub ssim_weight: f64,
     /// What the images were composited on; the render is composited the same way.
@@ -76,6 +82,7 @@ impl Default for FitOptions {
     fn default() -> Self {
         FitOptions {
             steps: 3000,
+            batch: 1,
             ssim_weight: 0.2,
             background: Vec3::ZERO,
             render: RenderOptions {
@@ -248,17 +255,17 @@ pub fn evaluate<M: SplatMethod>(
     Evaluation::of(&render_views::<M>(params, views, opts)?, views)
 }
 
-/// Whether `step` is the run's last: its final step, or the one it `stops` after
+/// Whether `batch` is the run's last: it holds its final step, or the run `stops` after it
 /// ([`FitOptions::stop`]).
-pub(crate) fn ends_after(opts: &FitOptions, step: usize, stops: bool) -> bool {
-    step + 1 == opts.steps || stops
+pub(crate) fn ends_after(opts: &FitOptions, batch: Batch, stops: bool) -> bool {
+    batch.last() + 1 == opts.steps || stops
 }
 
-/// Whether a checkpoint is reported after `step`: every `FitOptions::checkpoint_every` steps
+/// Whether a checkpoint is reported after `batch`: every `FitOptions::checkpoint_every` steps
 /// and after the run's last ([`ends_after`]).
-pub(crate) fn saves_at(opts: &FitOptions, step: usize, stops: bool) -> bool {
-    after_every(opts.checkpoint_every, step)
-        || (ends_after(opts, step, stops) && opts.checkpoint_every.is_some_and(|n| n > 0))
+pub(crate) fn saves_at(opts: &FitOptions, batch: Batch, stops: bool) -> bool {
+    batch.any(|s| after_every(opts.checkpoint_every, s))
+        || (ends_after(opts, batch, stops) && opts.checkpoint_every.is_some_and(|n| n > 0))
 }
 
 /// Whether something done every `every` steps (`FitOptions::eval_every`,
@@ -269,7 +276,10 @@ pub(crate) fn after_every(every: Option<usize>, step: usize) -> bool {
 
 /// What a step reports to the caller's progress callback.
 pub struct StepReport<'a> {
+    /// The last step (view) this Adam step took, counted from zero.
     pub step: usize,
+    /// How many views it took (`FitOptions::batch`, fewer in a run's last).
+    pub views: usize,
     pub loss: &'a LossValue,
     pub primitives: usize,
     /// Set on the steps that refined the primitive set.
@@ -324,6 +334,20 @@ pub fn fit_from<M: Trainable>(
     state: &mut Checkpoint,
     extent: f32,
     opts: &FitOptions,
+    progress: impl FnMut(&StepReport),
+) -> Result<(), FitError> {
+    fit_shared::<M>(&Solo, data, state, extent, opts, progress)
+}
+
+/// [`fit_from`] shared among the processes of `team`: each renders its share of every batch,
+/// and all take the same steps (the same scene, bit for bit, as one process with the same
+/// batch). Every rank must start from the same `state`.
+pub fn fit_shared<M: Trainable>(
+    team: &dyn Team,
+    data: &Dataset,
+    state: &mut Checkpoint,
+    extent: f32,
+    opts: &FitOptions,
     mut progress: impl FnMut(&StepReport),
 ) -> Result<(), FitError> {
     let rates = rates_for::<M>(data, extent, opts)?;
@@ -332,12 +356,13 @@ pub fn fit_from<M: Trainable>(
     let mut params = state.params::<M>();
     let mut flat = state.params.clone();
     let mut adam = Adam::resume(words, state.adam.clone());
+    let scaling = Scaling::for_batch(opts.batch, adam.beta1, adam.beta2);
+    (adam.beta1, adam.beta2) = (scaling.beta1, scaling.beta2);
     let mut grads = vec![0.0f32; flat.len()];
     let mut densifier = (opts.adc())
         .map(|d| Densifier::resume(d.clone(), params.len(), &state.grad2d, &state.seen));
     let mcmc = opts.mcmc::<M>()?;
     let mut rng = fastrand::Rng::with_seed(state.rng);
-    let render_opts = for_training(&opts.render);
     // The step's target, where a view does not hold it (8-bit views, another background).
     let mut target = Image {
         width: 0,
@@ -345,51 +370,72 @@ pub fn fit_from<M: Trainable>(
         channels: 3,
         data: vec![],
     };
-    for step in state.step..opts.steps {
+    for batch in batches(state.step, opts.steps, opts.batch) {
         let started = Instant::now();
-        let view = &data.train[rng.usize(..data.train.len())];
-        let background = step_background(opts, &mut rng);
-        let (frame, pass) =
-            splat_cpu::render_for_backward::<M>(&params, &view.camera, &render_opts)?;
-        let mut times = StepTimes {
-            preprocess: frame.stats.preprocess,
-            rasterize: frame.stats.rasterize,
-            shade: frame.stats.shade,
-            ..Default::default()
-        };
-        let clock = Instant::now();
-        let image = composite(frame.color, frame.alpha.as_ref(), background);
-        let (value, d_color) = loss::loss_and_gradient(
-            &image,
-            view.on_into(background, &mut target),
-            opts.ssim_weight,
-        )?;
-        // The background term (1 - alpha) b: its gradient flows into alpha.
-        let b = background.to_array();
-        let d_alpha = d_color
-            .chunks_exact(3)
-            .map(|g| -(g[0] * b[0] + g[1] * b[1] + g[2] * b[2]))
+        let draws: Vec<(&View, Vec3)> = (batch.steps())
+            .map(|_| {
+                let view = &data.train[rng.usize(..data.train.len())];
+                (view, step_background(opts, &mut rng))
+            })
             .collect();
-        let grad = FrameGrad {
-            color: d_color,
-            alpha: Some(d_alpha),
-            depth: None,
-        };
-        times.loss = clock.elapsed();
-        let g = splat_cpu::backward::<M>(&pass, &params, &view.camera, &grad)?;
-        (times.blend, times.project) = (g.stats.blend + g.stats.reduce, g.stats.project);
-        write_all(&g.params, &mut grads);
+        let observing = densifier
+            .as_ref()
+            .is_some_and(|d| batch.first < d.opts.stop);
+        let mut times = StepTimes::default();
+        let mine = (draws[batch.share(team.rank(), team.ranks())].iter())
+            .map(|&(view, background)| {
+                let target = &mut target;
+                view_pass::<M>(
+                    &params, view, background, opts, observing, target, &mut times,
+                )
+            })
+            .collect::<Result<Vec<_>, _>>()?;
         let clock = Instant::now();
-        if let Some(m) = &mcmc {
-            m.regularize(&flat, &mut grads, words);
+        let mine = Share {
+            passes: mine,
+            stop: opts.stop_requested(),
+        };
+        let shares = team.gather(mine)?;
+        times.exchange = clock.elapsed();
+        let asked_to_stop = shares.iter().any(|s| s.stop);
+        let passes: Vec<ViewPass> = shares.into_iter().flat_map(|s| s.passes).collect();
+        if passes.len() != batch.len || passes.iter().any(|p| p.grads.len() != flat.len()) {
+            return Err(FitError::Unsupported(format!(
+                "the ranks' passes do not fit the batch of {} views and {} words",
+                batch.len,
+                flat.len()
+            )));
         }
-        let lr = step_rates(&rates, step, opts.steps);
+        let clock = Instant::now();
+        // The batch's views in order: the same sums on every rank and in one process.
+        grads.fill(0.0);
+        let mut value = LossValue::default();
+        for p in &passes {
+            for (a, g) in grads.iter_mut().zip(&p.grads) {
+                *a += g;
+            }
+            value.loss += p.loss.loss / batch.len as f64;
+            value.l1 += p.loss.l1 / batch.len as f64;
+            value.ssim += p.loss.ssim / batch.len as f64;
+        }
+        if let Some(m) = &mcmc {
+            m.regularize(&flat, &mut grads, words, batch.len);
+        }
+        let lr: Vec<f32> = (step_rates(&rates, batch.first, opts.steps).into_iter())
+            .map(|r| {
+                if r < 0.0 {
+                    r
+                } else {
+                    r * scaling.learning_rate
+                }
+            })
+            .collect();
         let faults = adam.step(&mut flat, &grads, &lr);
         times.optimizer = clock.elapsed();
         let mut refinement = None;
         if let Some(m) = &mcmc {
             let clock = Instant::now();
-            if m.opts.refines_at(step) {
+            if batch.any(|s| m.opts.refines_at(s)) {
                 read_all(&mut params, &flat);
                 let r = m.refine::<M>(&mut params, &mut rng);
                 adam.remap(&r.origin);
@@ -405,25 +451,21 @@ pub fn fit_from<M: Trainable>(
             times.optimizer += clock.elapsed();
         }
         read_all(&mut params, &flat);
-        if let Some(d) = densifier.as_mut().filter(|d| step < d.opts.stop) {
+        if let Some(d) = densifier.as_mut().filter(|_| observing) {
             let clock = Instant::now();
-            let shade_words = M::Shade::LEN;
-            d.observe(pass.pre.visible.iter().map(|&(i, _)| {
-                let i = i as usize;
-                let shade = &g.shade[i * shade_words..(i + 1) * shade_words];
-                let grad = screen_gradient::<M>(&params[i], &g.params[i], shade, &view.camera);
-                (i, grad)
-            }));
-            times.statistics = clock.elapsed();
+            for p in &passes {
+                d.observe(p.seen.iter().map(|&(i, norm)| (i as usize, norm)));
+            }
+            times.statistics += clock.elapsed();
             let clock = Instant::now();
-            if d.refines_at(step) {
+            if let Some(step) = batch.steps().find(|&s| d.refines_at(s)) {
                 let r = d.refine::<M>(&mut params, step, extent, &mut rng);
                 adam.remap(&r.origin);
                 flat = flatten(&params);
                 grads = vec![0.0; flat.len()];
                 refinement = Some(r);
             }
-            if d.resets_at(step) {
+            if batch.any(|s| d.resets_at(s)) {
                 d.reset_opacity::<M>(&mut params);
                 let after = flatten(&params);
                 // Only the words the reset moved (opacities) forget their moments.
@@ -433,15 +475,17 @@ pub fn fit_from<M: Trainable>(
             times.densify = clock.elapsed();
         }
         let clock = Instant::now();
-        let evaluation = match after_every(opts.eval_every, step) {
+        let evaluation = match batch.any(|s| after_every(opts.eval_every, s)) {
             true => Some(evaluate::<M>(&params, &data.test, opts)?),
             false => None,
         };
         times.evaluation = clock.elapsed();
-        let stops = opts.stop_requested();
-        let save = saves_at(opts, step, stops);
-        if save || ends_after(opts, step, stops) {
-            state.step = step + 1;
+        // Ranks end after the batch where one was asked to; alone, a request during this
+        // batch's evaluation ends it too.
+        let stops = asked_to_stop || (team.ranks() == 1 && opts.stop_requested());
+        let save = saves_at(opts, batch, stops);
+        if save || ends_after(opts, batch, stops) {
+            state.step = batch.last() + 1;
             state.params = flat.clone();
             state.adam = adam.state();
             (state.grad2d, state.seen) = densifier
@@ -451,14 +495,17 @@ pub fn fit_from<M: Trainable>(
             state.rng = rng.get_seed();
         }
         progress(&StepReport {
-            step,
+            step: batch.last(),
+            views: batch.len,
             loss: &value,
             primitives: params.len(),
             refinement: refinement.as_ref(),
             faults,
             evaluation,
             checkpoint: save.then_some(&*state),
-            scene: after_every(opts.share_every, step).then_some(&flat[..]),
+            scene: batch
+                .any(|s| after_every(opts.share_every, s))
+                .then_some(&flat[..]),
             times: StepTimes {
                 wall: started.elapsed(),
                 ..times
@@ -469,6 +516,66 @@ pub fn fit_from<M: Trainable>(
         }
     }
     Ok(())
+}
+
+/// One view of a batch through `params`: its render on `background`, loss, backward pass and
+/// (when `observing`) density control's screen-space gradient norms; its stage times are added
+/// to `times`.
+fn view_pass<M: Trainable>(
+    params: &[M::Params],
+    view: &View,
+    background: Vec3,
+    opts: &FitOptions,
+    observing: bool,
+    target: &mut Image,
+    times: &mut StepTimes,
+) -> Result<ViewPass, FitError> {
+    let camera = &view.camera;
+    let (frame, pass) =
+        splat_cpu::render_for_backward::<M>(params, camera, &for_training(&opts.render))?;
+    times.preprocess += frame.stats.preprocess;
+    times.rasterize += frame.stats.rasterize;
+    times.shade += frame.stats.shade;
+    let clock = Instant::now();
+    let image = composite(frame.color, frame.alpha.as_ref(), background);
+    let (loss, d_color) =
+        loss::loss_and_gradient(&image, view.on_into(background, target), opts.ssim_weight)?;
+    // The background term (1 - alpha) b: its gradient flows into alpha.
+    let b = background.to_array();
+    let d_alpha = d_color
+        .chunks_exact(3)
+        .map(|g| -(g[0] * b[0] + g[1] * b[1] + g[2] * b[2]))
+        .collect();
+    let grad = FrameGrad {
+        color: d_color,
+        alpha: Some(d_alpha),
+        depth: None,
+    };
+    times.loss += clock.elapsed();
+    let g = splat_cpu::backward::<M>(&pass, params, camera, &grad)?;
+    times.blend += g.stats.blend + g.stats.reduce;
+    times.project += g.stats.project;
+    let clock = Instant::now();
+    let seen = match observing {
+        false => vec![],
+        true => {
+            let shade_words = M::Shade::LEN;
+            (pass.pre.visible.iter())
+                .map(|&(i, _)| {
+                    let k = i as usize;
+                    let shade = &g.shade[k * shade_words..(k + 1) * shade_words];
+                    let grad = screen_gradient::<M>(&params[k], &g.params[k], shade, camera);
+                    (i, grad.length())
+                })
+                .collect()
+        }
+    };
+    times.statistics += clock.elapsed();
+    Ok(ViewPass {
+        loss,
+        grads: flatten(&g.params),
+        seen,
+    })
 }
 
 /// Makes `state` this run's: refuses a state of another method, run length or (once
@@ -636,12 +743,13 @@ fn check_run<M: SplatMethod>(
 
 /// The settings of a run that change its steps beyond its method, length, strategy, extent
 /// and views (which a checkpoint records apart): the background, whether it is random, the
-/// cap on primitives, the frozen groups. A run resumed with others would train another way.
+/// cap on primitives, the frozen groups, the batch. A run resumed with others would train
+/// another way.
 pub fn settings<M: SplatMethod>(opts: &FitOptions) -> String {
     let b = opts.background;
     let frozen: Vec<&str> = frozen_groups::<M>(opts).into_iter().map(|g| g.0).collect();
     format!(
-        "on background {} {} {}{}{}{}",
+        "on background {} {} {}{}{}{}{}",
         b.x,
         b.y,
         b.z,
@@ -657,6 +765,10 @@ pub fn settings<M: SplatMethod>(opts: &FitOptions) -> String {
         match frozen.is_empty() {
             true => String::new(),
             false => format!(", with {} frozen", frozen.join(", ")),
+        },
+        match opts.batch {
+            0 | 1 => String::new(),
+            b => format!(", in batches of {b} views"),
         },
     )
 }

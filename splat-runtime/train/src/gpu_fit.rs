@@ -8,6 +8,7 @@
 //! density control or MCMC refines on the host: the scene and the moments go down and back up.
 
 use super::adam::Faults;
+use super::batch::batches;
 use super::checkpoint::Checkpoint;
 use super::densify::Densifier;
 use super::fit::{
@@ -75,6 +76,12 @@ pub fn fit_gpu_from<M: Trainable>(
 ) -> Result<(), FitError> {
     let rates = rates_for::<M>(data, extent, opts)?;
     adopt::<M>(state, extent, &data.train, opts)?;
+    if opts.batch > 1 {
+        return Err(FitError::Unsupported(format!(
+            "GPU training takes one view per step so far, not batches of {}: train with --batch 1, or on the CPU",
+            opts.batch
+        )));
+    }
     let words = M::Params::LEN;
     let source = screen_source::<M>().ok_or_else(|| {
         FitError::Unsupported(format!(
@@ -117,8 +124,8 @@ pub fn fit_gpu_from<M: Trainable>(
     let mut densifier =
         (opts.adc()).map(|d| Densifier::resume(d.clone(), scene.len(), &state.grad2d, &state.seen));
     let mut rng = fastrand::Rng::with_seed(state.rng);
-    for step in state.step..opts.steps {
-        let started = Instant::now();
+    for batch in batches(state.step, opts.steps, 1) {
+        let (step, started) = (batch.first, Instant::now());
         let k = rng.usize(..data.train.len());
         let camera = &data.train[k].camera;
         let background = step_background(opts, &mut rng);
@@ -186,8 +193,8 @@ pub fn fit_gpu_from<M: Trainable>(
         };
         times.evaluation = clock.elapsed();
         let stops = opts.stop_requested();
-        let save = saves_at(opts, step, stops);
-        if save || ends_after(opts, step, stops) {
+        let save = saves_at(opts, batch, stops);
+        if save || ends_after(opts, batch, stops) {
             let n = scene.len();
             state.step = step + 1;
             state.params = flatten(&scene.download(gpu)?);
@@ -208,6 +215,7 @@ pub fn fit_gpu_from<M: Trainable>(
         };
         progress(&StepReport {
             step,
+            views: 1,
             loss: &value,
             primitives: scene.len(),
             refinement: refinement.as_ref(),
@@ -282,6 +290,13 @@ impl<M: SplatMethod> DeviceStep<'_, M> {
             renderer.backward_on_device(scene, self.acc)?;
 
             let mut enc = gpu.device.create_command_encoder(&Default::default());
+            // The statistics read the positions the frame was drawn with, before Adam moves
+            // them (as the CPU does).
+            timer.start(&mut enc, STATISTICS);
+            if observing {
+                (self.observer).record(gpu, &mut enc, renderer, scene, self.source)?;
+            }
+            timer.end(&mut enc, STATISTICS);
             let param_grads = renderer.param_gradients();
             timer.start(&mut enc, OPTIMIZER);
             if let Some(m) = &self.mcmc {
@@ -296,11 +311,6 @@ impl<M: SplatMethod> DeviceStep<'_, M> {
             };
             self.adam.record(gpu, &mut enc, adam_step)?;
             timer.end(&mut enc, OPTIMIZER);
-            timer.start(&mut enc, STATISTICS);
-            if observing {
-                (self.observer).record(gpu, &mut enc, renderer, scene, self.source)?;
-            }
-            timer.end(&mut enc, STATISTICS);
             timer.resolve(&mut enc, LOSS..NOISE);
             gpu.queue.submit([enc.finish()]);
             let parts = [self.loss.sums()?, self.adam.fault_words()];

@@ -1,11 +1,13 @@
 //! splat-train: what training shares across methods: the photometric loss with its gradient and the
 //! evaluation metrics ([`loss`]), Adam ([`adam`]), where training starts ([`init`]), adaptive
 //! density control ([`densify`]) or MCMC ([`mcmc`]), checkpoints ([`checkpoint`]), where a
-//! step's time goes ([`step_times`]), and the loop with the trait a method implements to take
-//! part ([`fit`]), also on the GPU ([`gpu_fit`], with the loss, Adam, density control's
+//! step's time goes ([`step_times`]), batches of views ([`batch`]) shared among processes
+//! ([`team`]), and the loop with the trait a method implements to take part ([`fit`]), also
+//! on the GPU ([`gpu_fit`], with the loss, Adam, density control's
 //! statistics and MCMC's terms on the device in [`device`]).
 
 pub mod adam;
+pub mod batch;
 pub mod checkpoint;
 pub mod densify;
 #[cfg(feature = "gpu")]
@@ -18,6 +20,7 @@ pub mod like_3dgs;
 pub mod loss;
 pub mod mcmc;
 pub mod step_times;
+pub mod team;
 pub mod trainable;
 
 pub use checkpoint::Checkpoint;

@@ -174,16 +174,18 @@ impl Mcmc {
 
     /// The penalties' value for `n` primitives, and their gradients added to `grads`:
     /// `opacity_reg * mean(opacity) + scale_reg * mean(scale)`, the mean scale over every
-    /// axis of every primitive.
-    pub fn regularize(&self, flat: &[f32], grads: &mut [f32], words: usize) -> f32 {
+    /// axis of every primitive, once per view of the step (`views`: each view's loss carries
+    /// them, and a batch sums its views' losses).
+    pub fn regularize(&self, flat: &[f32], grads: &mut [f32], words: usize, views: usize) -> f32 {
         let n = flat.len() / words.max(1);
         if n == 0 {
             return 0.0;
         }
         let (o, s) = (self.words.opacity, self.words.log_scale);
+        let per_view = |reg: f32, count: usize| reg * views as f32 / count as f32;
         let (wo, ws) = (
-            self.opts.opacity_reg / n as f32,
-            self.opts.scale_reg / (3 * n) as f32,
+            per_view(self.opts.opacity_reg, n),
+            per_view(self.opts.scale_reg, 3 * n),
         );
         let mut value = 0.0f64;
         for (p, g) in flat.chunks_exact(words).zip(grads.chunks_exact_mut(words)) {

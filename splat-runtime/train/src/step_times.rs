@@ -22,6 +22,9 @@ pub struct StepTimes {
     pub optimizer: Duration,
     /// Density control's per-step statistics.
     pub statistics: Duration,
+    /// Waiting for the other processes' views of the batch (`splat fit` under MPI), which
+    /// also holds the time the slowest rank took beyond this one.
+    pub exchange: Duration,
     /// On the host, on the steps that do it: refining the primitive set or resetting
     /// opacities (on the GPU with the scene and moments down and back up).
     pub densify: Duration,
@@ -33,7 +36,7 @@ pub struct StepTimes {
 
 impl StepTimes {
     /// The stages, named, in the order a step runs them (`wall` aside).
-    pub fn stages(&self) -> [(&'static str, Duration); 10] {
+    pub fn stages(&self) -> [(&'static str, Duration); 11] {
         [
             ("preprocess", self.preprocess),
             ("rasterize", self.rasterize),
@@ -43,6 +46,7 @@ impl StepTimes {
             ("project adjoint", self.project),
             ("optimizer", self.optimizer),
             ("statistics", self.statistics),
+            ("exchange", self.exchange),
             ("densify", self.densify),
             ("evaluation", self.evaluation),
         ]
@@ -65,6 +69,7 @@ impl std::ops::AddAssign for StepTimes {
         self.project += o.project;
         self.optimizer += o.optimizer;
         self.statistics += o.statistics;
+        self.exchange += o.exchange;
         self.densify += o.densify;
         self.evaluation += o.evaluation;
         self.wall += o.wall;
@@ -87,9 +92,10 @@ mod tests {
             project: ms(6),
             optimizer: ms(7),
             statistics: ms(8),
+            exchange: ms(11),
             densify: ms(9),
             evaluation: ms(10),
-            wall: ms(60),
+            wall: ms(71),
         };
         let mut total = StepTimes::default();
         total += step;
@@ -97,7 +103,7 @@ mod tests {
         let want: Vec<_> = step.stages().iter().map(|s| 2 * s.1).collect();
         let got: Vec<_> = total.stages().iter().map(|s| s.1).collect();
         assert_eq!(got, want);
-        assert_eq!(total.wall, ms(120));
+        assert_eq!(total.wall, ms(142));
         assert_eq!(step.unaccounted(), ms(5));
         // Stages timed on the GPU can overlap the host's clock: never negative.
         assert_eq!(

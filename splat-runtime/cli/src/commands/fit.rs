@@ -5,6 +5,7 @@ use crate::fit::{
     CHECKPOINT, CURVE, Fit, FitArgs, METRICS, StrategyArg, frozen_and_trained, scene_file,
 };
 use crate::methods::{self, Method};
+use crate::ranks::Ranks;
 use crate::view::undistorted;
 use crate::{memory, scene};
 use anyhow::{Context, Result, bail};
@@ -87,6 +88,12 @@ fn check_knobs(args: &FitArgs) -> Result<()> {
 }
 
 pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
+    let ranks = Ranks::join()?;
+    fit_on(args, methods, &ranks).or_else(|e| ranks.fail(e))
+}
+
+/// `splat fit` as one of `ranks` (alone, or one of an MPI launch's).
+fn fit_on(args: &FitArgs, methods: &[Method], ranks: &Ranks) -> Result<()> {
     let method = methods::find(methods, &args.method)?;
     let Some(train) = method.full().fit else {
         bail!(
@@ -109,49 +116,78 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
     frozen_and_trained(&groups.collect::<Vec<_>>(), &args.freeze, method.name)?;
     // Picked first: the memory a run needs depends on where it trains.
     let gpu = crate::pick_gpu(args.backend)?;
+    if let (Some(gpu), 2..) = (&gpu, ranks.count()) {
+        bail!(
+            "GPU training runs as one process so far, not {} MPI ranks ({}): --backend cpu shares the run among them",
+            ranks.count(),
+            gpu.adapter
+        );
+    }
     let background = if args.white { Vec3::ONE } else { Vec3::ZERO };
     let t = Instant::now();
-    let (data, name, defaults, taken) = match &args.dataset {
-        Some(dir) => {
-            let name = dir.display().to_string();
-            let full = dataset::read_shots(dir)?;
-            let shots = full.clone().downscaled(args.downscale.factor)?;
-            if let Some(room) = memory::available() {
-                let demand = memory::Demand {
-                    threads: rayon::current_num_threads(),
-                    step: gpu.is_none().then_some(CPU_STEP_BYTES_PER_PIXEL),
-                };
-                memory::check_room(&name, (&full, &shots), args.downscale.factor, room, demand)?;
-            }
-            let all = || shots.train.iter().chain(&shots.test);
-            let pictures = all().map(|s| s.path.as_path());
-            crate::check_renders_spare(&args.out.join("test"), shots.test.len(), pictures)?;
-            let taken = args.downscale.how(all()) + &undistorted(all());
-            let bar = ProgressBar::new(all().count() as u64).with_style(
-                ProgressStyle::with_template("{bar:40} {pos}/{len} pictures decoded, {elapsed}")
+    let loaded = (|| -> Result<_> {
+        Ok(match &args.dataset {
+            Some(dir) => {
+                let name = dir.display().to_string();
+                let full = dataset::read_shots(dir)?;
+                let shots = full.clone().downscaled(args.downscale.factor)?;
+                if let Some(room) = memory::available() {
+                    let demand = memory::Demand {
+                        threads: rayon::current_num_threads(),
+                        step: gpu.is_none().then_some(CPU_STEP_BYTES_PER_PIXEL),
+                    };
+                    memory::check_room(
+                        &name,
+                        (&full, &shots),
+                        args.downscale.factor,
+                        room,
+                        demand,
+                    )?;
+                }
+                let all = || shots.train.iter().chain(&shots.test);
+                let pictures = all().map(|s| s.path.as_path());
+                crate::check_renders_spare(&args.out.join("test"), shots.test.len(), pictures)?;
+                let taken = args.downscale.how(all()) + &undistorted(all());
+                let bar = ProgressBar::new(all().count() as u64).with_style(
+                    ProgressStyle::with_template(
+                        "{bar:40} {pos}/{len} pictures decoded, {elapsed}",
+                    )
                     .expect("a valid template"),
-            );
-            let data = shots.load_counted(background, &|| bar.inc(1))?;
-            bar.finish_and_clear();
-            (data, name, DATASET_DEFAULTS, taken)
-        }
-        None if args.downscale.factor != 1 => {
-            bail!("--downscale applies to a dataset's pictures, and none was given")
-        }
-        None => {
-            let (views, width, height) = scene::DATASET;
-            (
-                scene::dataset(views, width, height, background)?,
-                "the built-in dataset".to_string(),
-                BUILT_IN_DEFAULTS,
-                String::new(),
-            )
-        }
-    };
+                );
+                let data = shots.load_counted(background, &|| bar.inc(1))?;
+                bar.finish_and_clear();
+                (data, name, DATASET_DEFAULTS, taken)
+            }
+            None if args.downscale.factor != 1 => {
+                bail!("--downscale applies to a dataset's pictures, and none was given")
+            }
+            None => {
+                let (views, width, height) = scene::DATASET;
+                (
+                    scene::dataset(views, width, height, background)?,
+                    "the built-in dataset".to_string(),
+                    BUILT_IN_DEFAULTS,
+                    String::new(),
+                )
+            }
+        })
+    })();
+    // Every rank trains on the same views: one that cannot read them stops all before the
+    // first step.
+    let fingerprint = loaded.as_ref().map(|l| l.0.fingerprint());
+    let same = "the ranks must read the same files (a folder every node sees, or identical copies)";
+    ranks.agree("dataset", &fingerprint.map_err(|e| format!("{e:#}")), same)?;
+    let (data, name, defaults, taken) = loaded?;
     let resume = match args.resume {
         true => {
             let path = args.out.join(CHECKPOINT);
-            let c = Checkpoint::read(&path)?;
+            // Rank 0 reads it (the others may not see its folder) and hands it to the others.
+            let c = match ranks.is_root() {
+                true => Some(Checkpoint::read(&path)?),
+                false => None,
+            };
+            let bytes = ranks.broadcast(c.map(|c| c.to_bytes()).transpose()?)?;
+            let c = Checkpoint::parse(&bytes, &path)?;
             if let Some(steps) = args.steps.filter(|s| *s != c.steps) {
                 bail!(
                     "{} is a checkpoint of a {}-step run, not {steps} (the learning rates follow the run's length): leave --steps out",
@@ -223,6 +259,7 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
     }
     let opts = FitOptions {
         steps,
+        batch: args.batch as usize,
         background,
         seed: args.seed,
         densify: match args.strategy {
@@ -251,16 +288,21 @@ pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
     // Tried before training, not with the outputs at its end: an output folder that cannot be
     // made fails the command before hours of training. The renders' folder is made again with
     // them, so a run stopped early leaves none empty.
+    // Rank 0 alone writes outputs.
     let renders = args.out.join("test");
     let made = !renders.exists();
-    std::fs::create_dir_all(&renders).with_context(|| format!("creating {}", renders.display()))?;
-    if made {
-        std::fs::remove_dir(&renders)
-            .with_context(|| format!("removing {} (made to try)", renders.display()))?;
+    if ranks.is_root() {
+        std::fs::create_dir_all(&renders)
+            .with_context(|| format!("creating {}", renders.display()))?;
+        if made {
+            std::fs::remove_dir(&renders)
+                .with_context(|| format!("removing {} (made to try)", renders.display()))?;
+        }
     }
     train(&Fit {
         args,
         methods,
+        ranks,
         gpu,
         data: &data,
         resume,

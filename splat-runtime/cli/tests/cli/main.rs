@@ -10,6 +10,8 @@ mod eval;
 mod fit;
 mod gallery;
 mod inspect;
+#[cfg(feature = "mpi")]
+mod mpi;
 mod outputs;
 mod render;
 mod tradeoff;

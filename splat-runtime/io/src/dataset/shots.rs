@@ -282,6 +282,24 @@ pub struct Dataset {
     pub points: Vec<Point>,
 }
 
+impl Dataset {
+    /// A hash of what training reads (the views' cameras and pixels in order, the points):
+    /// equal on two processes that read the same dataset, wherever it lies.
+    pub fn fingerprint(&self) -> u64 {
+        use std::hash::Hasher;
+        let mut h = std::hash::DefaultHasher::new();
+        for views in [&self.train, &self.test] {
+            h.write_usize(views.len());
+            views.iter().for_each(|v| v.fingerprint(&mut h));
+        }
+        for p in &self.points {
+            (p.position.to_array().iter().chain(&p.color.to_array()))
+                .for_each(|x| h.write_u32(x.to_bits()));
+        }
+        h.finish()
+    }
+}
+
 /// A point of a dataset's initial point cloud.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Point {

@@ -1,0 +1,166 @@
+//! The ranks of an MPI launch as a training [`Team`]: each batch's shares are gathered on
+//! every rank with one `MPI_Allgatherv` (the sizes first, then the bytes), so that every
+//! rank sums the same views' gradients in the same order.
+
+use crate::ranks::Traffic;
+use anyhow::{Result, anyhow};
+use mpi::datatype::PartitionMut;
+use mpi::environment::Universe;
+use mpi::topology::{Communicator, SimpleCommunicator};
+use mpi::traits::*;
+use splat_runtime::train::fit::FitError;
+use splat_runtime::train::team::{Share, Team};
+use std::cell::Cell;
+
+pub struct MpiTeam {
+    world: SimpleCommunicator,
+    rank: usize,
+    ranks: usize,
+    traffic: Cell<Traffic>,
+    // Last: finalizes MPI when the team goes.
+    _universe: Universe,
+}
+
+impl MpiTeam {
+    /// Initializes MPI and joins its world; every rank but 0 sends its standard output away.
+    pub fn join() -> Result<MpiTeam> {
+        let universe = mpi::initialize().ok_or_else(|| anyhow!("MPI was initialized already"))?;
+        let world = universe.world();
+        let (rank, ranks) = (world.rank() as usize, world.size() as usize);
+        if rank > 0 {
+            quiet_stdout()?;
+        }
+        Ok(MpiTeam {
+            world,
+            rank,
+            ranks,
+            traffic: Cell::default(),
+            _universe: universe,
+        })
+    }
+
+    /// Every rank's `mine`, in rank order. The bytes travel as 8-byte words, whose counts
+    /// MPI takes as 32-bit: up to 16 GiB in all.
+    fn all_gather(&self, mine: &[u8]) -> Result<Vec<Vec<u8>>, String> {
+        let len = mine.len() as u64;
+        let mut lens = vec![0u64; self.ranks];
+        self.world.all_gather_into(&len, &mut lens[..]);
+        let words = |n: u64| n.div_ceil(8);
+        let counts: Vec<i32> = (lens.iter())
+            .map(|&n| i32::try_from(words(n)))
+            .collect::<Result<_, _>>()
+            .map_err(|_| {
+                "a rank's share of the batch passes MPI's 16 GiB per message".to_string()
+            })?;
+        let displs: Vec<i32> = (counts.iter())
+            .scan(0i64, |at, &c| {
+                let d = *at;
+                *at += c as i64;
+                Some(i32::try_from(d))
+            })
+            .collect::<Result<_, _>>()
+            .map_err(|_| "the batch's shares pass MPI's 16 GiB per gather".to_string())?;
+        let mut send = vec![0u64; words(len) as usize];
+        for (w, chunk) in send.iter_mut().zip(mine.chunks(8)) {
+            let mut b = [0u8; 8];
+            b[..chunk.len()].copy_from_slice(chunk);
+            *w = u64::from_le_bytes(b);
+        }
+        let total = counts.iter().map(|&c| c as usize).sum();
+        let mut recv = vec![0u64; total];
+        let mut parts = PartitionMut::new(&mut recv[..], &counts[..], &displs[..]);
+        self.world.all_gather_varcount_into(&send[..], &mut parts);
+        Ok((lens.iter().zip(&displs))
+            .map(|(&n, &d)| {
+                let words = &recv[d as usize..d as usize + words(n) as usize];
+                let mut bytes: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
+                bytes.truncate(n as usize);
+                bytes
+            })
+            .collect())
+    }
+
+    /// Rank 0's `bytes` on every rank.
+    pub fn broadcast(&self, bytes: Option<Vec<u8>>) -> Result<Vec<u8>> {
+        let root = self.world.process_at_rank(0);
+        let mut len = bytes.as_ref().map_or(0, |b| b.len() as u64);
+        root.broadcast_into(&mut len);
+        let mut buf = bytes.unwrap_or_else(|| vec![0; len as usize]);
+        // Broadcast in pieces: MPI counts in 32 bits.
+        for piece in buf.chunks_mut(1 << 30) {
+            root.broadcast_into(piece);
+        }
+        Ok(buf)
+    }
+
+    /// Every rank's outcome of some step (a value, or why it failed), in rank order.
+    pub fn all_outcomes(
+        &self,
+        mine: &std::result::Result<u64, String>,
+    ) -> Result<Vec<std::result::Result<u64, String>>> {
+        let bytes = match mine {
+            Ok(v) => [&[0u8][..], &v.to_le_bytes()].concat(),
+            Err(e) => [&[1u8][..], e.as_bytes()].concat(),
+        };
+        let all = self.all_gather(&bytes).map_err(|e| anyhow!(e))?;
+        all.into_iter()
+            .map(|b| match b.split_first() {
+                Some((0, v)) if v.len() == 8 => Ok(Ok(u64::from_le_bytes(v.try_into()?))),
+                Some((1, e)) => Ok(Err(String::from_utf8_lossy(e).into_owned())),
+                _ => Err(anyhow!("a rank sent no outcome")),
+            })
+            .collect()
+    }
+
+    /// What this rank's batches exchanged so far.
+    pub fn traffic(&self) -> Traffic {
+        self.traffic.get()
+    }
+
+    /// Prints `error` as this rank's and aborts every rank (`MPI_Abort`): the others would
+    /// wait for this one at the next gather.
+    pub fn abort(&self, error: &anyhow::Error) -> ! {
+        eprintln!("error: rank {} of {}: {error:#}", self.rank, self.ranks);
+        self.world.abort(1)
+    }
+}
+
+impl Team for MpiTeam {
+    fn rank(&self) -> usize {
+        self.rank
+    }
+
+    fn ranks(&self) -> usize {
+        self.ranks
+    }
+
+    fn gather(&self, mine: Share) -> Result<Vec<Share>, FitError> {
+        let mine = mine.encode();
+        let all = self.all_gather(&mine).map_err(FitError::Unsupported)?;
+        let t = self.traffic.get();
+        let others: usize = all.iter().map(Vec::len).sum::<usize>() - mine.len();
+        self.traffic.set(Traffic {
+            batches: t.batches + 1,
+            // Every other rank gets this rank's share.
+            sent: t.sent + (mine.len() * (self.ranks - 1)) as u64,
+            received: t.received + others as u64,
+        });
+        (all.iter().enumerate())
+            .map(|(r, bytes)| {
+                Share::decode(bytes)
+                    .map_err(|e| FitError::Unsupported(format!("rank {r}'s share: {e}")))
+            })
+            .collect()
+    }
+}
+
+/// Points standard output at /dev/null: the ranks past 0 print nothing but their errors.
+fn quiet_stdout() -> Result<()> {
+    use std::os::fd::AsRawFd;
+    let null = std::fs::OpenOptions::new().write(true).open("/dev/null")?;
+    // SAFETY: dup2 on two open descriptors; stdout's old file is closed by it.
+    if unsafe { libc::dup2(null.as_raw_fd(), libc::STDOUT_FILENO) } < 0 {
+        return Err(std::io::Error::last_os_error().into());
+    }
+    Ok(())
+}

@@ -1,0 +1,220 @@
+//! `splat fit` under a real `mpirun` (OpenMPI; the CLI built with its `mpi` feature): ranks
+//! that share each batch train the scene one process trains, bit for bit; a killed rank ends
+//! the run within seconds and `--resume` goes on; ranks that cannot read the dataset, or were
+//! given other settings, are refused before the first step.
+
+use super::common::*;
+use std::time::{Duration, Instant};
+
+/// `mpirun` with `ranks` ranks running `splat args` (as root where CI runs, one thread each:
+/// the CPU backward's sums follow the thread count, so one process runs one thread too), or
+/// `None` where there is none (a failure with `SPLAT_REQUIRE_MPI=1`).
+fn mpirun(ranks: &[(usize, &[&str])], dir: &Path) -> Option<Command> {
+    let found = Command::new("mpirun").arg("--version").output();
+    if !found.is_ok_and(|o| o.status.success()) {
+        let required = std::env::var("SPLAT_REQUIRE_MPI").is_ok_and(|v| v == "1");
+        assert!(!required, "no mpirun");
+        eprintln!("skipped: no mpirun");
+        return None;
+    }
+    let mut c = Command::new("mpirun");
+    c.args(["--oversubscribe", "-x", "RAYON_NUM_THREADS"]);
+    // MPMD: each part its own ranks and command line, `:` between them.
+    for (k, (n, args)) in ranks.iter().enumerate() {
+        if k > 0 {
+            c.arg(":");
+        }
+        c.args(["-n", &n.to_string(), env!("CARGO_BIN_EXE_splat")])
+            .args(*args);
+    }
+    c.current_dir(dir)
+        .env("RAYON_NUM_THREADS", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1");
+    Some(c)
+}
+
+/// One process, one thread, as the ranks run.
+fn alone(args: &[&str], dir: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_splat"))
+        .args(args)
+        .current_dir(dir)
+        .env("RAYON_NUM_THREADS", "1")
+        .output()
+        .unwrap()
+}
+
+/// A densifying run on the built-in dataset: 640 views in batches of 4, density control's
+/// refinement at step 600 (its statistics gathered from every rank), into `out`.
+fn run(out: &str) -> Vec<&str> {
+    let args = "fit --method 3dgs --backend cpu --steps 640 --batch 4 --checkpoint-every 80";
+    let mut args: Vec<&str> = args.split(' ').collect();
+    args.extend(["--out", out]);
+    args
+}
+
+fn same_files(a: &Path, b: &Path) {
+    for name in ["scene.ply", "metrics.csv"] {
+        let (x, y) = (a.join(name), b.join(name));
+        assert!(
+            std::fs::read(&x).unwrap() == std::fs::read(&y).unwrap(),
+            "{} and {} differ",
+            x.display(),
+            y.display()
+        );
+    }
+}
+
+#[test]
+fn two_ranks_sharing_each_batch_train_the_scene_one_process_trains_bit_for_bit() {
+    let dir = temp();
+    let Some(mut two) = mpirun(&[(2, &run("two"))], dir.path()) else {
+        return;
+    };
+    let one = ok(&alone(&run("one"), dir.path()));
+    let two = ok(&two.output().unwrap());
+    same_files(&dir.path().join("one"), &dir.path().join("two"));
+    assert!(two.contains("on the CPUs of 2 MPI ranks"), "{two}");
+    assert!(two.contains("per batch"), "{two}");
+    // Density control acted on the gathered statistics.
+    let primitives = fit_output(&dir.path().join("one"), 4, (112, 84))
+        .scene
+        .gaussians
+        .len();
+    assert_ne!(primitives, 2000, "{one}");
+}
+
+#[test]
+fn a_killed_rank_ends_the_run_within_seconds_and_resume_goes_on_to_the_same_scene() {
+    let dir = temp();
+    let Some(mut killed) = mpirun(&[(2, &run("killed"))], dir.path()) else {
+        return;
+    };
+    let mut launch = (killed.stdout(std::process::Stdio::null()))
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let checkpoint = dir.path().join("killed/checkpoint.bin");
+    let started = Instant::now();
+    while !checkpoint.exists() {
+        assert!(
+            started.elapsed() < Duration::from_secs(120),
+            "no checkpoint"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let rank_1 = rank_pid(launch.id(), 1);
+    unsafe { libc::kill(rank_1 as i32, libc::SIGKILL) };
+    let killed_at = Instant::now();
+    let ended = loop {
+        if let Some(status) = launch.try_wait().unwrap() {
+            break status;
+        }
+        assert!(
+            killed_at.elapsed() < Duration::from_secs(30),
+            "rank 0 still runs 30 s after rank 1 was killed"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let waited = killed_at.elapsed();
+    let mut stderr = String::new();
+    std::io::Read::read_to_string(&mut launch.stderr.take().unwrap(), &mut stderr).unwrap();
+    assert!(!ended.success());
+    assert!(
+        stderr.contains("rank 1") && stderr.contains("signal 9"),
+        "{stderr}"
+    );
+    eprintln!(
+        "the run ended {:.1} s after rank 1 was killed",
+        waited.as_secs_f64()
+    );
+    assert!(waited < Duration::from_secs(10), "{waited:?}");
+
+    // The checkpoint is whole, and the same command with --resume ends where an
+    // uninterrupted run ends.
+    let mut resume = run("killed");
+    resume.push("--resume");
+    let resumed = ok(&mpirun(&[(2, &resume)], dir.path())
+        .unwrap()
+        .output()
+        .unwrap());
+    assert!(resumed.contains("resuming from"), "{resumed}");
+    ok(&alone(&run("whole"), dir.path()));
+    same_files(&dir.path().join("whole"), &dir.path().join("killed"));
+}
+
+/// The process id of rank `rank` among the children of `mpirun` (`launcher`).
+fn rank_pid(launcher: u32, rank: usize) -> u32 {
+    let started = Instant::now();
+    loop {
+        for entry in std::fs::read_dir("/proc").unwrap().flatten() {
+            let Ok(pid) = entry.file_name().to_string_lossy().parse::<u32>() else {
+                continue;
+            };
+            let stat = std::fs::read_to_string(entry.path().join("stat")).unwrap_or_default();
+            // The parent's pid is the fourth field, after the name in parentheses.
+            let parent = stat
+                .rsplit(')')
+                .next()
+                .and_then(|r| r.split_whitespace().nth(1));
+            let environ = std::fs::read(entry.path().join("environ")).unwrap_or_default();
+            let wanted = format!("OMPI_COMM_WORLD_RANK={rank}");
+            let is_rank = (environ.split(|b| *b == 0)).any(|v| v == wanted.as_bytes());
+            if parent == Some(&launcher.to_string()) && is_rank {
+                return pid;
+            }
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(10),
+            "no rank {rank}"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+#[test]
+fn ranks_that_cannot_read_the_dataset_or_were_given_other_settings_are_refused_before_training() {
+    let dir = temp();
+    tiny_dataset(&dir.path().join("tiny"), 3);
+    let fit = |dataset: Option<&'static str>, batch: &'static str| {
+        let mut args = vec![
+            "fit",
+            "--method",
+            "3dgs",
+            "--backend",
+            "cpu",
+            "--out",
+            "out",
+        ];
+        args.extend(dataset);
+        args.extend(["--batch", batch]);
+        args
+    };
+    let cases: [(Vec<&str>, Vec<&str>, &str); 3] = [
+        (
+            fit(None, "2"),
+            fit(Some("missing"), "2"),
+            "1 of 2 ranks could not get dataset:\n  rank 1:",
+        ),
+        (
+            fit(None, "2"),
+            fit(Some("tiny"), "2"),
+            "rank 1 has another dataset than rank 0",
+        ),
+        (
+            fit(None, "2"),
+            fit(None, "4"),
+            "rank 1 has another run than rank 0: give every rank the same command line",
+        ),
+    ];
+    for (first, second, needle) in cases {
+        let Some(mut c) = mpirun(&[(1, &first), (1, &second)], dir.path()) else {
+            return;
+        };
+        let out = c.output().unwrap();
+        fails(&out, needle, &dir.path().join("out/scene.ply"));
+        // Rank 0 says it, once.
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(stderr.matches(needle).count(), 1, "{stderr}");
+    }
+}
