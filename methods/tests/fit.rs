@@ -793,6 +793,71 @@ fn mcmc_fits_the_known_scene_from_random_points() {
     );
 }
 
+/// Batches of views train as well as one view per step at equal views seen (Grendel's
+/// scaling), and the GPU loop sums a batch as the CPU loop does: on the known scene, 400 views
+/// in batches of 4 (100 Adam steps, with MCMC's penalties and noise, which scale with the
+/// batch) reach the held-out PSNR of 400 single views, on both backends alike.
+#[test]
+fn batches_of_views_train_like_single_views_on_both_loops() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = truth();
+    write_known_scene(dir.path());
+    let data = read_blender(dir.path(), Vec3::ZERO).unwrap();
+    let start = moved_start::<Method>(&scene);
+    let mcmc = Strategy::Mcmc(splat_runtime::train::McmcOptions {
+        start: 1000,
+        ..Default::default()
+    });
+    let opts = |batch| FitOptions {
+        batch,
+        densify: Some(mcmc.clone()),
+        ..options(400)
+    };
+    let cpu = |batch| {
+        let mut params = start.clone();
+        let mut reports = 0;
+        fit::<Method>(&data, &mut params, 1.0, &opts(batch), |_| reports += 1).unwrap();
+        let psnr = evaluate::<Method>(&params, &data.test, &opts(1))
+            .unwrap()
+            .psnr;
+        (psnr, reports)
+    };
+    let (single, batched) = (cpu(1), cpu(4));
+    println!(
+        "400 views: one per step {:.2} dB, in batches of 4 {:.2} dB",
+        single.0, batched.0
+    );
+    assert_eq!(
+        (single.1, batched.1),
+        (400, 100),
+        "one report per Adam step"
+    );
+    assert!(batched.0 > single.0 - 0.5, "{batched:?} against {single:?}");
+
+    let Some(gpu) = splat_runtime::gpu::adapter_or_skip() else {
+        return;
+    };
+    let mut params = start.clone();
+    splat_runtime::train::gpu_fit::fit_gpu::<Method>(
+        &gpu,
+        &data,
+        &mut params,
+        1.0,
+        &opts(4),
+        |_| {},
+    )
+    .unwrap();
+    let on_gpu = evaluate::<Method>(&params, &data.test, &opts(1))
+        .unwrap()
+        .psnr;
+    println!("in batches of 4 on the GPU: {on_gpu:.2} dB");
+    assert!(
+        (on_gpu - batched.0).abs() < 0.2,
+        "{on_gpu} against the CPU's {}",
+        batched.0
+    );
+}
+
 /// The GPU loop trains like the CPU loop: on the known scene, the same steps from the same
 /// start reach held-out PSNRs within 1 dB of each other; from a sparse start, density control
 /// on the device grows the set and beats the fixed count as on the CPU.

@@ -1,7 +1,7 @@
 //! What a training step runs on the device besides the renderer: the photometric loss and its
 //! gradient ([`GpuLoss`], `loss.wgsl`), Adam ([`GpuAdam`], `adam.wgsl`), density control's
-//! statistics ([`GpuObserver`], `observe.wgsl`) and MCMC's per-step terms ([`GpuMcmc`],
-//! `mcmc.wgsl`). Each records into the caller's encoder; the
+//! statistics ([`GpuObserver`], `observe.wgsl`), MCMC's per-step terms ([`GpuMcmc`],
+//! `mcmc.wgsl`) and a batch's gradient sum ([`GpuBatchSum`], `batch.wgsl`). Each records into the caller's encoder; the
 //! data stays on the device, and the host reads back only what it asks for (the loss value,
 //! and the state density control refines from every hundred steps).
 
@@ -20,6 +20,7 @@ const LOSS: &str = include_str!("shaders/loss.wgsl");
 const ADAM: &str = include_str!("shaders/adam.wgsl");
 const OBSERVE: &str = include_str!("shaders/observe.wgsl");
 const MCMC: &str = include_str!("shaders/mcmc.wgsl");
+const BATCH: &str = include_str!("shaders/batch.wgsl");
 
 /// The loss of the renderer's frame against one of a set of target images, all kept on the
 /// device.
@@ -438,6 +439,58 @@ impl GpuAdam {
     }
 }
 
+/// The sum of a batch's views' parameter gradients, on the device.
+pub struct GpuBatchSum {
+    kernel: Kernel,
+    sum: Grown,
+    info: wgpu::Buffer,
+}
+
+impl GpuBatchSum {
+    pub fn new(gpu: &Gpu) -> Result<GpuBatchSum, GpuError> {
+        Ok(GpuBatchSum {
+            kernel: gpu.kernel(BATCH, "add_gradients")?,
+            sum: Grown::new(gpu, "a batch's gradient sum", 1)?,
+            info: gpu.uniform_buffer(4),
+        })
+    }
+
+    /// Records `grads` (`words` words, of the frame whose key count is `frame_keys`) added to
+    /// the sum, or starting it when `first`; a cut frame adds nothing.
+    pub fn record_add(
+        &mut self,
+        gpu: &Gpu,
+        encoder: &mut wgpu::CommandEncoder,
+        (grads, words): (&wgpu::Buffer, usize),
+        first: bool,
+        frame_keys: &wgpu::Buffer,
+    ) -> Result<(), GpuError> {
+        self.sum.ensure(gpu, words)?;
+        gpu.write(&self.info, &[words as u32, !first as u32, 0, 0]);
+        let bind = gpu.bind_named(
+            &self.kernel,
+            &[
+                ("grads", grads),
+                ("sum", &self.sum),
+                ("info", &self.info),
+                ("frame_keys", frame_keys),
+            ],
+        )?;
+        dispatch(
+            encoder,
+            &self.kernel.pipeline,
+            &bind,
+            (words as u32).div_ceil(256),
+        );
+        Ok(())
+    }
+
+    /// The sum so far.
+    pub fn buffer(&self) -> &wgpu::Buffer {
+        &self.sum
+    }
+}
+
 /// Where [`GpuObserver`] reads a primitive's screen-space gradient (as
 /// [`crate::densify::screen_gradient`] does on the CPU).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -568,13 +621,18 @@ impl GpuMcmc {
         kernel: usize,
         buffers: &[(&str, &wgpu::Buffer)],
         primitives: usize,
-        (seed, noise_scale): (u32, f32),
+        (seed, noise_scale, views): (u32, f32, usize),
     ) -> Result<(), GpuError> {
         let (o, l) = (&self.mcmc.opts, self.mcmc.words);
         let n = primitives.max(1) as f32;
         let size = [primitives as u32, self.words as u32, seed, 0];
         let layout = [l.position, l.log_scale, l.rotation, l.opacity].map(|w| w as u32);
-        let weights = [o.opacity_reg / n, o.scale_reg / (3.0 * n), noise_scale, 0.0];
+        let weights = [
+            o.opacity_reg * views as f32 / n,
+            o.scale_reg * views as f32 / (3.0 * n),
+            noise_scale,
+            0.0,
+        ];
         let info = &self.infos[kernel];
         gpu.write(
             info,
@@ -587,17 +645,18 @@ impl GpuMcmc {
         Ok(())
     }
 
-    /// Records the penalties' gradients added to `grads` (before Adam).
+    /// Records the penalties' gradients added to `grads` (before Adam), once per view of the
+    /// step (`views`, as `Mcmc::regularize`).
     pub fn record_regularize(
         &self,
         gpu: &Gpu,
         encoder: &mut wgpu::CommandEncoder,
-        params: &wgpu::Buffer,
-        grads: &wgpu::Buffer,
+        (params, grads): (&wgpu::Buffer, &wgpu::Buffer),
         primitives: usize,
+        views: usize,
     ) -> Result<(), GpuError> {
         let buffers = [("params", params), ("grads", grads)];
-        self.record(gpu, encoder, 0, &buffers, primitives, (0, 0.0))
+        self.record(gpu, encoder, 0, &buffers, primitives, (0, 0.0, views))
     }
 
     /// Records the noise of `seed` added to the positions in `params` (after Adam), with the
@@ -618,7 +677,7 @@ impl GpuMcmc {
             1,
             &[("params", params)],
             primitives,
-            (seed, scale),
+            (seed, scale, 1),
         )
     }
 }
@@ -853,7 +912,7 @@ mod tests {
         let device = GpuMcmc::new(&gpu, mcmc.clone(), words).unwrap();
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         device
-            .record_regularize(&gpu, &mut enc, &on_device.0, &on_device.1, prims)
+            .record_regularize(&gpu, &mut enc, (&on_device.0, &on_device.1), prims, 1)
             .unwrap();
         device
             .record_perturb(&gpu, &mut enc, &on_device.0, prims, 1e-5, 77)

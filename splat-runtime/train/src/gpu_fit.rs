@@ -8,7 +8,7 @@
 //! density control or MCMC refines on the host: the scene and the moments go down and back up.
 
 use super::adam::Faults;
-use super::batch::batches;
+use super::batch::{Scaling, batches};
 use super::checkpoint::Checkpoint;
 use super::densify::Densifier;
 use super::fit::{
@@ -19,7 +19,7 @@ use super::loss::LossValue;
 use super::step_times::StepTimes;
 use super::trainable::Trainable;
 use crate::device::{
-    AdamStep, GpuAdam, GpuLoss, GpuMcmc, GpuObserver, GpuTrainError, ScreenSource,
+    AdamStep, GpuAdam, GpuBatchSum, GpuLoss, GpuMcmc, GpuObserver, GpuTrainError, ScreenSource,
 };
 use glam::{Vec2, Vec3};
 use splat_core::flat::{Flat, flatten};
@@ -76,12 +76,6 @@ pub fn fit_gpu_from<M: Trainable>(
 ) -> Result<(), FitError> {
     let rates = rates_for::<M>(data, extent, opts)?;
     adopt::<M>(state, extent, &data.train, opts)?;
-    if opts.batch > 1 {
-        return Err(FitError::Unsupported(format!(
-            "GPU training takes one view per step so far, not batches of {}: train with --batch 1, or on the CPU",
-            opts.batch
-        )));
-    }
     let words = M::Params::LEN;
     let source = screen_source::<M>().ok_or_else(|| {
         FitError::Unsupported(format!(
@@ -107,12 +101,18 @@ pub fn fit_gpu_from<M: Trainable>(
     let mut scene = GpuScene::<M>::new(gpu, &state.params::<M>())?;
     let mut adam = GpuAdam::new(gpu, words)?;
     adam.restore(gpu, &state.adam)?;
+    let scaling = Scaling::for_batch(opts.batch, adam.beta1, adam.beta2);
+    (adam.beta1, adam.beta2) = (scaling.beta1, scaling.beta2);
     let mut device = DeviceStep {
         gpu,
         renderer,
         loss: GpuLoss::new(gpu, &targets, opts.ssim_weight as f32)?,
         adam,
         observer: GpuObserver::new(gpu)?,
+        sum: match opts.batch {
+            1 => None,
+            _ => Some(GpuBatchSum::new(gpu)?),
+        },
         mcmc: match opts.mcmc::<M>()? {
             Some(m) => Some(GpuMcmc::new(gpu, m, words)?),
             None => None,
@@ -124,24 +124,36 @@ pub fn fit_gpu_from<M: Trainable>(
     let mut densifier =
         (opts.adc()).map(|d| Densifier::resume(d.clone(), scene.len(), &state.grad2d, &state.seen));
     let mut rng = fastrand::Rng::with_seed(state.rng);
-    for batch in batches(state.step, opts.steps, 1) {
-        let (step, started) = (batch.first, Instant::now());
-        let k = rng.usize(..data.train.len());
-        let camera = &data.train[k].camera;
-        let background = step_background(opts, &mut rng);
-        let lr = step_rates(&rates, step, opts.steps);
-        let observing = densifier.as_ref().is_some_and(|d| step < d.opts.stop);
+    for batch in batches(state.step, opts.steps, opts.batch) {
+        let started = Instant::now();
+        let draws: Vec<(usize, Vec3)> = (batch.steps())
+            .map(|_| {
+                let k = rng.usize(..data.train.len());
+                (k, step_background(opts, &mut rng))
+            })
+            .collect();
+        let lr: Vec<f32> = (step_rates(&rates, batch.first, opts.steps).into_iter())
+            .map(|r| {
+                if r < 0.0 {
+                    r
+                } else {
+                    r * scaling.learning_rate
+                }
+            })
+            .collect();
+        let observing = densifier
+            .as_ref()
+            .is_some_and(|d| batch.first < d.opts.stop);
         let n = scene.len();
-        let (value, faults) = device.take(&scene, (k, camera, background), &lr, observing)?;
-        // Read now, with nothing left to wait for (MCMC's noise, recorded below, is timed in the
-        // next step's read: the previous step's noise), and before the evaluation's frames
-        // replace the renderer's times.
-        let mut times = device.times()?;
+        let views: Vec<_> = (draws.iter())
+            .map(|&(k, background)| (k, &data.train[k].camera, background))
+            .collect();
+        let (value, faults, mut times) = device.take(&scene, &views, &lr, observing)?;
 
         let clock = Instant::now();
         let mut refinement = None;
         if let Some(m) = &device.mcmc {
-            if m.mcmc.opts.refines_at(step) {
+            if batch.any(|s| m.mcmc.opts.refines_at(s)) {
                 let mut host = scene.download(gpu)?;
                 let r = m.mcmc.refine::<M>(&mut host, &mut rng);
                 device.adam.remap(gpu, n, &r.origin, |_| false)?;
@@ -158,12 +170,12 @@ pub fn fit_gpu_from<M: Trainable>(
             device.timer.resolve(&mut enc, NOISE..STAGES);
             gpu.queue.submit([enc.finish()]);
         }
-        if let Some(d) = densifier.as_mut().filter(|d| step < d.opts.stop)
-            && (d.refines_at(step) || d.resets_at(step))
+        if let Some(d) = densifier.as_mut().filter(|_| observing)
+            && batch.any(|s| d.refines_at(s) || d.resets_at(s))
         {
             let mut host = scene.download(gpu)?;
             let mut origin: Vec<Option<usize>> = (0..n).map(Some).collect();
-            if d.refines_at(step) {
+            if let Some(step) = batch.steps().find(|&s| d.refines_at(s)) {
                 let (grad2d, seen) = device.observer.take(gpu, n)?;
                 d.add_observations(&grad2d, &seen);
                 let r = d.refine::<M>(&mut host, step, extent, &mut rng);
@@ -171,7 +183,7 @@ pub fn fit_gpu_from<M: Trainable>(
                 refinement = Some(r);
             }
             let before = flatten(&host);
-            if d.resets_at(step) {
+            if batch.any(|s| d.resets_at(s)) {
                 d.reset_opacity::<M>(&mut host);
             }
             // Only the words the reset moved (opacities) forget their moments.
@@ -183,7 +195,7 @@ pub fn fit_gpu_from<M: Trainable>(
             times.densify = clock.elapsed();
         }
         let clock = Instant::now();
-        let evaluation = match after_every(opts.eval_every, step) {
+        let evaluation = match batch.any(|s| after_every(opts.eval_every, s)) {
             true => {
                 let images =
                     render_resident(&mut device.renderer, &scene, &data.test, opts.background)?;
@@ -196,7 +208,7 @@ pub fn fit_gpu_from<M: Trainable>(
         let save = saves_at(opts, batch, stops);
         if save || ends_after(opts, batch, stops) {
             let n = scene.len();
-            state.step = step + 1;
+            state.step = batch.last() + 1;
             state.params = flatten(&scene.download(gpu)?);
             state.adam = device.adam.download(gpu, n)?;
             (state.grad2d, state.seen) = match densifier.as_mut() {
@@ -209,13 +221,13 @@ pub fn fit_gpu_from<M: Trainable>(
             };
             state.rng = rng.get_seed();
         }
-        let shared = match after_every(opts.share_every, step) {
+        let shared = match batch.any(|s| after_every(opts.share_every, s)) {
             true => Some(flatten(&scene.download(gpu)?)),
             false => None,
         };
         progress(&StepReport {
-            step,
-            views: 1,
+            step: batch.last(),
+            views: batch.len,
             loss: &value,
             primitives: scene.len(),
             refinement: refinement.as_ref(),
@@ -251,6 +263,8 @@ struct DeviceStep<'g, M: SplatMethod> {
     loss: GpuLoss,
     adam: GpuAdam,
     observer: GpuObserver,
+    /// A batch's gradient sum (none with one view per step).
+    sum: Option<GpuBatchSum>,
     mcmc: Option<GpuMcmc>,
     source: ScreenSource,
     acc: Accumulation,
@@ -258,68 +272,116 @@ struct DeviceStep<'g, M: SplatMethod> {
 }
 
 impl<M: SplatMethod> DeviceStep<'_, M> {
-    /// One step from training view `k` through `camera` on `background`, at the learning
-    /// rates `lr`, with density control's statistics if `observing`: the value of its loss
-    /// and the words Adam could not step.
+    /// One Adam step from `views` (training view `k` through `camera` on `background`, each),
+    /// at the learning rates `lr`, with density control's statistics if `observing`: the mean
+    /// of the views' loss values, the words Adam could not step, and the stage times.
     ///
-    /// The frame is not waited for: the loss, the backward pass, Adam and the statistics are
-    /// recorded behind it, and the step's one wait reads the loss value and Adam's faults. A
-    /// frame with more intersections than the buffers held (its lists cut short) holds Adam
-    /// and the statistics back on the device, and the step runs again with room.
+    /// A step of one view does not wait for its frame: the loss, the backward pass, the
+    /// statistics and Adam are recorded behind it, and the step's one wait reads the loss
+    /// value and Adam's faults. A frame with more intersections than the buffers held (its
+    /// lists cut short) holds Adam and the statistics back on the device, and the step runs
+    /// again with room. A batch adds each view's gradient to its sum on the device as its
+    /// frame settles (a cut frame adds nothing and runs again), then takes Adam's step on it.
     fn take(
         &mut self,
         scene: &GpuScene<M>,
-        (k, camera, background): (usize, &Camera, Vec3),
+        views: &[(usize, &Camera, Vec3)],
         lr: &[f32],
         observing: bool,
-    ) -> Result<(LossValue, Faults), FitError> {
-        let (gpu, n, timer) = (self.gpu, scene.len(), &self.timer);
-        loop {
-            let grid = self.renderer.submit(scene, camera)?;
-            let renderer = &mut self.renderer;
-            let mut enc = gpu.device.create_command_encoder(&Default::default());
-            let grad = renderer.pixel_gradients()?.clone();
-            // Words per pixel of the frame's state (not the parameters' per primitive).
-            let state_words = renderer.state_layout().words() as u32;
-            let target = (k, background, (grid.width, grid.height));
-            timer.start(&mut enc, LOSS);
-            let state = renderer.pixel_state();
-            (self.loss).record(gpu, &mut enc, target, state, state_words, &grad)?;
-            timer.end(&mut enc, LOSS);
-            gpu.queue.submit([enc.finish()]);
-            renderer.backward_on_device(scene, self.acc)?;
-
-            let mut enc = gpu.device.create_command_encoder(&Default::default());
-            // The statistics read the positions the frame was drawn with, before Adam moves
-            // them (as the CPU does).
-            timer.start(&mut enc, STATISTICS);
-            if observing {
-                (self.observer).record(gpu, &mut enc, renderer, scene, self.source)?;
-            }
-            timer.end(&mut enc, STATISTICS);
-            let param_grads = renderer.param_gradients();
-            timer.start(&mut enc, OPTIMIZER);
-            if let Some(m) = &self.mcmc {
-                m.record_regularize(gpu, &mut enc, scene.buffer(), param_grads, n)?;
-            }
-            let adam_step = AdamStep {
-                params: scene.buffer(),
-                grads: param_grads,
-                primitives: n,
-                rates: lr,
-                held_by: Some(renderer.frame_keys()),
-            };
-            self.adam.record(gpu, &mut enc, adam_step)?;
-            timer.end(&mut enc, OPTIMIZER);
-            timer.resolve(&mut enc, LOSS..NOISE);
-            gpu.queue.submit([enc.finish()]);
-            let parts = [self.loss.sums()?, self.adam.fault_words()];
-            let [sums, fault_words] = gpu.read_together(parts)?;
-            match renderer.settle(scene)? {
-                Some(_) => return Ok((self.loss.value(&sums)?, GpuAdam::faults(&fault_words))),
-                None => self.adam.take_back(),
+    ) -> Result<(LossValue, Faults, StepTimes), FitError> {
+        let (gpu, n) = (self.gpu, scene.len());
+        let words = n * self.renderer.param_floats();
+        let mut value = LossValue::default();
+        let mut times = StepTimes::default();
+        for (j, &view) in views.iter().enumerate() {
+            loop {
+                self.record_view(scene, view, observing)?;
+                let mut enc = gpu.device.create_command_encoder(&Default::default());
+                self.timer.start(&mut enc, OPTIMIZER);
+                let grads = self.renderer.param_gradients();
+                match &mut self.sum {
+                    // One view: Adam steps on its gradient, held back with a cut frame.
+                    None => {
+                        let held_by = Some(self.renderer.frame_keys());
+                        let step = (scene, grads, lr, 1);
+                        record_optimizer(gpu, &mut enc, &mut self.adam, &self.mcmc, step, held_by)?
+                    }
+                    Some(sum) => {
+                        let keys = self.renderer.frame_keys();
+                        sum.record_add(gpu, &mut enc, (grads, words), j == 0, keys)?;
+                    }
+                }
+                self.timer.end(&mut enc, OPTIMIZER);
+                self.timer.resolve(&mut enc, LOSS..NOISE);
+                gpu.queue.submit([enc.finish()]);
+                let parts = [self.loss.sums()?, self.adam.fault_words()];
+                let [sums, fault_words] = gpu.read_together(parts)?;
+                if self.renderer.settle(scene)?.is_none() {
+                    if self.sum.is_none() {
+                        self.adam.take_back();
+                    }
+                    continue;
+                }
+                let v = self.loss.value(&sums)?;
+                let share = views.len() as f64;
+                value.loss += v.loss / share;
+                value.l1 += v.l1 / share;
+                value.ssim += v.ssim / share;
+                times += self.times()?;
+                if self.sum.is_none() {
+                    return Ok((value, GpuAdam::faults(&fault_words), times));
+                }
+                break;
             }
         }
+        let sum = self.sum.as_ref().expect("a batch sums its views");
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        for stage in [LOSS, STATISTICS] {
+            self.timer.start(&mut enc, stage);
+            self.timer.end(&mut enc, stage);
+        }
+        self.timer.start(&mut enc, OPTIMIZER);
+        let step = (scene, sum.buffer(), lr, views.len());
+        record_optimizer(gpu, &mut enc, &mut self.adam, &self.mcmc, step, None)?;
+        self.timer.end(&mut enc, OPTIMIZER);
+        self.timer.resolve(&mut enc, LOSS..NOISE);
+        gpu.queue.submit([enc.finish()]);
+        let [fault_words] = gpu.read_together([self.adam.fault_words()])?;
+        times.optimizer += self.times()?.optimizer;
+        Ok((value, GpuAdam::faults(&fault_words), times))
+    }
+
+    /// Records one view's frame of `scene`, its loss, backward pass and (when `observing`)
+    /// density control's statistics, which read the positions the frame was drawn with,
+    /// before Adam moves them (as the CPU does).
+    fn record_view(
+        &mut self,
+        scene: &GpuScene<M>,
+        (k, camera, background): (usize, &Camera, Vec3),
+        observing: bool,
+    ) -> Result<(), FitError> {
+        let (gpu, timer) = (self.gpu, &self.timer);
+        let grid = self.renderer.submit(scene, camera)?;
+        let renderer = &mut self.renderer;
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        let grad = renderer.pixel_gradients()?.clone();
+        // Words per pixel of the frame's state (not the parameters' per primitive).
+        let state_words = renderer.state_layout().words() as u32;
+        let target = (k, background, (grid.width, grid.height));
+        timer.start(&mut enc, LOSS);
+        let state = renderer.pixel_state();
+        (self.loss).record(gpu, &mut enc, target, state, state_words, &grad)?;
+        timer.end(&mut enc, LOSS);
+        gpu.queue.submit([enc.finish()]);
+        renderer.backward_on_device(scene, self.acc)?;
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        timer.start(&mut enc, STATISTICS);
+        if observing {
+            (self.observer).record(gpu, &mut enc, renderer, scene, self.source)?;
+        }
+        timer.end(&mut enc, STATISTICS);
+        gpu.queue.submit([enc.finish()]);
+        Ok(())
     }
 
     /// The last step's stage times on the GPU: the renderer's and the loop's own (a stage not
@@ -341,6 +403,32 @@ impl<M: SplatMethod> DeviceStep<'_, M> {
             ..Default::default()
         })
     }
+}
+
+/// Records MCMC's penalties (once per view of the step) added to the step's gradients, then
+/// Adam's step on them: `held_by` the frame of a step of one view, or taken whatever the
+/// frames were (`None`: a batch, whose frames all settled).
+fn record_optimizer<M: SplatMethod>(
+    gpu: &Gpu,
+    enc: &mut wgpu::CommandEncoder,
+    adam: &mut GpuAdam,
+    mcmc: &Option<GpuMcmc>,
+    (scene, grads, lr, views): (&GpuScene<M>, &wgpu::Buffer, &[f32], usize),
+    held_by: Option<&wgpu::Buffer>,
+) -> Result<(), FitError> {
+    let n = scene.len();
+    if let Some(m) = mcmc {
+        m.record_regularize(gpu, enc, (scene.buffer(), grads), n, views)?;
+    }
+    let adam_step = AdamStep {
+        params: scene.buffer(),
+        grads,
+        primitives: n,
+        rates: lr,
+        held_by,
+    };
+    adam.record(gpu, enc, adam_step)?;
+    Ok(())
 }
 
 /// Where a step's screen-space gradients are read on the device, as
