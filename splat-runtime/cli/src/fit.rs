@@ -22,7 +22,7 @@ use splat_runtime::train::batch::batches;
 use splat_runtime::train::fit::{
     Evaluation, FitError, FitOptions, StepReport, fit_shared, render_views,
 };
-use splat_runtime::train::gpu_fit::{fit_gpu_from, render_views_gpu};
+use splat_runtime::train::gpu_fit::{fit_gpu_shared, render_views_gpu};
 use splat_runtime::train::loss::LossValue;
 use splat_runtime::train::{Checkpoint, McmcOptions, StepTimes, Strategy, Trainable, init};
 use splat_runtime::{Effects, Flat, GradientSet, Image, RenderOptions, param_groups};
@@ -288,8 +288,15 @@ impl Fit<'_> {
                 });
             }
             let trained = match &gpu {
-                Some(gpu) => fit_gpu_from::<M>(gpu, data, &mut state, self.extent, opts, report)
-                    .map(|()| format!("the GPU ({})", gpu.adapter)),
+                Some(gpu) => {
+                    let team = ranks.team();
+                    fit_gpu_shared::<M>(team, gpu, data, &mut state, self.extent, opts, report).map(
+                        |()| match ranks.count() {
+                            1 => format!("the GPU ({})", gpu.adapter),
+                            n => format!("the GPUs of {n} MPI ranks (rank 0: {})", gpu.adapter),
+                        },
+                    )
+                }
                 None => fit_shared::<M>(ranks.team(), data, &mut state, self.extent, opts, report)
                     .map(|()| match ranks.count() {
                         1 => "the CPU".to_string(),
@@ -318,13 +325,14 @@ impl Fit<'_> {
         }
         std::mem::replace(&mut progress.saved, Ok(()))?;
         if stopped {
-            bail!(
+            // Every rank stopped after this batch: rank 0 says so, without aborting the rest.
+            return Err(crate::ranks::on_every_rank(format!(
                 "stopped by {} after step {} of {}; {}",
                 stopped_by().unwrap_or("a signal"),
                 state.step,
                 opts.steps,
                 kept()
-            );
+            )));
         }
         if progress.faulty_steps > 0 {
             println!(
@@ -338,11 +346,12 @@ impl Fit<'_> {
         let images = test_images(&params)?;
         let after = Evaluation::of(&images, &data.test)?;
         if let Some(by) = stopped_by() {
-            bail!(
+            // The other ranks are done: no need to abort them.
+            return Err(crate::ranks::on_every_rank(format!(
                 "stopped by {by} in the final evaluation, after the run's {} steps; {}",
                 opts.steps,
                 kept()
-            );
+            )));
         }
         drop(listening);
         let before = progress.before();
@@ -374,8 +383,8 @@ impl Fit<'_> {
         if taken > 0 {
             print_step_times(&progress.times, progress.batches, gpu.as_ref());
         }
-        if let Some(t) = ranks.traffic().filter(|t| t.batches > 0) {
-            let per = |bytes: u64| bytes as f64 / t.batches as f64 / 1e6;
+        if let Some(t) = ranks.traffic().filter(|_| progress.batches > 0) {
+            let per = |bytes: u64| bytes as f64 / progress.batches as f64 / 1e6;
             println!(
                 "rank 0 sent {:.2} MB and received {:.2} MB per batch (the views' gradients and density statistics)",
                 per(t.sent),
@@ -402,7 +411,13 @@ impl Fit<'_> {
             ..opts.clone()
         };
         let team = self.ranks.team();
-        fit_shared::<M>(team, self.data, &mut state, self.extent, &opts, |_| {})?;
+        match &self.gpu {
+            Some(gpu) => {
+                let data = self.data;
+                fit_gpu_shared::<M>(team, gpu, data, &mut state, self.extent, &opts, |_| {})?
+            }
+            None => fit_shared::<M>(team, self.data, &mut state, self.extent, &opts, |_| {})?,
+        }
         Ok(())
     }
 

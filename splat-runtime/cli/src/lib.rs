@@ -191,6 +191,7 @@ pub fn run(methods: &[Method]) -> ExitCode {
         Err(e) => match e.downcast::<clap::Error>() {
             // Usage errors, and --help and --version, as clap prints them.
             Ok(usage) => usage.exit(),
+            Err(e) if e.is::<ranks::Reported>() => ExitCode::FAILURE,
             Err(e) => {
                 eprintln!("error: {e:#}");
                 ExitCode::FAILURE
@@ -513,10 +514,19 @@ fn quiet_device_select_layer() {
 /// The GPU `backend` asks for: none for the CPU; for `auto`, a hardware adapter if there is
 /// one (and a line saying why not when there is none).
 pub(crate) fn pick_gpu(backend: Backend) -> Result<Option<Gpu>> {
+    pick_gpu_of(backend, None)
+}
+
+/// [`pick_gpu`], taking the machine's `nth` adapter (`None`: wgpu's choice).
+pub(crate) fn pick_gpu_of(backend: Backend, nth: Option<usize>) -> Result<Option<Gpu>> {
+    let new = || match nth {
+        Some(k) => Gpu::nth(k),
+        None => Gpu::new(),
+    };
     Ok(match backend {
         Backend::Cpu => None,
-        Backend::Gpu => Some(Gpu::new()?),
-        Backend::Auto => match Gpu::new() {
+        Backend::Gpu => Some(new()?),
+        Backend::Auto => match new() {
             Ok(g) if !g.software => Some(g),
             Ok(g) => {
                 println!(

@@ -9,7 +9,7 @@ use mpi::environment::Universe;
 use mpi::topology::{Communicator, SimpleCommunicator};
 use mpi::traits::*;
 use splat_runtime::train::fit::FitError;
-use splat_runtime::train::team::{Share, Team};
+use splat_runtime::train::team::Team;
 use std::cell::Cell;
 
 pub struct MpiTeam {
@@ -41,7 +41,7 @@ impl MpiTeam {
 
     /// Every rank's `mine`, in rank order. The bytes travel as 8-byte words, whose counts
     /// MPI takes as 32-bit: up to 16 GiB in all.
-    fn all_gather(&self, mine: &[u8]) -> Result<Vec<Vec<u8>>, String> {
+    fn exchange(&self, mine: &[u8]) -> Result<Vec<Vec<u8>>, String> {
         let len = mine.len() as u64;
         let mut lens = vec![0u64; self.ranks];
         self.world.all_gather_into(&len, &mut lens[..]);
@@ -102,7 +102,7 @@ impl MpiTeam {
             Ok(v) => [&[0u8][..], &v.to_le_bytes()].concat(),
             Err(e) => [&[1u8][..], e.as_bytes()].concat(),
         };
-        let all = self.all_gather(&bytes).map_err(|e| anyhow!(e))?;
+        let all = self.exchange(&bytes).map_err(|e| anyhow!(e))?;
         all.into_iter()
             .map(|b| match b.split_first() {
                 Some((0, v)) if v.len() == 8 => Ok(Ok(u64::from_le_bytes(v.try_into()?))),
@@ -134,23 +134,16 @@ impl Team for MpiTeam {
         self.ranks
     }
 
-    fn gather(&self, mine: Share) -> Result<Vec<Share>, FitError> {
-        let mine = mine.encode();
-        let all = self.all_gather(&mine).map_err(FitError::Unsupported)?;
+    fn all_gather(&self, mine: Vec<u8>) -> Result<Vec<Vec<u8>>, FitError> {
+        let all = self.exchange(&mine).map_err(FitError::Unsupported)?;
         let t = self.traffic.get();
         let others: usize = all.iter().map(Vec::len).sum::<usize>() - mine.len();
         self.traffic.set(Traffic {
-            batches: t.batches + 1,
-            // Every other rank gets this rank's share.
+            // Every other rank gets this rank's bytes.
             sent: t.sent + (mine.len() * (self.ranks - 1)) as u64,
             received: t.received + others as u64,
         });
-        (all.iter().enumerate())
-            .map(|(r, bytes)| {
-                Share::decode(bytes)
-                    .map_err(|e| FitError::Unsupported(format!("rank {r}'s share: {e}")))
-            })
-            .collect()
+        Ok(all)
     }
 }
 

@@ -52,6 +52,20 @@ impl Ranks {
         self.team().ranks()
     }
 
+    /// This rank's place among the ranks on its machine (where several share it), as the
+    /// launcher says: OpenMPI's `OMPI_COMM_WORLD_LOCAL_RANK`, MPICH's `MPI_LOCALRANKID`,
+    /// Slurm's `SLURM_LOCALID`. `None` alone.
+    pub fn local_rank(&self) -> Option<usize> {
+        let var = |name| std::env::var(name).ok().and_then(|v| v.parse().ok());
+        match self {
+            Ranks::Alone => None,
+            #[cfg(feature = "mpi")]
+            Ranks::Mpi(_) => var("OMPI_COMM_WORLD_LOCAL_RANK")
+                .or_else(|| var("MPI_LOCALRANKID"))
+                .or_else(|| var("SLURM_LOCALID")),
+        }
+    }
+
     /// Whether this rank prints and writes the run's outputs.
     pub fn is_root(&self) -> bool {
         self.rank() == 0
@@ -125,7 +139,12 @@ impl Ranks {
             Ranks::Alone => Err(error),
             #[cfg(feature = "mpi")]
             Ranks::Mpi(t) => match error.is::<OnEveryRank>() {
-                true if t.rank() == 0 => Err(error),
+                // Printed now, before MPI finalizes: a launcher ending on a signal stops
+                // forwarding the ranks' output once they have.
+                true if t.rank() == 0 => {
+                    eprintln!("error: {error:#}");
+                    Err(Reported.into())
+                }
                 true => Ok(()),
                 false => t.abort(&error),
             },
@@ -142,18 +161,34 @@ impl Ranks {
     }
 }
 
-/// The bytes a rank's batches sent to the other ranks and received from them, as the gathers
+/// The bytes a rank's gathers sent to the other ranks and received from them, as the gathers
 /// move them (what crosses the wire depends on MPI's algorithm: a ring forwards others' bytes).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Traffic {
-    pub batches: u64,
     pub sent: u64,
     pub received: u64,
 }
 
-/// An error every rank met alike.
+/// An error every rank met alike: rank 0 reports it, the others end quietly
+/// ([`Ranks::fail`]).
+pub fn on_every_rank(message: String) -> anyhow::Error {
+    OnEveryRank(message).into()
+}
+
 #[derive(Debug)]
 struct OnEveryRank(String);
+
+/// A failure whose error was printed already: the program exits with a failure, quietly.
+#[derive(Debug)]
+pub struct Reported;
+
+impl std::fmt::Display for Reported {
+    fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str("(reported above)")
+    }
+}
+
+impl std::error::Error for Reported {}
 
 impl std::fmt::Display for OnEveryRank {
     fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {

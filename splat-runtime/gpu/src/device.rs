@@ -56,18 +56,41 @@ const STORAGE: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE
     .union(wgpu::BufferUsages::COPY_SRC)
     .union(wgpu::BufferUsages::COPY_DST);
 
+/// The instance adapters are found through (Vulkan, Metal, DX12).
+fn instance() -> wgpu::Instance {
+    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+    desc.backends = wgpu::Backends::PRIMARY;
+    wgpu::Instance::new(desc)
+}
+
 impl Gpu {
     /// The first adapter wgpu finds (a software one such as lavapipe is fine), with float
     /// atomics enabled where the adapter has them.
     pub fn new() -> Result<Gpu, GpuError> {
-        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
-        desc.backends = wgpu::Backends::PRIMARY;
-        let instance = wgpu::Instance::new(desc);
-        let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
-            power_preference: wgpu::PowerPreference::HighPerformance,
-            ..Default::default()
-        }))
-        .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+        let adapter =
+            pollster::block_on(instance().request_adapter(&wgpu::RequestAdapterOptions {
+                power_preference: wgpu::PowerPreference::HighPerformance,
+                ..Default::default()
+            }))
+            .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+        Gpu::on(adapter)
+    }
+
+    /// The `k`-th of this machine's adapters, counting around (hardware ones, or all where
+    /// there are none): the `k`-th process on a machine takes its own GPU.
+    pub fn nth(k: usize) -> Result<Gpu, GpuError> {
+        let all = pollster::block_on(instance().enumerate_adapters(wgpu::Backends::PRIMARY));
+        let hardware = |a: &wgpu::Adapter| a.get_info().device_type != wgpu::DeviceType::Cpu;
+        let (hard, soft): (Vec<_>, Vec<_>) = all.into_iter().partition(hardware);
+        let pool = if hard.is_empty() { soft } else { hard };
+        let count = pool.len().max(1);
+        let adapter = (pool.into_iter().nth(k % count))
+            .ok_or_else(|| GpuError::NoAdapter("wgpu found none".into()))?;
+        Gpu::on(adapter)
+    }
+
+    /// A device on `adapter`.
+    fn on(adapter: wgpu::Adapter) -> Result<Gpu, GpuError> {
         let info = adapter.get_info();
         let features = adapter.features()
             & (wgpu::Features::SHADER_FLOAT32_ATOMIC

@@ -489,6 +489,26 @@ impl GpuBatchSum {
     pub fn buffer(&self) -> &wgpu::Buffer {
         &self.sum
     }
+
+    /// The sum's first `words` words, read back.
+    pub fn download(&self, gpu: &Gpu, words: usize) -> Result<Vec<f32>, GpuError> {
+        match words {
+            0 => Ok(vec![]),
+            _ => Ok(gpu
+                .read(&self.sum, words)?
+                .into_iter()
+                .map(f32::from_bits)
+                .collect()),
+        }
+    }
+
+    /// Replaces the sum with `values`.
+    pub fn upload(&mut self, gpu: &Gpu, values: &[f32]) -> Result<(), GpuError> {
+        self.sum.ensure(gpu, values.len())?;
+        let words: Vec<u32> = values.iter().map(|x| x.to_bits()).collect();
+        gpu.write(&self.sum, &words);
+        Ok(())
+    }
 }
 
 /// Where [`GpuObserver`] reads a primitive's screen-space gradient (as

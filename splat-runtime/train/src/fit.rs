@@ -409,15 +409,12 @@ pub fn fit_shared<M: Trainable>(
         let clock = Instant::now();
         // The batch's views in order: the same sums on every rank and in one process.
         grads.fill(0.0);
-        let mut value = LossValue::default();
         for p in &passes {
             for (a, g) in grads.iter_mut().zip(&p.grads) {
                 *a += g;
             }
-            value.loss += p.loss.loss / batch.len as f64;
-            value.l1 += p.loss.l1 / batch.len as f64;
-            value.ssim += p.loss.ssim / batch.len as f64;
         }
+        let value = LossValue::mean(passes.iter().map(|p| p.loss));
         if let Some(m) = &mcmc {
             m.regularize(&flat, &mut grads, words, batch.len);
         }

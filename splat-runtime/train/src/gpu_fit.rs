@@ -17,6 +17,7 @@ use super::fit::{
 };
 use super::loss::LossValue;
 use super::step_times::StepTimes;
+use super::team::{Share, Solo, Team, ViewPass, gather_statistics};
 use super::trainable::Trainable;
 use crate::device::{
     AdamStep, GpuAdam, GpuBatchSum, GpuLoss, GpuMcmc, GpuObserver, GpuTrainError, ScreenSource,
@@ -72,6 +73,24 @@ pub fn fit_gpu_from<M: Trainable>(
     state: &mut Checkpoint,
     extent: f32,
     opts: &FitOptions,
+    progress: impl FnMut(&StepReport),
+) -> Result<(), FitError> {
+    fit_gpu_shared::<M>(&Solo, gpu, data, state, extent, opts, progress)
+}
+
+/// [`fit_gpu_from`] shared among the processes of `team`, each on its own GPU: each renders
+/// its share of every batch and sums its views' gradients on its device, the ranks gather
+/// those sums (and, where density control refines, its statistics) and add them in rank order,
+/// and all take the same Adam step on the same total, so all hold the same scene. (The sums on
+/// a device are not in a fixed order: the scene is not one process's bit for bit.) Every rank
+/// must start from the same `state`.
+pub fn fit_gpu_shared<M: Trainable>(
+    team: &dyn Team,
+    gpu: &Gpu,
+    data: &Dataset,
+    state: &mut Checkpoint,
+    extent: f32,
+    opts: &FitOptions,
     mut progress: impl FnMut(&StepReport),
 ) -> Result<(), FitError> {
     let rates = rates_for::<M>(data, extent, opts)?;
@@ -109,8 +128,8 @@ pub fn fit_gpu_from<M: Trainable>(
         loss: GpuLoss::new(gpu, &targets, opts.ssim_weight as f32)?,
         adam,
         observer: GpuObserver::new(gpu)?,
-        sum: match opts.batch {
-            1 => None,
+        sum: match (opts.batch, team.ranks()) {
+            (1, 1) => None,
             _ => Some(GpuBatchSum::new(gpu)?),
         },
         mcmc: match opts.mcmc::<M>()? {
@@ -148,7 +167,23 @@ pub fn fit_gpu_from<M: Trainable>(
         let views: Vec<_> = (draws.iter())
             .map(|&(k, background)| (k, &data.train[k].camera, background))
             .collect();
-        let (value, faults, mut times) = device.take(&scene, &views, &lr, observing)?;
+        let (value, faults, mut times, asked_to_stop) = match team.ranks() {
+            1 => {
+                let (value, faults, times) = device.take(&scene, &views, &lr, observing)?;
+                (value, faults, times, false)
+            }
+            _ => {
+                let mine = &views[batch.share(team.rank(), team.ranks())];
+                let (values, mut times) = device.accumulate(&scene, mine, observing)?;
+                let clock = Instant::now();
+                let stop = opts.stop_requested();
+                let (values, stop) = exchange_sums(team, &mut device, n, values, stop)?;
+                times.exchange = clock.elapsed();
+                let (faults, optimizer) = device.step_on_sum(&scene, &lr, batch.len)?;
+                times.optimizer += optimizer;
+                (LossValue::mean(values), faults, times, stop)
+            }
+        };
 
         let clock = Instant::now();
         let mut refinement = None;
@@ -176,7 +211,7 @@ pub fn fit_gpu_from<M: Trainable>(
             let mut host = scene.download(gpu)?;
             let mut origin: Vec<Option<usize>> = (0..n).map(Some).collect();
             if let Some(step) = batch.steps().find(|&s| d.refines_at(s)) {
-                let (grad2d, seen) = device.observer.take(gpu, n)?;
+                let (grad2d, seen) = gather_statistics(team, device.observer.take(gpu, n)?)?;
                 d.add_observations(&grad2d, &seen);
                 let r = d.refine::<M>(&mut host, step, extent, &mut rng);
                 origin = r.origin.clone();
@@ -204,7 +239,9 @@ pub fn fit_gpu_from<M: Trainable>(
             false => None,
         };
         times.evaluation = clock.elapsed();
-        let stops = opts.stop_requested();
+        // Ranks end after the batch where one was asked to; alone, a request during this
+        // batch's evaluation ends it too.
+        let stops = asked_to_stop || (team.ranks() == 1 && opts.stop_requested());
         let save = saves_at(opts, batch, stops);
         if save || ends_after(opts, batch, stops) {
             let n = scene.len();
@@ -213,7 +250,7 @@ pub fn fit_gpu_from<M: Trainable>(
             state.adam = device.adam.download(gpu, n)?;
             (state.grad2d, state.seen) = match densifier.as_mut() {
                 Some(d) => {
-                    let (grad2d, seen) = device.observer.take(gpu, n)?;
+                    let (grad2d, seen) = gather_statistics(team, device.observer.take(gpu, n)?)?;
                     d.add_observations(&grad2d, &seen);
                     d.statistics()
                 }
@@ -289,66 +326,110 @@ impl<M: SplatMethod> DeviceStep<'_, M> {
         lr: &[f32],
         observing: bool,
     ) -> Result<(LossValue, Faults, StepTimes), FitError> {
-        let (gpu, n) = (self.gpu, scene.len());
-        let words = n * self.renderer.param_floats();
-        let mut value = LossValue::default();
-        let mut times = StepTimes::default();
+        if self.sum.is_none() {
+            return self.take_one(scene, views[0], lr, observing);
+        }
+        let (values, mut times) = self.accumulate(scene, views, observing)?;
+        let (faults, optimizer) = self.step_on_sum(scene, lr, views.len())?;
+        times.optimizer += optimizer;
+        Ok((LossValue::mean(values), faults, times))
+    }
+
+    /// A step of one view, Adam on its gradient held back on the device with a cut frame.
+    fn take_one(
+        &mut self,
+        scene: &GpuScene<M>,
+        view: (usize, &Camera, Vec3),
+        lr: &[f32],
+        observing: bool,
+    ) -> Result<(LossValue, Faults, StepTimes), FitError> {
+        let gpu = self.gpu;
+        loop {
+            self.record_view(scene, view, observing)?;
+            let mut enc = gpu.device.create_command_encoder(&Default::default());
+            self.timer.start(&mut enc, OPTIMIZER);
+            let (grads, held_by) = (self.renderer.param_gradients(), self.renderer.frame_keys());
+            let step = (scene, grads, lr, 1);
+            record_optimizer(
+                gpu,
+                &mut enc,
+                &mut self.adam,
+                &self.mcmc,
+                step,
+                Some(held_by),
+            )?;
+            self.timer.end(&mut enc, OPTIMIZER);
+            self.timer.resolve(&mut enc, LOSS..NOISE);
+            gpu.queue.submit([enc.finish()]);
+            let parts = [self.loss.sums()?, self.adam.fault_words()];
+            let [sums, fault_words] = gpu.read_together(parts)?;
+            match self.renderer.settle(scene)? {
+                Some(_) => {
+                    let faults = GpuAdam::faults(&fault_words);
+                    return Ok((self.loss.value(&sums)?, faults, self.times()?));
+                }
+                None => self.adam.take_back(),
+            }
+        }
+    }
+
+    /// Adds each of `views`' gradients to the batch's sum on the device as its frame settles
+    /// (a cut frame adds nothing and runs again): the views' loss values and their stage
+    /// times. No views leave the sum as it was.
+    fn accumulate(
+        &mut self,
+        scene: &GpuScene<M>,
+        views: &[(usize, &Camera, Vec3)],
+        observing: bool,
+    ) -> Result<(Vec<LossValue>, StepTimes), FitError> {
+        let gpu = self.gpu;
+        let words = scene.len() * self.renderer.param_floats();
+        let (mut values, mut times) = (vec![], StepTimes::default());
         for (j, &view) in views.iter().enumerate() {
             loop {
                 self.record_view(scene, view, observing)?;
                 let mut enc = gpu.device.create_command_encoder(&Default::default());
                 self.timer.start(&mut enc, OPTIMIZER);
-                let grads = self.renderer.param_gradients();
-                match &mut self.sum {
-                    // One view: Adam steps on its gradient, held back with a cut frame.
-                    None => {
-                        let held_by = Some(self.renderer.frame_keys());
-                        let step = (scene, grads, lr, 1);
-                        record_optimizer(gpu, &mut enc, &mut self.adam, &self.mcmc, step, held_by)?
-                    }
-                    Some(sum) => {
-                        let keys = self.renderer.frame_keys();
-                        sum.record_add(gpu, &mut enc, (grads, words), j == 0, keys)?;
-                    }
-                }
+                let (grads, keys) = (self.renderer.param_gradients(), self.renderer.frame_keys());
+                let sum = self.sum.as_mut().expect("a batch's sum");
+                sum.record_add(gpu, &mut enc, (grads, words), j == 0, keys)?;
                 self.timer.end(&mut enc, OPTIMIZER);
                 self.timer.resolve(&mut enc, LOSS..NOISE);
                 gpu.queue.submit([enc.finish()]);
-                let parts = [self.loss.sums()?, self.adam.fault_words()];
-                let [sums, fault_words] = gpu.read_together(parts)?;
-                if self.renderer.settle(scene)?.is_none() {
-                    if self.sum.is_none() {
-                        self.adam.take_back();
-                    }
-                    continue;
+                let [sums] = gpu.read_together([self.loss.sums()?])?;
+                if self.renderer.settle(scene)?.is_some() {
+                    values.push(self.loss.value(&sums)?);
+                    times += self.times()?;
+                    break;
                 }
-                let v = self.loss.value(&sums)?;
-                let share = views.len() as f64;
-                value.loss += v.loss / share;
-                value.l1 += v.l1 / share;
-                value.ssim += v.ssim / share;
-                times += self.times()?;
-                if self.sum.is_none() {
-                    return Ok((value, GpuAdam::faults(&fault_words), times));
-                }
-                break;
             }
         }
-        let sum = self.sum.as_ref().expect("a batch sums its views");
+        Ok((values, times))
+    }
+
+    /// Adam's step on the batch's sum of `views` views' gradients: the words it could not
+    /// move, and its time on the device.
+    fn step_on_sum(
+        &mut self,
+        scene: &GpuScene<M>,
+        lr: &[f32],
+        views: usize,
+    ) -> Result<(Faults, std::time::Duration), FitError> {
+        let gpu = self.gpu;
+        let sum = self.sum.as_ref().expect("a batch's sum");
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         for stage in [LOSS, STATISTICS] {
             self.timer.start(&mut enc, stage);
             self.timer.end(&mut enc, stage);
         }
         self.timer.start(&mut enc, OPTIMIZER);
-        let step = (scene, sum.buffer(), lr, views.len());
+        let step = (scene, sum.buffer(), lr, views);
         record_optimizer(gpu, &mut enc, &mut self.adam, &self.mcmc, step, None)?;
         self.timer.end(&mut enc, OPTIMIZER);
         self.timer.resolve(&mut enc, LOSS..NOISE);
         gpu.queue.submit([enc.finish()]);
         let [fault_words] = gpu.read_together([self.adam.fault_words()])?;
-        times.optimizer += self.times()?.optimizer;
-        Ok((value, GpuAdam::faults(&fault_words), times))
+        Ok((GpuAdam::faults(&fault_words), self.times()?.optimizer))
     }
 
     /// Records one view's frame of `scene`, its loss, backward pass and (when `observing`)
@@ -403,6 +484,54 @@ impl<M: SplatMethod> DeviceStep<'_, M> {
             ..Default::default()
         })
     }
+}
+
+/// Gathers every rank's sum of its views' gradients (on `device`, `primitives` primitives'
+/// words) with its views' loss values and whether it was asked to stop, and leaves the total,
+/// added in rank order, as the batch's sum on every rank: the batch's loss values in view
+/// order, and whether any rank was asked to stop.
+fn exchange_sums<M: SplatMethod>(
+    team: &dyn Team,
+    device: &mut DeviceStep<M>,
+    primitives: usize,
+    values: Vec<LossValue>,
+    stop: bool,
+) -> Result<(Vec<LossValue>, bool), FitError> {
+    let (gpu, words) = (device.gpu, primitives * device.renderer.param_floats());
+    let sum = device.sum.as_mut().expect("ranks sum their views");
+    // A rank without views this batch sends no gradient (its sum holds an earlier batch's).
+    let grads = match values.is_empty() {
+        true => vec![],
+        false => sum.download(gpu, words)?,
+    };
+    let mut passes: Vec<ViewPass> = (values.into_iter())
+        .map(|loss| ViewPass {
+            loss,
+            grads: vec![],
+            seen: vec![],
+        })
+        .collect();
+    if let Some(first) = passes.first_mut() {
+        first.grads = grads;
+    }
+    let shares = team.gather(Share { passes, stop })?;
+    let mut total = vec![0.0f32; words];
+    for (r, share) in shares.iter().enumerate() {
+        let grads = share.passes.first().map_or(&[][..], |p| &p.grads[..]);
+        if !(grads.is_empty() || grads.len() == words) {
+            return Err(FitError::Unsupported(format!(
+                "rank {r} sent a gradient of {} words, not {words}",
+                grads.len()
+            )));
+        }
+        for (t, g) in total.iter_mut().zip(grads) {
+            *t += g;
+        }
+    }
+    sum.upload(gpu, &total)?;
+    let stop = shares.iter().any(|s| s.stop);
+    let values = shares.into_iter().flat_map(|s| s.passes).map(|p| p.loss);
+    Ok((values.collect(), stop))
 }
 
 /// Records MCMC's penalties (once per view of the step) added to the step's gradients, then

@@ -25,6 +25,23 @@ pub struct LossValue {
     pub ssim: f64,
 }
 
+impl LossValue {
+    /// The mean of `values` (each part's), zero for none.
+    pub fn mean(values: impl IntoIterator<Item = LossValue>) -> LossValue {
+        let (mut sum, mut n) = (LossValue::default(), 0);
+        for v in values {
+            (sum.loss, sum.l1, sum.ssim) = (sum.loss + v.loss, sum.l1 + v.l1, sum.ssim + v.ssim);
+            n += 1;
+        }
+        let n = n.max(1) as f64;
+        LossValue {
+            loss: sum.loss / n,
+            l1: sum.l1 / n,
+            ssim: sum.ssim / n,
+        }
+    }
+}
+
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum LossError {
     #[error("the render is {got:?} (width, height, channels), the target {want:?}")]

@@ -19,7 +19,9 @@ pub struct ViewPass {
 }
 
 /// What a rank contributes to a batch: the passes of its views, and whether it was asked to
-/// stop (every rank then ends after this batch, so that none waits for the others).
+/// stop (every rank then ends after this batch, so that none waits for the others). A rank
+/// that sums its views' gradients itself (on the GPU) sends that sum as its first pass's
+/// `grads`, and none in the others.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Share {
     pub passes: Vec<ViewPass>,
@@ -32,9 +34,23 @@ pub trait Team {
     fn rank(&self) -> usize;
     /// How many processes share the run.
     fn ranks(&self) -> usize;
+    /// Every rank's `mine`, in rank order.
+    fn all_gather(&self, mine: Vec<u8>) -> Result<Vec<Vec<u8>>, FitError>;
+
     /// Every rank's share of the batch, in rank order (and so their passes in view order),
     /// given this rank's.
-    fn gather(&self, mine: Share) -> Result<Vec<Share>, FitError>;
+    fn gather(&self, mine: Share) -> Result<Vec<Share>, FitError> {
+        if self.ranks() == 1 {
+            return Ok(vec![mine]);
+        }
+        let all = self.all_gather(mine.encode())?;
+        (all.iter().enumerate())
+            .map(|(r, bytes)| {
+                Share::decode(bytes)
+                    .map_err(|e| FitError::Unsupported(format!("rank {r}'s share: {e}")))
+            })
+            .collect()
+    }
 }
 
 /// One process: it renders every view of a batch.
@@ -49,9 +65,41 @@ impl Team for Solo {
         1
     }
 
-    fn gather(&self, mine: Share) -> Result<Vec<Share>, FitError> {
+    fn all_gather(&self, mine: Vec<u8>) -> Result<Vec<Vec<u8>>, FitError> {
         Ok(vec![mine])
     }
+}
+
+/// Density control's statistics (per primitive, the summed screen-space gradient norms and
+/// the views that saw it) of every rank, summed in rank order: the same on every rank.
+pub fn gather_statistics(
+    team: &dyn Team,
+    (grad2d, seen): (Vec<f32>, Vec<u32>),
+) -> Result<(Vec<f32>, Vec<u32>), FitError> {
+    if team.ranks() == 1 {
+        return Ok((grad2d, seen));
+    }
+    let n = grad2d.len();
+    let mine: Vec<u8> = (grad2d.iter().map(|g| g.to_bits()))
+        .chain(seen.iter().copied())
+        .flat_map(u32::to_le_bytes)
+        .collect();
+    let (mut grad2d, mut seen) = (vec![0.0f32; n], vec![0u32; n]);
+    for (r, bytes) in team.all_gather(mine)?.iter().enumerate() {
+        if bytes.len() != 8 * n {
+            return Err(FitError::Unsupported(format!(
+                "rank {r} sent statistics of {} bytes, not {} for {n} primitives",
+                bytes.len(),
+                8 * n
+            )));
+        }
+        let word = |k: usize| u32::from_le_bytes(bytes[4 * k..4 * k + 4].try_into().unwrap());
+        for i in 0..n {
+            grad2d[i] += f32::from_bits(word(i));
+            seen[i] += word(n + i);
+        }
+    }
+    Ok((grad2d, seen))
 }
 
 impl Share {

@@ -114,15 +114,9 @@ fn fit_on(args: &FitArgs, methods: &[Method], ranks: &Ranks) -> Result<()> {
     check_knobs(args)?;
     let groups = method.full().param_fields.iter().map(|(name, _)| *name);
     frozen_and_trained(&groups.collect::<Vec<_>>(), &args.freeze, method.name)?;
-    // Picked first: the memory a run needs depends on where it trains.
-    let gpu = crate::pick_gpu(args.backend)?;
-    if let (Some(gpu), 2..) = (&gpu, ranks.count()) {
-        bail!(
-            "GPU training runs as one process so far, not {} MPI ranks ({}): --backend cpu shares the run among them",
-            ranks.count(),
-            gpu.adapter
-        );
-    }
+    // Picked first: the memory a run needs depends on where it trains. Ranks on one machine
+    // take one GPU each, in turn.
+    let gpu = crate::pick_gpu_of(args.backend, ranks.local_rank())?;
     let background = if args.white { Vec3::ONE } else { Vec3::ZERO };
     let t = Instant::now();
     let loaded = (|| -> Result<_> {
