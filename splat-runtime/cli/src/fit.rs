@@ -383,7 +383,10 @@ impl Fit<'_> {
         if taken > 0 {
             print_step_times(&progress.times, progress.batches, gpu.as_ref());
         }
-        if let Some(t) = ranks.traffic().filter(|_| progress.batches > 0) {
+        if let Some(t) = ranks
+            .traffic()
+            .filter(|_| ranks.count() > 1 && progress.batches > 0)
+        {
             let per = |bytes: u64| bytes as f64 / progress.batches as f64 / 1e6;
             println!(
                 "rank 0 sent {:.2} MB and received {:.2} MB per batch (the views' gradients and density statistics)",

@@ -60,12 +60,9 @@ impl MpiTeam {
             })
             .collect::<Result<_, _>>()
             .map_err(|_| "the batch's shares pass MPI's 16 GiB per gather".to_string())?;
+        // The bytes as they are, in words (MPI's ranks here share one architecture).
         let mut send = vec![0u64; words(len) as usize];
-        for (w, chunk) in send.iter_mut().zip(mine.chunks(8)) {
-            let mut b = [0u8; 8];
-            b[..chunk.len()].copy_from_slice(chunk);
-            *w = u64::from_le_bytes(b);
-        }
+        bytemuck::cast_slice_mut::<u64, u8>(&mut send)[..mine.len()].copy_from_slice(mine);
         let total = counts.iter().map(|&c| c as usize).sum();
         let mut recv = vec![0u64; total];
         let mut parts = PartitionMut::new(&mut recv[..], &counts[..], &displs[..]);
@@ -73,9 +70,7 @@ impl MpiTeam {
         Ok((lens.iter().zip(&displs))
             .map(|(&n, &d)| {
                 let words = &recv[d as usize..d as usize + words(n) as usize];
-                let mut bytes: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
-                bytes.truncate(n as usize);
-                bytes
+                bytemuck::cast_slice::<u64, u8>(words)[..n as usize].to_vec()
             })
             .collect())
     }

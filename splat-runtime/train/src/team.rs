@@ -80,10 +80,9 @@ pub fn gather_statistics(
         return Ok((grad2d, seen));
     }
     let n = grad2d.len();
-    let mine: Vec<u8> = (grad2d.iter().map(|g| g.to_bits()))
-        .chain(seen.iter().copied())
-        .flat_map(u32::to_le_bytes)
-        .collect();
+    let mut mine = Vec::with_capacity(8 * n);
+    put_words(&mut mine, &grad2d);
+    put_words(&mut mine, &seen);
     let (mut grad2d, mut seen) = (vec![0.0f32; n], vec![0u32; n]);
     for (r, bytes) in team.all_gather(mine)?.iter().enumerate() {
         if bytes.len() != 8 * n {
@@ -93,10 +92,12 @@ pub fn gather_statistics(
                 8 * n
             )));
         }
-        let word = |k: usize| u32::from_le_bytes(bytes[4 * k..4 * k + 4].try_into().unwrap());
-        for i in 0..n {
-            grad2d[i] += f32::from_bits(word(i));
-            seen[i] += word(n + i);
+        let (g, c) = bytes.split_at(4 * n);
+        for (sum, x) in grad2d.iter_mut().zip(get_words::<f32>(g)) {
+            *sum += x;
+        }
+        for (sum, x) in seen.iter_mut().zip(get_words::<u32>(c)) {
+            *sum += x;
         }
     }
     Ok((grad2d, seen))
@@ -116,7 +117,7 @@ impl Share {
                 out.extend(x.to_le_bytes());
             }
             out.extend((p.grads.len() as u64).to_le_bytes());
-            out.extend(p.grads.iter().flat_map(|g| g.to_le_bytes()));
+            put_words(&mut out, &p.grads);
             out.extend((p.seen.len() as u64).to_le_bytes());
             for (i, norm) in &p.seen {
                 out.extend(i.to_le_bytes());
@@ -139,7 +140,7 @@ impl Share {
         for _ in 0..count {
             let [loss, l1, ssim] = [r.f64()?, r.f64()?, r.f64()?];
             let words = r.len(4)?;
-            let grads = (0..words).map(|_| r.f32()).collect::<Result<_, _>>()?;
+            let grads = get_words(r.slice(4 * words)?);
             let seen = r.len(8)?;
             let seen = (0..seen)
                 .map(|_| Ok((r.u32()?, r.f32()?)))
@@ -155,6 +156,29 @@ impl Share {
             false => Err(format!("{} bytes past the passes", bytes.len() - r.at)),
         }
     }
+}
+
+/// 4-byte `words` (f32 or u32) appended to `out` little-endian: one copy on little-endian
+/// machines.
+fn put_words<T: bytemuck::Pod>(out: &mut Vec<u8>, words: &[T]) {
+    debug_assert_eq!(std::mem::size_of::<T>(), 4);
+    let bytes: &[u8] = bytemuck::cast_slice(words);
+    match cfg!(target_endian = "little") {
+        true => out.extend_from_slice(bytes),
+        false => out.extend(bytes.chunks_exact(4).flat_map(|w| [w[3], w[2], w[1], w[0]])),
+    }
+}
+
+/// The 4-byte words [`put_words`] wrote (`bytes` a multiple of 4 long).
+fn get_words<T: bytemuck::Pod>(bytes: &[u8]) -> Vec<T> {
+    debug_assert_eq!(std::mem::size_of::<T>(), 4);
+    let mut words: Vec<T> = bytemuck::pod_collect_to_vec(bytes);
+    if cfg!(target_endian = "big") {
+        for w in bytemuck::cast_slice_mut::<T, [u8; 4]>(&mut words) {
+            w.reverse();
+        }
+    }
+    words
 }
 
 /// Little-endian reads that fail past the end instead of panicking.
@@ -174,6 +198,13 @@ impl Reader<'_> {
         })?;
         self.at = end;
         Ok(got.try_into().expect("N bytes"))
+    }
+
+    fn slice(&mut self, n: usize) -> Result<&[u8], String> {
+        let got = (self.bytes.get(self.at..self.at + n))
+            .ok_or_else(|| format!("the passes end at byte {} of {n} more", self.bytes.len()))?;
+        self.at += n;
+        Ok(got)
     }
 
     fn f64(&mut self) -> Result<f64, String> {
