@@ -23,5 +23,6 @@ mod linprim;
 mod precision;
 mod reference;
 mod rolling_shutter;
+mod slices;
 mod suite;
 mod variants;

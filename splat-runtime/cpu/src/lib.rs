@@ -8,6 +8,11 @@
 //!    tiles scheduled longest list first (trip-count binning).
 //! 4. [`backward`](mod@backward): the back-to-front backward blend, a per-primitive
 //!    reduction, then `project`'s adjoint per primitive.
+//!
+//! A scene cut into slices (sharded among processes) renders the same frame, bit for bit:
+//! each slice's visible records ([`project_visible`]) rendered together
+//! ([`render_records_for_backward`]), the blend's gradients ([`backward_blend`]) sent back to
+//! their slices for `project`'s adjoint ([`project_adjoints`]).
 
 pub mod backward;
 pub mod preprocess;
@@ -109,7 +114,63 @@ fn forward<M: SplatMethod>(
     let pre = preprocess::preprocess::<M>(params, camera, &grid, opts.shade_precision);
     stats.visible = pre.visible.len();
     stats.preprocess = t0.elapsed();
+    blend_projected(pre, grid, camera, opts, keep, stats)
+}
 
+/// The primitives of a slice of a scene that reach the rasterizer through a camera, in order:
+/// their indices in the slice, and `project`'s records of them.
+pub struct Visible<M: SplatMethod> {
+    pub index: Vec<u32>,
+    pub records: Vec<Projected<M::Cull, M::Shade>>,
+}
+
+/// What of `params` (a slice of a scene) reaches the rasterizer through `camera`, for
+/// [`render_records_for_backward`] to render with other slices'.
+pub fn project_visible<M: SplatMethod>(
+    params: &[M::Params],
+    camera: &Camera,
+    opts: &RenderOptions,
+) -> Result<Visible<M>, RenderError> {
+    let grid = check::<M>(camera, opts)?;
+    if let Some(i) = params.par_iter().position_any(|p| !p.is_finite()) {
+        return Err(RenderError::NonFinite(i));
+    }
+    let pre = preprocess::preprocess::<M>(params, camera, &grid, precision::Precision::F32);
+    let index: Vec<u32> = pre.visible.iter().map(|&(i, _)| i).collect();
+    let records = index.iter().map(|&i| pre.projected[i as usize]).collect();
+    Ok(Visible { index, records })
+}
+
+/// Renders records `project` made elsewhere (the visible primitives of each slice of a scene
+/// sharded among processes, [`preprocess::visible_records`], concatenated in the slices'
+/// order) and keeps what [`backward_blend`] needs. The frame is the whole scene's, bit for bit:
+/// the records keep the primitives' order, and the tile lists sort by depth, then order.
+pub fn render_records_for_backward<M: SplatMethod>(
+    records: Vec<Projected<M::Cull, M::Shade>>,
+    camera: &Camera,
+    opts: &RenderOptions,
+) -> Result<(Frame, ForwardState<M>), RenderError> {
+    let grid = check::<M>(camera, opts)?;
+    let t0 = Instant::now();
+    let pre = preprocess::from_records::<M>(records, &grid, opts.shade_precision);
+    let stats = Stats {
+        primitives: pre.projected.len(),
+        visible: pre.visible.len(),
+        preprocess: t0.elapsed(),
+        ..Stats::default()
+    };
+    blend_projected(pre, grid, camera, opts, true, stats).map(|(f, s)| (f, s.expect("state kept")))
+}
+
+/// Stages 2 and 3 from `pre`: the tile lists and the blend.
+fn blend_projected<M: SplatMethod>(
+    pre: Preprocessed<M>,
+    grid: TileGrid,
+    camera: &Camera,
+    opts: &RenderOptions,
+    keep: bool,
+    mut stats: Stats,
+) -> Result<(Frame, Option<ForwardState<M>>), RenderError> {
     let lists = tile_lists(&pre, &grid, opts.tile_cull, &mut stats)?;
 
     let t2 = Instant::now();
@@ -231,8 +292,6 @@ pub fn backward<M: SplatMethod>(
     camera: &Camera,
     grad: &FrameGrad,
 ) -> Result<Gradients<M>, RenderError> {
-    let pixels = (state.grid.width * state.grid.height) as usize;
-    grad.check(pixels, M::Color::LEN, state.depth_acc.len() == pixels)?;
     let n = state.pre.projected.len();
     if params.len() != n {
         return Err(RenderError::ParamsCount {
@@ -243,6 +302,64 @@ pub fn backward<M: SplatMethod>(
     if *camera != state.camera {
         return Err(RenderError::OtherCamera);
     }
+    let blended = backward_blend(state, grad)?;
+    let t2 = Instant::now();
+    let (param_grads, camera_grads) = project_adjoints::<M>(
+        params,
+        camera,
+        &blended.shade,
+        &blended.depth,
+        state.gradients,
+    );
+    // Summed in fixed chunks, in order: the same gradient whatever the thread count.
+    let camera_grad = camera_grads
+        .map_or(Camera::ZERO, |grads| {
+            grads
+                .par_chunks(CHUNK)
+                .map(|c| c.iter().fold(Camera::ZERO, |a, b| a.add_cotangent(b)))
+                .collect::<Vec<_>>()
+                .iter()
+                .fold(Camera::ZERO, |a, b| a.add_cotangent(b))
+        })
+        .add_cotangent(&blended.ray_camera);
+    let stats = BackwardStats {
+        blend: blended.blend,
+        reduce: blended.reduce,
+        project: t2.elapsed(),
+    };
+    Ok(Gradients {
+        params: param_grads,
+        shade: blended.shade,
+        camera: camera_grad,
+        stats,
+    })
+}
+
+/// Chunks of the per-primitive sums, summed in parallel.
+const CHUNK: usize = 1 << 14;
+
+/// What the backward blend sends back to `project`'s adjoint: per record of the frame
+/// (`ForwardState::pre`), the gradient of its shade data (`M::Shade::LEN` words each) and of
+/// its depth; the camera's through the pixel rays; the stages' times.
+pub struct BlendGradients {
+    pub shade: Vec<f32>,
+    pub depth: Vec<f32>,
+    pub ray_camera: Camera,
+    pub blend: std::time::Duration,
+    pub reduce: std::time::Duration,
+}
+
+/// The backward blend of the frame `state` kept, given the gradient of each output: the
+/// per-record sums [`project_adjoints`] reads (for a frame of records,
+/// [`render_records_for_backward`], each goes back to the slice it came from).
+pub fn backward_blend<M: SplatMethod>(
+    state: &ForwardState<M>,
+    grad: &FrameGrad,
+) -> Result<BlendGradients, RenderError> {
+    let pixels = (state.grid.width * state.grid.height) as usize;
+    grad.check(pixels, M::Color::LEN, state.depth_acc.len() == pixels)?;
+    let n = state.pre.projected.len();
+    let camera = &state.camera;
     let words = M::Shade::LEN;
     let t0 = Instant::now();
     // The f16 sums' loss scale; f32 sums are not scaled (and no pass over the gradient is
@@ -279,7 +396,6 @@ pub fn backward<M: SplatMethod>(
     let ray_camera = accs
         .iter()
         .fold(Camera::ZERO, |c, a| c.add_cotangent(&a.camera));
-    const CHUNK: usize = 1 << 14;
     // Summed in f32, held at the gradient precision as each worker's sums were, then unscaled.
     let sum = |mut parts: Vec<Stored>| -> Vec<f32> {
         let mut out = parts.remove(0).into_f32();
@@ -297,15 +413,34 @@ pub fn backward<M: SplatMethod>(
     let (shades, depths) = accs.into_iter().map(|a| (a.shade, a.depth)).unzip();
     let (shade, depth) = (sum(shades), sum(depths));
     let reduce = t1.elapsed();
-    let t2 = Instant::now();
+    Ok(BlendGradients {
+        shade,
+        depth,
+        ray_camera,
+        blend,
+        reduce,
+    })
+}
+
+/// `project`'s adjoint for each of `params` through `camera`, given the gradients of its
+/// shade data (`M::Shade::LEN` words each) and depth; a primitive with none (not drawn) gets
+/// zero. The camera's gradient per primitive where `wanted` asks for it.
+pub fn project_adjoints<M: SplatMethod>(
+    params: &[M::Params],
+    camera: &Camera,
+    shade: &[f32],
+    depth: &[f32],
+    wanted: GradientSet,
+) -> (Vec<M::Params>, Option<Vec<Camera>>) {
+    let words = M::Shade::LEN;
+    let n = params.len();
     let (zero_params, zero_cull) = (M::Params::zero(), M::Cull::zero());
-    let wanted = state.gradients;
     // Each gradient is written once (no zero-filled buffer first: that alone cost 0.1 s at 1M).
-    let (param_grads, camera_grads) = splat_core::with_camera_model!(camera.model, MODEL => {
+    splat_core::with_camera_model!(camera.model, MODEL => {
         let one = |i: usize| {
             let d_words = &shade[i * words..(i + 1) * words];
             let untouched = depth[i] == 0.0 && d_words.iter().all(|v| *v == 0.0);
-            if !state.pre.projected[i].visible || untouched {
+            if untouched {
                 return (zero_params, Camera::ZERO);
             }
             // Only depth and shade carry a gradient; the rest of the cotangent is zero.
@@ -326,27 +461,5 @@ pub fn backward<M: SplatMethod>(
             }
             false => ((0..n).into_par_iter().map(|i| one(i).0).collect(), None),
         }
-    });
-    // Summed in fixed chunks, in order: the same gradient whatever the thread count.
-    let camera_grad = camera_grads
-        .map_or(Camera::ZERO, |grads| {
-            grads
-                .par_chunks(CHUNK)
-                .map(|c| c.iter().fold(Camera::ZERO, |a, b| a.add_cotangent(b)))
-                .collect::<Vec<_>>()
-                .iter()
-                .fold(Camera::ZERO, |a, b| a.add_cotangent(b))
-        })
-        .add_cotangent(&ray_camera);
-    let stats = BackwardStats {
-        blend,
-        reduce,
-        project: t2.elapsed(),
-    };
-    Ok(Gradients {
-        params: param_grads,
-        shade,
-        camera: camera_grad,
-        stats,
     })
 }

@@ -70,7 +70,17 @@ pub fn preprocess<M: SplatMethod>(
         .par_iter()
         .map(|p| M::project_as::<MODEL>(p, camera))
         .collect());
-    let mut pre = filter::<M>(projected, grid);
+    from_records(projected, grid, shade_precision)
+}
+
+/// `project`'s `records` (every primitive's, or the visible ones of slices rendered
+/// together), filtered and packed as [`preprocess`] does.
+pub fn from_records<M: SplatMethod>(
+    records: Vec<Projected<M::Cull, M::Shade>>,
+    grid: &TileGrid,
+    shade_precision: Precision,
+) -> Preprocessed<M> {
+    let mut pre = filter::<M>(records, grid);
     if shade_precision != Precision::F32 {
         let packed = PackedShade::new::<M>(shade_precision, &pre.projected, &pre.visible);
         pre.packed = Some(packed);

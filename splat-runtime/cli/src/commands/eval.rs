@@ -10,14 +10,15 @@ use crate::format_costs;
 use crate::methods::{self, Method};
 use crate::view::{Downscale, Split, undistorted};
 use anyhow::{Context, Result};
-use splat_runtime::RenderOptions;
 use splat_runtime::glam::Vec3;
 use splat_runtime::io::Outputs;
 use splat_runtime::io::dataset::{self, Shot};
 use splat_runtime::io::formats::Format;
 use splat_runtime::io::image::stage_image;
+use splat_runtime::io::ply::GaussianCloud;
 use splat_runtime::train::fit::composite;
 use splat_runtime::train::loss;
+use splat_runtime::{Camera, RenderOptions};
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
@@ -99,15 +100,8 @@ pub(crate) fn eval_cmd(args: &EvalArgs, methods: &[Method]) -> Result<()> {
         let bar = indicatif::ProgressBar::new((Format::ALL.len() * shots.len()) as u64);
         let costs = format_costs::measure(&cloud, &views, &bar)?;
         bar.finish_and_clear();
-        println!(
-            "{}: {} primitives (SH degree {}) from {}, {} {split} views of {}{taken}, in every format",
-            method.name,
-            cloud.gaussians.len(),
-            cloud.sh_degree,
-            args.scene.display(),
-            shots.len(),
-            args.dataset.display(),
-        );
+        let what = format!("{} in every format", method.name);
+        println!("{}", heading(&what, &cloud, args, &cameras, &taken));
         format_costs::print_table(&costs, cloud.gaussians.len());
         if let Some(out) = &args.out {
             let mut outputs = Outputs::default();
@@ -155,16 +149,8 @@ pub(crate) fn eval_cmd(args: &EvalArgs, methods: &[Method]) -> Result<()> {
     // Summed as `splat fit` sums its evaluation (`train::fit::Evaluation`), to the last bit.
     let n = measured.len() as f64;
     let mean = |f: fn(&Measured) -> f64| measured.iter().map(|m| f(m) / n).sum::<f64>();
-    println!(
-        "{} on {place}: {} primitives (SH degree {}) from {}, {} {split} views of {}, {}{taken}",
-        method.name,
-        cloud.gaussians.len(),
-        cloud.sh_degree,
-        args.scene.display(),
-        measured.len(),
-        args.dataset.display(),
-        sizes(&measured),
-    );
+    let what = format!("{} on {place}", method.name);
+    println!("{}", heading(&what, &cloud, args, &cameras, &taken));
     println!(
         "mean PSNR {:.2} dB, SSIM {:.4} (on {})",
         mean(|m| m.psnr),
@@ -201,11 +187,32 @@ pub(crate) fn eval_cmd(args: &EvalArgs, methods: &[Method]) -> Result<()> {
 }
 
 /// The views' size, or the range of their sizes when they differ.
-fn sizes(measured: &[Measured]) -> String {
-    let size = |m: &Measured| (m.shot.camera.size.x as u32, m.shot.camera.size.y as u32);
+/// What an evaluation measures, before its figures: `what` (the method, where it ran), the
+/// scene, and the views (their count, sizes and how they were taken).
+fn heading(
+    what: &str,
+    cloud: &GaussianCloud,
+    args: &EvalArgs,
+    cameras: &[Camera],
+    taken: &str,
+) -> String {
+    format!(
+        "{what}: {} primitives (SH degree {}) from {}, {} {} views of {}, {}{taken}",
+        cloud.gaussians.len(),
+        cloud.sh_degree,
+        args.scene.display(),
+        cameras.len(),
+        args.split.name(),
+        args.dataset.display(),
+        sizes(cameras),
+    )
+}
+
+fn sizes(cameras: &[Camera]) -> String {
+    let size = |c: &Camera| (c.size.x as u32, c.size.y as u32);
     let (smallest, largest) = (
-        measured.iter().map(size).min(),
-        measured.iter().map(size).max(),
+        cameras.iter().map(size).min(),
+        cameras.iter().map(size).max(),
     );
     match (smallest, largest) {
         (Some(a), Some(b)) if a == b => format!("{}x{}", a.0, a.1),

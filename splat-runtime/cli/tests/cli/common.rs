@@ -246,18 +246,17 @@ pub fn browser() -> Option<PathBuf> {
     let browser = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/browser");
     let ready = browser.join("node_modules/playwright-core").is_dir()
         && Path::new(&std::env::var("CHROMIUM").unwrap_or("/usr/bin/chromium".into())).exists();
-    if ready {
-        return Some(browser);
+    let missing = format!("no Chromium or `npm install` in {}", browser.display());
+    required(ready.then_some(browser), "SPLAT_REQUIRE_BROWSER", &missing)
+}
+
+/// `found`, a tool a test needs; where it is `None`, the test skips (saying `missing`), or
+/// fails where the environment variable `require` is 1 (CI installs every tool and sets it).
+pub fn required<T>(found: Option<T>, require: &str, missing: &str) -> Option<T> {
+    if found.is_none() {
+        let required = std::env::var(require).is_ok_and(|v| v == "1");
+        assert!(!required, "{missing}");
+        eprintln!("skipped: {missing}");
     }
-    let required = std::env::var("SPLAT_REQUIRE_BROWSER").is_ok_and(|v| v == "1");
-    assert!(
-        !required,
-        "no Chromium or playwright-core in {}",
-        browser.display()
-    );
-    eprintln!(
-        "skipped: no Chromium or `npm install` in {}",
-        browser.display()
-    );
-    None
+    found
 }

@@ -10,17 +10,8 @@ use splat_runtime::io::ply::{GaussianCloud, read};
 fn splat_transform() -> Option<PathBuf> {
     let bin = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("tests/formats/node_modules/.bin/splat-transform");
-    if bin.exists() {
-        return Some(bin);
-    }
-    let required = std::env::var("SPLAT_REQUIRE_NPM").is_ok_and(|v| v == "1");
-    assert!(
-        !required,
-        "no {}: npm install in tests/formats",
-        bin.display()
-    );
-    eprintln!("skipped: no splat-transform (npm install in tests/formats)");
-    None
+    let missing = format!("no {}: npm install in tests/formats", bin.display());
+    required(bin.exists().then_some(bin), "SPLAT_REQUIRE_NPM", &missing)
 }
 
 fn run_splat_transform(bin: &Path, args: &[&str], dir: &Path) {

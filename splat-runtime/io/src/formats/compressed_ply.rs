@@ -519,12 +519,8 @@ mod tests {
                     within((a.sh[0] - b.sh[0]).abs(), Vec3::splat(0.5 / 255.0) * dc);
                     let alpha = (sigmoid(a.opacity_logit) - sigmoid(b.opacity_logit)).abs();
                     assert!(alpha <= 0.5 / 255.0 + 1e-5, "{alpha}");
-                    let (qa, qb) = (a.rotation.normalize(), b.rotation);
-                    let near = (qa - qb)
-                        .abs()
-                        .max_element()
-                        .min((qa + qb).abs().max_element());
-                    assert!(near < 2e-3, "{qa} {qb}");
+                    let near = crate::formats::rotation_distance(a.rotation, b.rotation);
+                    assert!(near < 2e-3, "{} {}", a.rotation, b.rotation);
                     for k in 1..sh_coefficients(degree) {
                         // Truncated to 8 / 256, read at the step's middle.
                         let off = (a.sh[k] - b.sh[k]).abs().max_element();

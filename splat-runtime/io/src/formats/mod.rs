@@ -230,6 +230,15 @@ pub(crate) fn random_cloud(
     GaussianCloud::new(degree, gaussians)
 }
 
+/// How far the rotation `read` back is from `stored` (normalized first): the largest component
+/// difference, of `read` or of `-read` (q and -q are one rotation), for the formats' tests.
+#[cfg(test)]
+pub(crate) fn rotation_distance(stored: glam::Vec4, read: glam::Vec4) -> f32 {
+    let q = stored.normalize();
+    let off = |r: glam::Vec4| (q - r).abs().max_element();
+    off(read).min(off(-read))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -518,14 +518,15 @@ mod tests {
                     (sigmoid(a.opacity_logit) - sigmoid(b.opacity_logit)).abs()
                         <= 1.0 / 255.0 + 1e-6
                 );
-                let (qa, qb) = (a.rotation.normalize(), b.rotation);
-                let near = (qa - qb)
-                    .abs()
-                    .max_element()
-                    .min((qa + qb).abs().max_element());
+                let near = crate::formats::rotation_distance(a.rotation, b.rotation);
                 // Half a step of sqrt 2 / 255 each; the largest, recomputed, up to three of
                 // them (it is at least each other's magnitude).
-                assert!(near < 1.5 * std::f32::consts::SQRT_2 / 255.0, "{qa} {qb}");
+                assert!(
+                    near < 1.5 * std::f32::consts::SQRT_2 / 255.0,
+                    "{} {}",
+                    a.rotation,
+                    b.rotation
+                );
             }
         }
     }

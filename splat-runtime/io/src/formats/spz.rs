@@ -378,13 +378,8 @@ mod tests {
                     (sigmoid(a.opacity_logit) - sigmoid(b.opacity_logit)).abs()
                         <= 0.5 / 255.0 + 1e-5
                 );
-                // q and -q are one rotation.
-                let (qa, qb) = (a.rotation.normalize(), b.rotation);
-                let near = (qa - qb)
-                    .abs()
-                    .max_element()
-                    .min((qa + qb).abs().max_element());
-                assert!(near < 2e-3, "{qa} {qb}");
+                let near = crate::formats::rotation_distance(a.rotation, b.rotation);
+                assert!(near < 2e-3, "{} {}", a.rotation, b.rotation);
                 for k in 1..=rest(degree) {
                     let bucket = if k <= 3 { 8.0 } else { 16.0 };
                     let off = (a.sh[k] - b.sh[k]).abs().max_element();
