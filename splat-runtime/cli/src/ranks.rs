@@ -56,13 +56,16 @@ impl Ranks {
     /// launcher says: OpenMPI's `OMPI_COMM_WORLD_LOCAL_RANK`, MPICH's `MPI_LOCALRANKID`,
     /// Slurm's `SLURM_LOCALID`. `None` alone.
     pub fn local_rank(&self) -> Option<usize> {
-        let var = |name| std::env::var(name).ok().and_then(|v| v.parse().ok());
         match self {
             Ranks::Alone => None,
             #[cfg(feature = "mpi")]
-            Ranks::Mpi(_) => var("OMPI_COMM_WORLD_LOCAL_RANK")
-                .or_else(|| var("MPI_LOCALRANKID"))
-                .or_else(|| var("SLURM_LOCALID")),
+            Ranks::Mpi(_) => [
+                "OMPI_COMM_WORLD_LOCAL_RANK",
+                "MPI_LOCALRANKID",
+                "SLURM_LOCALID",
+            ]
+            .iter()
+            .find_map(|name| std::env::var(name).ok()?.parse().ok()),
         }
     }
 
