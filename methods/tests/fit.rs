@@ -129,6 +129,13 @@ fn write_known_scene(dir: &Path) -> Vec<Camera> {
     write_split(dir, "train", &scene, &train_eyes)
 }
 
+/// The known scene's dataset ([`write_known_scene`]) read back, composited on black.
+fn known_dataset() -> Dataset {
+    let dir = tempfile::tempdir().unwrap();
+    write_known_scene(dir.path());
+    read_blender(dir.path(), Vec3::ZERO).unwrap()
+}
+
 /// The pose read back equals the one written, up to the f32 round trip through the file.
 fn assert_same_pose(got: &Camera, want: &Camera) {
     let close = |a: &[f32], b: &[f32]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-4);
@@ -207,9 +214,7 @@ fn three_dgs_fits_a_blender_dataset_of_a_known_scene() {
 #[test]
 fn linprim_fits_the_known_scene() {
     use splat_methods::linprim;
-    let dir = tempfile::tempdir().unwrap();
-    write_known_scene(dir.path());
-    let data = read_blender(dir.path(), Vec3::ZERO).unwrap();
+    let data = known_dataset();
     let mut params = moved_start::<linprim::Method>(&truth());
     let opts = options(300);
     let before = evaluate::<linprim::Method>(&params, &data.test, &opts).unwrap();
@@ -579,10 +584,8 @@ fn density_control_clones_splits_prunes_and_resets_as_3dgs_does() {
 /// held-out views come out clearly better than the same run with a fixed count.
 #[test]
 fn density_control_beats_a_fixed_count_from_a_sparse_start() {
-    let dir = tempfile::tempdir().unwrap();
     let scene = truth();
-    write_known_scene(dir.path());
-    let data = read_blender(dir.path(), Vec3::ZERO).unwrap();
+    let data = known_dataset();
     let start: Vec<Params> = scene
         .iter()
         .step_by(8)
@@ -765,9 +768,7 @@ fn test_mcmc() -> Strategy {
 #[test]
 fn mcmc_fits_the_known_scene_from_random_points() {
     use splat_runtime::train::McmcOptions;
-    let dir = tempfile::tempdir().unwrap();
-    write_known_scene(dir.path());
-    let data = read_blender(dir.path(), Vec3::ZERO).unwrap();
+    let data = known_dataset();
     let mut params = random_start();
     McmcOptions::prepare::<Method>(&mut params);
     let opts = FitOptions {
@@ -799,10 +800,8 @@ fn mcmc_fits_the_known_scene_from_random_points() {
 /// batch) reach the held-out PSNR of 400 single views, on both backends alike.
 #[test]
 fn batches_of_views_train_like_single_views_on_both_loops() {
-    let dir = tempfile::tempdir().unwrap();
     let scene = truth();
-    write_known_scene(dir.path());
-    let data = read_blender(dir.path(), Vec3::ZERO).unwrap();
+    let data = known_dataset();
     let start = moved_start::<Method>(&scene);
     let mcmc = Strategy::Mcmc(splat_runtime::train::McmcOptions {
         start: 1000,
@@ -867,10 +866,8 @@ fn the_gpu_loop_trains_like_the_cpu_loop() {
         return;
     };
     use splat_runtime::train::gpu_fit::fit_gpu;
-    let dir = tempfile::tempdir().unwrap();
     let scene = truth();
-    write_known_scene(dir.path());
-    let data = read_blender(dir.path(), Vec3::ZERO).unwrap();
+    let data = known_dataset();
 
     let opts = FitOptions {
         densify: None,
@@ -951,9 +948,7 @@ fn non_finite_gradients_are_named_and_skipped() {
     use splat_methods::geer;
     use splat_runtime::train::gpu_fit::fit_gpu;
     use splat_runtime::{Flat, param_group};
-    let dir = tempfile::tempdir().unwrap();
-    write_known_scene(dir.path());
-    let data = read_blender(dir.path(), Vec3::ZERO).unwrap();
+    let data = known_dataset();
     let opts = FitOptions {
         densify: None,
         ..options(40)
@@ -1022,9 +1017,7 @@ fn non_finite_gradients_are_named_and_skipped() {
 fn frozen_groups_stay_as_they_start() {
     use splat_runtime::GradientSet;
     use splat_runtime::train::gpu_fit::fit_gpu;
-    let dir = tempfile::tempdir().unwrap();
-    write_known_scene(dir.path());
-    let data = read_blender(dir.path(), Vec3::ZERO).unwrap();
+    let data = known_dataset();
     let colors = GradientSet::params::<Method>(&["opacity_logit", "sh"]).unwrap();
     let opts = FitOptions {
         densify: None,
@@ -1301,9 +1294,7 @@ fn the_gpu_loop_resumes_from_its_checkpoint() {
         return;
     };
     use splat_runtime::train::gpu_fit::fit_gpu_from;
-    let dir = tempfile::tempdir().unwrap();
-    write_known_scene(dir.path());
-    let data = read_blender(dir.path(), Vec3::ZERO).unwrap();
+    let data = known_dataset();
     let opts = resumable_options();
     let start = moved_start::<Method>(&truth());
     let mut whole = Checkpoint::start::<Method>(&start, opts.steps, opts.seed);

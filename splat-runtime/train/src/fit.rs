@@ -22,16 +22,41 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
-/// Each word's rate at `step` of `steps` as Adam takes it (on both backends): negative for a
-/// word not trained yet, which then neither moves nor gathers moments (they start from zero).
-pub(crate) fn step_rates(rates: &[Rate], step: usize, steps: usize) -> Vec<f32> {
+/// Each word's rate for `batch` (at its first step) of `steps` as Adam takes it (on both
+/// backends), times the batch's `scale` ([`Scaling::learning_rate`]): negative for a word not
+/// trained yet, which then neither moves nor gathers moments (they start from zero).
+pub(crate) fn step_rates(rates: &[Rate], batch: Batch, steps: usize, scale: f32) -> Vec<f32> {
+    let step = batch.first;
     rates
         .iter()
         .map(|r| match step < r.from_step {
             true => -1.0,
-            false => r.at(step, steps),
+            false => r.at(step, steps) * scale,
         })
         .collect()
+}
+
+/// The training views of `batch`, drawn at random (their indices), each with its background
+/// ([`step_background`]): the same draws on every rank and on both backends.
+pub(crate) fn draw_views(
+    data: &Dataset,
+    batch: Batch,
+    opts: &FitOptions,
+    rng: &mut fastrand::Rng,
+) -> Vec<(usize, Vec3)> {
+    (batch.steps())
+        .map(|_| {
+            let k = rng.usize(..data.train.len());
+            (k, step_background(opts, rng))
+        })
+        .collect()
+}
+
+/// Whether the run ends after this batch: `asked` (some rank was asked to stop before the
+/// batch's gather: every rank then ends after it), or alone, a request during the batch's
+/// evaluation.
+pub(crate) fn stops_after(team: &dyn Team, asked: bool, opts: &FitOptions) -> bool {
+    asked || (team.ranks() == 1 && opts.stop_requested())
 }
 
 #[derive(Clone, Debug)]
@@ -372,11 +397,8 @@ pub fn fit_shared<M: Trainable>(
     };
     for batch in batches(state.step, opts.steps, opts.batch) {
         let started = Instant::now();
-        let draws: Vec<(&View, Vec3)> = (batch.steps())
-            .map(|_| {
-                let view = &data.train[rng.usize(..data.train.len())];
-                (view, step_background(opts, &mut rng))
-            })
+        let draws: Vec<(&View, Vec3)> = (draw_views(data, batch, opts, &mut rng).into_iter())
+            .map(|(k, background)| (&data.train[k], background))
             .collect();
         let observing = densifier
             .as_ref()
@@ -418,15 +440,7 @@ pub fn fit_shared<M: Trainable>(
         if let Some(m) = &mcmc {
             m.regularize(&flat, &mut grads, words, batch.len);
         }
-        let lr: Vec<f32> = (step_rates(&rates, batch.first, opts.steps).into_iter())
-            .map(|r| {
-                if r < 0.0 {
-                    r
-                } else {
-                    r * scaling.learning_rate
-                }
-            })
-            .collect();
+        let lr = step_rates(&rates, batch, opts.steps, scaling.learning_rate);
         let faults = adam.step(&mut flat, &grads, &lr);
         times.optimizer = clock.elapsed();
         let mut refinement = None;
@@ -477,9 +491,7 @@ pub fn fit_shared<M: Trainable>(
             false => None,
         };
         times.evaluation = clock.elapsed();
-        // Ranks end after the batch where one was asked to; alone, a request during this
-        // batch's evaluation ends it too.
-        let stops = asked_to_stop || (team.ranks() == 1 && opts.stop_requested());
+        let stops = stops_after(team, asked_to_stop, opts);
         let save = saves_at(opts, batch, stops);
         if save || ends_after(opts, batch, stops) {
             state.step = batch.last() + 1;

@@ -12,8 +12,8 @@ use super::batch::{Scaling, batches};
 use super::checkpoint::Checkpoint;
 use super::densify::Densifier;
 use super::fit::{
-    Evaluation, FitError, FitOptions, StepReport, adopt, after_every, composite, ends_after,
-    for_training, rates_for, saves_at, step_background, step_rates,
+    Evaluation, FitError, FitOptions, StepReport, adopt, after_every, composite, draw_views,
+    ends_after, for_training, rates_for, saves_at, step_rates, stops_after,
 };
 use super::loss::LossValue;
 use super::step_times::StepTimes;
@@ -145,21 +145,8 @@ pub fn fit_gpu_shared<M: Trainable>(
     let mut rng = fastrand::Rng::with_seed(state.rng);
     for batch in batches(state.step, opts.steps, opts.batch) {
         let started = Instant::now();
-        let draws: Vec<(usize, Vec3)> = (batch.steps())
-            .map(|_| {
-                let k = rng.usize(..data.train.len());
-                (k, step_background(opts, &mut rng))
-            })
-            .collect();
-        let lr: Vec<f32> = (step_rates(&rates, batch.first, opts.steps).into_iter())
-            .map(|r| {
-                if r < 0.0 {
-                    r
-                } else {
-                    r * scaling.learning_rate
-                }
-            })
-            .collect();
+        let draws = draw_views(data, batch, opts, &mut rng);
+        let lr = step_rates(&rates, batch, opts.steps, scaling.learning_rate);
         let observing = densifier
             .as_ref()
             .is_some_and(|d| batch.first < d.opts.stop);
@@ -239,9 +226,7 @@ pub fn fit_gpu_shared<M: Trainable>(
             false => None,
         };
         times.evaluation = clock.elapsed();
-        // Ranks end after the batch where one was asked to; alone, a request during this
-        // batch's evaluation ends it too.
-        let stops = asked_to_stop || (team.ranks() == 1 && opts.stop_requested());
+        let stops = stops_after(team, asked_to_stop, opts);
         let save = saves_at(opts, batch, stops);
         if save || ends_after(opts, batch, stops) {
             let n = scene.len();

@@ -189,20 +189,14 @@ struct Reader<'a> {
 
 impl Reader<'_> {
     fn take<const N: usize>(&mut self) -> Result<[u8; N], String> {
-        let end = self.at + N;
-        let got = (self.bytes.get(self.at..end)).ok_or_else(|| {
-            format!(
-                "the passes end at byte {} of {N} more",
-                self.bytes.len().min(self.at)
-            )
-        })?;
-        self.at = end;
-        Ok(got.try_into().expect("N bytes"))
+        self.slice(N).map(|b| b.try_into().expect("N bytes"))
     }
 
+    /// The next `n` bytes.
     fn slice(&mut self, n: usize) -> Result<&[u8], String> {
+        let left = self.bytes.len() - self.at;
         let got = (self.bytes.get(self.at..self.at + n))
-            .ok_or_else(|| format!("the passes end at byte {} of {n} more", self.bytes.len()))?;
+            .ok_or_else(|| format!("the passes end {left} bytes on, short of {n} more"))?;
         self.at += n;
         Ok(got)
     }
