@@ -101,7 +101,7 @@ fn write_split(dir: &Path, name: &str, scene: &[Params], eyes: &[Vec3]) -> Vec<C
     cams
 }
 
-fn truth() -> Vec<Params> {
+pub(crate) fn truth() -> Vec<Params> {
     let mut rng = fastrand::Rng::with_seed(8);
     // Placed through a camera at the origin looking down +z, then moved to the origin.
     let cam = crate::common::camera(SIZE, SIZE);
@@ -130,7 +130,7 @@ fn write_known_scene(dir: &Path) -> Vec<Camera> {
 }
 
 /// The known scene's dataset ([`write_known_scene`]) read back, composited on black.
-fn known_dataset() -> Dataset {
+pub(crate) fn known_dataset() -> Dataset {
     let dir = tempfile::tempdir().unwrap();
     write_known_scene(dir.path());
     read_blender(dir.path(), Vec3::ZERO).unwrap()
@@ -156,7 +156,7 @@ fn moved_start<M: Trainable>(truth: &[Params]) -> Vec<M::Params> {
 }
 
 /// `steps` steps at tile 8 (the test images are 40 x 40).
-fn options(steps: usize) -> FitOptions {
+pub(crate) fn options(steps: usize) -> FitOptions {
     FitOptions {
         steps,
         render: RenderOptions {

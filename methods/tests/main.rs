@@ -23,6 +23,7 @@ mod linprim;
 mod precision;
 mod reference;
 mod rolling_shutter;
+mod sharded;
 mod slices;
 mod suite;
 mod variants;

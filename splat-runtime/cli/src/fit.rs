@@ -24,6 +24,7 @@ use splat_runtime::train::fit::{
 };
 use splat_runtime::train::gpu_fit::{fit_gpu_shared, render_views_gpu};
 use splat_runtime::train::loss::LossValue;
+use splat_runtime::train::sharded::fit_sharded;
 use splat_runtime::train::{Checkpoint, McmcOptions, StepTimes, Strategy, Trainable, init};
 use splat_runtime::{Effects, Flat, GradientSet, Image, RenderOptions, param_groups};
 use std::collections::BTreeMap;
@@ -52,6 +53,14 @@ pub struct FitArgs {
     /// `mpirun` the ranks share each batch's views (docs/distributed.md).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=4096))]
     pub(crate) batch: u32,
+    /// Under `mpirun`, each rank holds a slice of the scene (its primitives, their Adam
+    /// moments and density statistics) instead of all of it, and the ranks exchange each
+    /// view's visible primitives and their gradients: for scenes past one process's memory.
+    /// The same steps as the ranks sharing the views with the whole scene each (bit for bit at
+    /// the same thread count per rank). On the CPU (with --backend auto too), with --strategy
+    /// adc or fixed, without --view (docs/distributed.md).
+    #[arg(long)]
+    pub(crate) sharded: bool,
     /// How many points to start from: at most this many of the dataset's points (evenly
     /// spaced), or as many random ones in a cube around the cameras' target when it has none
     /// (Blender and nerfstudio scenes) [default: 100000; 2000 on the built-in dataset].
@@ -240,8 +249,10 @@ impl Fit<'_> {
             None => render_views::<M>(params, &data.test, opts),
         };
         let (mut state, log) = self.begin::<M>(opts, &test_images)?;
-        // The other ranks start from this state, bit for bit.
-        ranks.broadcast(Some(state.to_bytes()?))?;
+        // The other ranks start from this state, bit for bit (each its slice, when sharded).
+        if !args.sharded {
+            ranks.broadcast(Some(state.to_bytes()?))?;
+        }
         // The cap bounds growth (as gsplat's): a start above it is kept, and ADC may prune it
         // below; MCMC never removes primitives.
         if let Some(cap) = opts.densify.as_ref().map(Strategy::max_primitives)
@@ -280,7 +291,8 @@ impl Fit<'_> {
                 page.step::<M>(r, &|| opts.stop_requested());
             }
         };
-        let place = std::thread::scope(|scope| {
+        let mut peaks = vec![];
+        let place = std::thread::scope(|scope| -> Result<String> {
             if let Some(page) = &page {
                 scope.spawn(|| {
                     page.serve()
@@ -290,18 +302,28 @@ impl Fit<'_> {
             let trained = match &gpu {
                 Some(gpu) => {
                     let team = ranks.team();
-                    fit_gpu_shared::<M>(team, gpu, data, &mut state, self.extent, opts, report).map(
-                        |()| match ranks.count() {
+                    fit_gpu_shared::<M>(team, gpu, data, &mut state, self.extent, opts, report)
+                        .map(|()| match ranks.count() {
                             1 => format!("the GPU ({})", gpu.adapter),
                             n => format!("the GPUs of {n} MPI ranks (rank 0: {})", gpu.adapter),
-                        },
-                    )
+                        })
+                        .map_err(Into::into)
                 }
+                None if args.sharded => (|| {
+                    let team = ranks.team();
+                    fit_sharded::<M>(team, data, &mut state, self.extent, opts, report)?;
+                    peaks = peak_memory(ranks)?;
+                    Ok(format!(
+                        "the CPUs of {} MPI ranks, each with a slice of the scene",
+                        ranks.count()
+                    ))
+                })(),
                 None => fit_shared::<M>(ranks.team(), data, &mut state, self.extent, opts, report)
                     .map(|()| match ranks.count() {
                         1 => "the CPU".to_string(),
                         n => format!("the CPUs of {n} MPI ranks"),
-                    }),
+                    })
+                    .map_err(Into::into),
             };
             if let Some(page) = &page {
                 page.close();
@@ -394,6 +416,16 @@ impl Fit<'_> {
                 per(t.received)
             );
         }
+        if !peaks.is_empty() {
+            let peaks: Vec<String> = (peaks.iter())
+                .map(|p| p.map_or("?".into(), |b| format!("{:.0}", b as f64 / 1e6)))
+                .collect();
+            println!(
+                "each rank held 1/{} of the scene and its moments; peak resident memory by rank: {} MB",
+                ranks.count(),
+                peaks.join(", ")
+            );
+        }
         let antialiased = methods::find(self.methods, &args.method)?.antialiased;
         let cloud = GaussianCloud {
             antialiased,
@@ -405,15 +437,26 @@ impl Fit<'_> {
     /// A rank past 0 under MPI: the same steps as rank 0, from the state it hands over,
     /// printing and writing nothing.
     fn train_beside_root<M: Trainable>(&self, opts: &FitOptions) -> Result<()> {
+        let listening = crate::interrupt::listen();
+        let team = self.ranks.team();
+        if self.args.sharded {
+            // Its slice comes from rank 0; the evaluations take every slice.
+            let opts = FitOptions {
+                stop: listening.as_ref().map(Listening::flag),
+                ..opts.clone()
+            };
+            let mut slice = Checkpoint::start::<M>(&[], opts.steps, opts.seed);
+            fit_sharded::<M>(team, self.data, &mut slice, self.extent, &opts, |_| {})?;
+            peak_memory(self.ranks)?;
+            return Ok(());
+        }
         let path = self.args.out.join(CHECKPOINT);
         let mut state = Checkpoint::parse(&self.ranks.broadcast(None)?, &path)?;
-        let listening = crate::interrupt::listen();
         let opts = FitOptions {
             eval_every: None,
             stop: listening.as_ref().map(Listening::flag),
             ..opts.clone()
         };
-        let team = self.ranks.team();
         match &self.gpu {
             Some(gpu) => {
                 let data = self.data;
@@ -890,4 +933,15 @@ impl Log {
             Ok(())
         })
     }
+}
+
+/// Every rank's peak resident memory (`None` where the system does not say), in rank order.
+fn peak_memory(ranks: &Ranks) -> Result<Vec<Option<u64>>> {
+    let mine = memory::peak_resident().unwrap_or(u64::MAX).to_le_bytes();
+    (ranks.team().all_gather(mine.to_vec())?.iter())
+        .map(|b| {
+            let peak = u64::from_le_bytes(b.as_slice().try_into()?);
+            Ok((peak != u64::MAX).then_some(peak))
+        })
+        .collect()
 }

@@ -167,6 +167,15 @@ pub fn available() -> Option<u64> {
     Some(cgroup_room().map_or(system, |room| room.min(system)))
 }
 
+/// This process's peak resident memory so far, in bytes (`VmHWM`); `None` where the system
+/// does not say (not Linux).
+pub fn peak_resident() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find_map(|l| l.strip_prefix("VmHWM:"))?;
+    let kilobytes: u64 = line.trim().strip_suffix("kB")?.trim().parse().ok()?;
+    Some(kilobytes * 1024)
+}
+
 /// The least room this process's control groups leave under their memory limits (cgroup v2,
 /// or v1's memory controller); `None` where none sets one.
 fn cgroup_room() -> Option<u64> {

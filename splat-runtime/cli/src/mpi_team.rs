@@ -4,7 +4,7 @@
 
 use crate::ranks::Traffic;
 use anyhow::{Result, anyhow};
-use mpi::datatype::PartitionMut;
+use mpi::datatype::{Partition, PartitionMut};
 use mpi::environment::Universe;
 use mpi::topology::{Communicator, SimpleCommunicator};
 use mpi::traits::*;
@@ -45,34 +45,29 @@ impl MpiTeam {
         let len = mine.len() as u64;
         let mut lens = vec![0u64; self.ranks];
         self.world.all_gather_into(&len, &mut lens[..]);
-        let words = |n: u64| n.div_ceil(8);
-        let counts: Vec<i32> = (lens.iter())
-            .map(|&n| i32::try_from(words(n)))
-            .collect::<Result<_, _>>()
-            .map_err(|_| {
-                "a rank's share of the batch passes MPI's 16 GiB per message".to_string()
-            })?;
-        let displs: Vec<i32> = (counts.iter())
-            .scan(0i64, |at, &c| {
-                let d = *at;
-                *at += c as i64;
-                Some(i32::try_from(d))
-            })
-            .collect::<Result<_, _>>()
-            .map_err(|_| "the batch's shares pass MPI's 16 GiB per gather".to_string())?;
-        // The bytes as they are, in words (MPI's ranks here share one architecture).
-        let mut send = vec![0u64; words(len) as usize];
-        bytemuck::cast_slice_mut::<u64, u8>(&mut send)[..mine.len()].copy_from_slice(mine);
-        let total = counts.iter().map(|&c| c as usize).sum();
-        let mut recv = vec![0u64; total];
+        let (counts, displs) = layout(&lens)?;
+        let send = in_words(&[mine], &[0]);
+        let mut recv = vec![0u64; total(&counts)];
         let mut parts = PartitionMut::new(&mut recv[..], &counts[..], &displs[..]);
         self.world.all_gather_varcount_into(&send[..], &mut parts);
-        Ok((lens.iter().zip(&displs))
-            .map(|(&n, &d)| {
-                let words = &recv[d as usize..d as usize + words(n) as usize];
-                bytemuck::cast_slice::<u64, u8>(words)[..n as usize].to_vec()
-            })
-            .collect())
+        Ok(from_words(&recv, &lens, &displs))
+    }
+
+    /// What every rank sent this one, given what this one sends each: the sizes first
+    /// (`MPI_Alltoall`), then the bytes in 8-byte words (`MPI_Alltoallv`).
+    fn exchange_each(&self, to_each: &[Vec<u8>]) -> Result<Vec<Vec<u8>>, String> {
+        let lens: Vec<u64> = to_each.iter().map(|b| b.len() as u64).collect();
+        let mut got = vec![0u64; self.ranks];
+        self.world.all_to_all_into(&lens[..], &mut got[..]);
+        let (send_counts, send_displs) = layout(&lens)?;
+        let (recv_counts, recv_displs) = layout(&got)?;
+        let parts: Vec<&[u8]> = to_each.iter().map(Vec::as_slice).collect();
+        let send = in_words(&parts, &send_displs);
+        let mut recv = vec![0u64; total(&recv_counts)];
+        let sent = Partition::new(&send[..], &send_counts[..], &send_displs[..]);
+        let mut parts = PartitionMut::new(&mut recv[..], &recv_counts[..], &recv_displs[..]);
+        self.world.all_to_all_varcount_into(&sent, &mut parts);
+        Ok(from_words(&recv, &got, &recv_displs))
     }
 
     /// Rank 0's `bytes` on every rank.
@@ -129,6 +124,29 @@ impl Team for MpiTeam {
         self.ranks
     }
 
+    fn all_to_all(&self, to_each: Vec<Vec<u8>>) -> Result<Vec<Vec<u8>>, FitError> {
+        if to_each.len() != self.ranks {
+            return Err(FitError::Unsupported(format!(
+                "{} messages for {} ranks",
+                to_each.len(),
+                self.ranks
+            )));
+        }
+        let all = self
+            .exchange_each(&to_each)
+            .map_err(FitError::Unsupported)?;
+        let others = |parts: &[Vec<u8>]| {
+            let all: usize = parts.iter().map(Vec::len).sum();
+            (all - parts[self.rank].len()) as u64
+        };
+        let t = self.traffic.get();
+        self.traffic.set(Traffic {
+            sent: t.sent + others(&to_each),
+            received: t.received + others(&all),
+        });
+        Ok(all)
+    }
+
     fn all_gather(&self, mine: Vec<u8>) -> Result<Vec<Vec<u8>>, FitError> {
         let all = self.exchange(&mine).map_err(FitError::Unsupported)?;
         let t = self.traffic.get();
@@ -140,6 +158,58 @@ impl Team for MpiTeam {
         });
         Ok(all)
     }
+}
+
+/// Bytes as 8-byte words: a part of `n` bytes takes `n.div_ceil(8)`.
+fn words(n: u64) -> u64 {
+    n.div_ceil(8)
+}
+
+/// The counts and displacements, in words, of parts of `lens` bytes laid one after another,
+/// as MPI takes them (32-bit: up to 16 GiB in all).
+fn layout(lens: &[u64]) -> Result<(Vec<i32>, Vec<i32>), String> {
+    let too_big = || "the ranks' messages pass MPI's 16 GiB per exchange".to_string();
+    let counts: Vec<i32> = (lens.iter())
+        .map(|&n| i32::try_from(words(n)))
+        .collect::<Result<_, _>>()
+        .map_err(|_| too_big())?;
+    let displs: Vec<i32> = (counts.iter())
+        .scan(0i64, |at, &c| {
+            let d = *at;
+            *at += c as i64;
+            Some(i32::try_from(d))
+        })
+        .collect::<Result<_, _>>()
+        .map_err(|_| too_big())?;
+    Ok((counts, displs))
+}
+
+fn total(counts: &[i32]) -> usize {
+    counts.iter().map(|&c| c as usize).sum()
+}
+
+/// `parts` copied into words at `displs` (MPI's ranks here share one architecture, so the
+/// bytes travel as they are).
+fn in_words(parts: &[&[u8]], displs: &[i32]) -> Vec<u64> {
+    let len = (parts.iter().zip(displs))
+        .map(|(p, &d)| d as u64 + words(p.len() as u64))
+        .max()
+        .unwrap_or(0);
+    let mut out = vec![0u64; len as usize];
+    let bytes = bytemuck::cast_slice_mut::<u64, u8>(&mut out);
+    for (p, &d) in parts.iter().zip(displs) {
+        let at = 8 * d as usize;
+        bytes[at..at + p.len()].copy_from_slice(p);
+    }
+    out
+}
+
+/// The parts of `lens` bytes at `displs` words in `words`.
+fn from_words(words: &[u64], lens: &[u64], displs: &[i32]) -> Vec<Vec<u8>> {
+    let bytes = bytemuck::cast_slice::<u64, u8>(words);
+    (lens.iter().zip(displs))
+        .map(|(&n, &d)| bytes[8 * d as usize..][..n as usize].to_vec())
+        .collect()
 }
 
 /// Points standard output at /dev/null: the ranks past 0 print nothing but their errors.

@@ -150,6 +150,24 @@ pub fn render_records_for_backward<M: SplatMethod>(
     camera: &Camera,
     opts: &RenderOptions,
 ) -> Result<(Frame, ForwardState<M>), RenderError> {
+    records_forward::<M>(records, camera, opts, true).map(|(f, s)| (f, s.expect("state kept")))
+}
+
+/// [`render_records_for_backward`]'s frame alone.
+pub fn render_records<M: SplatMethod>(
+    records: Vec<Projected<M::Cull, M::Shade>>,
+    camera: &Camera,
+    opts: &RenderOptions,
+) -> Result<Frame, RenderError> {
+    records_forward::<M>(records, camera, opts, false).map(|(f, _)| f)
+}
+
+fn records_forward<M: SplatMethod>(
+    records: Vec<Projected<M::Cull, M::Shade>>,
+    camera: &Camera,
+    opts: &RenderOptions,
+    keep: bool,
+) -> Result<(Frame, Option<ForwardState<M>>), RenderError> {
     let grid = check::<M>(camera, opts)?;
     let t0 = Instant::now();
     let pre = preprocess::from_records::<M>(records, &grid, opts.shade_precision);
@@ -159,7 +177,7 @@ pub fn render_records_for_backward<M: SplatMethod>(
         preprocess: t0.elapsed(),
         ..Stats::default()
     };
-    blend_projected(pre, grid, camera, opts, true, stats).map(|(f, s)| (f, s.expect("state kept")))
+    blend_projected(pre, grid, camera, opts, keep, stats)
 }
 
 /// Stages 2 and 3 from `pre`: the tile lists and the blend.

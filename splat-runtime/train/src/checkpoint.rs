@@ -120,6 +120,75 @@ impl Checkpoint {
         self.params.len() / self.words.max(1)
     }
 
+    /// Primitives `range` of this state, with their moments and statistics, the rest as it
+    /// is: what one rank of a sharded run holds ([`super::sharded`]).
+    pub fn slice(&self, range: std::ops::Range<usize>) -> Checkpoint {
+        let words = range.start * self.words..range.end * self.words;
+        // Statistics are per primitive, or none at all.
+        fn part<T: Copy>(v: &[T], range: &std::ops::Range<usize>) -> Vec<T> {
+            v.get(range.clone()).map_or_else(Vec::new, <[T]>::to_vec)
+        }
+        Checkpoint {
+            params: self.params[words.clone()].to_vec(),
+            adam: AdamState {
+                step: self.adam.step,
+                m: self.adam.m[words.clone()].to_vec(),
+                v: self.adam.v[words].to_vec(),
+            },
+            grad2d: part(&self.grad2d, &range),
+            seen: part(&self.seen, &range),
+            ..self.clone_head()
+        }
+    }
+
+    /// Slices of one state ([`Checkpoint::slice`]) put back together in order, the rest as
+    /// the first has it (`None` for no slices).
+    pub fn join(parts: Vec<Checkpoint>) -> Option<Checkpoint> {
+        let mut whole = parts.first()?.clone_head();
+        let stats = parts.iter().any(|p| !p.grad2d.is_empty());
+        for p in parts {
+            let n = p.primitives();
+            whole.params.extend(p.params);
+            whole.adam.m.extend(p.adam.m);
+            whole.adam.v.extend(p.adam.v);
+            match (stats, p.grad2d.is_empty()) {
+                (true, true) => {
+                    whole.grad2d.extend(std::iter::repeat_n(0.0, n));
+                    whole.seen.extend(std::iter::repeat_n(0, n));
+                }
+                (true, false) => {
+                    whole.grad2d.extend(p.grad2d);
+                    whole.seen.extend(p.seen);
+                }
+                (false, _) => {}
+            }
+        }
+        Some(whole)
+    }
+
+    /// Everything but the primitives' words, moments and statistics.
+    pub fn clone_head(&self) -> Checkpoint {
+        Checkpoint {
+            method: self.method.clone(),
+            words: self.words,
+            strategy: self.strategy.clone(),
+            settings: self.settings.clone(),
+            step: self.step,
+            steps: self.steps,
+            params: vec![],
+            adam: AdamState {
+                step: self.adam.step,
+                m: vec![],
+                v: vec![],
+            },
+            grad2d: vec![],
+            seen: vec![],
+            rng: self.rng,
+            extent: self.extent,
+            views: self.views,
+        }
+    }
+
     /// What makes this state no run's (its fields are public, so a caller can build one):
     /// parameters that are not whole primitives, moments or statistics of another size, a
     /// step past the run's end. `read` refuses a file that holds such a state.

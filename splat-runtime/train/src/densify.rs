@@ -7,6 +7,7 @@
 //! It reads a method's primitives through [`Trainable::shape`], so any method whose primitives
 //! have a position, an oriented scale and an opacity densifies without code of its own.
 
+use super::mcmc::hashed_normal3;
 use super::trainable::{Shape, Trainable};
 use glam::{Vec2, Vec3};
 use splat_core::flat::{Flat, flatten};
@@ -173,11 +174,37 @@ impl Densifier {
         extent: f32,
         rng: &mut fastrand::Rng,
     ) -> Refinement {
+        // Each growth adds one primitive: where the cap leaves room for fewer than pass the
+        // threshold, it is spent where the image asks most, not on whichever come first.
+        let room = self.opts.max_primitives.saturating_sub(params.len());
+        let mut grows = vec![false; params.len()];
+        for i in strongest(self.pulls(), room) {
+            grows[i] = true;
+        }
+        let draws = Draws {
+            seed: rng.u32(..),
+            first: 0,
+        };
+        self.refine_growing::<M>(params, &grows, step, extent, draws)
+    }
+
+    /// [`Densifier::refine`] growing the primitives `grows` says (a slice of a scene sharded
+    /// among processes: chosen from the whole scene's pulls, [`Densifier::pulls`]), its
+    /// splits drawn from `draws`. New primitives take their origin's place in the order (a
+    /// copy right after it, a split's two in its place), so slices refined apart and put
+    /// back together in order are the whole scene refined.
+    pub fn refine_growing<M: Trainable>(
+        &mut self,
+        params: &mut Vec<M::Params>,
+        grows: &[bool],
+        step: usize,
+        extent: f32,
+        draws: Draws,
+    ) -> Refinement {
         let o = self.opts.clone();
         let n = params.len();
         let mut r = Refinement::default();
         let mut grown: Vec<(M::Params, Option<usize>)> = Vec::with_capacity(n);
-        let grows = self.strongest_pulls(o.grow_grad2d, o.max_primitives.saturating_sub(n));
         for (i, p) in params.iter().enumerate() {
             let shape = M::shape(p);
             let small = shape.scale.max_element() <= o.grow_scale3d * extent;
@@ -191,8 +218,8 @@ impl Densifier {
                 }
                 // Large: two smaller ones drawn from it, in its place.
                 (true, false) => {
-                    for _ in 0..2 {
-                        let local = shape.scale * normal3(rng);
+                    for child in 0..2 {
+                        let local = shape.scale * draws.normal3(i, child);
                         let child = Shape {
                             position: shape.position + shape.rotation * local,
                             scale: shape.scale / 1.6,
@@ -221,25 +248,15 @@ impl Densifier {
         r
     }
 
-    /// Which primitives grow: those whose mean screen-space gradient passes `threshold`, and
-    /// when there is room for fewer than that (each growth adds one primitive), the `room`
-    /// most strongly pulled of them, so that a cap on the count spends it where the image
-    /// asks most, not on whichever primitives come first.
-    fn strongest_pulls(&self, threshold: f32, room: usize) -> Vec<bool> {
+    /// The primitives whose mean screen-space gradient passes the growth threshold, with that
+    /// mean: the candidates [`Densifier::refine`] grows (the strongest of them where the cap
+    /// leaves room for fewer).
+    pub fn pulls(&self) -> Vec<(usize, f32)> {
         let mean = |i: usize| self.grad2d[i] / self.count[i].max(1) as f32;
-        let mut pulled: Vec<usize> = (0..self.grad2d.len())
-            .filter(|&i| mean(i) > threshold)
-            .collect();
-        if pulled.len() > room {
-            // Ties go to the lower index, so that the choice is the same on every run.
-            pulled.sort_unstable_by(|&a, &b| mean(b).total_cmp(&mean(a)).then(a.cmp(&b)));
-            pulled.truncate(room);
-        }
-        let mut grows = vec![false; self.grad2d.len()];
-        for i in pulled {
-            grows[i] = true;
-        }
-        grows
+        (0..self.grad2d.len())
+            .map(|i| (i, mean(i)))
+            .filter(|&(_, m)| m > self.opts.grow_grad2d)
+            .collect()
     }
 
     /// Lowers every opacity above `2 * prune_opacity` to it.
@@ -272,11 +289,30 @@ impl Densifier {
     }
 }
 
-/// Three independent standard normal samples (Box-Muller).
-fn normal3(rng: &mut fastrand::Rng) -> Vec3 {
-    let mut normal = || {
-        let u = 1.0 - rng.f32(); // in (0, 1]: ln(u) is finite
-        (-2.0 * u.ln()).sqrt() * (std::f32::consts::TAU * rng.f32()).cos()
-    };
-    Vec3::new(normal(), normal(), normal())
+/// Of `pulled` (a primitive's place and its mean pull), the places of the `room` most
+/// strongly pulled, or all where there is room for all. Ties go to the earlier place, so
+/// that the choice is the same on every run.
+pub fn strongest(mut pulled: Vec<(usize, f32)>, room: usize) -> impl Iterator<Item = usize> {
+    if pulled.len() > room {
+        pulled.sort_unstable_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+        pulled.truncate(room);
+    }
+    pulled.into_iter().map(|(i, _)| i)
+}
+
+/// Where a refinement's splits draw their children's offsets: from a hash of the
+/// refinement's `seed` and the parent's place in the whole scene (`first` is the place of a
+/// slice's first primitive), so that a scene refined in slices draws what it draws whole.
+#[derive(Clone, Copy, Debug)]
+pub struct Draws {
+    pub seed: u32,
+    pub first: usize,
+}
+
+impl Draws {
+    /// Three standard normal samples for child `child` (0 or 1) of the slice's primitive `i`.
+    fn normal3(&self, i: usize, child: u32) -> Vec3 {
+        let place = (self.first + i) as u32;
+        hashed_normal3(self.seed, place.wrapping_mul(2).wrapping_add(child))
+    }
 }

@@ -15,7 +15,7 @@ use super::team::{Share, Solo, Team, ViewPass};
 use super::trainable::{Rate, Shape, Trainable};
 use glam::Vec3;
 use splat_core::flat::{Flat, flatten, read_all};
-use splat_core::frame::{FrameGrad, Image, RenderError, RenderOptions};
+use splat_core::frame::{Frame, FrameGrad, Image, RenderError, RenderOptions};
 use splat_core::method::{SplatMethod, param_groups, word_name};
 use splat_io::dataset::{Dataset, View};
 use std::sync::Arc;
@@ -546,20 +546,7 @@ fn view_pass<M: Trainable>(
     times.rasterize += frame.stats.rasterize;
     times.shade += frame.stats.shade;
     let clock = Instant::now();
-    let image = composite(frame.color, frame.alpha.as_ref(), background);
-    let (loss, d_color) =
-        loss::loss_and_gradient(&image, view.on_into(background, target), opts.ssim_weight)?;
-    // The background term (1 - alpha) b: its gradient flows into alpha.
-    let b = background.to_array();
-    let d_alpha = d_color
-        .chunks_exact(3)
-        .map(|g| -(g[0] * b[0] + g[1] * b[1] + g[2] * b[2]))
-        .collect();
-    let grad = FrameGrad {
-        color: d_color,
-        alpha: Some(d_alpha),
-        depth: None,
-    };
+    let (loss, grad) = frame_loss(frame, view, background, opts, target)?;
     times.loss += clock.elapsed();
     let g = splat_cpu::backward::<M>(&pass, params, camera, &grad)?;
     times.blend += g.stats.blend + g.stats.reduce;
@@ -585,6 +572,32 @@ fn view_pass<M: Trainable>(
         grads: flatten(&g.params),
         seen,
     })
+}
+
+/// The loss of `frame` (rendered on black) composited on `background` against `view`'s
+/// picture, and its gradient by the frame's color and alpha.
+pub(crate) fn frame_loss(
+    frame: Frame,
+    view: &View,
+    background: Vec3,
+    opts: &FitOptions,
+    target: &mut Image,
+) -> Result<(LossValue, FrameGrad), FitError> {
+    let image = composite(frame.color, frame.alpha.as_ref(), background);
+    let (loss, d_color) =
+        loss::loss_and_gradient(&image, view.on_into(background, target), opts.ssim_weight)?;
+    // The background term (1 - alpha) b: its gradient flows into alpha.
+    let b = background.to_array();
+    let d_alpha = d_color
+        .chunks_exact(3)
+        .map(|g| -(g[0] * b[0] + g[1] * b[1] + g[2] * b[2]))
+        .collect();
+    let grad = FrameGrad {
+        color: d_color,
+        alpha: Some(d_alpha),
+        depth: None,
+    };
+    Ok((loss, grad))
 }
 
 /// Makes `state` this run's: refuses a state of another method, run length or (once

@@ -19,6 +19,7 @@ pub mod init;
 pub mod like_3dgs;
 pub mod loss;
 pub mod mcmc;
+pub mod sharded;
 pub mod step_times;
 pub mod team;
 pub mod trainable;

@@ -36,6 +36,9 @@ pub trait Team {
     fn ranks(&self) -> usize;
     /// Every rank's `mine`, in rank order.
     fn all_gather(&self, mine: Vec<u8>) -> Result<Vec<Vec<u8>>, FitError>;
+    /// What every rank sent this one, in rank order, given what this one sends each
+    /// (`to_each[r]` goes to rank `r`; one per rank).
+    fn all_to_all(&self, to_each: Vec<Vec<u8>>) -> Result<Vec<Vec<u8>>, FitError>;
 
     /// Every rank's share of the batch, in rank order (and so their passes in view order),
     /// given this rank's.
@@ -67,6 +70,10 @@ impl Team for Solo {
 
     fn all_gather(&self, mine: Vec<u8>) -> Result<Vec<Vec<u8>>, FitError> {
         Ok(vec![mine])
+    }
+
+    fn all_to_all(&self, to_each: Vec<Vec<u8>>) -> Result<Vec<Vec<u8>>, FitError> {
+        Ok(to_each)
     }
 }
 
@@ -160,7 +167,7 @@ impl Share {
 
 /// 4-byte `words` (f32 or u32) appended to `out` little-endian: one copy on little-endian
 /// machines.
-fn put_words<T: bytemuck::Pod>(out: &mut Vec<u8>, words: &[T]) {
+pub(crate) fn put_words<T: bytemuck::Pod>(out: &mut Vec<u8>, words: &[T]) {
     debug_assert_eq!(std::mem::size_of::<T>(), 4);
     let bytes: &[u8] = bytemuck::cast_slice(words);
     match cfg!(target_endian = "little") {
@@ -170,7 +177,7 @@ fn put_words<T: bytemuck::Pod>(out: &mut Vec<u8>, words: &[T]) {
 }
 
 /// The 4-byte words [`put_words`] wrote (`bytes` a multiple of 4 long).
-fn get_words<T: bytemuck::Pod>(bytes: &[u8]) -> Vec<T> {
+pub(crate) fn get_words<T: bytemuck::Pod>(bytes: &[u8]) -> Vec<T> {
     debug_assert_eq!(std::mem::size_of::<T>(), 4);
     let mut words: Vec<T> = bytemuck::pod_collect_to_vec(bytes);
     if cfg!(target_endian = "big") {
@@ -182,18 +189,18 @@ fn get_words<T: bytemuck::Pod>(bytes: &[u8]) -> Vec<T> {
 }
 
 /// Little-endian reads that fail past the end instead of panicking.
-struct Reader<'a> {
-    bytes: &'a [u8],
-    at: usize,
+pub(crate) struct Reader<'a> {
+    pub bytes: &'a [u8],
+    pub at: usize,
 }
 
 impl Reader<'_> {
-    fn take<const N: usize>(&mut self) -> Result<[u8; N], String> {
+    pub(crate) fn take<const N: usize>(&mut self) -> Result<[u8; N], String> {
         self.slice(N).map(|b| b.try_into().expect("N bytes"))
     }
 
     /// The next `n` bytes.
-    fn slice(&mut self, n: usize) -> Result<&[u8], String> {
+    pub(crate) fn slice(&mut self, n: usize) -> Result<&[u8], String> {
         let left = self.bytes.len() - self.at;
         let got = (self.bytes.get(self.at..self.at + n))
             .ok_or_else(|| format!("the passes end {left} bytes on, short of {n} more"))?;
@@ -201,21 +208,21 @@ impl Reader<'_> {
         Ok(got)
     }
 
-    fn f64(&mut self) -> Result<f64, String> {
+    pub(crate) fn f64(&mut self) -> Result<f64, String> {
         self.take().map(f64::from_le_bytes)
     }
 
-    fn f32(&mut self) -> Result<f32, String> {
+    pub(crate) fn f32(&mut self) -> Result<f32, String> {
         self.take().map(f32::from_le_bytes)
     }
 
-    fn u32(&mut self) -> Result<u32, String> {
+    pub(crate) fn u32(&mut self) -> Result<u32, String> {
         self.take().map(u32::from_le_bytes)
     }
 
     /// A count of items of at least `item` bytes each, refused where the bytes left cannot
     /// hold that many (so a bad count allocates nothing).
-    fn len(&mut self, item: usize) -> Result<usize, String> {
+    pub(crate) fn len(&mut self, item: usize) -> Result<usize, String> {
         let n = u64::from_le_bytes(self.take()?);
         let left = (self.bytes.len() - self.at) as u64;
         match n.checked_mul(item as u64).is_some_and(|b| b <= left) {

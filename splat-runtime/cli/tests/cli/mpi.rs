@@ -62,6 +62,9 @@ fn same_files(a: &Path, b: &Path) {
     }
 }
 
+/// Both ways of sharing a run: ranks that each hold the whole scene and share each batch's
+/// views, and ranks that each hold a slice of the scene (`--sharded`) and exchange the views'
+/// visible primitives and their gradients.
 #[test]
 fn two_ranks_sharing_each_batch_train_the_scene_one_process_trains_bit_for_bit() {
     let dir = temp();
@@ -73,6 +76,20 @@ fn two_ranks_sharing_each_batch_train_the_scene_one_process_trains_bit_for_bit()
     same_files(&dir.path().join("one"), &dir.path().join("two"));
     assert!(two.contains("on the CPUs of 2 MPI ranks"), "{two}");
     assert!(two.contains("per batch"), "{two}");
+    let sharded = [&run("sharded")[..], &["--sharded"]].concat();
+    let sharded = ok(&mpirun(&[(2, &sharded)], dir.path())
+        .unwrap()
+        .output()
+        .unwrap());
+    same_files(&dir.path().join("one"), &dir.path().join("sharded"));
+    assert!(
+        sharded.contains("each with a slice of the scene"),
+        "{sharded}"
+    );
+    assert!(
+        sharded.contains("each rank held 1/2 of the scene"),
+        "{sharded}"
+    );
     // Density control acted on the gathered statistics.
     let primitives = fit_output(&dir.path().join("one"), 4, (112, 84))
         .scene
