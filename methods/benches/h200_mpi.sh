@@ -1,6 +1,7 @@
 #!/bin/bash
-# Issue 61 measured on the lent machine, as one device call: `splat fit` data parallel under
-# OpenMPI's mpirun, CPU ranks N = 1, 2, 4, 8 on its 16 cores (threads split among them), and
+# Issue 61 measured on the lent machine, as one device call: `splat fit` under OpenMPI's
+# mpirun, CPU ranks N = 1, 2, 4, 8 on its 16 cores (threads split among them; data parallel,
+# and from 2 ranks on sharded too), and
 # on the GPU two ranks sharing it against one process at the same batch (what the exchange
 # costs: each step's sum down, gathered through shared memory, the total up). Prepared here,
 # run there from the repository root with carry [".gl", ".dev"]:
@@ -54,6 +55,11 @@ for n in $RANKS; do
     limit 90 mpirun --oversubscribe --bind-to none -n $n -x RAYON_NUM_THREADS=$((CORES / n)) \
         $splat fit "$data" "${still[@]}" --backend cpu --steps $STEPS --batch 8 --out /tmp/cpu$n \
         | grep -E "steps|sent|\| (exchange|step) "
+    [ $n -gt 1 ] || continue
+    echo "--- $n ranks, $((CORES / n)) threads each, --sharded"
+    limit 90 mpirun --oversubscribe --bind-to none -n $n -x RAYON_NUM_THREADS=$((CORES / n)) \
+        $splat fit "$data" "${still[@]}" --backend cpu --steps $STEPS --batch 8 --sharded \
+        --out /tmp/sharded$n | grep -E "steps|sent|peak|\| (exchange|step) "
 done
 
 part "GPU: $GPU_STEPS views in batches of 2, one process against two ranks on the one GPU"

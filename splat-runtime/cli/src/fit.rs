@@ -313,10 +313,10 @@ impl Fit<'_> {
                     let team = ranks.team();
                     fit_sharded::<M>(team, data, &mut state, self.extent, opts, report)?;
                     peaks = peak_memory(ranks)?;
-                    Ok(format!(
-                        "the CPUs of {} MPI ranks, each with a slice of the scene",
-                        ranks.count()
-                    ))
+                    Ok(match ranks.count() {
+                        1 => "the CPU, the scene in one slice".to_string(),
+                        n => format!("the CPUs of {n} MPI ranks, each with a slice of the scene"),
+                    })
                 })(),
                 None => fit_shared::<M>(ranks.team(), data, &mut state, self.extent, opts, report)
                     .map(|()| match ranks.count() {
@@ -410,13 +410,17 @@ impl Fit<'_> {
             .filter(|_| ranks.count() > 1 && progress.batches > 0)
         {
             let per = |bytes: u64| bytes as f64 / progress.batches as f64 / 1e6;
+            let what = match args.sharded {
+                true => "the views' visible primitives and their gradients",
+                false => "the views' gradients and density statistics",
+            };
             println!(
-                "rank 0 sent {:.2} MB and received {:.2} MB per batch (the views' gradients and density statistics)",
+                "rank 0 sent {:.2} MB and received {:.2} MB per batch ({what})",
                 per(t.sent),
                 per(t.received)
             );
         }
-        if !peaks.is_empty() {
+        if peaks.len() > 1 {
             let peaks: Vec<String> = (peaks.iter())
                 .map(|p| p.map_or("?".into(), |b| format!("{:.0}", b as f64 / 1e6)))
                 .collect();
