@@ -388,13 +388,7 @@ pub fn fit_shared<M: Trainable>(
         .map(|d| Densifier::resume(d.clone(), params.len(), &state.grad2d, &state.seen));
     let mcmc = opts.mcmc::<M>()?;
     let mut rng = fastrand::Rng::with_seed(state.rng);
-    // The step's target, where a view does not hold it (8-bit views, another background).
-    let mut target = Image {
-        width: 0,
-        height: 0,
-        channels: 3,
-        data: vec![],
-    };
+    let mut target = no_target();
     for batch in batches(state.step, opts.steps, opts.batch) {
         let started = Instant::now();
         let draws: Vec<(&View, Vec3)> = (draw_views(data, batch, opts, &mut rng).into_iter())
@@ -477,11 +471,7 @@ pub fn fit_shared<M: Trainable>(
                 refinement = Some(r);
             }
             if batch.any(|s| d.resets_at(s)) {
-                d.reset_opacity::<M>(&mut params);
-                let after = flatten(&params);
-                // Only the words the reset moved (opacities) forget their moments.
-                adam.forget(|k| flat[k] != after[k]);
-                flat = after;
+                reset_opacities::<M>(d, &mut params, &mut flat, &mut adam);
             }
             times.densify = clock.elapsed();
         }
@@ -572,6 +562,31 @@ fn view_pass<M: Trainable>(
         grads: flatten(&g.params),
         seen,
     })
+}
+
+/// Room for a step's target, where a view does not hold it (8-bit views, another
+/// background): filled by [`View::on_into`].
+pub(crate) fn no_target() -> Image {
+    Image {
+        width: 0,
+        height: 0,
+        channels: 3,
+        data: vec![],
+    }
+}
+
+/// Density control's opacity reset on `params` (held as `flat` too), with Adam forgetting
+/// the moments of the words it moved (opacities) alone, as gsplat does.
+pub(crate) fn reset_opacities<M: Trainable>(
+    d: &Densifier,
+    params: &mut [M::Params],
+    flat: &mut Vec<f32>,
+    adam: &mut Adam,
+) {
+    d.reset_opacity::<M>(params);
+    let after = flatten(params);
+    adam.forget(|k| flat[k] != after[k]);
+    *flat = after;
 }
 
 /// The loss of `frame` (rendered on black) composited on `background` against `view`'s

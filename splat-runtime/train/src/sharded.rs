@@ -26,7 +26,8 @@ use super::checkpoint::Checkpoint;
 use super::densify::{Densifier, Draws, Refinement, screen_gradient, strongest};
 use super::fit::{
     Evaluation, FitError, FitOptions, StepReport, Strategy, adopt, after_every, composite,
-    draw_views, ends_after, for_training, frame_loss, rates_for, saves_at, step_rates, stops_after,
+    draw_views, ends_after, for_training, frame_loss, no_target, rates_for, reset_opacities,
+    saves_at, step_rates, stops_after,
 };
 use super::loss::{self, LossValue};
 use super::step_times::StepTimes;
@@ -64,12 +65,7 @@ pub fn fit_sharded<M: Trainable>(
     let mut slice = Slice::<M>::scatter(team, state, extent, data, opts)?;
     let render = for_training(&opts.render);
     let mut rng = fastrand::Rng::with_seed(slice.head.rng);
-    let mut target = Image {
-        width: 0,
-        height: 0,
-        channels: 3,
-        data: vec![],
-    };
+    let mut target = no_target();
     for batch in batches(slice.head.step, opts.steps, opts.batch) {
         let started = Instant::now();
         let mut times = StepTimes::default();
@@ -181,7 +177,8 @@ struct Slice<M: Trainable> {
     opts: FitOptions,
 }
 
-/// A few words that ranks exchange.
+/// How rank 0's first message to each rank begins: the rank's slice follows, or why the run
+/// cannot start.
 const STARTED: u8 = 0;
 const REFUSED: u8 = 1;
 
@@ -266,8 +263,9 @@ impl<M: Trainable> Slice<M> {
                 let (place, bytes) = bytes.split_at(16);
                 let first = u64::from_le_bytes(place[..8].try_into().expect("8 bytes"));
                 let total = u64::from_le_bytes(place[8..].try_into().expect("8 bytes"));
-                let part = Checkpoint::parse(bytes, Path::new(SLICE))
-                    .map_err(|e| FitError::Unsupported(e.to_string()))?;
+                let [part] = parse_slices(&[bytes.to_vec()])?
+                    .try_into()
+                    .expect("one part");
                 Ok(Slice::new(part, first as usize, total as usize, opts))
             }
             Some((&REFUSED, why)) => Err(FitError::Unsupported(format!(
@@ -379,11 +377,7 @@ impl<M: Trainable> Slice<M> {
             refinement = Some(r);
         }
         if batch.any(|s| d.resets_at(s)) {
-            d.reset_opacity::<M>(&mut self.params);
-            let after = flatten(&self.params);
-            // Only the words the reset moved (opacities) forget their moments.
-            self.adam.forget(|k| self.flat[k] != after[k]);
-            self.flat = after;
+            reset_opacities::<M>(d, &mut self.params, &mut self.flat, &mut self.adam);
         }
         Ok(refinement)
     }
@@ -412,10 +406,7 @@ impl<M: Trainable> Slice<M> {
                     .map_err(|e| FitError::Unsupported(format!("a slice's part: {e}")))
             })
             .collect::<Result<_, _>>()?;
-        let parts = (team.all_to_all(to_each)?.iter())
-            .map(|bytes| Checkpoint::parse(bytes, Path::new(SLICE)))
-            .collect::<Result<Vec<_>, _>>()
-            .map_err(|e| FitError::Unsupported(e.to_string()))?;
+        let parts = parse_slices(&team.all_to_all(to_each)?)?;
         let moved = Checkpoint::join(parts).unwrap_or_else(|| state.clone_head());
         if moved.primitives() != target.len() {
             return Err(FitError::Unsupported(format!(
@@ -440,11 +431,7 @@ impl<M: Trainable> Slice<M> {
         let Some(parts) = to_root(team, bytes)? else {
             return Ok(None);
         };
-        let parts = (parts.iter())
-            .map(|bytes| Checkpoint::parse(bytes, Path::new(SLICE)))
-            .collect::<Result<Vec<_>, _>>()
-            .map_err(|e| FitError::Unsupported(e.to_string()))?;
-        Ok(Checkpoint::join(parts))
+        Ok(Checkpoint::join(parse_slices(&parts)?))
     }
 }
 
@@ -603,6 +590,14 @@ fn read_gradients<M: Trainable>(
     let shade = get_words(r.slice(4 * n * M::Shade::LEN)?);
     let depth = get_words(r.slice(4 * n)?);
     Ok((LossValue { loss, l1, ssim }, shade, depth))
+}
+
+/// Slices of a run's state as ranks sent them ([`Checkpoint::to_bytes`]).
+fn parse_slices(parts: &[Vec<u8>]) -> Result<Vec<Checkpoint>, FitError> {
+    (parts.iter())
+        .map(|bytes| Checkpoint::parse(bytes, Path::new(SLICE)))
+        .collect::<Result<_, _>>()
+        .map_err(|e| FitError::Unsupported(e.to_string()))
 }
 
 /// Every rank's `bytes` on rank 0, in rank order (`None` on the others).
