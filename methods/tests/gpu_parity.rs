@@ -452,3 +452,93 @@ fn a_frame_of_more_than_65535_tiles_equals_one_of_fewer() {
         "alpha and depth"
     );
 }
+
+/// A frame split as a sharded run splits it (`splat fit --sharded` on GPUs): the scene's
+/// slices projected apart and read back, the frame drawn from every slice's visible records
+/// in order, its backward blend read back per record, and `project`'s adjoint of each slice
+/// from its records' gradients. The frame is the scene's bit for bit, the parameter gradients
+/// the scene's backward's up to the order of the atomic adds.
+#[test]
+fn a_frame_drawn_from_the_records_of_the_scenes_slices_is_the_scenes() {
+    let Some(gpu) = adapter_or_skip() else {
+        return;
+    };
+    let opts = RenderOptions {
+        tile_size: 16,
+        ..Default::default()
+    };
+    let acc = Accumulation::default_for(&gpu);
+    let cam = camera(72, 56);
+    let params = spread_gaussians(&cam, 300, 2);
+    let pixels = 72 * 56;
+    // Per pixel the color's gradient, alpha's, depth's (which a loss on the device leaves
+    // out: zero).
+    let mut rng = fastrand::Rng::with_seed(9);
+    let mut random = |n: usize| (0..n).map(|_| rng.f32() - 0.5).collect::<Vec<f32>>();
+    let grad = FrameGrad {
+        color: random(3 * pixels),
+        alpha: Some(random(pixels)),
+        depth: None,
+    };
+    let alpha = grad.alpha.as_ref().unwrap();
+    let pixel_words: Vec<u32> = (0..pixels)
+        .flat_map(|p| [&grad.color[3 * p..3 * p + 3], &[alpha[p], 0.0]].concat())
+        .map(f32::to_bits)
+        .collect();
+
+    let scene = GpuScene::<Method>::new(&gpu, &params).unwrap();
+    let mut whole = GpuRenderer::<Method>::new(&gpu, &opts).unwrap();
+    let want_info = whole.forward(&scene, &cam).unwrap();
+    let want_frame = whole.download_frame().unwrap();
+    gpu.write(&whole.pixel_gradients().unwrap().clone(), &pixel_words);
+    whole.backward_on_device(&scene, acc).unwrap();
+    let want = whole.download_gradients().unwrap().gradients.params;
+
+    // Three slices, each's visible records to the renderer in order.
+    let mut split = GpuRenderer::<Method>::new(&gpu, &opts).unwrap();
+    let slices: Vec<GpuScene<Method>> = [0..100, 100..190, 190..300]
+        .map(|r| GpuScene::new(&gpu, &params[r]).unwrap())
+        .into();
+    let mut records = vec![];
+    let mut seen = vec![];
+    for slice in &slices {
+        let projected = split.project(slice, &cam).unwrap();
+        let visible: Vec<usize> = (0..projected.len())
+            .filter(|&i| projected[i].visible)
+            .collect();
+        records.extend(visible.iter().map(|&i| projected[i]));
+        seen.push(visible);
+    }
+    split.submit_records(&records, &cam).unwrap();
+    let info = split.finish_records(&records, &cam).unwrap();
+    let frame = split.download_frame().unwrap();
+    assert_eq!(frame.color, want_frame.color);
+    assert_eq!(info.intersections, want_info.intersections);
+    assert_eq!(info.visible, want_info.visible);
+    gpu.write(&split.pixel_gradients().unwrap().clone(), &pixel_words);
+    split.blend_records(acc).unwrap();
+    let per_record = split.download_record_gradients().unwrap();
+    let stride = per_record.len() / records.len();
+    let param_words = <Params as splat_runtime::Flat>::LEN;
+
+    let mut got = vec![];
+    let mut at = 0;
+    for (slice, visible) in slices.iter().zip(&seen) {
+        let mut grads = vec![0.0; slice.len() * stride];
+        for &i in visible {
+            grads[i * stride..][..stride].copy_from_slice(&per_record[at * stride..][..stride]);
+            at += 1;
+        }
+        split.adjoint_from(slice, &cam, &grads).unwrap();
+        let bits = (gpu.read(split.param_gradients(), slice.len() * param_words)).unwrap();
+        let floats: Vec<f32> = bits.into_iter().map(f32::from_bits).collect();
+        let read = <Params as splat_runtime::Flat>::read_words;
+        got.extend(floats.chunks_exact(param_words).map(read));
+    }
+    let terms = backward_for::<Method>(&params, &cam, &grad);
+    let groups = param_groups::<Method>();
+    let all = |ps: &[Params]| ps.iter().map(words).collect::<Vec<_>>();
+    let gross = Some(&terms.gross_params[..]);
+    let at = "slices' records / the scene";
+    groups_match(at, &all(&got), &all(&want), gross, &groups, ATOMIC_ORDER);
+}

@@ -24,7 +24,7 @@ use splat_runtime::train::fit::{
 };
 use splat_runtime::train::gpu_fit::{fit_gpu_shared, render_views_gpu};
 use splat_runtime::train::loss::LossValue;
-use splat_runtime::train::sharded::fit_sharded;
+use splat_runtime::train::sharded::{fit_sharded, fit_sharded_gpu};
 use splat_runtime::train::{Checkpoint, McmcOptions, StepTimes, Strategy, Trainable, init};
 use splat_runtime::{Effects, Flat, GradientSet, Image, RenderOptions, param_groups};
 use std::collections::BTreeMap;
@@ -56,9 +56,10 @@ pub struct FitArgs {
     /// Under `mpirun`, each rank holds a slice of the scene (its primitives, their Adam
     /// moments and density statistics) instead of all of it, and the ranks exchange each
     /// view's visible primitives and their gradients: for scenes past one process's memory.
-    /// The same steps as the ranks sharing the views with the whole scene each (bit for bit at
-    /// the same thread count per rank). On the CPU (with --backend auto too), with --strategy
-    /// adc or fixed, without --view (docs/distributed.md).
+    /// The same steps as the ranks sharing the views with the whole scene each (on the CPU
+    /// bit for bit at the same thread count per rank; on GPUs, whose gradient sums are in no
+    /// fixed order, the same training). With --strategy adc or fixed, without --view
+    /// (docs/distributed.md).
     #[arg(long)]
     pub(crate) sharded: bool,
     /// How many points to start from: at most this many of the dataset's points (evenly
@@ -300,6 +301,18 @@ impl Fit<'_> {
                 });
             }
             let trained = match &gpu {
+                Some(gpu) if args.sharded => (|| {
+                    let team = ranks.team();
+                    fit_sharded_gpu::<M>(team, gpu, data, &mut state, self.extent, opts, report)?;
+                    peaks = peak_memory(ranks)?;
+                    Ok(match ranks.count() {
+                        1 => format!("the GPU ({}), the scene in one slice", gpu.adapter),
+                        n => format!(
+                            "the GPUs of {n} MPI ranks, each with a slice of the scene (rank 0: {})",
+                            gpu.adapter
+                        ),
+                    })
+                })(),
                 Some(gpu) => {
                     let team = ranks.team();
                     fit_gpu_shared::<M>(team, gpu, data, &mut state, self.extent, opts, report)
@@ -450,7 +463,13 @@ impl Fit<'_> {
                 ..opts.clone()
             };
             let mut slice = Checkpoint::start::<M>(&[], opts.steps, opts.seed);
-            fit_sharded::<M>(team, self.data, &mut slice, self.extent, &opts, |_| {})?;
+            let (data, extent) = (self.data, self.extent);
+            match &self.gpu {
+                Some(gpu) => {
+                    fit_sharded_gpu::<M>(team, gpu, data, &mut slice, extent, &opts, |_| {})?
+                }
+                None => fit_sharded::<M>(team, data, &mut slice, extent, &opts, |_| {})?,
+            }
             peak_memory(self.ranks)?;
             return Ok(());
         }

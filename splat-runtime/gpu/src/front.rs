@@ -47,6 +47,24 @@ pub(crate) struct Counted {
 
 const SETTLE: &str = include_str!("shaders/settle.wgsl");
 
+/// Where a frame's `project` results come from.
+pub(crate) enum Projection<'a, M: SplatMethod> {
+    /// `project` of a scene's primitives, run on the device.
+    Scene(&'a GpuScene<M>),
+    /// Results `project` made elsewhere (a sharded run's records of every slice), as the
+    /// device holds them: [`Layout`]'s stride of words each.
+    Given(&'a [u32]),
+}
+
+impl<M: SplatMethod> Projection<'_, M> {
+    fn len(&self) -> usize {
+        match self {
+            Projection::Scene(scene) => scene.len(),
+            Projection::Given(words) => words.len() / Layout::of::<M>().stride,
+        }
+    }
+}
+
 /// Bits of the depth keys (`depth.wgsl`): a float's.
 const DEPTH_BITS: u32 = 32;
 
@@ -145,34 +163,56 @@ impl Front {
         self.room
     }
 
-    /// Records `project` of `scene` through `camera`, the depth sort, each primitive's count
-    /// of tiles of `grid` front to back and their prefix sum (timed as `PROJECT` and
-    /// `COUNT`). Lists are read capped at `p_max` entries.
-    pub fn record_count<M: SplatMethod>(
+    /// Records `project` of `scene` through `camera` alone (its results in `projected`).
+    pub fn record_project<M: SplatMethod>(
         &mut self,
         gpu: &Gpu,
         enc: &mut wgpu::CommandEncoder,
         (scene, camera): (&GpuScene<M>, &Camera),
-        (grid, p_max): (&TileGrid, u32),
-        timer: &StageTimer,
     ) -> Result<(), GpuRenderError> {
         let n = scene.len();
-        let n32 = n as u32;
         let model = camera.model;
         let project = self.project.get(model, || {
             gpu.kernel(&entries::project::<M>(model)?, "splat_harness")
         })?;
-        self.n = n32;
+        self.n = n as u32;
         self.model = model;
-        self.tiles = grid.tile_count() as u32;
         self.projected.ensure(gpu, n * Layout::of::<M>().stride)?;
+        gpu.write(&self.camera, &words_of(std::slice::from_ref(camera)));
+        gpu.write(&self.count_info, &[n as u32, 0, 0, 0]);
+        let bind = gpu.bind_named(
+            &project,
+            &[
+                ("harness_rows", scene.buffer()),
+                ("harness_shared", &self.camera),
+                ("harness_out", &self.projected),
+                ("harness_count", &self.count_info),
+            ],
+        )?;
+        dispatch(enc, &project.pipeline, &bind, (n as u32).div_ceil(64));
+        Ok(())
+    }
+
+    /// Records `project`'s results of `source` through `camera`, the depth sort, each
+    /// primitive's count of tiles of `grid` front to back and their prefix sum (timed as
+    /// `PROJECT` and `COUNT`). Lists are read capped at `p_max` entries.
+    pub fn record_count<M: SplatMethod>(
+        &mut self,
+        gpu: &Gpu,
+        enc: &mut wgpu::CommandEncoder,
+        (source, camera): (Projection<M>, &Camera),
+        (grid, p_max): (&TileGrid, u32),
+        timer: &StageTimer,
+    ) -> Result<(), GpuRenderError> {
+        let n = source.len();
+        let n32 = n as u32;
+        self.tiles = grid.tile_count() as u32;
         self.depth_keys.ensure(gpu, n)?;
         self.order.ensure(gpu, n)?;
         self.depth_sort.prepare(gpu, n32, DEPTH_BITS)?;
         self.counts.ensure(gpu, n)?;
         self.scan.prepare(gpu, n32)?;
         gpu.write(&self.primitives, &[n32]);
-        gpu.write(&self.camera, &words_of(std::slice::from_ref(camera)));
         let info = FrameUniform {
             primitives: n32,
             width: grid.width,
@@ -184,20 +224,19 @@ impl Front {
             room: self.room as u32,
         };
         gpu.write(&self.frame_uniform, &info.words());
-        gpu.write(&self.count_info, &[n32, 0, 0, 0]);
 
         enc.clear_buffer(&self.totals, 0, None);
         timer.start(enc, PROJECT);
-        let bind = gpu.bind_named(
-            &project,
-            &[
-                ("harness_rows", scene.buffer()),
-                ("harness_shared", &self.camera),
-                ("harness_out", &self.projected),
-                ("harness_count", &self.count_info),
-            ],
-        )?;
-        dispatch(enc, &project.pipeline, &bind, n32.div_ceil(64));
+        match source {
+            Projection::Scene(scene) => self.record_project(gpu, enc, (scene, camera))?,
+            Projection::Given(words) => {
+                (self.n, self.model) = (n32, camera.model);
+                self.projected.ensure(gpu, words.len())?;
+                gpu.write(&self.projected, words);
+                gpu.write(&self.camera, &words_of(std::slice::from_ref(camera)));
+                gpu.write(&self.count_info, &[n32, 0, 0, 0]);
+            }
+        }
         timer.end(enc, PROJECT);
         timer.start(enc, COUNT);
         let bind = gpu.bind_named(
@@ -233,7 +272,7 @@ impl Front {
     pub fn count<M: SplatMethod>(
         &mut self,
         gpu: &Gpu,
-        frame: (&GpuScene<M>, &Camera),
+        frame: (Projection<M>, &Camera),
         grid: (&TileGrid, u32),
         timer: &StageTimer,
     ) -> Result<Counted, GpuRenderError> {

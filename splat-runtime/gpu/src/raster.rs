@@ -12,7 +12,7 @@
 //! and there is no P_max. wgpu has no fragment-shader interlock, so there is no hardware
 //! backward pass: gradients come from the tile path ([`super::GpuRenderer`]).
 
-use super::front::{COUNT, Front, PROJECT, SORT};
+use super::front::{COUNT, Front, PROJECT, Projection, SORT};
 use super::per_model::PerModel;
 use super::resident::FrameInfo;
 use super::timing::StageTimer;
@@ -154,7 +154,12 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
         // One tile over the whole image: one key per visible primitive, front to back (the
         // depth sort's order; no tile pass).
         let whole = TileGrid::new(grid.width, grid.height, grid.width.max(grid.height));
-        let counted = (self.front).count(gpu, (scene, camera), (&whole, u32::MAX), &self.timer)?;
+        let counted = (self.front).count(
+            gpu,
+            (Projection::Scene(scene), camera),
+            (&whole, u32::MAX),
+            &self.timer,
+        )?;
         self.front.reserve(gpu, counted)?;
         let size = (grid.width, grid.height);
         let made_for = |t: &wgpu::Texture| (t.width(), t.height());

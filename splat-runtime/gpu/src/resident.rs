@@ -16,7 +16,7 @@
 
 use super::device::{Grown, Kernel, dispatch};
 use super::entries::{self, Accumulation, Layout, Reduction};
-use super::front::{COUNT, Front, PROJECT, SORT};
+use super::front::{COUNT, Front, PROJECT, Projection, SORT};
 use super::per_model::PerModel;
 use super::scene::GpuScene;
 use super::shade_pack::{ShadePacker, ShadePacking};
@@ -43,6 +43,11 @@ const PACK: u32 = 4;
 const BLEND: u32 = 5;
 const ADJOINT: u32 = 6;
 const STAGES: u32 = 7;
+
+mod records;
+
+/// [`GpuRenderer::rendered_from`] of a frame of records: no scene's stamp.
+const GIVEN: u64 = u64::MAX;
 
 /// What the last frame was: its tile grid and sizes.
 #[derive(Clone, Copy, Debug)]
@@ -211,16 +216,28 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         scene: &GpuScene<M>,
         camera: &Camera,
     ) -> Result<TileGrid, GpuRenderError> {
+        self.submit_from(Projection::Scene(scene), camera)
+    }
+
+    /// [`GpuRenderer::submit`] of `project`'s results of `source`.
+    fn submit_from(
+        &mut self,
+        source: Projection<M>,
+        camera: &Camera,
+    ) -> Result<TileGrid, GpuRenderError> {
         (self.frame, self.pending) = (None, None);
         let gpu = self.gpu;
         let grid = splat_core::frame::check::<M>(camera, &self.opts)?;
-        let n = scene.len();
+        let (n, stamp) = match source {
+            Projection::Scene(scene) => (scene.len(), scene.stamp),
+            Projection::Given(words) => (words.len() / self.layout.stride, GIVEN),
+        };
         let tiles = grid.tile_count() as u32;
         let p_max = self
             .opts
             .p_max
             .map_or(u32::MAX, |p| p.min(u32::MAX as usize) as u32);
-        let frame = (scene, camera);
+        let frame = (source, camera);
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         // Project, count, prefix sum.
         if self.front.room() == 0 {
@@ -269,7 +286,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             primitives: n,
             camera: *camera,
         });
-        self.rendered_from = scene.stamp;
+        self.rendered_from = stamp;
         Ok(grid)
     }
 
@@ -298,6 +315,12 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
     pub fn settle(&mut self, scene: &GpuScene<M>) -> Result<Option<FrameInfo>, GpuRenderError> {
         let p = self.pending.ok_or(GpuRenderError::NoFrame)?;
         self.check_scene(scene, p.primitives)?;
+        self.settle_any()
+    }
+
+    /// [`GpuRenderer::settle`] of whatever frame was submitted last.
+    fn settle_any(&mut self) -> Result<Option<FrameInfo>, GpuRenderError> {
+        let p = self.pending.ok_or(GpuRenderError::NoFrame)?;
         let counted = self.front.counted(self.gpu)?;
         if counted.cut {
             self.front.reserve(self.gpu, counted)?;
@@ -523,19 +546,35 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         want_depth: bool,
         acc: Accumulation,
     ) -> Result<(), GpuRenderError> {
+        let (_, n) = self.current()?;
+        self.check_scene(scene, n)?;
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        self.record_blend(&mut enc, want_depth, acc)?;
+        self.timer.start(&mut enc, ADJOINT);
+        self.record_adjoint(&mut enc, scene)?;
+        self.record_pixel_adjoint(&mut enc)?;
+        self.timer.end(&mut enc, ADJOINT);
+        self.timer.resolve(&mut enc, BLEND..STAGES);
+        self.gpu.queue.submit([enc.finish()]);
+        Ok(())
+    }
+
+    /// Records the backward blend of the last frame: each primitive's shade and depth
+    /// gradient summed in `grads` (timed as `BLEND`).
+    fn record_blend(
+        &mut self,
+        enc: &mut wgpu::CommandEncoder,
+        want_depth: bool,
+        acc: Accumulation,
+    ) -> Result<(), GpuRenderError> {
         let gpu = self.gpu;
         let (grid, n) = self.current()?;
-        self.check_scene(scene, n)?;
         let layout = self.layout;
         let pixels = (grid.width * grid.height) as usize;
         let blend = self.blend(want_depth, acc)?;
-        let groups = (n as u32).div_ceil(64).max(1);
         let npx = M::PixelLanes::default().as_ref().len();
         let sum_words = self.sums.words(n * layout.grad_words);
         self.grads.ensure(gpu, sum_words)?;
-        self.param_grads.ensure(gpu, n * self.param_floats)?;
-        self.camera_partials
-            .ensure(gpu, groups as usize * Camera::FLOAT_SLOTS)?;
         if M::HAS_PIXEL_INFO {
             self.pixel_cotangent.ensure(gpu, pixels * npx)?;
             let ray_groups = (pixels as u32).div_ceil(64).max(1) as usize;
@@ -544,14 +583,13 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             gpu.write(&self.pixel_info, &[grid.width, grid.height, 0, 0]);
         }
 
-        let mut enc = gpu.device.create_command_encoder(&Default::default());
         enc.clear_buffer(&self.grads, 0, Some(4 * sum_words.max(1) as u64));
         enc.clear_buffer(&self.issued, 0, None);
         if let Some(largest) = &self.largest {
             let read = layout.channels + 1 + want_depth as usize;
-            largest.record(gpu, &mut enc, &self.pixel_grad, (pixels, read))?;
+            largest.record(gpu, enc, &self.pixel_grad, (pixels, read))?;
         }
-        self.timer.start(&mut enc, BLEND);
+        self.timer.start(enc, BLEND);
         let mut inputs = self.tile_pass_inputs();
         inputs.extend([
             ("pixel_state", &*self.pixels),
@@ -568,9 +606,24 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         }
         let tiles = grid.tile_count() as u32;
         let bind = gpu.bind_named(&blend, &inputs)?;
-        dispatch(&mut enc, &blend.pipeline, &bind, tiles);
-        self.timer.end(&mut enc, BLEND);
-        self.timer.start(&mut enc, ADJOINT);
+        dispatch(enc, &blend.pipeline, &bind, tiles);
+        self.timer.end(enc, BLEND);
+        Ok(())
+    }
+
+    /// Records `project`'s adjoint for `scene`'s primitives, from the shade and depth
+    /// gradients in `grads` and `project`'s results in `projected`, through the front's camera.
+    fn record_adjoint(
+        &mut self,
+        enc: &mut wgpu::CommandEncoder,
+        scene: &GpuScene<M>,
+    ) -> Result<(), GpuRenderError> {
+        let gpu = self.gpu;
+        let n = scene.len();
+        let groups = (n as u32).div_ceil(64).max(1);
+        self.param_grads.ensure(gpu, n * self.param_floats)?;
+        self.camera_partials
+            .ensure(gpu, groups as usize * Camera::FLOAT_SLOTS)?;
         let model = self.front.model;
         let k = self.project_backward.get(model, || {
             gpu.kernel(
@@ -591,7 +644,20 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             inputs.push(("grad_largest", &largest.bits));
         }
         let bind = gpu.bind_named(&k, &inputs)?;
-        dispatch(&mut enc, &k.pipeline, &bind, groups);
+        dispatch(enc, &k.pipeline, &bind, groups);
+        Ok(())
+    }
+
+    /// Records the camera's gradient through `pixel_info` (ray methods, when the options ask
+    /// for the camera's gradient), from the last backward blend's pixel cotangents.
+    fn record_pixel_adjoint(
+        &mut self,
+        enc: &mut wgpu::CommandEncoder,
+    ) -> Result<(), GpuRenderError> {
+        let gpu = self.gpu;
+        let (grid, _) = self.current()?;
+        let pixels = (grid.width * grid.height) as usize;
+        let model = self.front.model;
         if M::HAS_PIXEL_INFO && self.opts.gradients.camera() {
             let k = self.pixel_backward.get(model, || {
                 gpu.kernel(&entries::pixel_backward::<M>(model)?, "pixel_backward")
@@ -605,11 +671,8 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
                     ("info", &self.pixel_info),
                 ],
             )?;
-            dispatch(&mut enc, &k.pipeline, &bind, (pixels as u32).div_ceil(64));
+            dispatch(enc, &k.pipeline, &bind, (pixels as u32).div_ceil(64));
         }
-        self.timer.end(&mut enc, ADJOINT);
-        self.timer.resolve(&mut enc, BLEND..STAGES);
-        gpu.queue.submit([enc.finish()]);
         Ok(())
     }
 

@@ -522,7 +522,7 @@ fn exchange_sums<M: SplatMethod>(
 /// Records MCMC's penalties (once per view of the step) added to the step's gradients, then
 /// Adam's step on them: `held_by` the frame of a step of one view, or taken whatever the
 /// frames were (`None`: a batch, whose frames all settled).
-fn record_optimizer<M: SplatMethod>(
+pub(crate) fn record_optimizer<M: SplatMethod>(
     gpu: &Gpu,
     enc: &mut wgpu::CommandEncoder,
     adam: &mut GpuAdam,

@@ -20,7 +20,7 @@
 //! whole state only where it is written (checkpoints, the end of the run) or shown
 //! (`FitOptions::share_every`), and hands out the first state (it read it).
 
-use super::adam::{Adam, Faults};
+use super::adam::{Adam, AdamState, Faults};
 use super::batch::{Batch, Scaling, batches};
 use super::checkpoint::Checkpoint;
 use super::densify::{Densifier, Draws, Refinement, screen_gradient, strongest};
@@ -37,15 +37,18 @@ use glam::Vec3;
 use splat_core::flat::{Flat, flatten, read_all};
 use splat_core::frame::{Image, RenderOptions};
 use splat_core::method::SplatMethod;
-use splat_core::types::Projected;
+use splat_core::types::{Camera, Projected};
 use splat_cpu::Visible;
 use splat_io::dataset::{Dataset, View};
 use std::ops::Range;
 use std::path::Path;
 use std::time::Instant;
 
-/// [`super::fit::fit_shared`] with the scene sharded among the processes of `team` (on the
-/// CPU; ADC or a fixed count, not MCMC, whose relocations draw from the whole scene). Rank
+#[cfg(feature = "gpu")]
+mod gpu;
+
+/// [`super::fit::fit_shared`] with the scene sharded among the processes of `team`, on the
+/// CPU (ADC or a fixed count, not MCMC, whose relocations draw from the whole scene). Rank
 /// 0's `state` is the run's first (every other rank's is not read) and ends as the run's
 /// state after its last step; every other rank's ends as its slice of it.
 pub fn fit_sharded<M: Trainable>(
@@ -54,7 +57,38 @@ pub fn fit_sharded<M: Trainable>(
     state: &mut Checkpoint,
     extent: f32,
     opts: &FitOptions,
+    progress: impl FnMut(&StepReport),
+) -> Result<(), FitError> {
+    let engine = |_: &Slice<M>| Ok(OnCpu::new(opts));
+    run::<M, _>(team, data, (state, extent), opts, progress, engine)
+}
+
+/// [`fit_sharded`] with each rank's slice, and the views it renders, on its GPU: the
+/// records and their gradients cross between ranks through the host. Not bit for bit one
+/// process's (a device's gradient sums are in no fixed order).
+#[cfg(feature = "gpu")]
+pub fn fit_sharded_gpu<M: Trainable>(
+    team: &dyn Team,
+    gpu: &splat_gpu::Gpu,
+    data: &Dataset,
+    state: &mut Checkpoint,
+    extent: f32,
+    opts: &FitOptions,
+    progress: impl FnMut(&StepReport),
+) -> Result<(), FitError> {
+    gpu::OnGpu::<M>::refuse(opts)?;
+    let engine = |slice: &Slice<M>| gpu::OnGpu::new(gpu, data, slice, opts);
+    run::<M, _>(team, data, (state, extent), opts, progress, engine)
+}
+
+/// The sharded loop, on the `engine` made for this rank's slice.
+fn run<M: Trainable, E: Engine<M>>(
+    team: &dyn Team,
+    data: &Dataset,
+    (state, extent): (&mut Checkpoint, f32),
+    opts: &FitOptions,
     mut progress: impl FnMut(&StepReport),
+    engine: impl FnOnce(&Slice<M>) -> Result<E, FitError>,
 ) -> Result<(), FitError> {
     let rates = rates_for::<M>(data, extent, opts)?;
     if let Some(Strategy::Mcmc(_)) = opts.densify {
@@ -63,54 +97,60 @@ pub fn fit_sharded<M: Trainable>(
         ));
     }
     let mut slice = Slice::<M>::scatter(team, state, extent, data, opts)?;
+    let mut engine = engine(&slice)?;
     let render = for_training(&opts.render);
     let mut rng = fastrand::Rng::with_seed(slice.head.rng);
-    let mut target = no_target();
     for batch in batches(slice.head.step, opts.steps, opts.batch) {
         let started = Instant::now();
         let mut times = StepTimes::default();
-        let draws: Vec<(&View, Vec3)> = (draw_views(data, batch, opts, &mut rng).into_iter())
-            .map(|(k, background)| (&data.train[k], background))
+        let draws: Vec<Draw> = (draw_views(data, batch, opts, &mut rng).into_iter())
+            .map(|(k, background)| (k, &data.train[k], background))
             .collect();
         let observing = (slice.densifier.as_ref()).is_some_and(|d| batch.first < d.opts.stop);
 
         // This slice through every view of the batch, to each view's renderer.
         let clock = Instant::now();
         let visible = (draws.iter())
-            .map(|(view, _)| splat_cpu::project_visible::<M>(&slice.params, &view.camera, &render))
+            .map(|(_, view, _)| engine.project(&slice, &view.camera, &render))
             .collect::<Result<Vec<_>, _>>()?;
         times.preprocess += clock.elapsed();
         let clock = Instant::now();
         let (asked_to_stop, records) = send_records(team, batch, &visible, opts.stop_requested())?;
         times.exchange += clock.elapsed();
-        let replies =
-            render_views::<M>(team, batch, &draws, records, opts, &mut target, &mut times)?;
+        let replies = render_views::<M, E>(team, batch, &draws, records, &mut engine, &mut times)?;
         let clock = Instant::now();
         let replies = team.all_to_all(replies)?;
         times.exchange += clock.elapsed();
         let clock = Instant::now();
-        let (grads, value) = slice.gradients(team, batch, &draws, &visible, &replies, observing)?;
+        let slices = (&mut slice, &mut engine);
+        let value = add_gradients(team, batch, &draws, &visible, &replies, observing, slices)?;
         times.project += clock.elapsed();
 
         let clock = Instant::now();
         let lr = step_rates(&rates, batch, opts.steps, slice.scaling.learning_rate);
-        let faults = slice.adam.step(&mut slice.flat, &grads, &lr);
-        read_all(&mut slice.params, &slice.flat);
+        let faults = engine.step(&mut slice, &lr, batch.len)?;
         times.optimizer = clock.elapsed();
 
         let clock = Instant::now();
+        let densifies = slice.densifies(batch);
+        if densifies {
+            engine.to_host(&mut slice)?;
+        }
         let refined = slice.densify(team, batch, extent, &mut rng)?;
         let tally = Tally::gather(team, &slice, faults, refined.as_ref())?;
         if refined.is_some() {
             slice.rebalance(team, &tally.sizes)?;
         }
+        if densifies {
+            engine.reload(&slice)?;
+        }
         times.densify = clock.elapsed();
 
         let clock = Instant::now();
         let evaluation = match batch.any(|s| after_every(opts.eval_every, s)) {
-            true => Some(evaluate_sharded::<M>(
+            true => Some(evaluate_sharded(
                 team,
-                &slice.params,
+                (&slice, &mut engine),
                 &data.test,
                 opts,
             )?),
@@ -122,14 +162,20 @@ pub fn fit_sharded<M: Trainable>(
         slice.head.step = batch.last() + 1;
         slice.head.rng = rng.get_seed();
         let whole = match save || ends_after(opts, batch, stops) {
-            true => slice.gather(team)?,
+            true => {
+                engine.to_host(&mut slice)?;
+                slice.gather(team)?
+            }
             false => None,
         };
         if let Some(whole) = whole {
             *state = whole;
         }
         let shared = match batch.any(|s| after_every(opts.share_every, s)) {
-            true => gather_words(team, &slice.flat)?,
+            true => {
+                engine.to_host(&mut slice)?;
+                gather_words(team, &slice.flat)?
+            }
             false => None,
         };
         progress(&StepReport {
@@ -156,9 +202,213 @@ pub fn fit_sharded<M: Trainable>(
         }
     }
     if team.rank() != 0 {
+        engine.to_host(&mut slice)?;
         *state = slice.state();
     }
     Ok(())
+}
+
+/// A view of the batch as a rank draws it: its place among the training views, the view, its
+/// background.
+type Draw<'a> = (usize, &'a View, Vec3);
+
+/// Where a rank's work runs: `project` of its slice and the adjoint's, Adam's step, the
+/// frames of the views it renders. [`OnCpu`], or a GPU (`gpu::OnGpu`). The host's copy of
+/// the slice ([`Slice`]'s primitives, moments and statistics) is the engine's to keep
+/// current: density control, the evening out and the gathers read and change it there.
+trait Engine<M: Trainable> {
+    /// The slice's primitives that reach the rasterizer through `camera`, with their records.
+    fn project(
+        &mut self,
+        slice: &Slice<M>,
+        camera: &Camera,
+        render: &RenderOptions,
+    ) -> Result<Visible<M>, FitError>;
+
+    /// Training view `draw` rendered from `records` (every slice's, in rank order), its loss
+    /// and backward blend: the loss, each record's shade gradient (`M::Shade::LEN` words
+    /// each), each record's depth gradient.
+    fn render(
+        &mut self,
+        records: Vec<Record<M>>,
+        draw: Draw,
+        times: &mut StepTimes,
+    ) -> Result<(LossValue, Vec<f32>, Vec<f32>), FitError>;
+
+    /// `view` rendered from `records` on the run's background.
+    fn image(&mut self, records: Vec<Record<M>>, view: &View) -> Result<Image, FitError>;
+
+    /// View `j` of the batch: `project`'s adjoint of the slice's `visible` primitives through
+    /// `camera`, from their records' gradients, added to the batch's (the first view starts
+    /// it), with density control's statistics when `observing`.
+    fn add_view(
+        &mut self,
+        slice: &mut Slice<M>,
+        seen: (&Camera, &Visible<M>),
+        gradients: (&[f32], &[f32]),
+        j: usize,
+        observing: bool,
+    ) -> Result<(), FitError>;
+
+    /// Adam's step on the batch's gradient, of `views` views, at the rates `lr`.
+    fn step(&mut self, slice: &mut Slice<M>, lr: &[f32], views: usize) -> Result<Faults, FitError>;
+
+    /// The host's copy of `slice` made current.
+    fn to_host(&mut self, slice: &mut Slice<M>) -> Result<(), FitError>;
+
+    /// The host's copy of `slice`, changed there, taken up again.
+    fn reload(&mut self, slice: &Slice<M>) -> Result<(), FitError>;
+}
+
+/// The CPU: the host's copy of the slice is the slice.
+struct OnCpu {
+    opts: FitOptions,
+    /// The batch's gradient of the slice's words.
+    grads: Vec<f32>,
+    /// The last target image, kept for its buffer.
+    target: Image,
+}
+
+impl OnCpu {
+    fn new(opts: &FitOptions) -> OnCpu {
+        OnCpu {
+            opts: opts.clone(),
+            grads: vec![],
+            target: no_target(),
+        }
+    }
+}
+
+impl<M: Trainable> Engine<M> for OnCpu {
+    fn project(
+        &mut self,
+        slice: &Slice<M>,
+        camera: &Camera,
+        render: &RenderOptions,
+    ) -> Result<Visible<M>, FitError> {
+        Ok(splat_cpu::project_visible::<M>(
+            &slice.params,
+            camera,
+            render,
+        )?)
+    }
+
+    fn render(
+        &mut self,
+        records: Vec<Record<M>>,
+        (_, view, background): Draw,
+        times: &mut StepTimes,
+    ) -> Result<(LossValue, Vec<f32>, Vec<f32>), FitError> {
+        let render = for_training(&self.opts.render);
+        let (frame, pass) =
+            splat_cpu::render_records_for_backward::<M>(records, &view.camera, &render)?;
+        times.preprocess += frame.stats.preprocess;
+        times.rasterize += frame.stats.rasterize;
+        times.shade += frame.stats.shade;
+        let clock = Instant::now();
+        let (loss, grad) = frame_loss(frame, view, background, &self.opts, &mut self.target)?;
+        times.loss += clock.elapsed();
+        let blended = splat_cpu::backward_blend::<M>(&pass, &grad)?;
+        times.blend += blended.blend + blended.reduce;
+        Ok((loss, blended.shade, blended.depth))
+    }
+
+    fn image(&mut self, records: Vec<Record<M>>, view: &View) -> Result<Image, FitError> {
+        let render = for_training(&self.opts.render);
+        let frame = splat_cpu::render_records::<M>(records, &view.camera, &render)?;
+        let background = self.opts.background;
+        Ok(composite(frame.color, frame.alpha.as_ref(), background))
+    }
+
+    fn add_view(
+        &mut self,
+        slice: &mut Slice<M>,
+        (camera, visible): (&Camera, &Visible<M>),
+        (shade, depth): (&[f32], &[f32]),
+        j: usize,
+        observing: bool,
+    ) -> Result<(), FitError> {
+        let wanted = for_training(&self.opts.render).gradients;
+        let (words, shade_words) = (M::Params::LEN, M::Shade::LEN);
+        if j == 0 {
+            self.grads = vec![0.0f32; slice.flat.len()];
+        }
+        let seen = &visible.index;
+        let params: Vec<M::Params> = seen.iter().map(|&i| slice.params[i as usize]).collect();
+        let (g, _) = splat_cpu::project_adjoints::<M>(&params, camera, shade, depth, wanted);
+        let mut param_words = vec![0.0f32; words];
+        let mut norms = Vec::with_capacity(if observing { seen.len() } else { 0 });
+        for (k, &i) in seen.iter().enumerate() {
+            let i = i as usize;
+            g[k].write_words(&mut param_words);
+            for (sum, x) in self.grads[i * words..][..words]
+                .iter_mut()
+                .zip(&param_words)
+            {
+                *sum += x;
+            }
+            if observing {
+                let shade = &shade[k * shade_words..][..shade_words];
+                let norm = screen_gradient::<M>(&params[k], &g[k], shade, camera).length();
+                norms.push((i, norm));
+            }
+        }
+        if let Some(d) = slice.densifier.as_mut().filter(|_| observing) {
+            d.observe(norms);
+        }
+        Ok(())
+    }
+
+    fn step(
+        &mut self,
+        slice: &mut Slice<M>,
+        lr: &[f32],
+        _views: usize,
+    ) -> Result<Faults, FitError> {
+        let faults = slice.adam.step(&mut slice.flat, &self.grads, lr);
+        read_all(&mut slice.params, &slice.flat);
+        Ok(faults)
+    }
+
+    fn to_host(&mut self, _: &mut Slice<M>) -> Result<(), FitError> {
+        Ok(())
+    }
+
+    fn reload(&mut self, _: &Slice<M>) -> Result<(), FitError> {
+        Ok(())
+    }
+}
+
+/// The batch's loss, each view's gradients (the renderers' `replies`, rank order, for the
+/// slice's `visible` records of each view) added to the slice's gradient view by view in the
+/// batch's order, as one process adds its views; density control's statistics `observing`.
+fn add_gradients<M: Trainable, E: Engine<M>>(
+    team: &dyn Team,
+    batch: Batch,
+    draws: &[Draw],
+    visible: &[Visible<M>],
+    replies: &[Vec<u8>],
+    observing: bool,
+    (slice, engine): (&mut Slice<M>, &mut E),
+) -> Result<LossValue, FitError> {
+    let mut losses = Vec::with_capacity(batch.len);
+    let mut readers: Vec<Reader> = (replies.iter())
+        .map(|b| Reader { bytes: b, at: 0 })
+        .collect();
+    for (j, (_, view, _)) in draws.iter().enumerate() {
+        let r = &mut readers[owner(batch, j, team.ranks())];
+        let (loss, shade, depth) = read_gradients::<M>(r, visible[j].index.len())
+            .map_err(|e| FitError::Unsupported(format!("a view's gradients: {e}")))?;
+        losses.push(loss);
+        let seen = (&view.camera, &visible[j]);
+        engine.add_view(slice, seen, (&shade, &depth), j, observing)?;
+    }
+    if readers.iter().any(|r| r.at != r.bytes.len()) {
+        return Err(FitError::Unsupported(
+            "the renderers sent more gradients than the batch's views take".into(),
+        ));
+    }
+    Ok(LossValue::mean(losses))
 }
 
 /// This rank's part of the scene: primitives `first..first + params.len()` of it, their Adam
@@ -278,59 +528,16 @@ impl<M: Trainable> Slice<M> {
         }
     }
 
-    /// The batch's gradient of this slice's words, from the renderers' `replies` (rank
-    /// order) for the slice's `visible` records of each view: `project`'s adjoint view by view
-    /// in the batch's order, adding up as one process adds its views; density control's
-    /// statistics `observing`; and the batch's loss.
-    fn gradients(
-        &mut self,
-        team: &dyn Team,
-        batch: Batch,
-        draws: &[(&View, Vec3)],
-        visible: &[Visible<M>],
-        replies: &[Vec<u8>],
-        observing: bool,
-    ) -> Result<(Vec<f32>, LossValue), FitError> {
-        let wanted = for_training(&self.opts.render).gradients;
-        let (words, shade_words) = (M::Params::LEN, M::Shade::LEN);
-        let mut grads = vec![0.0f32; self.flat.len()];
-        let mut losses = Vec::with_capacity(batch.len);
-        let mut readers: Vec<Reader> = (replies.iter())
-            .map(|b| Reader { bytes: b, at: 0 })
-            .collect();
-        let mut param_words = vec![0.0f32; words];
-        for (j, (view, _)) in draws.iter().enumerate() {
-            let r = &mut readers[owner(batch, j, team.ranks())];
-            let seen = &visible[j].index;
-            let (loss, shade, depth) = read_gradients::<M>(r, seen.len())
-                .map_err(|e| FitError::Unsupported(format!("a view's gradients: {e}")))?;
-            losses.push(loss);
-            let camera = &view.camera;
-            let params: Vec<M::Params> = seen.iter().map(|&i| self.params[i as usize]).collect();
-            let (g, _) = splat_cpu::project_adjoints::<M>(&params, camera, &shade, &depth, wanted);
-            let mut norms = Vec::with_capacity(if observing { seen.len() } else { 0 });
-            for (k, &i) in seen.iter().enumerate() {
-                let i = i as usize;
-                g[k].write_words(&mut param_words);
-                for (sum, x) in grads[i * words..][..words].iter_mut().zip(&param_words) {
-                    *sum += x;
-                }
-                if observing {
-                    let shade = &shade[k * shade_words..][..shade_words];
-                    let norm = screen_gradient::<M>(&params[k], &g[k], shade, camera).length();
-                    norms.push((i, norm));
-                }
-            }
-            if let Some(d) = self.densifier.as_mut().filter(|_| observing) {
-                d.observe(norms);
-            }
-        }
-        if readers.iter().any(|r| r.at != r.bytes.len()) {
-            return Err(FitError::Unsupported(
-                "the renderers sent more gradients than the batch's views take".into(),
-            ));
-        }
-        Ok((grads, LossValue::mean(losses)))
+    /// Whether density control refines or resets opacities in `batch`.
+    fn densifies(&self, batch: Batch) -> bool {
+        (self.densifier.as_ref()).is_some_and(|d| batch.any(|s| d.refines_at(s) || d.resets_at(s)))
+    }
+
+    /// The moments of the slice's words from `state` (the batch's scaled betas kept).
+    fn adopt_moments(&mut self, state: AdamState) {
+        let (beta1, beta2) = (self.adam.beta1, self.adam.beta2);
+        self.adam = Adam::resume(M::Params::LEN, state);
+        (self.adam.beta1, self.adam.beta2) = (beta1, beta2);
     }
 
     /// Density control's refinement and opacity reset on this slice, where `batch` holds
@@ -460,39 +667,27 @@ fn send_records<M: Trainable>(
 /// The views of `batch` this rank renders, each from every slice's `records` (in rank order:
 /// the whole scene's frame), with its loss and backward blend: for each rank, each view's loss
 /// and the gradients of that rank's records.
-fn render_views<M: Trainable>(
+fn render_views<M: Trainable, E: Engine<M>>(
     team: &dyn Team,
     batch: Batch,
-    draws: &[(&View, Vec3)],
+    draws: &[Draw],
     records: Vec<FromSlices<M>>,
-    opts: &FitOptions,
-    target: &mut Image,
+    engine: &mut E,
     times: &mut StepTimes,
 ) -> Result<Vec<Vec<u8>>, FitError> {
-    let render = for_training(&opts.render);
     let mut replies = vec![vec![]; team.ranks()];
     for (j, from) in batch.share(team.rank(), team.ranks()).zip(records) {
-        let (view, background) = draws[j];
         let counts: Vec<usize> = from.iter().map(Vec::len).collect();
         let records = from.into_iter().flatten().collect();
-        let (frame, pass) =
-            splat_cpu::render_records_for_backward::<M>(records, &view.camera, &render)?;
-        times.preprocess += frame.stats.preprocess;
-        times.rasterize += frame.stats.rasterize;
-        times.shade += frame.stats.shade;
-        let clock = Instant::now();
-        let (loss, grad) = frame_loss(frame, view, background, opts, target)?;
-        times.loss += clock.elapsed();
-        let blended = splat_cpu::backward_blend::<M>(&pass, &grad)?;
-        times.blend += blended.blend + blended.reduce;
+        let (loss, shade, depth) = engine.render(records, draws[j], times)?;
         let words = M::Shade::LEN;
         let mut at = 0;
         for (reply, n) in replies.iter_mut().zip(counts) {
             for x in [loss.loss, loss.l1, loss.ssim] {
                 reply.extend(x.to_le_bytes());
             }
-            put_words(reply, &blended.shade[at * words..(at + n) * words]);
-            put_words(reply, &blended.depth[at..at + n]);
+            put_words(reply, &shade[at * words..(at + n) * words]);
+            put_words(reply, &depth[at..at + n]);
             at += n;
         }
     }
@@ -682,9 +877,9 @@ impl Tally {
 /// Mean PSNR and SSIM of the sharded scene over `views` (every rank takes part with its
 /// slice `params`): the views rendered in rounds, one per rank, from every slice's records,
 /// and scored where they are rendered; the same [`Evaluation`] as the whole scene's.
-fn evaluate_sharded<M: Trainable>(
+fn evaluate_sharded<M: Trainable, E: Engine<M>>(
     team: &dyn Team,
-    params: &[M::Params],
+    (slice, engine): (&Slice<M>, &mut E),
     views: &[View],
     opts: &FitOptions,
 ) -> Result<Evaluation, FitError> {
@@ -696,7 +891,7 @@ fn evaluate_sharded<M: Trainable>(
             .map(|r| {
                 let mut out = vec![];
                 if let Some(view) = round.get(r) {
-                    let visible = splat_cpu::project_visible::<M>(params, &view.camera, &render)?;
+                    let visible = engine.project(slice, &view.camera, &render)?;
                     put_records::<M>(&mut out, &visible.records);
                 }
                 Ok(out)
@@ -704,7 +899,13 @@ fn evaluate_sharded<M: Trainable>(
             .collect::<Result<_, FitError>>()?;
         let received = team.all_to_all(to_each)?;
         if let Some(view) = round.get(rank) {
-            let image = scored_render::<M>(&received, view, &render, opts)?;
+            let mut records = vec![];
+            for (rank, bytes) in received.iter().enumerate() {
+                let mut r = Reader { bytes, at: 0 };
+                let bad = |e: String| FitError::Unsupported(format!("rank {rank}'s records: {e}"));
+                records.extend(get_records::<M>(&mut r).map_err(bad)?);
+            }
+            let image = engine.image(records, view)?;
             let picture = view.image();
             mine.push((loss::psnr(&image, &picture)?, loss::ssim(&image, &picture)?));
         }
@@ -730,26 +931,4 @@ fn evaluate_sharded<M: Trainable>(
         e.ssim += ssim / views.len() as f64;
     }
     Ok(e)
-}
-
-/// `view` rendered from every slice's records (`received`, in rank order) on the run's
-/// background.
-fn scored_render<M: Trainable>(
-    received: &[Vec<u8>],
-    view: &View,
-    render: &RenderOptions,
-    opts: &FitOptions,
-) -> Result<Image, FitError> {
-    let mut records = vec![];
-    for (rank, bytes) in received.iter().enumerate() {
-        let mut r = Reader { bytes, at: 0 };
-        let bad = |e: String| FitError::Unsupported(format!("rank {rank}'s records: {e}"));
-        records.extend(get_records::<M>(&mut r).map_err(bad)?);
-    }
-    let frame = splat_cpu::render_records::<M>(records, &view.camera, render)?;
-    Ok(composite(
-        frame.color,
-        frame.alpha.as_ref(),
-        opts.background,
-    ))
 }

@@ -78,11 +78,6 @@ fn check_knobs(args: &FitArgs) -> Result<()> {
     if args.no_opacity_reset && !matches!(args.strategy, StrategyArg::Adc) {
         bail!("--no-opacity-reset is for --strategy adc, the only one that resets opacities");
     }
-    if args.sharded && matches!(args.backend, crate::Backend::Gpu) {
-        bail!(
-            "--sharded trains on the CPU: each GPU rank holds the whole scene (leave out --sharded, or train with --backend cpu)"
-        );
-    }
     if args.sharded && matches!(args.strategy, StrategyArg::Mcmc) {
         bail!(
             "--sharded cannot take --strategy mcmc: its relocations draw from the whole scene's opacities (shard with adc or fixed)"
@@ -131,10 +126,7 @@ fn fit_on(args: &FitArgs, methods: &[Method], ranks: &Ranks) -> Result<()> {
     frozen_and_trained(&groups.collect::<Vec<_>>(), &args.freeze, method.name)?;
     // Picked first: the memory a run needs depends on where it trains. Ranks on one machine
     // take one GPU each, in turn.
-    let gpu = match args.sharded {
-        true => None,
-        false => crate::pick_gpu_of(args.backend, ranks.local_rank())?,
-    };
+    let gpu = crate::pick_gpu_of(args.backend, ranks.local_rank())?;
     let background = if args.white { Vec3::ONE } else { Vec3::ZERO };
     let t = Instant::now();
     let loaded = (|| -> Result<_> {

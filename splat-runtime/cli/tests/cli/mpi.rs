@@ -99,9 +99,10 @@ fn two_ranks_sharing_each_batch_train_the_scene_one_process_trains_bit_for_bit()
 }
 
 /// On GPUs (lavapipe in CI, one device per rank) each rank sums its views' gradients on its
-/// device and the ranks add the sums: not bit for bit (a device's sums are in no fixed
-/// order), but the same training: the held-out PSNR of 200 views in batches of 2 within 0.1 dB
-/// of one GPU process's.
+/// device and the ranks add the sums, or (`--sharded`) each rank holds a slice of the scene
+/// on its device and the ranks exchange the views' records: not bit for bit (a device's sums
+/// are in no fixed order), but the same training: the held-out PSNR of 200 views in batches
+/// of 2 within 0.1 dB of one GPU process's.
 #[test]
 fn two_gpu_ranks_train_like_one_gpu_process() {
     let dir = temp();
@@ -121,15 +122,25 @@ fn two_gpu_ranks_train_like_one_gpu_process() {
     };
     let two = ok(&two.env_remove("XDG_RUNTIME_DIR").output().unwrap());
     assert!(two.contains("on the GPUs of 2 MPI ranks"), "{two}");
+    let sharded = [&args("sharded")[..], &["--sharded"]].concat();
+    let mut sharded = mpirun(&[(2, &sharded)], dir.path()).unwrap();
+    let sharded = ok(&sharded.env_remove("XDG_RUNTIME_DIR").output().unwrap());
+    assert!(
+        sharded.contains("each with a slice of the scene"),
+        "{sharded}"
+    );
     let psnr = |out: &str| {
         let psnr = fit_output(&dir.path().join(out), 4, (112, 84)).psnr;
         psnr.last().unwrap().1
     };
-    let (one, two) = (psnr("one"), psnr("two"));
-    assert!(
-        (one - two).abs() < 0.1,
-        "one process {one} dB, two ranks {two} dB"
-    );
+    let one = psnr("one");
+    for run in ["two", "sharded"] {
+        let two = psnr(run);
+        assert!(
+            (one - two).abs() < 0.1,
+            "one process {one} dB, two ranks ({run}) {two} dB"
+        );
+    }
 }
 
 #[test]

@@ -1,0 +1,197 @@
+//! A frame split between the ranks of a sharded run (`splat_train::sharded`): a slice of the
+//! scene projected alone and read back; a frame rendered from the records `project` made of
+//! every slice, its backward blend read back per record; `project`'s adjoint of a slice from
+//! the gradients its records came back with. The records are the CPU's ([`Projected`]), so
+//! the wire between ranks is one format for both backends.
+
+use super::{ADJOINT, BLEND, FrameInfo, GIVEN, GpuRenderer, PROJECT, Projection, STAGES};
+use crate::entries::Accumulation;
+use crate::scene::GpuScene;
+use crate::{GpuError, GpuRenderError};
+use glam::Vec2;
+use splat_core::flat::Flat;
+use splat_core::grid::TileGrid;
+use splat_core::method::SplatMethod;
+use splat_core::types::{Camera, Projected};
+
+/// What `project` makes of one primitive.
+pub type Record<M> = Projected<<M as SplatMethod>::Cull, <M as SplatMethod>::Shade>;
+
+impl<M: SplatMethod> GpuRenderer<'_, M> {
+    /// `project` of every primitive of `scene` through `camera`, read back (waits for it).
+    pub fn project(
+        &mut self,
+        scene: &GpuScene<M>,
+        camera: &Camera,
+    ) -> Result<Vec<Record<M>>, GpuRenderError> {
+        splat_core::frame::check::<M>(camera, &self.opts)?;
+        (self.frame, self.pending) = (None, None);
+        if scene.is_empty() {
+            return Ok(vec![]);
+        }
+        let gpu = self.gpu;
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        self.timer.start(&mut enc, PROJECT);
+        self.front.record_project(gpu, &mut enc, (scene, camera))?;
+        self.timer.end(&mut enc, PROJECT);
+        gpu.queue.submit([enc.finish()]);
+        let stride = self.layout.stride;
+        let words = gpu.read(&self.front.projected, scene.len() * stride)?;
+        Ok(words.chunks_exact(stride).map(decode::<M>).collect())
+    }
+
+    /// Records and submits the frame of `records` through `camera`, as
+    /// [`GpuRenderer::submit`] does a scene's; [`GpuRenderer::finish_records`] or
+    /// [`GpuRenderer::settle_records`] waits for it.
+    pub fn submit_records(
+        &mut self,
+        records: &[Record<M>],
+        camera: &Camera,
+    ) -> Result<TileGrid, GpuRenderError> {
+        let words = encode::<M>(records, self.layout.stride);
+        self.submit_from(Projection::Given(&words), camera)
+    }
+
+    /// [`GpuRenderer::settle`] of a frame of records.
+    pub fn settle_records(&mut self) -> Result<Option<FrameInfo>, GpuRenderError> {
+        self.settle_any()
+    }
+
+    /// [`GpuRenderer::finish`] of the frame of `records` through `camera` submitted last.
+    pub fn finish_records(
+        &mut self,
+        records: &[Record<M>],
+        camera: &Camera,
+    ) -> Result<FrameInfo, GpuRenderError> {
+        if self.rendered_from != GIVEN {
+            return Err(GpuRenderError::OtherScene);
+        }
+        let mut redone = false;
+        loop {
+            if let Some(info) = self.settle_any()? {
+                return Ok(FrameInfo { redone, ..info });
+            }
+            redone = true;
+            self.submit_records(records, camera)?;
+        }
+    }
+
+    /// The backward blend of the frame of records submitted last, from the output gradients
+    /// in [`GpuRenderer::pixel_gradients`] (a loss on the device wrote them; depth's
+    /// ignored): each record's gradient, read with [`GpuRenderer::download_record_gradients`]
+    /// once the frame settled. No adjoint: the records' primitives live on other ranks.
+    pub fn blend_records(&mut self, acc: Accumulation) -> Result<(), GpuRenderError> {
+        self.refuse_half_sums()?;
+        if self.rendered_from != GIVEN {
+            return Err(GpuRenderError::OtherScene);
+        }
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        self.record_blend(&mut enc, false, acc)?;
+        self.timer.start(&mut enc, ADJOINT);
+        self.timer.end(&mut enc, ADJOINT);
+        self.timer.resolve(&mut enc, BLEND..STAGES);
+        self.gpu.queue.submit([enc.finish()]);
+        Ok(())
+    }
+
+    /// The last backward blend's gradient of each record of its frame: [`Layout`]'s
+    /// `grad_words` per record (`M::Shade`'s float slots, then the depth's), read back.
+    ///
+    /// [`Layout`]: crate::entries::Layout
+    pub fn download_record_gradients(&self) -> Result<Vec<f32>, GpuRenderError> {
+        self.refuse_half_sums()?;
+        let (_, n) = self.current()?;
+        let words = n * self.layout.grad_words;
+        if words == 0 {
+            return Ok(vec![]);
+        }
+        let bits = self.gpu.read(&self.grads, words)?;
+        Ok(bits.into_iter().map(f32::from_bits).collect())
+    }
+
+    /// `project`'s adjoint for the primitives of `scene` through `camera`, given each one's
+    /// shade and depth gradient (`grad_words` per primitive, as
+    /// [`GpuRenderer::download_record_gradients`] reads them; zeros where no frame saw it):
+    /// the parameter gradients in [`GpuRenderer::param_gradients`], and beside them what
+    /// density control's statistics read ([`GpuRenderer::projected`],
+    /// [`GpuRenderer::shade_gradients`], [`GpuRenderer::frame_keys`] saying no frame was cut).
+    /// The camera's gradient through `pixel_info` is not taken: the pixels are elsewhere.
+    pub fn adjoint_from(
+        &mut self,
+        scene: &GpuScene<M>,
+        camera: &Camera,
+        grads: &[f32],
+    ) -> Result<(), GpuRenderError> {
+        self.refuse_half_sums()?;
+        let n = scene.len();
+        let words = n * self.layout.grad_words;
+        if grads.len() != words {
+            return Err(GpuRenderError::SceneChanged {
+                got: n,
+                want: grads.len() / self.layout.grad_words,
+            });
+        }
+        splat_core::frame::check::<M>(camera, &self.opts)?;
+        (self.frame, self.pending) = (None, None);
+        let gpu = self.gpu;
+        self.grads.ensure(gpu, words)?;
+        if words > 0 {
+            let bits: Vec<u32> = grads.iter().map(|g| g.to_bits()).collect();
+            gpu.write(&self.grads, &bits);
+        }
+        gpu.write(self.front.key_count(), &[0, 0]);
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        self.front.record_project(gpu, &mut enc, (scene, camera))?;
+        self.timer.start(&mut enc, BLEND);
+        self.timer.end(&mut enc, BLEND);
+        self.timer.start(&mut enc, ADJOINT);
+        self.record_adjoint(&mut enc, scene)?;
+        self.timer.end(&mut enc, ADJOINT);
+        self.timer.resolve(&mut enc, BLEND..STAGES);
+        gpu.queue.submit([enc.finish()]);
+        Ok(())
+    }
+
+    /// Records' gradients cross between ranks as f32 words: sums held in f16 are refused.
+    fn refuse_half_sums(&self) -> Result<(), GpuRenderError> {
+        match self.sums.half {
+            true => Err(GpuError::Shader(
+                "a sharded frame's gradients are read per record as f32 sums, not f16".into(),
+            )
+            .into()),
+            false => Ok(()),
+        }
+    }
+}
+
+/// A record from its `stride` words on the device: visible, depth, box, `cull`, `shade`.
+fn decode<M: SplatMethod>(w: &[u32]) -> Record<M> {
+    let f: Vec<f32> = w.iter().map(|&x| f32::from_bits(x)).collect();
+    let shade_at = 6 + M::Cull::LEN;
+    Projected {
+        visible: w[0] != 0,
+        depth: f[1],
+        bbox_min: Vec2::new(f[2], f[3]),
+        bbox_max: Vec2::new(f[4], f[5]),
+        cull: M::Cull::read_words(&f[6..shade_at]),
+        shade: M::Shade::read_words(&f[shade_at..]),
+    }
+}
+
+/// `records` as the device holds `project`'s results, `stride` words each ([`decode`]'s).
+fn encode<M: SplatMethod>(records: &[Record<M>], stride: usize) -> Vec<u32> {
+    let shade_at = 6 + M::Cull::LEN;
+    let mut f = vec![0.0f32; records.len() * stride];
+    for (w, r) in f.chunks_exact_mut(stride).zip(records) {
+        w[1] = r.depth;
+        w[2..4].copy_from_slice(&r.bbox_min.to_array());
+        w[4..6].copy_from_slice(&r.bbox_max.to_array());
+        r.cull.write_words(&mut w[6..shade_at]);
+        r.shade.write_words(&mut w[shade_at..]);
+    }
+    let mut words: Vec<u32> = f.into_iter().map(f32::to_bits).collect();
+    for (w, r) in words.chunks_exact_mut(stride).zip(records) {
+        w[0] = r.visible as u32;
+    }
+    words
+}
