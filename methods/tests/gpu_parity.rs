@@ -454,7 +454,8 @@ fn a_frame_of_more_than_65535_tiles_equals_one_of_fewer() {
 }
 
 /// A frame split as a sharded run splits it (`splat fit --sharded` on GPUs): the scene's
-/// slices projected apart and read back, the frame drawn from every slice's visible records
+/// slices projected apart, the primitives the CPU would keep compacted on the device and read
+/// back, the frame drawn from every slice's visible records
 /// in order, its backward blend read back per record, and `project`'s adjoint of each slice
 /// from its records' gradients. The frame is the scene's bit for bit, the parameter gradients
 /// the scene's backward's up to the order of the atomic adds.
@@ -502,12 +503,17 @@ fn a_frame_drawn_from_the_records_of_the_scenes_slices_is_the_scenes() {
     let mut records = vec![];
     let mut seen = vec![];
     for slice in &slices {
-        let projected = split.project(slice, &cam).unwrap();
-        let visible: Vec<usize> = (0..projected.len())
-            .filter(|&i| projected[i].visible)
-            .collect();
-        records.extend(visible.iter().map(|&i| projected[i]));
-        seen.push(visible);
+        let (index, visible) = split.project_visible(slice, &cam).unwrap();
+        // What the device keeps is what the CPU's filter keeps.
+        let on_cpu = splat_runtime::pipeline::project_visible::<Method>(
+            &slice.download(&gpu).unwrap(),
+            &cam,
+            &opts,
+        )
+        .unwrap();
+        assert_eq!(index, on_cpu.index);
+        records.extend(visible);
+        seen.push(index);
     }
     split.submit_records(&records, &cam).unwrap();
     let info = split.finish_records(&records, &cam).unwrap();
@@ -523,13 +529,10 @@ fn a_frame_drawn_from_the_records_of_the_scenes_slices_is_the_scenes() {
 
     let mut got = vec![];
     let mut at = 0;
-    for (slice, visible) in slices.iter().zip(&seen) {
-        let mut grads = vec![0.0; slice.len() * stride];
-        for &i in visible {
-            grads[i * stride..][..stride].copy_from_slice(&per_record[at * stride..][..stride]);
-            at += 1;
-        }
-        split.adjoint_from(slice, &cam, &grads).unwrap();
+    for (slice, index) in slices.iter().zip(&seen) {
+        let grads = &per_record[at * stride..(at + index.len()) * stride];
+        at += index.len();
+        split.adjoint_from(slice, &cam, (index, grads)).unwrap();
         let bits = (gpu.read(split.param_gradients(), slice.len() * param_words)).unwrap();
         let floats: Vec<f32> = bits.into_iter().map(f32::from_bits).collect();
         let read = <Params as splat_runtime::Flat>::read_words;

@@ -120,6 +120,9 @@ pub struct GpuRenderer<'g, M: SplatMethod> {
     pending: Option<Pending>,
     /// The last frame finished.
     frame: Option<FrameInfo>,
+    /// A sharded run's compaction of records and scatter of their gradients, made on first
+    /// use ([`records`]).
+    exchange: Option<records::Exchange>,
     /// The stamp of the scene's upload the last frame was rendered from ([`GpuScene::upload`]).
     rendered_from: u64,
     method: PhantomData<M>,
@@ -180,6 +183,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             timer: StageTimer::new(gpu, STAGES),
             pending: None,
             frame: None,
+            exchange: None,
             rendered_from: 0,
             method: PhantomData,
         })

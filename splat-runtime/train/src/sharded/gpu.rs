@@ -1,6 +1,6 @@
 //! The sharded loop's engine on a GPU: the slice, its Adam moments and density control's
-//! statistics live on the device, as in [`crate::gpu_fit`]; `project` of the slice is read
-//! back to send its visible records, the views this rank renders are drawn from the records
+//! statistics live on the device, as in [`crate::gpu_fit`]; `project` of the slice's visible records are
+//! compacted on the device and read back to be sent, the views this rank renders are drawn from the records
 //! that come in (loss and backward blend on the device, each record's gradient read back),
 //! and `project`'s adjoint runs on the device from the gradients the slice's records come
 //! back with. The host's copy of the slice is brought up to date only where density control,
@@ -36,7 +36,6 @@ pub(super) struct OnGpu<'g, M: SplatMethod> {
     observer: GpuObserver,
     source: ScreenSource,
     acc: Accumulation,
-    render: RenderOptions,
     background: glam::Vec3,
 }
 
@@ -79,8 +78,7 @@ impl<'g, M: Trainable> OnGpu<'g, M> {
         slice: &Slice<M>,
         opts: &FitOptions,
     ) -> Result<OnGpu<'g, M>, FitError> {
-        let render = for_training(&opts.render);
-        let renderer = GpuRenderer::<M>::new(gpu, &render)?;
+        let renderer = GpuRenderer::<M>::new(gpu, &for_training(&opts.render))?;
         if renderer.param_floats() != M::Params::LEN {
             return Err(FitError::Unsupported(format!(
                 "{}: GPU training needs all-float parameters",
@@ -101,7 +99,6 @@ impl<'g, M: Trainable> OnGpu<'g, M> {
             observer: GpuObserver::new(gpu)?,
             source: screen_source::<M>().expect("refused before"),
             acc: Accumulation::default_for(gpu),
-            render,
             background: opts.background,
         })
     }
@@ -114,11 +111,7 @@ impl<M: Trainable> Engine<M> for OnGpu<'_, M> {
         camera: &Camera,
         _: &RenderOptions,
     ) -> Result<Visible<M>, FitError> {
-        let projected = self.renderer.project(&self.scene, camera)?;
-        let grid = splat_core::frame::check::<M>(camera, &self.render)?;
-        let kept = splat_cpu::preprocess::filter::<M>(projected, &grid);
-        let index: Vec<u32> = kept.visible.iter().map(|&(i, _)| i).collect();
-        let records = index.iter().map(|&i| kept.projected[i as usize]).collect();
+        let (index, records) = self.renderer.project_visible(&self.scene, camera)?;
         Ok(Visible { index, records })
     }
 
@@ -181,16 +174,15 @@ impl<M: Trainable> Engine<M> for OnGpu<'_, M> {
         j: usize,
         observing: bool,
     ) -> Result<(), FitError> {
-        let gpu = self.gpu;
-        let (n, words) = (self.scene.len(), M::Shade::LEN);
-        // Every primitive's shade and depth gradient (zero where the view did not see it).
-        let mut grads = vec![0.0f32; n * (words + 1)];
-        for (r, &i) in visible.index.iter().enumerate() {
-            let at = i as usize * (words + 1);
-            grads[at..at + words].copy_from_slice(&shade[r * words..][..words]);
-            grads[at + words] = depth[r];
+        let (gpu, n, words) = (self.gpu, self.scene.len(), M::Shade::LEN);
+        // Each record's shade words, then its depth word, as the device sums them.
+        let mut grads = Vec::with_capacity(depth.len() * (words + 1));
+        for (shade, depth) in shade.chunks_exact(words).zip(depth) {
+            grads.extend(shade);
+            grads.push(*depth);
         }
-        self.renderer.adjoint_from(&self.scene, camera, &grads)?;
+        let records = (&visible.index[..], &grads[..]);
+        self.renderer.adjoint_from(&self.scene, camera, records)?;
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         let (param_grads, keys) = (self.renderer.param_gradients(), self.renderer.frame_keys());
         let summed = (param_grads, n * M::Params::LEN);
