@@ -3,7 +3,8 @@
 # mpirun, CPU ranks N = 1, 2, 4, 8 on its 16 cores (threads split among them; data parallel,
 # and from 2 ranks on sharded too), and
 # on the GPU two ranks sharing it against one process at the same batch (what the exchange
-# costs: each step's sum down, gathered through shared memory, the total up). Prepared here,
+# costs: each step's sum down, gathered through shared memory, the total up), and sharded
+# GPU ranks (1 and 2: the records' trip through the host). Prepared here,
 # run there from the repository root with carry [".gl", ".dev"]:
 #   .gl/        the Vulkan loader debs (see the device README);
 #   .dev/       `splat-mpi.xz` (cargo build --release -p splat-cli --features mpi; strip; xz),
@@ -67,5 +68,13 @@ limit 60 $splat fit "$data" "${still[@]}" --backend gpu --steps $GPU_STEPS --bat
     --out /tmp/gpu1 | grep -E "steps|\| (exchange|optimizer|step) "
 limit 90 mpirun --oversubscribe -n 2 $splat fit "$data" "${still[@]}" --backend gpu \
     --steps $GPU_STEPS --batch 2 --out /tmp/gpu2 | grep -E "steps|sent|\| (exchange|optimizer|step) "
+# Sharded: one rank (what the records' trip through the host costs against the loop above),
+# then two ranks sharing the GPU.
+for n in 1 2; do
+    echo "--- $n ranks, --sharded"
+    limit 90 mpirun --oversubscribe -n $n $splat fit "$data" "${still[@]}" --backend gpu \
+        --steps $GPU_STEPS --batch 2 --sharded --out /tmp/gpu-sharded$n \
+        | grep -E "steps|sent|peak|\| (preprocess|project adjoint|exchange|optimizer|step) "
+done
 
 part "done"
