@@ -20,7 +20,7 @@ use splat_runtime::io::image::stage_image;
 use splat_runtime::io::ply::{GaussianCloud, ToStored};
 use splat_runtime::train::batch::batches;
 use splat_runtime::train::fit::{
-    Evaluation, FitError, FitOptions, StepReport, fit_shared, render_views,
+    Evaluation, FitError, FitOptions, StepReport, fit_shared, refuse_other_settings, render_views,
 };
 use splat_runtime::train::gpu_fit::{fit_gpu_shared, render_views_gpu};
 use splat_runtime::train::loss::LossValue;
@@ -513,10 +513,12 @@ impl Fit<'_> {
                 c.strategy,
                 Strategy::name(opts.densify.as_ref())
             ),
-            Some(c) => (
-                c.clone(),
-                Log::read_csv(&args.out.join(METRICS), c.step, opts.batch)?,
-            ),
+            Some(c) => {
+                // Before the metrics, which are read one row per batch of the run's own.
+                refuse_other_settings::<M>(c, opts)?;
+                let log = Log::read_csv(&args.out.join(METRICS), c.step, opts.batch)?;
+                (c.clone(), log)
+            }
             None => {
                 let half = self.init_extent * self.extent;
                 let first = init::Start {

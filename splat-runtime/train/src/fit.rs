@@ -615,6 +615,22 @@ pub(crate) fn frame_loss(
     Ok((loss, grad))
 }
 
+/// Refuses to go on from `state` (once started) with settings that change its steps
+/// ([`settings`]: the background, the primitive cap, frozen groups, the batch).
+pub fn refuse_other_settings<M: SplatMethod>(
+    state: &Checkpoint,
+    opts: &FitOptions,
+) -> Result<(), FitError> {
+    let settings = settings::<M>(opts);
+    match state.step > 0 && !state.settings.is_empty() && state.settings != settings {
+        true => Err(FitError::Unsupported(format!(
+            "the checkpoint is of a run {}, not {settings} (go on with the run's own settings)",
+            state.settings
+        ))),
+        false => Ok(()),
+    }
+}
+
 /// Makes `state` this run's: refuses a state of another method, run length or (once
 /// started) strategy, scene extent or training views, or with a non-finite parameter, and
 /// records the strategy, the extent and the views.
@@ -651,13 +667,7 @@ pub(crate) fn adopt<M: Trainable>(
             state.strategy
         )));
     }
-    let settings = settings::<M>(opts);
-    if state.step > 0 && !state.settings.is_empty() && state.settings != settings {
-        return Err(FitError::Unsupported(format!(
-            "the checkpoint is of a run {}, not {settings} (go on with the run's own settings)",
-            state.settings
-        )));
-    }
+    refuse_other_settings::<M>(state, opts)?;
     if state.step > 0 && state.extent.to_bits() != extent.to_bits() {
         return Err(FitError::Unsupported(format!(
             "the checkpoint is of a run with scene extent {}, not {extent} (the cameras' spread times --global-scale: the position rates and density control's sizes follow it)",
@@ -684,7 +694,7 @@ pub(crate) fn adopt<M: Trainable>(
         )));
     }
     state.strategy = strategy.to_string();
-    state.settings = settings;
+    state.settings = settings::<M>(opts);
     state.extent = extent;
     state.views = Some(views);
     Ok(())

@@ -452,6 +452,17 @@ fn fit_resumes_from_its_checkpoint() {
         &["--freeze", "sh"],
         "not on background 0 0 0, at most 4000000 primitives, with sh frozen",
     );
+    // Another batch is refused before the metrics are read in its batches (which would warn
+    // of rows missing).
+    let batched = splat(
+        &[&args[..], &["--resume", "--batch", "2"]].concat(),
+        dir.path(),
+    );
+    let stderr = String::from_utf8_lossy(&batched.stderr);
+    assert!(!batched.status.success());
+    assert!(stderr.contains("in batches of 2 views"), "{stderr}");
+    let stdout = String::from_utf8_lossy(&batched.stdout);
+    assert!(!stdout.contains("warning"), "{stdout}");
     // One bit changed in the parameters, past the header.
     let mut checkpoint = std::fs::read(out.join("checkpoint.bin")).unwrap();
     let at = checkpoint.len() / 2;
