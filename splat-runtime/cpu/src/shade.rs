@@ -10,7 +10,7 @@ use glam::Vec2;
 use splat_core::blend::Blend;
 use splat_core::flat::Flat;
 use splat_core::grid::TileGrid;
-use splat_core::lanes::{F32x8, LANES, M32x8};
+use splat_core::lanes::{F32x8, LANES, M32x8, U32x8};
 use splat_core::method::SplatMethod;
 use splat_core::types::{Camera, Projected};
 
@@ -166,7 +166,10 @@ fn shade_tile_body<M: SplatMethod, const MODEL: u32>(
             let mut t = F32x8::splat(1.0);
             let mut color = M::ColorLanes::default();
             let mut depth = F32x8::splat(0.0);
-            let mut ends = [0u32; LANES];
+            let mut ends = U32x8::splat(0);
+            // Pairs per lane, summed once the group is done (a sum per pair costs a
+            // horizontal add in the hottest loop).
+            let mut pairs = U32x8::splat(0);
             for (k, &prim) in list.iter().enumerate() {
                 if done.all() {
                     break;
@@ -176,7 +179,7 @@ fn shade_tile_body<M: SplatMethod, const MODEL: u32>(
                     continue;
                 }
                 let c = M::evaluate_lanes(&pixels, shades.get(k));
-                out.pairs += (!done).count() as u64;
+                pairs = pairs + (!done).to_u32();
                 let st = step(c.alpha, c.valid, done, t, blend);
                 let w = st.weight;
                 for (acc, ch) in color.as_mut().iter_mut().zip(c.color.as_ref()) {
@@ -187,13 +190,10 @@ fn shade_tile_body<M: SplatMethod, const MODEL: u32>(
                 }
                 t = st.take.select_f32(t * (1.0 - st.alpha), t);
                 done = done | st.stop;
-                for (l, end) in ends.iter_mut().enumerate() {
-                    if st.take.lane(l) {
-                        *end = k as u32 + 1;
-                    }
-                }
+                ends = st.take.select_u32(U32x8::splat(k as u32 + 1), ends);
             }
-            for (l, end) in ends.into_iter().enumerate() {
+            out.pairs += pairs.0.iter().map(|&p| p as u64).sum::<u64>();
+            for (l, end) in ends.0.into_iter().enumerate() {
                 let px = row * s + gx + l;
                 out.transmittance[px] = t.lane(l);
                 out.ends[px] = end;
