@@ -1,10 +1,10 @@
 //! The sharded loop's engine on a GPU: the slice, its Adam moments and density control's
-//! statistics live on the device, as in [`crate::gpu_fit`]; `project` of the slice's visible records are
-//! compacted on the device and read back to be sent, the views this rank renders are drawn from the records
-//! that come in (loss and backward blend on the device, each record's gradient read back),
-//! and `project`'s adjoint runs on the device from the gradients the slice's records come
-//! back with. The host's copy of the slice is brought up to date only where density control,
-//! the evening out or a gather reads it.
+//! statistics live on the device, as in [`crate::gpu_fit`]. Per view the slice is projected
+//! on the device and its visible records are compacted there and read back to be sent; the
+//! views this rank renders are drawn from the records that come in (loss and backward blend
+//! on the device, each record's gradient read back); `project`'s adjoint runs on the device
+//! from the gradients the slice's records come back with. The host's copy of the slice is
+//! brought up to date only where density control, the evening out or a gather reads it.
 
 use super::{Draw, Engine, Record, Slice};
 use crate::adam::Faults;
