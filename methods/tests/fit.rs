@@ -1573,3 +1573,17 @@ fn a_gpu_step_from_a_cut_frame_is_held_back_and_taken_again() {
     assert_eq!(seen, seen_ref);
     assert!(seen.contains(&1));
 }
+
+/// Density control's statistics before any view was observed (a run resumed past ADC's stop,
+/// then saved) read as zeros for every primitive, not past the end of the device's buffers.
+#[test]
+fn an_observer_that_saw_no_view_reads_zero_statistics() {
+    let Some(gpu) = splat_runtime::gpu::adapter_or_skip() else {
+        return;
+    };
+    use splat_runtime::train::device::GpuObserver;
+    let mut observer = GpuObserver::new(&gpu).unwrap();
+    let (grad2d, seen) = observer.take(&gpu, 1000).unwrap();
+    assert_eq!((grad2d.len(), seen.len()), (1000, 1000));
+    assert!(grad2d.iter().all(|g| *g == 0.0) && seen.iter().all(|s| *s == 0));
+}

@@ -596,11 +596,15 @@ impl GpuObserver {
         Ok(())
     }
 
-    /// The statistics of the `primitives` primitives since the last call, then cleared.
+    /// The statistics of the `primitives` primitives since the last call, then cleared: zeros
+    /// for those no view has been observed for since the buffers last grew (a run resumed past
+    /// density control's stop and saved, or grown and saved before its next observed view).
     pub fn take(&mut self, gpu: &Gpu, primitives: usize) -> Result<(Vec<f32>, Vec<u32>), GpuError> {
         if primitives == 0 {
             return Ok((vec![], vec![]));
         }
+        self.grad2d.ensure(gpu, primitives)?;
+        self.seen.ensure(gpu, primitives)?;
         let grad2d = gpu.read(&self.grad2d, primitives)?;
         let seen = gpu.read(&self.seen, primitives)?;
         let mut enc = gpu.device.create_command_encoder(&Default::default());
