@@ -57,7 +57,8 @@ pub(crate) enum Projection<'a, M: SplatMethod> {
 }
 
 impl<M: SplatMethod> Projection<'_, M> {
-    fn len(&self) -> usize {
+    /// The frame's primitives.
+    pub fn len(&self) -> usize {
         match self {
             Projection::Scene(scene) => scene.len(),
             Projection::Given(words) => words.len() / Layout::of::<M>().stride,
@@ -163,6 +164,13 @@ impl Front {
         self.room
     }
 
+    /// The primitive count and camera of the frame whose `project` results `projected` holds.
+    fn frame_of(&mut self, gpu: &Gpu, n: usize, camera: &Camera) {
+        (self.n, self.model) = (n as u32, camera.model);
+        gpu.write(&self.camera, &words_of(std::slice::from_ref(camera)));
+        gpu.write(&self.count_info, &[n as u32, 0, 0, 0]);
+    }
+
     /// Records `project` of `scene` through `camera` alone (its results in `projected`).
     pub fn record_project<M: SplatMethod>(
         &mut self,
@@ -175,11 +183,8 @@ impl Front {
         let project = self.project.get(model, || {
             gpu.kernel(&entries::project::<M>(model)?, "splat_harness")
         })?;
-        self.n = n as u32;
-        self.model = model;
         self.projected.ensure(gpu, n * Layout::of::<M>().stride)?;
-        gpu.write(&self.camera, &words_of(std::slice::from_ref(camera)));
-        gpu.write(&self.count_info, &[n as u32, 0, 0, 0]);
+        self.frame_of(gpu, n, camera);
         let bind = gpu.bind_named(
             &project,
             &[
@@ -230,11 +235,9 @@ impl Front {
         match source {
             Projection::Scene(scene) => self.record_project(gpu, enc, (scene, camera))?,
             Projection::Given(words) => {
-                (self.n, self.model) = (n32, camera.model);
                 self.projected.ensure(gpu, words.len())?;
                 gpu.write(&self.projected, words);
-                gpu.write(&self.camera, &words_of(std::slice::from_ref(camera)));
-                gpu.write(&self.count_info, &[n32, 0, 0, 0]);
+                self.frame_of(gpu, n, camera);
             }
         }
         timer.end(enc, PROJECT);

@@ -232,9 +232,10 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         (self.frame, self.pending) = (None, None);
         let gpu = self.gpu;
         let grid = splat_core::frame::check::<M>(camera, &self.opts)?;
-        let (n, stamp) = match source {
-            Projection::Scene(scene) => (scene.len(), scene.stamp),
-            Projection::Given(words) => (words.len() / self.layout.stride, GIVEN),
+        let n = source.len();
+        let stamp = match source {
+            Projection::Scene(scene) => scene.stamp,
+            Projection::Given(_) => GIVEN,
         };
         let tiles = grid.tile_count() as u32;
         let p_max = self

@@ -96,26 +96,8 @@ pub fn fit_gpu_shared<M: Trainable>(
     let rates = rates_for::<M>(data, extent, opts)?;
     adopt::<M>(state, extent, &data.train, opts)?;
     let words = M::Params::LEN;
-    let source = screen_source::<M>().ok_or_else(|| {
-        FitError::Unsupported(format!(
-            "{}: its screen position is not two consecutive shade words, or (without one) its position not three consecutive parameter words",
-            M::NAME
-        ))
-    })?;
+    let source = gpu_training::<M>(opts)?;
     let renderer = GpuRenderer::<M>::new(gpu, &for_training(&opts.render))?;
-    // The loss on the device reads the frame as f32 words.
-    if opts.render.precision != splat_core::precision::Precision::F32 {
-        return Err(FitError::Unsupported(format!(
-            "GPU training reads its frames as f32, not {}: render at another precision with `splat render` or `splat tradeoff`",
-            opts.render.precision.name()
-        )));
-    }
-    if renderer.param_floats() != words || M::Color::LEN != 3 {
-        return Err(FitError::Unsupported(format!(
-            "{}: GPU training needs all-float parameters and RGB color",
-            M::NAME
-        )));
-    }
     let targets: Vec<_> = data.train.iter().collect();
     let mut scene = GpuScene::<M>::new(gpu, &state.params::<M>())?;
     let mut adam = GpuAdam::new(gpu, words)?;
@@ -543,6 +525,31 @@ pub(crate) fn record_optimizer<M: SplatMethod>(
     };
     adam.record(gpu, enc, adam_step)?;
     Ok(())
+}
+
+/// Why `M` cannot train on the GPU under `opts`, if it cannot; otherwise where its steps'
+/// screen-space gradients are read ([`screen_source`]).
+pub(crate) fn gpu_training<M: Trainable>(opts: &FitOptions) -> Result<ScreenSource, FitError> {
+    let source = screen_source::<M>().ok_or_else(|| {
+        FitError::Unsupported(format!(
+            "{}: its screen position is not two consecutive shade words, or (without one) its position not three consecutive parameter words",
+            M::NAME
+        ))
+    })?;
+    // The loss on the device reads the frame as f32 words.
+    if opts.render.precision != splat_core::precision::Precision::F32 {
+        return Err(FitError::Unsupported(format!(
+            "GPU training reads its frames as f32, not {}: render at another precision with `splat render` or `splat tradeoff`",
+            opts.render.precision.name()
+        )));
+    }
+    if splat_gpu::entries::param_floats::<M>()? != M::Params::LEN || M::Color::LEN != 3 {
+        return Err(FitError::Unsupported(format!(
+            "{}: GPU training needs all-float parameters and RGB color",
+            M::NAME
+        )));
+    }
+    Ok(source)
 }
 
 /// Where a step's screen-space gradients are read on the device, as

@@ -10,7 +10,7 @@ use super::{Draw, Engine, Record, Slice};
 use crate::adam::Faults;
 use crate::device::{GpuAdam, GpuBatchSum, GpuLoss, GpuObserver, ScreenSource};
 use crate::fit::{FitError, FitOptions, composite, for_training};
-use crate::gpu_fit::{record_optimizer, screen_source};
+use crate::gpu_fit::{gpu_training, record_optimizer};
 use crate::loss::LossValue;
 use crate::step_times::StepTimes;
 use crate::trainable::Trainable;
@@ -43,32 +43,20 @@ impl<'g, M: Trainable> OnGpu<'g, M> {
     /// Why `M` under `opts` cannot train sharded on a GPU, if it cannot (every rank says the
     /// same before the first exchange).
     pub fn refuse(opts: &FitOptions) -> Result<(), FitError> {
-        let layout = Layout::of::<M>();
+        gpu_training::<M>(opts)?;
         let unsupported = |why: String| Err(FitError::Unsupported(why));
-        if opts.render.precision != Precision::F32 {
-            return unsupported(format!(
-                "GPU training reads its frames as f32, not {}",
-                opts.render.precision.name()
-            ));
-        }
         if opts.render.gradient_precision != Precision::F32 {
             return unsupported(
                 "a sharded run's records cross between ranks with f32 gradients: leave the gradient sums at f32".into(),
             );
         }
-        if layout.shade_floats != M::Shade::LEN || M::Color::LEN != 3 {
+        if Layout::of::<M>().shade_floats != M::Shade::LEN {
             return unsupported(format!(
-                "{}: sharded GPU training needs all-float shade data and RGB color",
+                "{}: sharded GPU training needs all-float shade data",
                 M::NAME
             ));
         }
-        match screen_source::<M>() {
-            Some(_) => Ok(()),
-            None => unsupported(format!(
-                "{}: its screen position is not two consecutive shade words, or (without one) its position not three consecutive parameter words",
-                M::NAME
-            )),
-        }
+        Ok(())
     }
 
     /// The engine of `slice` on `gpu`, the training views of `data` its loss's targets.
@@ -78,13 +66,8 @@ impl<'g, M: Trainable> OnGpu<'g, M> {
         slice: &Slice<M>,
         opts: &FitOptions,
     ) -> Result<OnGpu<'g, M>, FitError> {
+        let source = gpu_training::<M>(opts)?;
         let renderer = GpuRenderer::<M>::new(gpu, &for_training(&opts.render))?;
-        if renderer.param_floats() != M::Params::LEN {
-            return Err(FitError::Unsupported(format!(
-                "{}: GPU training needs all-float parameters",
-                M::NAME
-            )));
-        }
         let targets: Vec<&View> = data.train.iter().collect();
         let mut adam = GpuAdam::new(gpu, M::Params::LEN)?;
         adam.restore(gpu, &slice.adam.state())?;
@@ -97,7 +80,7 @@ impl<'g, M: Trainable> OnGpu<'g, M> {
             adam,
             sum: GpuBatchSum::new(gpu)?,
             observer: GpuObserver::new(gpu)?,
-            source: screen_source::<M>().expect("refused before"),
+            source,
             acc: Accumulation::default_for(gpu),
             background: opts.background,
         })
