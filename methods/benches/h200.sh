@@ -8,7 +8,8 @@
 #   .dev/  `splat.xz` (cargo build --release -p splat-cli; strip; xz: 73 MB stripped, over
 #          the 64 MiB a call carries), `gpu-bench.xz` (the executable `cargo bench -p
 #          splat-methods --bench gpu --no-run` prints; strip; xz), `viewer-bench.xz` (the same
-#          for `cargo bench -p splat-cli --bench viewer --no-run`),
+#          for `cargo bench -p splat-cli --bench viewer --no-run`), `raster-order.xz`
+#          (`cargo build --release -p splat-gpu --example raster_order`; strip; xz),
 #          shared/bench/{make_scene,gsplat_bench,gsplat_train}.py,
 #          gsplat-1.5.3-py3-none-any.whl (pip download --no-deps) and `stilllife/`
 #          (methods/benches/mitsuba_dataset.py .dev/stilllife).
@@ -34,7 +35,7 @@ part() { echo; echo "=== $1 ($(date +%T))"; }
 # Each part's time limit, in seconds on the H200 (SLOW times that on lavapipe).
 limit() { timeout $(($1 * SLOW)) "${@:2}"; }
 mkdir -p /tmp/bin
-for x in splat gpu-bench viewer-bench; do
+for x in splat gpu-bench viewer-bench raster-order; do
     python3 -c 'import lzma, shutil, sys; shutil.copyfileobj(lzma.open(sys.argv[1]), open(sys.argv[2], "wb"))' \
         .dev/$x.xz /tmp/bin/$x && chmod +x /tmp/bin/$x
 done
@@ -108,6 +109,9 @@ python3 .dev/make_scene.py $N_TRADEOFF 960 540 $big
 limit 100 $splat tradeoff --backend gpu --scene $big/scene.ply --camera $big/camera.json \
     --iters 5 --out /tmp/tradeoff
 tar czf "$OUT/tradeoff.tgz" -C /tmp/tradeoff . 2>/dev/null
+
+part "issue 63: programmable blending (which extensions; the order test and its time)"
+limit 20 /tmp/bin/raster-order 1920 1080 64 3 || echo "raster-order exited $?"
 
 if [ "${CPU:-0}" = 1 ]; then
     part "issue 11: the CPU backend by thread count"

@@ -57,7 +57,7 @@ const STORAGE: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE
     .union(wgpu::BufferUsages::COPY_DST);
 
 /// The instance adapters are found through (Vulkan, Metal, DX12).
-fn instance() -> wgpu::Instance {
+pub(crate) fn instance() -> wgpu::Instance {
     let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
     desc.backends = wgpu::Backends::PRIMARY;
     wgpu::Instance::new(desc)
@@ -91,6 +91,21 @@ impl Gpu {
 
     /// A device on `adapter`.
     fn on(adapter: wgpu::Adapter) -> Result<Gpu, GpuError> {
+        Gpu::open_with(&adapter, |adapter, desc| {
+            pollster::block_on(adapter.request_device(desc))
+                .map_err(|e| GpuError::Device(e.to_string()))
+        })
+    }
+
+    /// A device on `adapter` with the features the runtime uses where it has them, opened by
+    /// `open` (wgpu's request, or one through its Vulkan layer with extensions of our own).
+    pub(crate) fn open_with(
+        adapter: &wgpu::Adapter,
+        open: impl FnOnce(
+            &wgpu::Adapter,
+            &wgpu::DeviceDescriptor,
+        ) -> Result<(wgpu::Device, wgpu::Queue), GpuError>,
+    ) -> Result<Gpu, GpuError> {
         let info = adapter.get_info();
         let features = adapter.features()
             & (wgpu::Features::SHADER_FLOAT32_ATOMIC
@@ -111,13 +126,15 @@ impl Gpu {
                 .flags
                 .contains(wgpu::TextureFormatFeatureFlags::BLENDABLE);
         let limits = adapter.limits();
-        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
-            label: Some("splat"),
-            required_features: features,
-            required_limits: limits.clone(),
-            ..Default::default()
-        }))
-        .map_err(|e| GpuError::Device(e.to_string()))?;
+        let (device, queue) = open(
+            adapter,
+            &wgpu::DeviceDescriptor {
+                label: Some("splat"),
+                required_features: features,
+                required_limits: limits.clone(),
+                ..Default::default()
+            },
+        )?;
         Ok(Gpu {
             device,
             queue,

@@ -12,6 +12,8 @@
 //!   [`GpuRenderer`] (kernels built once, buffers kept across frames, forward and backward).
 //! - [`raster`]: the hardware-rasterized forward pass: quads drawn in depth order, blended
 //!   by fixed-function blending into render targets of each precision.
+//! - [`programmable_blend`]: a fragment's read-modify-write of its pixel in rasterization
+//!   order (raw Vulkan inside a wgpu encoder): the footing of a hardware backward.
 //! - [`render`]: one-shot render and backward for parameters on the host, over `resident`.
 //! - [`state`]: the per-pixel state of the tile path, packed at each precision.
 //! - [`sums`]: the backward blend's per-primitive gradient sums, f32 or f16.
@@ -27,6 +29,7 @@ mod front;
 pub mod kernel;
 mod packing;
 mod per_model;
+pub mod programmable_blend;
 mod prune;
 pub mod raster;
 pub mod render;

@@ -1,0 +1,315 @@
+//! Programmable blending: a fragment shader that reads and writes its pixel's state in
+//! rasterization order, what the seed's hardware backward (paper 001) is built on. This module
+//! is its feasibility step: a device opened for it, one pass that does it, and the test that
+//! tells an ordered read-modify-write from an unordered one.
+//!
+//! WebGPU has no such access (gpuweb issues 395 and 442), and wgpu 30 stops short of it in
+//! three places: WGSL and naga have no input attachments (gfx-rs/wgpu#5233), wgpu's render
+//! pipelines and passes have none either (gfx-rs/wgpu#10148), and neither carries the
+//! rasterization-order flags. What wgpu does lend is enough for the rest: its Vulkan layer opens
+//! the device with `VK_EXT_rasterization_order_attachment_access` and its feature
+//! ([`open`]), hands out the raw device and an open command buffer of a wgpu encoder, and
+//! submits that buffer on its queue, so the one pass is raw Vulkan (`ash`) between wgpu's own
+//! passes, its shaders the SPIR-V naga writes from WGSL with the texture load rewritten into
+//! a subpass-input read ([`spirv`]).
+//!
+//! Which devices have it: Mesa's lavapipe (CI's adapter), RADV, Turnip and ARM's drivers
+//! expose the extension; NVIDIA's drivers expose `VK_EXT_fragment_shader_interlock` instead
+//! (a critical section around a fragment's access to storage memory, which wgpu's
+//! passthrough SPIR-V could take without raw passes), and Mesa's lavapipe gained the
+//! interlock only after the 25.0 that Debian bookworm's backports carry.
+
+mod pass;
+pub mod spirv;
+
+use crate::device::instance;
+use crate::{Gpu, GpuError};
+use ash::vk;
+use std::ffi::CStr;
+use std::time::Duration;
+use wgpu::hal::api::Vulkan;
+
+/// The Vulkan extension that orders attachment reads in a subpass by rasterization order.
+pub const EXTENSION: &CStr = ash::ext::rasterization_order_attachment_access::NAME;
+
+/// Whether a pass asks for rasterization order: [`Order::Unspecified`] is the control, whose
+/// reads of what the subpass writes Vulkan leaves undefined.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Order {
+    Rasterization,
+    Unspecified,
+}
+
+/// The first adapter's device opened with rasterization-order attachment access, or `None`
+/// when the adapter is not Vulkan or lacks the extension or its color-attachment feature.
+pub fn open() -> Result<Option<Gpu>, GpuError> {
+    let adapter = first_adapter()?;
+    if !color_access(&adapter) {
+        return Ok(None);
+    }
+    Gpu::open_with(&adapter, open_ordered).map(Some)
+}
+
+/// What the first adapter offers for programmable blending.
+#[derive(Clone, Debug)]
+pub struct Support {
+    pub adapter: String,
+    /// `VK_EXT_rasterization_order_attachment_access` with its color-attachment feature: what
+    /// [`open`] and [`fold`] use.
+    pub rasterization_order: bool,
+    /// `VK_EXT_fragment_shader_interlock`: the other route (NVIDIA's), not built yet.
+    pub interlock: bool,
+}
+
+/// What the first adapter offers ([`Support`]).
+pub fn support() -> Result<Support, GpuError> {
+    let adapter = first_adapter()?;
+    let info = adapter.get_info();
+    // SAFETY: the handle is only read, while `adapter` lives.
+    let interlock = unsafe { adapter.as_hal::<Vulkan>() }.is_some_and(|hal| {
+        let extension = ash::ext::fragment_shader_interlock::NAME;
+        hal.physical_device_capabilities()
+            .supports_extension(extension)
+    });
+    Ok(Support {
+        adapter: format!(
+            "{} ({:?}, driver {})",
+            info.name, info.backend, info.driver_info
+        ),
+        rasterization_order: color_access(&adapter),
+        interlock,
+    })
+}
+
+fn first_adapter() -> Result<wgpu::Adapter, GpuError> {
+    pollster::block_on(instance().request_adapter(&wgpu::RequestAdapterOptions {
+        power_preference: wgpu::PowerPreference::HighPerformance,
+        ..Default::default()
+    }))
+    .map_err(|e| GpuError::NoAdapter(e.to_string()))
+}
+
+/// Whether `adapter` is a Vulkan one with the extension and its color-attachment feature.
+fn color_access(adapter: &wgpu::Adapter) -> bool {
+    // SAFETY: the handles are only read, while `adapter` lives.
+    let Some(hal) = (unsafe { adapter.as_hal::<Vulkan>() }) else {
+        return false;
+    };
+    if !hal
+        .physical_device_capabilities()
+        .supports_extension(EXTENSION)
+    {
+        return false;
+    }
+    let mut order = vk::PhysicalDeviceRasterizationOrderAttachmentAccessFeaturesEXT::default();
+    let mut features = vk::PhysicalDeviceFeatures2::default().push_next(&mut order);
+    let instance = hal.shared_instance().raw_instance();
+    // SAFETY: the physical device is the adapter's; the chain's one struct is the extension's.
+    unsafe { instance.get_physical_device_features2(hal.raw_physical_device(), &mut features) };
+    order.rasterization_order_color_attachment_access == vk::TRUE
+}
+
+/// `desc`'s device on `adapter` through wgpu's Vulkan layer, with the extension and its
+/// color-attachment feature enabled besides what wgpu enables.
+fn open_ordered(
+    adapter: &wgpu::Adapter,
+    desc: &wgpu::DeviceDescriptor,
+) -> Result<(wgpu::Device, wgpu::Queue), GpuError> {
+    let failed = |e: String| GpuError::Device(format!("with rasterization-order access: {e}"));
+    let mut order = vk::PhysicalDeviceRasterizationOrderAttachmentAccessFeaturesEXT::default()
+        .rasterization_order_color_attachment_access(true);
+    let opened = {
+        // SAFETY: the adapter's own handle; `color_access` checked the extension and feature.
+        let hal =
+            unsafe { adapter.as_hal::<Vulkan>() }.ok_or_else(|| failed("not Vulkan".into()))?;
+        let order = &mut order;
+        let add_order: Box<wgpu::hal::vulkan::CreateDeviceCallback> = Box::new(move |args| {
+            args.extensions.push(EXTENSION);
+            *args.create_info = args.create_info.push_next(order);
+        });
+        // SAFETY: the callback adds a supported extension and feature and removes nothing.
+        unsafe {
+            hal.open_with_callback(
+                desc.required_features,
+                &desc.required_limits,
+                &desc.memory_hints,
+                Some(add_order),
+            )
+        }
+        .map_err(|e| failed(e.to_string()))?
+    };
+    // SAFETY: the device was opened on this adapter with `desc`'s features and limits.
+    unsafe { adapter.create_device_from_hal(opened, desc) }.map_err(|e| failed(e.to_string()))
+}
+
+/// The order test on `gpu` (from [`open`]): `draws` triangles over a `width` x `height` target,
+/// each fragment folding one step into its pixel ([`fold_step`]); the final value of every
+/// pixel and the GPU time of the pass (with its readback copy).
+pub fn fold(
+    gpu: &Gpu,
+    width: u32,
+    height: u32,
+    draws: u32,
+    order: Order,
+) -> Result<(Vec<u32>, Duration), GpuError> {
+    if width == 0 || height == 0 || draws == 0 {
+        return Err(GpuError::Device(
+            "the order test needs a pixel and a draw".into(),
+        ));
+    }
+    pass::run(gpu, width, height, draws, order)
+}
+
+/// What [`fold`] must leave in each pixel: the fold over the draws that reach the pixel, in
+/// draw order, from zero.
+pub fn fold_in_order(width: u32, height: u32, draws: u32) -> Vec<u32> {
+    let pixel = |i: u32| {
+        let (x, y) = (i % width, i / width);
+        (0..draws).filter(|&d| covers(x, y, d)).fold(0, fold_step)
+    };
+    (0..width * height).map(pixel).collect()
+}
+
+/// One fragment's step: not commutative (two draws swapped or one lost change the value), as in
+/// `shaders/pixel_fold.wgsl`.
+pub fn fold_step(previous: u32, draw: u32) -> u32 {
+    previous.wrapping_mul(0x0100_0193).wrapping_add(draw + 1)
+}
+
+/// Whether `draw` reaches pixel (x, y), as `covers` in `shaders/pixel_fold.wgsl`.
+pub fn covers(x: u32, y: u32, draw: u32) -> bool {
+    let mut h =
+        x.wrapping_mul(0x9e37_79b1) ^ y.wrapping_mul(0x85eb_ca77) ^ draw.wrapping_mul(0xc2b2_ae3d);
+    h = (h ^ (h >> 15)).wrapping_mul(0x2c1b_3c6d);
+    h ^= h >> 12;
+    (h >> 7) & 1 == 1
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The device, or `None` (with a line on stderr) where the adapter lacks the extension,
+    /// unless `SPLAT_REQUIRE_RASTER_ORDER=1` (CI, whose lavapipe has it).
+    fn ordered_gpu() -> Option<Gpu> {
+        let required = std::env::var("SPLAT_REQUIRE_RASTER_ORDER").is_ok_and(|v| v == "1");
+        match open() {
+            Ok(Some(gpu)) => Some(gpu),
+            Ok(None) if !required => {
+                eprintln!("skipping: the adapter lacks rasterization-order attachment access");
+                None
+            }
+            Ok(None) => panic!("the adapter lacks rasterization-order attachment access"),
+            Err(e) if !required => {
+                eprintln!("skipping: {e}");
+                None
+            }
+            Err(e) => panic!("{e}"),
+        }
+    }
+
+    /// Every pixel holds the fold of its fragments in draw order: each fragment read what the
+    /// one before it wrote. Any two fragments of a pixel run out of order, or a write lost to a
+    /// read that came before it, change the pixel's value.
+    #[test]
+    fn each_fragment_reads_what_the_one_before_it_wrote() {
+        let Some(gpu) = ordered_gpu() else { return };
+        for (width, height, draws) in [(1, 1, 1), (64, 48, 96), (100, 37, 300)] {
+            let (got, _) = fold(&gpu, width, height, draws, Order::Rasterization).unwrap();
+            let want = fold_in_order(width, height, draws);
+            let wrong = got.iter().zip(&want).filter(|(g, w)| g != w).count();
+            assert_eq!(
+                wrong,
+                0,
+                "{wrong} of {} pixels ({width}x{height}, {draws} draws)",
+                got.len()
+            );
+        }
+    }
+
+    /// The fold tells orders apart: the same fragments in reverse order, or with one lost, end
+    /// differently at every pixel where it could.
+    #[test]
+    fn the_fold_depends_on_the_order_of_every_two_fragments() {
+        let (width, height, draws) = (32, 32, 40);
+        let in_order = fold_in_order(width, height, draws);
+        for i in 0..width * height {
+            let (x, y) = (i % width, i / width);
+            let reached: Vec<u32> = (0..draws).filter(|&d| covers(x, y, d)).collect();
+            let reversed = reached.iter().rev().fold(0, |v, &d| fold_step(v, d));
+            let one_lost = reached.iter().skip(1).fold(0, |v, &d| fold_step(v, d));
+            let palindrome = reached.iter().eq(reached.iter().rev());
+            assert!(palindrome || reversed != in_order[i as usize], "pixel {i}");
+            assert!(
+                reached.is_empty() || one_lost != in_order[i as usize],
+                "pixel {i}"
+            );
+        }
+        // About half of the draws reach each pixel.
+        let fragments = (0..width * height)
+            .map(|i| {
+                (0..draws)
+                    .filter(|&d| covers(i % width, i / width, d))
+                    .count()
+            })
+            .sum::<usize>();
+        let share = fragments as f64 / (width * height * draws) as f64;
+        assert!((0.4..0.6).contains(&share), "{share}");
+    }
+
+    /// The rewritten fragment shader reads a subpass input: the texture type, the load, the
+    /// capability and the decoration are what Vulkan needs, and nothing else changed.
+    #[test]
+    fn the_texture_load_becomes_a_subpass_input_read() {
+        let source = include_str!("shaders/pixel_fold.wgsl");
+        let fragment = spirv::entry_point(source, "fold", naga::ShaderStage::Fragment).unwrap();
+        let patched = spirv::texture_as_input_attachment(&fragment).unwrap();
+        let ops = |words: &[u32]| spirv::split(&words[5..]).unwrap().len();
+        let find = |op: ::spirv::Op| -> Vec<Vec<u32>> {
+            let body = spirv::split(&patched[5..]).unwrap();
+            body.into_iter()
+                .filter(|i| i[0] & 0xffff == op as u32)
+                .map(<[u32]>::to_vec)
+                .collect()
+        };
+        assert_eq!(find(::spirv::Op::ImageFetch).len(), 0);
+        assert_eq!(find(::spirv::Op::ImageRead).len(), 1);
+        let image = &find(::spirv::Op::TypeImage)[0];
+        assert_eq!(image[3], ::spirv::Dim::DimSubpassData as u32);
+        assert_eq!(image[7], 2);
+        assert!(
+            find(::spirv::Op::Capability)
+                .iter()
+                .any(|c| c[1] == ::spirv::Capability::InputAttachment as u32)
+        );
+        assert!(
+            find(::spirv::Op::Decorate)
+                .iter()
+                .any(|d| d[2] == ::spirv::Decoration::InputAttachmentIndex as u32)
+        );
+        // Two instructions more (capability, decoration), one word less (the load's level).
+        assert_eq!(ops(&patched), ops(&fragment) + 2);
+        assert_eq!(patched.len(), fragment.len() + 2 + 4 - 2);
+    }
+
+    /// A shader the rewrite does not fit (no texture, or two loads) is refused with the reason.
+    #[test]
+    fn a_shader_without_one_texture_load_is_refused() {
+        let no_texture = "@fragment fn f() -> @location(0) vec4<f32> { return vec4<f32>(1.0); }";
+        let two_loads = "@group(0) @binding(0) var t: texture_2d<u32>;
+            @fragment fn f() -> @location(0) vec4<u32> {
+                return textureLoad(t, vec2<i32>(0, 0), 0) + textureLoad(t, vec2<i32>(1, 0), 0);
+            }";
+        for (source, why) in [(no_texture, "0 image types"), (two_loads, "2 image loads")] {
+            let words = spirv::entry_point(source, "f", naga::ShaderStage::Fragment).unwrap();
+            let e = spirv::texture_as_input_attachment(&words)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(why), "{e}");
+        }
+        let e = spirv::texture_as_input_attachment(&[0x0723_0203, 0x10000, 0, 10, 0, 0x0005_0011])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("truncated"), "{e}");
+    }
+}
