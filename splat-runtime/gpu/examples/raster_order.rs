@@ -25,6 +25,7 @@ fn main() {
         Err(e) => panic!("{e}"),
     };
     let want = programmable_blend::fold_in_order(width, height, draws);
+    let reached = programmable_blend::reached_by_draw(width, height, draws);
     let fragments: u64 = (0..width * height)
         .map(|i| {
             (0..draws)
@@ -39,9 +40,11 @@ fn main() {
     );
     for order in [Order::Rasterization, Order::Unspecified] {
         for run in 0..runs {
-            let (got, time) = programmable_blend::fold(&gpu, width, height, draws, order)
+            let fold = programmable_blend::fold(&gpu, width, height, draws, order)
                 .unwrap_or_else(|e| panic!("{e}"));
+            let (got, time) = (&fold.values, fold.time);
             let wrong = got.iter().zip(&want).filter(|(g, w)| g != w).count();
+            assert_eq!(fold.reached, reached, "fragments per draw");
             println!(
                 "{order:?} run {run}: {wrong} of {} pixels differ from the fold in draw order; {:.2} ms ({:.1} ns per fragment)",
                 got.len(),

@@ -142,22 +142,43 @@ fn open_ordered(
     unsafe { adapter.create_device_from_hal(opened, desc) }.map_err(|e| failed(e.to_string()))
 }
 
+/// What the order test's pass left.
+#[derive(Clone, Debug)]
+pub struct Fold {
+    /// The fold's final value per pixel, row by row.
+    pub values: Vec<u32>,
+    /// Fragments per draw, added up in a wgpu storage buffer by the fragments.
+    pub reached: Vec<u32>,
+    /// The GPU time of the pass and its readback copy (one submission).
+    pub time: Duration,
+}
+
 /// The order test on `gpu` (from [`open`]): `draws` triangles over a `width` x `height` target,
-/// each fragment folding one step into its pixel ([`fold_step`]); the final value of every
-/// pixel and the GPU time of the pass (with its readback copy).
+/// each fragment folding one step into its pixel ([`fold_step`]) and counting itself into its
+/// draw's word of a wgpu buffer.
 pub fn fold(
     gpu: &Gpu,
     width: u32,
     height: u32,
     draws: u32,
     order: Order,
-) -> Result<(Vec<u32>, Duration), GpuError> {
+) -> Result<Fold, GpuError> {
     if width == 0 || height == 0 || draws == 0 {
         return Err(GpuError::Device(
             "the order test needs a pixel and a draw".into(),
         ));
     }
     pass::run(gpu, width, height, draws, order)
+}
+
+/// Pixels each draw reaches: what [`Fold::reached`] must hold.
+pub fn reached_by_draw(width: u32, height: u32, draws: u32) -> Vec<u32> {
+    let reached = |d: u32| {
+        (0..width * height)
+            .filter(|i| covers(i % width, i / width, d))
+            .count()
+    };
+    (0..draws).map(|d| reached(d) as u32).collect()
 }
 
 /// What [`fold`] must leave in each pixel: the fold over the draws that reach the pixel, in
@@ -210,20 +231,22 @@ mod tests {
 
     /// Every pixel holds the fold of its fragments in draw order: each fragment read what the
     /// one before it wrote. Any two fragments of a pixel run out of order, or a write lost to a
-    /// read that came before it, change the pixel's value.
+    /// read that came before it, change the pixel's value. And the fragments' adds into a wgpu
+    /// buffer reach wgpu's own readback.
     #[test]
     fn each_fragment_reads_what_the_one_before_it_wrote() {
         let Some(gpu) = ordered_gpu() else { return };
         for (width, height, draws) in [(1, 1, 1), (64, 48, 96), (100, 37, 300)] {
-            let (got, _) = fold(&gpu, width, height, draws, Order::Rasterization).unwrap();
+            let got = fold(&gpu, width, height, draws, Order::Rasterization).unwrap();
             let want = fold_in_order(width, height, draws);
-            let wrong = got.iter().zip(&want).filter(|(g, w)| g != w).count();
+            let wrong = got.values.iter().zip(&want).filter(|(g, w)| g != w).count();
+            let pixels = want.len();
             assert_eq!(
-                wrong,
-                0,
-                "{wrong} of {} pixels ({width}x{height}, {draws} draws)",
-                got.len()
+                wrong, 0,
+                "{wrong} of {pixels} pixels ({width}x{height}, {draws} draws)"
             );
+            // Every fragment added to its draw's word of the wgpu buffer, once.
+            assert_eq!(got.reached, reached_by_draw(width, height, draws));
         }
     }
 

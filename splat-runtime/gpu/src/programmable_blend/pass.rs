@@ -4,12 +4,14 @@
 //! triangle over it. With [`Order::Rasterization`] both carry the flags of
 //! `VK_EXT_rasterization_order_attachment_access`, which make each fragment's read see the
 //! writes of every fragment before it in rasterization order; without them (the control) a
-//! read of what the same subpass writes is undefined.
+//! read of what the same subpass writes is undefined. Each fragment also adds to a wgpu
+//! storage buffer, bound by its raw handle, with barriers of our own on either side of the
+//! pass (wgpu's tracking does not see it).
 
-use super::{Order, spirv};
+use super::{Fold, Order, spirv};
 use crate::{Gpu, GpuError};
 use ash::vk;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 use wgpu::hal::api::Vulkan;
 
 const SOURCE: &str = include_str!("../shaders/pixel_fold.wgsl");
@@ -61,15 +63,16 @@ fn vulkan(what: &'static str) -> impl Fn(vk::Result) -> GpuError {
     move |e| GpuError::Device(format!("{what}: {e}"))
 }
 
-/// The fold's final value per pixel (row-major) and the GPU time of its one submission.
+/// The order test's pass (see [`super::fold`]).
 pub(super) fn run(
     gpu: &Gpu,
     width: u32,
     height: u32,
     draws: u32,
     order: Order,
-) -> Result<(Vec<u32>, Duration), GpuError> {
-    let (device, memory_types) = {
+) -> Result<Fold, GpuError> {
+    let reached = gpu.buffer_from("fragments per draw", &vec![0; draws as usize])?;
+    let (device, memory_types, reached_raw) = {
         // SAFETY: the handles are used only while `gpu` lives, and none is destroyed here.
         let hal = unsafe { gpu.device.as_hal::<Vulkan>() }
             .ok_or_else(|| GpuError::Device("programmable blending needs Vulkan".into()))?;
@@ -82,7 +85,11 @@ pub(super) fn run(
         // SAFETY: the physical device is the one the device was opened on.
         let memory =
             unsafe { instance.get_physical_device_memory_properties(hal.raw_physical_device()) };
-        (hal.raw_device().clone(), memory)
+        // SAFETY: `reached` outlives the pass, which waits for its submission, and is not
+        // destroyed through its handle.
+        let reached_raw = unsafe { reached.as_hal::<Vulkan>().map(|b| b.raw_handle()) }
+            .ok_or_else(|| GpuError::Device("a wgpu buffer that is not Vulkan's".into()))?;
+        (hal.raw_device().clone(), memory, reached_raw)
     };
     let mut o = Objects::default();
     o.device = Some(device.clone());
@@ -186,21 +193,34 @@ pub(super) fn run(
             )
             .map_err(vulkan("the framebuffer"))?;
 
-        let binding = [vk::DescriptorSetLayoutBinding::default()
-            .binding(0)
-            .descriptor_type(vk::DescriptorType::INPUT_ATTACHMENT)
-            .descriptor_count(1)
-            .stage_flags(vk::ShaderStageFlags::FRAGMENT)];
+        let binding = [
+            vk::DescriptorSetLayoutBinding::default()
+                .binding(0)
+                .descriptor_type(vk::DescriptorType::INPUT_ATTACHMENT)
+                .descriptor_count(1)
+                .stage_flags(vk::ShaderStageFlags::FRAGMENT),
+            vk::DescriptorSetLayoutBinding::default()
+                .binding(1)
+                .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                .descriptor_count(1)
+                .stage_flags(vk::ShaderStageFlags::FRAGMENT),
+        ];
         o.set_layout = d
             .create_descriptor_set_layout(
                 &vk::DescriptorSetLayoutCreateInfo::default().bindings(&binding),
                 None,
             )
             .map_err(vulkan("the descriptor set layout"))?;
-        let sizes = [vk::DescriptorPoolSize {
-            ty: vk::DescriptorType::INPUT_ATTACHMENT,
-            descriptor_count: 1,
-        }];
+        let sizes = [
+            vk::DescriptorPoolSize {
+                ty: vk::DescriptorType::INPUT_ATTACHMENT,
+                descriptor_count: 1,
+            },
+            vk::DescriptorPoolSize {
+                ty: vk::DescriptorType::STORAGE_BUFFER,
+                descriptor_count: 1,
+            },
+        ];
         o.descriptor_pool = d
             .create_descriptor_pool(
                 &vk::DescriptorPoolCreateInfo::default()
@@ -221,12 +241,24 @@ pub(super) fn run(
             image_view: o.view,
             image_layout: vk::ImageLayout::GENERAL,
         }];
+        let buffer_info = [vk::DescriptorBufferInfo {
+            buffer: reached_raw,
+            offset: 0,
+            range: vk::WHOLE_SIZE,
+        }];
         d.update_descriptor_sets(
-            &[vk::WriteDescriptorSet::default()
-                .dst_set(set)
-                .dst_binding(0)
-                .descriptor_type(vk::DescriptorType::INPUT_ATTACHMENT)
-                .image_info(&image_info)],
+            &[
+                vk::WriteDescriptorSet::default()
+                    .dst_set(set)
+                    .dst_binding(0)
+                    .descriptor_type(vk::DescriptorType::INPUT_ATTACHMENT)
+                    .image_info(&image_info),
+                vk::WriteDescriptorSet::default()
+                    .dst_set(set)
+                    .dst_binding(1)
+                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                    .buffer_info(&buffer_info),
+            ],
             &[],
         );
         o.pipeline_layout = d
@@ -323,6 +355,19 @@ pub(super) fn run(
         let recorded = encoder.as_hal_mut::<Vulkan, _, _>(|encoder| {
             let Some(encoder) = encoder else { return false };
             let cb = encoder.raw_handle();
+            // wgpu's writes of the buffer (its zeros) before the fragments' adds.
+            let from_wgpu = [vk::MemoryBarrier::default()
+                .src_access_mask(vk::AccessFlags::MEMORY_WRITE)
+                .dst_access_mask(vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE)];
+            d.cmd_pipeline_barrier(
+                cb,
+                vk::PipelineStageFlags::ALL_COMMANDS,
+                vk::PipelineStageFlags::FRAGMENT_SHADER,
+                vk::DependencyFlags::empty(),
+                &from_wgpu,
+                &[],
+                &[],
+            );
             let clear = [vk::ClearValue {
                 color: vk::ClearColorValue { uint32: [0; 4] },
             }];
@@ -358,15 +403,20 @@ pub(super) fn run(
                     .image_subresource(layer)
                     .image_extent(extent.into())],
             );
-            let to_host = [vk::MemoryBarrier::default()
-                .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-                .dst_access_mask(vk::AccessFlags::HOST_READ)];
+            // The copy's writes to the host; the fragments' adds to whatever wgpu does next.
+            let after = [vk::MemoryBarrier::default()
+                .src_access_mask(vk::AccessFlags::TRANSFER_WRITE | vk::AccessFlags::SHADER_WRITE)
+                .dst_access_mask(
+                    vk::AccessFlags::HOST_READ
+                        | vk::AccessFlags::MEMORY_READ
+                        | vk::AccessFlags::MEMORY_WRITE,
+                )];
             d.cmd_pipeline_barrier(
                 cb,
-                vk::PipelineStageFlags::TRANSFER,
-                vk::PipelineStageFlags::HOST,
+                vk::PipelineStageFlags::TRANSFER | vk::PipelineStageFlags::FRAGMENT_SHADER,
+                vk::PipelineStageFlags::HOST | vk::PipelineStageFlags::ALL_COMMANDS,
                 vk::DependencyFlags::empty(),
-                &to_host,
+                &after,
                 &[],
                 &[],
             );
@@ -390,7 +440,12 @@ pub(super) fn run(
         let values =
             std::slice::from_raw_parts(mapped as *const u32, (width * height) as usize).to_vec();
         d.unmap_memory(o.readback_memory);
-        Ok((values, time))
+        let reached = gpu.read(&reached, draws as usize)?;
+        Ok(Fold {
+            values,
+            reached,
+            time,
+        })
     }
 }
 

@@ -1,11 +1,15 @@
 // The order test of programmable blending (programmable_blend.rs): every draw covers the
 // viewport, and each of its fragments folds one step into its pixel's state, read from the
 // pixel's own attachment. The fold is not commutative, so a pixel's final value says whether
-// its fragments ran in draw order, each after the one before had written.
+// its fragments ran in draw order, each after the one before had written. Each fragment also
+// counts itself into its draw's word of a wgpu storage buffer, as the backward adds a
+// fragment's gradient into its primitive's words.
 
 // The pixel's state. WGSL has no input attachments: the SPIR-V naga writes for this texture and
 // its one load is patched into a subpass input and a read at the fragment's own pixel.
 @group(0) @binding(0) var state: texture_2d<u32>;
+// Fragments per draw.
+@group(0) @binding(1) var<storage, read_write> reached: array<atomic<u32>>;
 
 struct Fragment {
     @builtin(position) position: vec4<f32>,
@@ -34,6 +38,7 @@ fn fold(fragment: Fragment) -> @location(0) vec4<u32> {
     if !covers(pixel.x, pixel.y, fragment.draw) {
         discard;
     }
+    atomicAdd(&reached[fragment.draw], 1u);
     // The offset (0, 0) from this fragment once patched.
     let previous = textureLoad(state, vec2<i32>(0, 0), 0).x;
     return vec4<u32>(previous * 0x01000193u + fragment.draw + 1u, 0u, 0u, 0u);
