@@ -1,17 +1,18 @@
 //! The hardware-rasterized forward pass (quads in depth order, fixed-function blending into
 //! render targets of each precision) against the tile-based forward on the GPU, within the
 //! bound each target format implies (`hardware_forward_matches_tiles`): 3DGS (no pixel data)
-//! and 3DGUT (its `pixel_info` rays, on a fisheye) through the same check.
+//! and 3DGUT (its `pixel_info` rays, on a fisheye) through the same check; and the same pass
+//! with programmable blending (the fragments blend themselves, in rasterization order).
 //!
 //! Needs a wgpu adapter (lavapipe is enough); with `SPLAT_REQUIRE_GPU=1` a missing adapter
-//! fails the test, otherwise it skips.
+//! fails the test, otherwise it skips (programmable blending: `SPLAT_REQUIRE_RASTER_ORDER=1`).
 
 use crate::common::{as_method, spread_gaussians, wide_camera};
 use splat_methods::{gs3d, gut};
 use splat_runtime::CameraModel;
 use splat_runtime::checks::forward::hardware_forward_matches_tiles;
-use splat_runtime::gpu::raster::HardwareRenderer;
-use splat_runtime::gpu::{GpuScene, adapter_or_skip};
+use splat_runtime::gpu::raster::{Blending, HardwareRenderer};
+use splat_runtime::gpu::{GpuScene, adapter_or_skip, programmable_blend};
 use splat_runtime::precision::Precision;
 use splat_runtime::{RenderOptions, render};
 
@@ -19,7 +20,8 @@ use splat_runtime::{RenderOptions, render};
 fn hardware_forward_matches_the_tile_path_in_every_format() {
     let cam = wide_camera(64, 48, CameraModel::Pinhole);
     let params = spread_gaussians(&cam, 300, 4);
-    let formats = hardware_forward_matches_tiles::<gs3d::Method>("3dgs", &params, &cam);
+    let fixed = Blending::FixedFunction;
+    let formats = hardware_forward_matches_tiles::<gs3d::Method>("3dgs", &params, &cam, fixed);
     if adapter_or_skip().is_some() {
         // Rgba16Float and Rgba8Unorm blend on every adapter.
         assert!(formats.iter().any(|(p, _)| *p == Precision::F16));
@@ -27,7 +29,35 @@ fn hardware_forward_matches_the_tile_path_in_every_format() {
     }
     let fisheye = wide_camera(64, 48, CameraModel::KannalaBrandt);
     let rays = as_method::<gut::Params>(spread_gaussians(&fisheye, 300, 5));
-    hardware_forward_matches_tiles::<gut::Method>("3dgut, fisheye", &rays, &fisheye);
+    hardware_forward_matches_tiles::<gut::Method>("3dgut, fisheye", &rays, &fisheye, fixed);
+}
+
+/// Programmable blending (each fragment reads its pixel's targets and writes the blend, in
+/// rasterization order) within the same bounds of the tile path, in every format, through a
+/// pinhole (3DGS) and a fisheye (3DGUT, whose fragments read the camera's rays).
+#[test]
+fn programmable_blending_matches_the_tile_path_in_every_format() {
+    let cam = wide_camera(64, 48, CameraModel::Pinhole);
+    let params = spread_gaussians(&cam, 300, 4);
+    let programmable = Blending::Programmable;
+    let formats =
+        hardware_forward_matches_tiles::<gs3d::Method>("3dgs", &params, &cam, programmable);
+    if programmable_blend::open_or_skip().is_some() {
+        assert_eq!(
+            formats.len(),
+            Precision::ALL.len(),
+            "every format, blendable or not"
+        );
+    }
+    for (precision, worst) in &formats {
+        println!(
+            "3dgs, programmable, {}: worst {worst:.3} of the bound",
+            precision.name()
+        );
+    }
+    let fisheye = wide_camera(64, 48, CameraModel::KannalaBrandt);
+    let rays = as_method::<gut::Params>(spread_gaussians(&fisheye, 300, 5));
+    hardware_forward_matches_tiles::<gut::Method>("3dgut, fisheye", &rays, &fisheye, programmable);
 }
 
 /// The image of the default hardware path equals the CPU's (with its transmittance stop)

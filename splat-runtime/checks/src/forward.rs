@@ -344,16 +344,23 @@ pub fn outputs_close(label: &str, want: &Frame, got: &Frame, abs: f32, rel: f32)
 /// narrow formats) by 2n u times the farthest depth. Unorm formats are compared with the tile
 /// path's values saturated to [0, 1]. Returns each format with its worst error as a fraction
 /// of the bound, and asserts the frame holds one key per visible primitive (no tile pass).
+/// With `Blending::Programmable` the fragments blend themselves (a device from
+/// `programmable_blend::open_or_skip`), into every format.
 #[cfg(feature = "gpu")]
 pub fn hardware_forward_matches_tiles<M: SplatMethod>(
     label: &str,
     params: &[M::Params],
     cam: &Camera,
+    blending: splat_gpu::raster::Blending,
 ) -> Vec<(splat_core::precision::Precision, f32)> {
     use splat_core::precision::Precision;
-    use splat_gpu::raster::{HardwareRenderer, supports};
+    use splat_gpu::raster::{Blending, HardwareRenderer, supports};
     use splat_gpu::{GpuRenderer, GpuScene};
-    let Some(gpu) = splat_gpu::adapter_or_skip() else {
+    let gpu = match blending {
+        Blending::FixedFunction => splat_gpu::adapter_or_skip(),
+        Blending::Programmable => splat_gpu::programmable_blend::open_or_skip(),
+    };
+    let Some(gpu) = gpu else {
         return vec![];
     };
     let no_stop = Blend {
@@ -374,12 +381,12 @@ pub fn hardware_forward_matches_tiles<M: SplatMethod>(
         .fold(0.0f32, f32::max);
     let mut out = vec![];
     for precision in Precision::ALL {
-        if !supports(&gpu, precision) {
+        if blending == Blending::FixedFunction && !supports(&gpu, precision) {
             println!("{label}: this adapter cannot blend into {precision:?} targets");
             continue;
         }
-        let mut hw =
-            HardwareRenderer::<M>::new(&gpu, &RenderOptions { precision, ..opts }).unwrap();
+        let opts = RenderOptions { precision, ..opts };
+        let mut hw = HardwareRenderer::<M>::with_blending(&gpu, &opts, blending).unwrap();
         let info = hw.forward(&scene, cam).unwrap();
         assert_eq!(
             info.intersections, want.stats.visible,

@@ -8,6 +8,7 @@
 
 use super::kernel::{self, load};
 use super::packing::ShadePacking;
+use super::raster::Blending;
 use super::scatter;
 use super::state::PixelState;
 use super::sums::Sums;
@@ -530,6 +531,9 @@ pub fn backward<M: SplatMethod>(
     ))
 }
 
+/// Where the hardware forward's programmable blending binds its first state texture.
+const RASTER_STATE_BINDING: u32 = 16;
+
 /// Values per render target of the hardware-rasterized forward pass: three, then the alpha
 /// each target blends by.
 pub const RASTER_VALUES: usize = 3;
@@ -550,8 +554,15 @@ pub fn blend_constants(rule: Blend) -> [(&'static str, f64); 2] {
 
 /// The hardware-rasterized forward pass under the camera `model` (`quad_vertex`,
 /// `splat_fragment`): the color channels in `color_targets` targets, then (with `depth`) the
-/// depth in one more target ([`raster_color_targets`] of them for the colors).
-pub fn raster<M: SplatMethod>(model: CameraModel, depth: bool) -> Result<String, GpuError> {
+/// depth in one more target ([`raster_color_targets`] of them for the colors). With
+/// `Blending::Programmable` the fragment blends itself: it reads each target's state (a
+/// texture, bound from 16 on, that `programmable_blend` makes an input attachment) and writes
+/// what fixed-function blending would.
+pub fn raster<M: SplatMethod>(
+    model: CameraModel,
+    depth: bool,
+    blending: Blending,
+) -> Result<String, GpuError> {
     let wgsl = M::SOURCE.wgsl;
     let layout = Layout::of::<M>();
     let (camera, pixel_code, pixel_args) = pixel::<M>(3, model)?;
@@ -568,13 +579,28 @@ pub fn raster<M: SplatMethod>(model: CameraModel, depth: bool) -> Result<String,
     }
     let mut decls = String::new();
     let mut write = String::new();
+    let mut states = String::new();
     for (t, values) in targets.iter_mut().enumerate() {
         values.resize(RASTER_VALUES, "0.0".into());
         decls += &format!("    @location({t}) t{t}: vec4<f32>,\n");
-        write += &format!(
-            "    out.t{t} = vec4<f32>(a * {}, a * {}, a * {}, a);\n",
+        let src = format!(
+            "vec4<f32>(a * {}, a * {}, a * {}, a)",
             values[0], values[1], values[2]
         );
+        write += &match blending {
+            Blending::FixedFunction => format!("    out.t{t} = {src};\n"),
+            // "Under", as the fixed-function blend state of `raster.rs`: dst + (1 - dst.a) src.
+            Blending::Programmable => {
+                states += &format!(
+                    "@group(0) @binding({}) var state{t}: texture_2d<f32>;\n",
+                    RASTER_STATE_BINDING + t as u32
+                );
+                format!(
+                    "    let s{t} = textureLoad(state{t}, vec2<i32>(0, 0), 0);
+    out.t{t} = s{t} + (1.0 - s{t}.a) * {src};\n"
+                )
+            }
+        };
     }
     let body = fill(
         RASTER,
@@ -590,7 +616,7 @@ pub fn raster<M: SplatMethod>(model: CameraModel, depth: bool) -> Result<String,
             ("WRITE", write),
         ],
     );
-    Ok(format!("{wgsl}\n{FRAME_UNIFORM}\n{body}"))
+    Ok(format!("{wgsl}\n{FRAME_UNIFORM}\n{body}\n{states}"))
 }
 
 /// The float slots of `M::Params` (gradient words per primitive): `project_adjoint`'s

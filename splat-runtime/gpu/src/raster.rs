@@ -9,11 +9,16 @@
 //!
 //! It differs from the tile path in what fixed-function blending cannot do: a pixel is never
 //! stopped at `t_min` (its later primitives still blend; they add at most `t_min` of color),
-//! and there is no P_max. wgpu has no fragment-shader interlock, so there is no hardware
-//! backward pass: gradients come from the tile path ([`super::GpuRenderer`]).
+//! and there is no P_max. There is no hardware backward pass yet: gradients come from the tile
+//! path ([`super::GpuRenderer`]).
+//!
+//! With [`Blending::Programmable`] (a device from [`super::programmable_blend::open`]) the
+//! fragments blend themselves, reading and writing the targets in rasterization order: the
+//! same images, the footing of the backward pass, which has to read the state it updates.
 
 use super::front::{COUNT, Front, PROJECT, Projection, SORT};
 use super::per_model::PerModel;
+use super::programmable_blend::{Order, RasterPass, RasterPassDesc};
 use super::resident::FrameInfo;
 use super::timing::StageTimer;
 use super::{Gpu, GpuError, entries};
@@ -23,7 +28,7 @@ use splat_core::frame::{Frame, Image, RenderOptions, Stats};
 use splat_core::grid::TileGrid;
 use splat_core::method::SplatMethod;
 use splat_core::precision::Precision;
-use splat_core::types::Camera;
+use splat_core::types::{Camera, CameraModel};
 use std::marker::PhantomData;
 
 // The renderer's timed stage after the front's (two timestamps each).
@@ -49,6 +54,16 @@ pub fn supports(gpu: &Gpu, precision: Precision) -> bool {
     }
 }
 
+/// How the fragments' values reach the targets.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Blending {
+    /// The blend unit's "under" (a wgpu render pipeline).
+    FixedFunction,
+    /// The fragment shader reads its pixel's targets and writes the blend itself, in
+    /// rasterization order (a raw Vulkan pass, [`super::programmable_blend`]).
+    Programmable,
+}
+
 /// A hardware-rasterized renderer for one method and one set of options: pipeline built
 /// once, buffers and targets kept across frames.
 pub struct HardwareRenderer<'g, M: SplatMethod> {
@@ -63,6 +78,12 @@ pub struct HardwareRenderer<'g, M: SplatMethod> {
     color_targets: usize,
     /// The render targets, made for the last frame's size.
     targets: Vec<wgpu::Texture>,
+    blending: Blending,
+    /// With programmable blending: the pass of the last frame's camera model, which also
+    /// holds its targets.
+    programmable: Option<(CameraModel, RasterPass)>,
+    /// The last programmable draw's time, measured on the host.
+    draw_time: std::time::Duration,
     timer: StageTimer,
     frame: Option<FrameInfo>,
     method: PhantomData<M>,
@@ -72,6 +93,15 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
     /// A renderer producing the outputs `opts` asks for, stored at `opts.precision`
     /// (`tile_size` and `tile_cull` do not apply; `p_max` must be `None`).
     pub fn new(gpu: &'g Gpu, opts: &RenderOptions) -> Result<Self, GpuRenderError> {
+        Self::with_blending(gpu, opts, Blending::FixedFunction)
+    }
+
+    /// [`HardwareRenderer::new`] with the targets blended as `blending` says.
+    pub fn with_blending(
+        gpu: &'g Gpu,
+        opts: &RenderOptions,
+        blending: Blending,
+    ) -> Result<Self, GpuRenderError> {
         let refuse = |why: String| GpuError::Hardware(why);
         if opts.shade_precision != Precision::F32 {
             return Err(refuse(format!(
@@ -85,7 +115,7 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
                 refuse("there are no tile lists to cap: P_max must be unset".into()).into(),
             );
         }
-        if !supports(gpu, opts.precision) {
+        if blending == Blending::FixedFunction && !supports(gpu, opts.precision) {
             return Err(refuse(format!(
                 "this adapter cannot blend into {:?} targets (precision {})",
                 target_format(opts.precision),
@@ -127,6 +157,9 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
             formats,
             color_targets,
             targets: vec![],
+            blending,
+            programmable: None,
+            draw_time: Default::default(),
             timer: StageTimer::new(gpu, STAGES),
             frame: None,
             method: PhantomData,
@@ -161,6 +194,18 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
             &self.timer,
         )?;
         self.front.reserve(gpu, counted)?;
+        let info = FrameInfo {
+            grid,
+            primitives: scene.len(),
+            visible: counted.visible,
+            intersections: counted.intersections as usize,
+            redone: false,
+        };
+        if self.blending == Blending::Programmable {
+            self.draw_programmable(camera.model, info)?;
+            self.frame = Some(info);
+            return Ok(info);
+        }
         let size = (grid.width, grid.height);
         let made_for = |t: &wgpu::Texture| (t.width(), t.height());
         if self.targets.first().map(made_for) != Some(size) {
@@ -181,7 +226,7 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
         }
         let (model, opts, formats) = (camera.model, self.opts, &self.formats);
         let (pipeline, slots) = self.pipelines.get(model, || {
-            let source = entries::raster::<M>(model, opts.depth)?;
+            let source = entries::raster::<M>(model, opts.depth, Blending::FixedFunction)?;
             build_pipeline(gpu, &source, formats, opts.blend.alpha_min)
         })?;
         let layout = pipeline.get_bind_group_layout(0);
@@ -218,15 +263,49 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
         self.timer.end(&mut enc, DRAW);
         self.timer.resolve(&mut enc, PROJECT..STAGES);
         gpu.queue.submit([enc.finish()]);
-        let info = FrameInfo {
-            grid,
-            primitives: scene.len(),
-            visible: counted.visible,
-            intersections: counted.intersections as usize,
-            redone: false,
-        };
         self.frame = Some(info);
         Ok(info)
+    }
+
+    /// The frame's sort and its quads drawn by the programmable pass of `model` (built on
+    /// first use). Waits for the draw.
+    fn draw_programmable(&mut self, model: CameraModel, info: FrameInfo) -> Result<(), GpuError> {
+        let gpu = self.gpu;
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        self.timer.start(&mut enc, SORT);
+        self.front.emit_sorted(gpu, &mut enc)?;
+        self.timer.end(&mut enc, SORT);
+        // The draw is timed on the host (`download_frame`): the raw pass holds no queries.
+        self.timer.start(&mut enc, DRAW);
+        self.timer.end(&mut enc, DRAW);
+        self.timer.resolve(&mut enc, PROJECT..STAGES);
+        gpu.queue.submit([enc.finish()]);
+        if self.programmable.as_ref().map(|(m, _)| *m) != Some(model) {
+            let source = entries::raster::<M>(model, self.opts.depth, Blending::Programmable)?;
+            let constants = [("ALPHA_MIN", f64::from(self.opts.blend.alpha_min))];
+            let desc = RasterPassDesc {
+                source: &source,
+                vertex: "quad_vertex",
+                fragment: "splat_fragment",
+                states: &self.formats,
+                constants: &constants,
+                strips: true,
+                order: Order::Rasterization,
+            };
+            self.programmable = Some((model, RasterPass::new(gpu, &desc)?));
+        }
+        let (_, pass) = self.programmable.as_mut().expect("built above");
+        let mut inputs: Vec<(&str, &wgpu::Buffer)> = vec![
+            ("projected", &self.front.projected),
+            ("order", &self.front.prims),
+            ("frame", &self.front.frame_uniform),
+        ];
+        if M::HAS_PIXEL_INFO {
+            inputs.push(("camera_words", &self.front.camera));
+        }
+        let size = (info.grid.width, info.grid.height);
+        self.draw_time = pass.draw(gpu, size, 4, info.intersections as u32, &inputs)?;
+        Ok(())
     }
 
     /// Bytes the last frame's sorts used ([`super::sort_bytes`]).
@@ -240,7 +319,13 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
         let info = self.frame.ok_or(GpuRenderError::NoFrame)?;
         let grid = info.grid;
         let pixels = (grid.width * grid.height) as usize;
-        let values = read_targets(self.gpu, &self.targets, (grid.width, grid.height))?;
+        let values = match &self.programmable {
+            Some((_, pass)) if self.blending == Blending::Programmable => (self.formats.iter())
+                .enumerate()
+                .map(|(k, format)| Ok(decode(*format, &pass.state_bytes(k)?)))
+                .collect::<Result<Vec<_>, GpuError>>()?,
+            _ => read_targets(self.gpu, &self.targets, (grid.width, grid.height))?,
+        };
         let mut color = Vec::with_capacity(pixels * self.channels);
         let (mut t, mut dacc) = (Vec::with_capacity(pixels), vec![0.0; pixels]);
         for p in 0..pixels {
@@ -275,7 +360,10 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
                 pairs: 0,
                 preprocess: time(PROJECT),
                 rasterize: time(COUNT) + time(SORT),
-                shade: time(DRAW),
+                shade: match self.blending {
+                    Blending::FixedFunction => time(DRAW),
+                    Blending::Programmable => self.draw_time,
+                },
             },
         })
     }
