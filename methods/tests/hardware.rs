@@ -10,6 +10,7 @@
 use crate::common::{as_method, spread_gaussians, wide_camera};
 use splat_methods::{gs3d, gut};
 use splat_runtime::CameraModel;
+use splat_runtime::blend::Blend;
 use splat_runtime::checks::forward::hardware_forward_matches_tiles;
 use splat_runtime::gpu::raster::{Blending, HardwareRenderer};
 use splat_runtime::gpu::{GpuScene, adapter_or_skip, programmable_blend};
@@ -94,4 +95,41 @@ fn hardware_forward_renders_what_the_cpu_renders_and_refuses_p_max() {
         .err()
         .unwrap();
     assert!(err.to_string().contains("P_max"), "{err}");
+}
+
+/// With a stack deep enough that pixels stop (the stop changes the image by more than the
+/// check's bound), programmable blending stops them where the tile path does.
+#[test]
+fn programmable_blending_stops_pixels_where_the_tile_path_does() {
+    let cam = wide_camera(32, 24, CameraModel::Pinhole);
+    let params = spread_gaussians(&cam, 2000, 7);
+    let stop = render::<gs3d::Method>(&params, &cam, &RenderOptions::default()).unwrap();
+    let no_stop = RenderOptions {
+        blend: Blend {
+            t_min: 0.0,
+            ..Blend::default()
+        },
+        ..RenderOptions::default()
+    };
+    let all = render::<gs3d::Method>(&params, &cam, &no_stop).unwrap();
+    let diffs: Vec<f32> = stop
+        .color
+        .data
+        .iter()
+        .zip(&all.color.data)
+        .map(|(a, b)| (a - b).abs())
+        .collect();
+    let changed = diffs.iter().filter(|d| **d > 1e-4).count();
+    println!(
+        "the stop changed {changed} of {} values, most by {:e}",
+        diffs.len(),
+        diffs.iter().fold(0.0f32, |a, b| a.max(*b))
+    );
+    assert!(changed > 0);
+    hardware_forward_matches_tiles::<gs3d::Method>(
+        "3dgs, deep",
+        &params,
+        &cam,
+        Blending::Programmable,
+    );
 }

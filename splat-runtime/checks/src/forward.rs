@@ -345,7 +345,8 @@ pub fn outputs_close(label: &str, want: &Frame, got: &Frame, abs: f32, rel: f32)
 /// path's values saturated to [0, 1]. Returns each format with its worst error as a fraction
 /// of the bound, and asserts the frame holds one key per visible primitive (no tile pass).
 /// With `Blending::Programmable` the fragments blend themselves (a device from
-/// `programmable_blend::open_or_skip`), into every format.
+/// `programmable_blend::open_or_skip`), into every format, and both paths stop each pixel at
+/// the default `t_min`.
 #[cfg(feature = "gpu")]
 pub fn hardware_forward_matches_tiles<M: SplatMethod>(
     label: &str,
@@ -363,11 +364,14 @@ pub fn hardware_forward_matches_tiles<M: SplatMethod>(
     let Some(gpu) = gpu else {
         return vec![];
     };
-    let no_stop = Blend {
-        t_min: 0.0,
-        ..Blend::default()
+    let rule = match blending {
+        Blending::FixedFunction => Blend {
+            t_min: 0.0,
+            ..Blend::default()
+        },
+        Blending::Programmable => Blend::default(),
     };
-    let opts = options_with(16, no_stop);
+    let opts = options_with(16, rule);
     let scene = GpuScene::<M>::new(&gpu, params).unwrap();
     let mut tiles = GpuRenderer::<M>::new(&gpu, &opts).unwrap();
     tiles.forward(&scene, cam).unwrap();

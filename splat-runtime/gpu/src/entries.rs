@@ -557,7 +557,8 @@ pub fn blend_constants(rule: Blend) -> [(&'static str, f64); 2] {
 /// depth in one more target ([`raster_color_targets`] of them for the colors). With
 /// `Blending::Programmable` the fragment blends itself: it reads each target's state (a
 /// texture, bound from 16 on, that `programmable_blend` makes an input attachment) and writes
-/// what fixed-function blending would.
+/// what fixed-function blending would, and stops its pixel as the tile path does (before the
+/// primitive that would bring T to `T_STOP` or below), marking it in one more target.
 pub fn raster<M: SplatMethod>(
     model: CameraModel,
     depth: bool,
@@ -579,28 +580,47 @@ pub fn raster<M: SplatMethod>(
     }
     let mut decls = String::new();
     let mut write = String::new();
-    let mut states = String::new();
+    let (mut states, mut blend, mut keep) = (String::new(), String::new(), String::new());
     for (t, values) in targets.iter_mut().enumerate() {
         values.resize(RASTER_VALUES, "0.0".into());
         decls += &format!("    @location({t}) t{t}: vec4<f32>,\n");
-        let src = format!(
-            "vec4<f32>(a * {}, a * {}, a * {}, a)",
-            values[0], values[1], values[2]
-        );
-        write += &match blending {
-            Blending::FixedFunction => format!("    out.t{t} = {src};\n"),
+        let [v0, v1, v2] = [&values[0], &values[1], &values[2]];
+        let src = format!("vec4<f32>(a * {v0}, a * {v1}, a * {v2}, a)");
+        match blending {
+            Blending::FixedFunction => write += &format!("    out.t{t} = {src};\n"),
             // "Under", as the fixed-function blend state of `raster.rs`: dst + (1 - dst.a) src.
             Blending::Programmable => {
-                states += &format!(
-                    "@group(0) @binding({}) var state{t}: texture_2d<f32>;\n",
-                    RASTER_STATE_BINDING + t as u32
-                );
-                format!(
-                    "    let s{t} = textureLoad(state{t}, vec2<i32>(0, 0), 0);
-    out.t{t} = s{t} + (1.0 - s{t}.a) * {src};\n"
-                )
+                let binding = RASTER_STATE_BINDING + t as u32;
+                states +=
+                    &format!("@group(0) @binding({binding}) var state{t}: texture_2d<f32>;\n");
+                write += &format!("    let s{t} = textureLoad(state{t}, vec2<i32>(0, 0), 0);\n");
+                blend += &format!("        out.t{t} = s{t} + (1.0 - s{t}.a) * {src};\n");
+                keep += &format!("        out.t{t} = s{t};\n");
             }
-        };
+        }
+    }
+    if blending == Blending::Programmable {
+        // The pixel's stop mark: a target after the values', read like them.
+        let n = targets.len();
+        let binding = RASTER_STATE_BINDING + n as u32;
+        decls += &format!("    @location({n}) stopped: vec4<u32>,\n");
+        states += &format!(
+            "@group(0) @binding({binding}) var stop_mark: texture_2d<u32>;
+// Transmittance at or below which a pixel stops (`Blend::stop_at`).
+override T_STOP: f32;
+"
+        );
+        write = format!(
+            "    if (textureLoad(stop_mark, vec2<i32>(0, 0), 0).x != 0u) {{
+        discard;
+    }}
+{write}    if ((1.0 - s0.a) * (1.0 - a) <= T_STOP) {{
+        out.stopped = vec4<u32>(1u, 0u, 0u, 0u);
+{keep}    }} else {{
+        out.stopped = vec4<u32>(0u);
+{blend}    }}
+"
+        );
     }
     let body = fill(
         RASTER,

@@ -14,7 +14,8 @@
 //!
 //! With [`Blending::Programmable`] (a device from [`super::programmable_blend::open`]) the
 //! fragments blend themselves, reading and writing the targets in rasterization order: the
-//! same images, the footing of the backward pass, which has to read the state it updates.
+//! same images, and a stop mark per pixel, so a pixel stops at `t_min` as on the tile path.
+//! It is the footing of the backward pass, which has to read the state it updates.
 
 use super::front::{COUNT, Front, PROJECT, Projection, SORT};
 use super::per_model::PerModel;
@@ -282,12 +283,18 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
         gpu.queue.submit([enc.finish()]);
         if self.programmable.as_ref().map(|(m, _)| *m) != Some(model) {
             let source = entries::raster::<M>(model, self.opts.depth, Blending::Programmable)?;
-            let constants = [("ALPHA_MIN", f64::from(self.opts.blend.alpha_min))];
+            let constants = [
+                ("ALPHA_MIN", f64::from(self.opts.blend.alpha_min)),
+                ("T_STOP", f64::from(self.opts.blend.stop_at())),
+            ];
+            // The targets, then each pixel's stop mark.
+            let mut states = self.formats.clone();
+            states.push(wgpu::TextureFormat::R8Uint);
             let desc = RasterPassDesc {
                 source: &source,
                 vertex: "quad_vertex",
                 fragment: "splat_fragment",
-                states: &self.formats,
+                states: &states,
                 constants: &constants,
                 strips: true,
                 order: Order::Rasterization,

@@ -85,6 +85,7 @@ fn vk_format(format: wgpu::TextureFormat) -> Result<vk::Format, GpuError> {
         T::Rgba16Unorm => vk::Format::R16G16B16A16_UNORM,
         T::Rgba8Unorm => vk::Format::R8G8B8A8_UNORM,
         T::R32Uint => vk::Format::R32_UINT,
+        T::R8Uint => vk::Format::R8_UINT,
         other => {
             return Err(GpuError::Device(format!(
                 "programmable blending: no state images of {other:?}"
