@@ -217,14 +217,7 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
         self.front.emit_sorted(gpu, &mut enc)?;
         self.timer.end(&mut enc, SORT);
         self.timer.start(&mut enc, DRAW);
-        let mut inputs: Vec<(&str, &wgpu::Buffer)> = vec![
-            ("projected", &self.front.projected),
-            ("order", &self.front.prims),
-            ("frame", &self.front.frame_uniform),
-        ];
-        if M::HAS_PIXEL_INFO {
-            inputs.push(("camera_words", &self.front.camera));
-        }
+        let inputs = quad_inputs::<M>(&self.front);
         let (model, opts, formats) = (camera.model, self.opts, &self.formats);
         let (pipeline, slots) = self.pipelines.get(model, || {
             let source = entries::raster::<M>(model, opts.depth, Blending::FixedFunction)?;
@@ -302,14 +295,7 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
             self.programmable = Some((model, RasterPass::new(gpu, &desc)?));
         }
         let (_, pass) = self.programmable.as_mut().expect("built above");
-        let mut inputs: Vec<(&str, &wgpu::Buffer)> = vec![
-            ("projected", &self.front.projected),
-            ("order", &self.front.prims),
-            ("frame", &self.front.frame_uniform),
-        ];
-        if M::HAS_PIXEL_INFO {
-            inputs.push(("camera_words", &self.front.camera));
-        }
+        let inputs = quad_inputs::<M>(&self.front);
         let size = (info.grid.width, info.grid.height);
         self.draw_time = pass.draw(gpu, size, 4, info.intersections as u32, &inputs)?;
         Ok(())
@@ -396,6 +382,20 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
             })
             .collect()
     }
+}
+
+/// What the quads' shaders bind (`shaders/raster.wgsl`), by name: the front's projected
+/// primitives, their depth order, the frame and (ray methods) the camera.
+fn quad_inputs<M: SplatMethod>(front: &Front) -> Vec<(&'static str, &wgpu::Buffer)> {
+    let mut inputs: Vec<(&str, &wgpu::Buffer)> = vec![
+        ("projected", &front.projected),
+        ("order", &front.prims),
+        ("frame", &front.frame_uniform),
+    ];
+    if M::HAS_PIXEL_INFO {
+        inputs.push(("camera_words", &front.camera));
+    }
+    inputs
 }
 
 /// The quad pipeline: triangle strips, front-to-back ("under") blending into every target;
