@@ -57,23 +57,27 @@ const STORAGE: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE
     .union(wgpu::BufferUsages::COPY_DST);
 
 /// The instance adapters are found through (Vulkan, Metal, DX12).
-pub(crate) fn instance() -> wgpu::Instance {
+fn instance() -> wgpu::Instance {
     let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
     desc.backends = wgpu::Backends::PRIMARY;
     wgpu::Instance::new(desc)
+}
+
+/// The adapter wgpu picks first, preferring a fast one (a software one such as lavapipe is
+/// fine).
+pub(crate) fn first_adapter() -> Result<wgpu::Adapter, GpuError> {
+    pollster::block_on(instance().request_adapter(&wgpu::RequestAdapterOptions {
+        power_preference: wgpu::PowerPreference::HighPerformance,
+        ..Default::default()
+    }))
+    .map_err(|e| GpuError::NoAdapter(e.to_string()))
 }
 
 impl Gpu {
     /// The first adapter wgpu finds (a software one such as lavapipe is fine), with float
     /// atomics enabled where the adapter has them.
     pub fn new() -> Result<Gpu, GpuError> {
-        let adapter =
-            pollster::block_on(instance().request_adapter(&wgpu::RequestAdapterOptions {
-                power_preference: wgpu::PowerPreference::HighPerformance,
-                ..Default::default()
-            }))
-            .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
-        Gpu::on(adapter)
+        Gpu::on(first_adapter()?)
     }
 
     /// The `k`-th of this machine's adapters, counting around (hardware ones, or all where

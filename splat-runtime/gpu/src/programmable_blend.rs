@@ -1,17 +1,18 @@
-//! Programmable blending: a fragment shader that reads and writes its pixel's state in
-//! rasterization order, what the seed's hardware backward (paper 001) is built on. This module
-//! is its feasibility step: a device opened for it, one pass that does it, and the test that
-//! tells an ordered read-modify-write from an unordered one.
+//! Programmable blending: fragment shaders that read and write their pixel's state in
+//! rasterization order, what the seed's hardware backward (paper 001) is built on: a device
+//! opened for it ([`open`]), a render pass that does it ([`RasterPass`], which the hardware
+//! forward's `Blending::Programmable` draws with), and the order test that tells an ordered
+//! read-modify-write from an unordered one ([`fold`]).
 //!
 //! WebGPU has no such access (gpuweb issues 395 and 442), and wgpu 30 stops short of it in
 //! three places: WGSL and naga have no input attachments (gfx-rs/wgpu#5233), wgpu's render
 //! pipelines and passes have none either (gfx-rs/wgpu#10148), and neither carries the
 //! rasterization-order flags. What wgpu does lend is enough for the rest: its Vulkan layer opens
-//! the device with `VK_EXT_rasterization_order_attachment_access` and its feature
-//! ([`open`]), hands out the raw device and an open command buffer of a wgpu encoder, and
-//! submits that buffer on its queue, so the one pass is raw Vulkan (`ash`) between wgpu's own
-//! passes, its shaders the SPIR-V naga writes from WGSL with the texture load rewritten into
-//! a subpass-input read ([`spirv`]).
+//! the device with `VK_EXT_rasterization_order_attachment_access` and its feature, hands out
+//! the raw device and the open command buffer of an encoder of our own, and submits that
+//! buffer on its queue in order with its own work, so the one pass is raw Vulkan (`ash`), its
+//! shaders the SPIR-V naga writes from WGSL with the texture loads rewritten into
+//! subpass-input reads ([`spirv`]).
 //!
 //! Which devices have it: Mesa's lavapipe (CI's adapter), RADV, Turnip and ARM's drivers
 //! expose the extension; NVIDIA's drivers expose `VK_EXT_fragment_shader_interlock` instead
@@ -24,7 +25,7 @@ pub mod spirv;
 
 pub use pass::{RasterPass, RasterPassDesc};
 
-use crate::device::instance;
+use crate::device::first_adapter;
 use crate::{Gpu, GpuError};
 use ash::vk;
 use std::ffi::CStr;
@@ -98,14 +99,6 @@ pub fn support() -> Result<Support, GpuError> {
         rasterization_order: color_access(&adapter),
         interlock,
     })
-}
-
-fn first_adapter() -> Result<wgpu::Adapter, GpuError> {
-    pollster::block_on(instance().request_adapter(&wgpu::RequestAdapterOptions {
-        power_preference: wgpu::PowerPreference::HighPerformance,
-        ..Default::default()
-    }))
-    .map_err(|e| GpuError::NoAdapter(e.to_string()))
 }
 
 /// Whether `adapter` is a Vulkan one with the extension and its color-attachment feature.
@@ -182,10 +175,8 @@ pub fn fold(
     draws: u32,
     order: Order,
 ) -> Result<Fold, GpuError> {
-    if width == 0 || height == 0 || draws == 0 {
-        return Err(GpuError::Device(
-            "the order test needs a pixel and a draw".into(),
-        ));
+    if draws == 0 {
+        return Err(GpuError::Device("the order test needs a draw".into()));
     }
     let mut pass = RasterPass::new(
         gpu,

@@ -55,6 +55,9 @@ pub fn supports(gpu: &Gpu, precision: Precision) -> bool {
     }
 }
 
+/// The format of programmable blending's stop mark per pixel.
+const STOP_MARK: wgpu::TextureFormat = wgpu::TextureFormat::R8Uint;
+
 /// How the fragments' values reach the targets.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Blending {
@@ -134,16 +137,18 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
             }));
         }
         let limits = gpu.limits();
-        let bytes: u32 = formats
-            .iter()
+        // Programmable blending draws into one more image: each pixel's stop mark.
+        let mark = (blending == Blending::Programmable).then_some(STOP_MARK);
+        let attached = || formats.iter().chain(&mark);
+        let bytes: u32 = attached()
             .map(|f| f.block_copy_size(None).unwrap_or(16))
             .sum();
-        if formats.len() as u32 > limits.max_color_attachments
+        if attached().count() as u32 > limits.max_color_attachments
             || bytes > limits.max_color_attachment_bytes_per_sample
         {
             return Err(refuse(format!(
                 "{} targets of {bytes} bytes per pixel exceed this adapter's {} targets of {} bytes: use a narrower precision or fewer channels",
-                formats.len(),
+                attached().count(),
                 limits.max_color_attachments,
                 limits.max_color_attachment_bytes_per_sample
             ))
@@ -202,23 +207,42 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
             intersections: counted.intersections as usize,
             redone: false,
         };
-        if self.blending == Blending::Programmable {
-            self.draw_programmable(camera.model, info)?;
-            self.frame = Some(info);
-            return Ok(info);
-        }
-        let size = (grid.width, grid.height);
-        let made_for = |t: &wgpu::Texture| (t.width(), t.height());
-        if self.targets.first().map(made_for) != Some(size) {
-            self.targets = self.make_targets(size);
-        }
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         self.timer.start(&mut enc, SORT);
         self.front.emit_sorted(gpu, &mut enc)?;
         self.timer.end(&mut enc, SORT);
+        // A programmable draw is timed on the host (`download_frame`): the raw pass holds no
+        // queries, and its DRAW stage here is empty.
         self.timer.start(&mut enc, DRAW);
+        if self.blending == Blending::FixedFunction {
+            self.record_quads(&mut enc, camera.model, info)?;
+        }
+        self.timer.end(&mut enc, DRAW);
+        self.timer.resolve(&mut enc, PROJECT..STAGES);
+        gpu.queue.submit([enc.finish()]);
+        if self.blending == Blending::Programmable {
+            self.draw_programmable(camera.model, info)?;
+        }
+        self.frame = Some(info);
+        Ok(info)
+    }
+
+    /// Records the frame's quads under the camera `model`, blended by the blend unit into the
+    /// targets (made for the frame's size).
+    fn record_quads(
+        &mut self,
+        enc: &mut wgpu::CommandEncoder,
+        model: CameraModel,
+        info: FrameInfo,
+    ) -> Result<(), GpuError> {
+        let gpu = self.gpu;
+        let size = (info.grid.width, info.grid.height);
+        let made_for = |t: &wgpu::Texture| (t.width(), t.height());
+        if self.targets.first().map(made_for) != Some(size) {
+            self.targets = self.make_targets(size);
+        }
         let inputs = quad_inputs::<M>(&self.front);
-        let (model, opts, formats) = (camera.model, self.opts, &self.formats);
+        let (opts, formats) = (self.opts, &self.formats);
         let (pipeline, slots) = self.pipelines.get(model, || {
             let source = entries::raster::<M>(model, opts.depth, Blending::FixedFunction)?;
             build_pipeline(gpu, &source, formats, opts.blend.alpha_min)
@@ -244,36 +268,21 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
                 })
             })
             .collect();
-        {
-            let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("splat quads"),
-                color_attachments: &attachments,
-                ..Default::default()
-            });
-            pass.set_pipeline(&pipeline);
-            pass.set_bind_group(0, &bind, &[]);
-            pass.draw(0..4, 0..counted.intersections as u32);
-        }
-        self.timer.end(&mut enc, DRAW);
-        self.timer.resolve(&mut enc, PROJECT..STAGES);
-        gpu.queue.submit([enc.finish()]);
-        self.frame = Some(info);
-        Ok(info)
+        let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("splat quads"),
+            color_attachments: &attachments,
+            ..Default::default()
+        });
+        pass.set_pipeline(&pipeline);
+        pass.set_bind_group(0, &bind, &[]);
+        pass.draw(0..4, 0..info.intersections as u32);
+        Ok(())
     }
 
-    /// The frame's sort and its quads drawn by the programmable pass of `model` (built on
-    /// first use). Waits for the draw.
+    /// The frame's quads drawn by the programmable pass of `model` (built on first use), after
+    /// the sort submitted before it. Waits for the draw.
     fn draw_programmable(&mut self, model: CameraModel, info: FrameInfo) -> Result<(), GpuError> {
         let gpu = self.gpu;
-        let mut enc = gpu.device.create_command_encoder(&Default::default());
-        self.timer.start(&mut enc, SORT);
-        self.front.emit_sorted(gpu, &mut enc)?;
-        self.timer.end(&mut enc, SORT);
-        // The draw is timed on the host (`download_frame`): the raw pass holds no queries.
-        self.timer.start(&mut enc, DRAW);
-        self.timer.end(&mut enc, DRAW);
-        self.timer.resolve(&mut enc, PROJECT..STAGES);
-        gpu.queue.submit([enc.finish()]);
         if self.programmable.as_ref().map(|(m, _)| *m) != Some(model) {
             let source = entries::raster::<M>(model, self.opts.depth, Blending::Programmable)?;
             let constants = [
@@ -282,7 +291,7 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
             ];
             // The targets, then each pixel's stop mark.
             let mut states = self.formats.clone();
-            states.push(wgpu::TextureFormat::R8Uint);
+            states.push(STOP_MARK);
             let desc = RasterPassDesc {
                 source: &source,
                 vertex: "quad_vertex",
@@ -313,11 +322,11 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
         let grid = info.grid;
         let pixels = (grid.width * grid.height) as usize;
         let values = match &self.programmable {
-            Some((_, pass)) if self.blending == Blending::Programmable => (self.formats.iter())
+            Some((_, pass)) => (self.formats.iter())
                 .enumerate()
                 .map(|(k, format)| Ok(decode(*format, &pass.state_bytes(k)?)))
                 .collect::<Result<Vec<_>, GpuError>>()?,
-            _ => read_targets(self.gpu, &self.targets, (grid.width, grid.height))?,
+            None => read_targets(self.gpu, &self.targets, (grid.width, grid.height))?,
         };
         let mut color = Vec::with_capacity(pixels * self.channels);
         let (mut t, mut dacc) = (Vec::with_capacity(pixels), vec![0.0; pixels]);
