@@ -167,7 +167,8 @@ pub fn gradients_match_reference_adjoint<M: SplatMethod>(
 
 /// Each parameter group of `got` (per primitive, its words) against `reference`, each element
 /// within `bound` (given the magnitude of its terms `gross`, per primitive and word, where
-/// known); prints every group's worst element and panics naming it past the bound.
+/// known); prints every group's worst element and panics naming it past the bound. Returns
+/// the worst element's fraction of the bound.
 pub fn groups_match<N: AsRef<str>>(
     label: &str,
     got: &[Vec<f64>],
@@ -175,24 +176,28 @@ pub fn groups_match<N: AsRef<str>>(
     gross: Option<&[Vec<f64>]>,
     groups: &[(N, Range<usize>)],
     bound: Bound,
-) {
+) -> f64 {
+    let mut worst = 0.0f64;
     for (name, range) in groups {
         let pick = |ps: &[Vec<f64>]| -> Vec<f64> {
             ps.iter().flat_map(|p| p[range.clone()].to_vec()).collect()
         };
         let width = range.len();
-        bound.check(
+        let fit = bound.check(
             &format!("{label}, {}", name.as_ref()),
             &pick(got),
             &pick(reference),
             gross.map(pick).as_deref(),
             |k| format!("primitive {} word {}", k / width, k % width),
         );
+        worst = worst.max(fit.of_bound);
     }
+    worst
 }
 
 /// Each camera group of `got` (float slots) against `reference`, each element within `bound`
-/// (given the magnitude of its terms `gross` where known).
+/// (given the magnitude of its terms `gross` where known). Returns the worst element's
+/// fraction of the bound.
 pub fn camera_matches<N: AsRef<str>>(
     label: &str,
     got: &[f64],
@@ -200,16 +205,19 @@ pub fn camera_matches<N: AsRef<str>>(
     gross: Option<&[f64]>,
     groups: &[(N, Range<usize>)],
     bound: Bound,
-) {
+) -> f64 {
+    let mut worst = 0.0f64;
     for (name, range) in groups {
-        bound.check(
+        let fit = bound.check(
             &format!("{label}, camera {}", name.as_ref()),
             &got[range.clone()],
             &reference[range.clone()],
             gross.map(|g| &g[range.clone()]),
             |k| format!("slot {}", range.start + k),
         );
+        worst = worst.max(fit.of_bound);
     }
+    worst
 }
 
 /// A primitive leaves no trace through the pixels where its pairs are invalid: with the loss
@@ -513,4 +521,86 @@ pub fn gradient_subsets_match_the_full_pass<M: SplatMethod>(
             }
         }
     }
+}
+
+/// The hardware path's backward (the programmable forward's draw replayed in fragment shaders,
+/// `HardwareRenderer::backward`) against the tile path's on the same device, for every state
+/// format the adapter can draw into, for the random linear loss of
+/// [`gpu_gradients_match_cpu`] (on the reference's clear pixels; with unorm states, only on
+/// pixels whose color stays within [0, 1], as a unorm state saturates): each parameter group
+/// and camera field within `bound(precision)` (the terms' magnitude from the f64 adjoint).
+/// Both stop each pixel at the default `t_min`. Returns each format with its worst group's
+/// fraction of the bound, and the atomics the replay issued.
+#[cfg(feature = "gpu")]
+pub fn hardware_gradients_match_tiles<M: SplatMethod>(
+    label: &str,
+    params: &[M::Params],
+    cam: &Camera,
+    bound: impl Fn(splat_core::precision::Precision) -> Bound,
+) -> Vec<(splat_core::precision::Precision, f64, u64)> {
+    use splat_core::precision::Precision;
+    use splat_gpu::raster::{Blending, HardwareRenderer};
+    use splat_gpu::{GpuRenderer, GpuScene};
+    let Some(gpu) = splat_gpu::programmable_blend::open_or_skip() else {
+        return vec![];
+    };
+    let blend = splat_core::blend::Blend::default();
+    let reference = super::forward::clear_reference::<M>(label, params, cam, blend);
+    let channels = <M::Color as Flat>::LEN;
+    let mut clear = super::weights_on(&reference.clear, channels);
+    reference.weigh_depth_where_clear(&mut clear);
+    // Unorm states saturate: their loss leaves out pixels with a channel past 1.
+    let mut within = clear.clone();
+    let mut saturated = 0;
+    for (p, color) in reference.color.chunks_exact(channels).enumerate() {
+        if color.iter().any(|c| *c > 1.0) {
+            within[0][p * channels..(p + 1) * channels].fill(0.0);
+            (within[1][p], within[2][p]) = (0.0, 0.0);
+            saturated += 1;
+        }
+    }
+    println!("{label}: {saturated} pixels past 1 left out of the unorm states' loss");
+    let groups = splat_core::param_groups::<M>();
+    let opts = super::options_with(16, blend);
+    let scene = GpuScene::<M>::new(&gpu, params).unwrap();
+    let mut tiles = GpuRenderer::<M>::new(&gpu, &opts).unwrap();
+    tiles.forward(&scene, cam).unwrap();
+    let acc = splat_gpu::entries::Accumulation::default_for(&gpu);
+    let all = |ps: &[M::Params]| -> Vec<Vec<f64>> { ps.iter().map(words).collect() };
+    let mut out = vec![];
+    for precision in Precision::ALL {
+        let unorm = matches!(precision, Precision::Unorm16 | Precision::Unorm8);
+        let w = if unorm { &within } else { &clear };
+        let grad = frame_grad(w);
+        let terms = adjoint::backward::<M>(params, cam, w);
+        tiles.backward(&scene, &grad, acc).unwrap();
+        let want = tiles.download_gradients().unwrap().gradients;
+        let opts = splat_core::frame::RenderOptions { precision, ..opts };
+        let programmable = Blending::Programmable;
+        let mut hw = match HardwareRenderer::<M>::with_blending(&gpu, &opts, programmable) {
+            Ok(hw) => hw,
+            Err(e) => {
+                println!("{label}, {precision:?}: no hardware path ({e})");
+                continue;
+            }
+        };
+        hw.forward(&scene, cam).unwrap();
+        hw.backward(&scene, &grad).unwrap();
+        let got = hw.download_gradients().unwrap();
+        let bound = bound(precision);
+        let at = format!("{label}, {}, hardware / tiles", precision.name());
+        let (got_params, want_params) = (all(&got.gradients.params), all(&want.params));
+        let gross = Some(&terms.gross_params[..]);
+        let mut worst = groups_match(&at, &got_params, &want_params, gross, &groups, bound);
+        let (got_camera, want_camera) = (
+            camera_words(&got.gradients.camera),
+            camera_words(&want.camera),
+        );
+        let gross = Some(&terms.gross_camera[..]);
+        let cameras = &super::CAMERA_GROUPS;
+        let camera = camera_matches(&at, &got_camera, &want_camera, gross, cameras, bound);
+        worst = worst.max(camera);
+        out.push((precision, worst, got.atomics));
+    }
+    out
 }

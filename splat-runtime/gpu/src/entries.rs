@@ -38,7 +38,9 @@ const SHADE: &str = include_str!("shaders/shade.wgsl");
 const BACKWARD: &str = include_str!("shaders/backward.wgsl");
 const PROJECT_BACKWARD: &str = include_str!("shaders/project_backward.wgsl");
 const PIXEL_BACKWARD: &str = include_str!("shaders/pixel_backward.wgsl");
+const QUADS: &str = include_str!("shaders/quads.wgsl");
 const RASTER: &str = include_str!("shaders/raster.wgsl");
+const RASTER_BACKWARD: &str = include_str!("shaders/raster_backward.wgsl");
 const SHADE_PACK: &str = include_str!("shaders/shade_pack.wgsl");
 /// `fn to_half`, `fn from_half`: f16 conversions on the bits.
 pub const HALF: &str = include_str!("shaders/half.wgsl");
@@ -494,7 +496,7 @@ pub fn backward<M: SplatMethod>(
             ),
             ("LANE", lane.into()),
             ("SUM_BINDING", sum_binding(sums, 13)),
-            ("ADD_GRAD", add_grad.into()),
+            ("ADD_GRAD", add_grad),
             ("WG", b.wg.to_string()),
             ("PIXEL", pixel_code),
             ("EVALUATE", call),
@@ -564,79 +566,263 @@ pub fn raster<M: SplatMethod>(
     depth: bool,
     blending: Blending,
 ) -> Result<String, GpuError> {
-    let wgsl = M::SOURCE.wgsl;
     let layout = Layout::of::<M>();
     let (camera, pixel_code, pixel_args) = pixel::<M>(3, model)?;
     let (call, eval) = evaluate_call::<M>(&pixel_args, "projected")?;
-    let color: Vec<String> = (0..layout.channels)
-        .map(|c| format!("r.{}", eval.results[1 + c].0))
-        .collect();
-    let mut targets: Vec<Vec<String>> = color
-        .chunks(RASTER_VALUES)
-        .map(<[String]>::to_vec)
-        .collect();
-    if depth {
-        targets.push(vec!["depth".into()]);
-    }
-    let mut decls = String::new();
-    let mut write = String::new();
-    let (mut states, mut blend, mut keep) = (String::new(), String::new(), String::new());
-    for (t, values) in targets.iter_mut().enumerate() {
-        values.resize(RASTER_VALUES, "0.0".into());
-        decls += &format!("    @location({t}) t{t}: vec4<f32>,\n");
-        let [v0, v1, v2] = [&values[0], &values[1], &values[2]];
-        let src = format!("vec4<f32>(a * {v0}, a * {v1}, a * {v2}, a)");
-        match blending {
-            Blending::FixedFunction => write += &format!("    out.t{t} = {src};\n"),
-            // "Under", as the fixed-function blend state of `raster.rs`: dst + (1 - dst.a) src.
-            Blending::Programmable => {
-                let binding = RASTER_STATE_BINDING + t as u32;
-                states +=
-                    &format!("@group(0) @binding({binding}) var state{t}: texture_2d<f32>;\n");
-                write += &format!("    let s{t} = textureLoad(state{t}, vec2<i32>(0, 0), 0);\n");
-                blend += &format!("        out.t{t} = s{t} + (1.0 - s{t}.a) * {src};\n");
-                keep += &format!("        out.t{t} = s{t};\n");
-            }
-        }
-    }
-    if blending == Blending::Programmable {
-        // The pixel's stop mark: a target after the values', read like them.
-        let n = targets.len();
-        let binding = RASTER_STATE_BINDING + n as u32;
-        decls += &format!("    @location({n}) stopped: vec4<u32>,\n");
-        states += &format!(
-            "@group(0) @binding({binding}) var stop_mark: texture_2d<u32>;
-// Transmittance at or below which a pixel stops (`Blend::stop_at`).
-override T_STOP: f32;
-"
-        );
-        write = format!(
-            "    if (textureLoad(stop_mark, vec2<i32>(0, 0), 0).x != 0u) {{
-        discard;
-    }}
-{write}    if ((1.0 - s0.a) * (1.0 - a) <= T_STOP) {{
-        out.stopped = vec4<u32>(1u, 0u, 0u, 0u);
-{keep}    }} else {{
-        out.stopped = vec4<u32>(0u);
-{blend}    }}
-"
-        );
-    }
+    let targets = RasterTargets::of::<M>(eval, depth, blending);
     let body = fill(
         RASTER,
         &[
-            ("STRIDE", layout.stride.to_string()),
-            ("SHADE_AT", layout.shade_at.to_string()),
-            ("CAMERA_BINDING", camera),
-            ("TARGETS", decls),
+            ("TARGETS", targets.decls),
             ("PIXEL", pixel_code),
             ("EVALUATE", call),
             ("VALID", eval.results[layout.channels + 1].0.to_string()),
             ("ALPHA", eval.results[0].0.to_string()),
-            ("WRITE", write),
+            ("WRITE", targets.write),
         ],
     );
-    Ok(format!("{wgsl}\n{FRAME_UNIFORM}\n{body}\n{states}"))
+    Ok(format!(
+        "{}\n{body}\n{}",
+        quads::<M>(camera),
+        targets.states
+    ))
+}
+
+/// The method's WGSL and the quads' vertex stage (`shaders/quads.wgsl`), with the camera's
+/// binding `camera`.
+fn quads<M: SplatMethod>(camera: String) -> String {
+    let layout = Layout::of::<M>();
+    let quads = fill(
+        QUADS,
+        &[
+            ("STRIDE", layout.stride.to_string()),
+            ("SHADE_AT", layout.shade_at.to_string()),
+            ("CAMERA_BINDING", camera),
+        ],
+    );
+    format!("{}\n{FRAME_UNIFORM}\n{quads}", M::SOURCE.wgsl)
+}
+
+/// What the quads' fragment shaders write, for `evaluate`'s result `r` of alpha `a` and the
+/// primitive's `depth`: the color channels [`RASTER_VALUES`] to a target `t0`, `t1`, ..., then
+/// (with `depth`) the depth in one more.
+struct RasterTargets {
+    /// The fields of the `Targets` struct.
+    decls: String,
+    /// The state textures and what they need (programmable blending).
+    states: String,
+    /// Sets `out`: the premultiplied values (fixed-function blending), or (programmable) the
+    /// state `s0`, `s1`, ... read and blended under, or the pixel stopped: then `out` is
+    /// returned at once.
+    write: String,
+    /// Per target, the expressions it blends ("0.0" past the values).
+    values: Vec<Vec<String>>,
+}
+
+impl RasterTargets {
+    fn of<M: SplatMethod>(eval: &WgslFunction, depth: bool, blending: Blending) -> RasterTargets {
+        let color: Vec<String> = (0..M::Color::LEN)
+            .map(|c| format!("r.{}", eval.results[1 + c].0))
+            .collect();
+        let mut values: Vec<Vec<String>> = color
+            .chunks(RASTER_VALUES)
+            .map(<[String]>::to_vec)
+            .collect();
+        if depth {
+            values.push(vec!["depth".into()]);
+        }
+        let mut decls = String::new();
+        let mut write = String::new();
+        let (mut states, mut blend, mut keep) = (String::new(), String::new(), String::new());
+        for (t, values) in values.iter_mut().enumerate() {
+            values.resize(RASTER_VALUES, "0.0".into());
+            decls += &format!("    @location({t}) t{t}: vec4<f32>,\n");
+            let [v0, v1, v2] = [&values[0], &values[1], &values[2]];
+            let src = format!("vec4<f32>(a * {v0}, a * {v1}, a * {v2}, a)");
+            match blending {
+                Blending::FixedFunction => write += &format!("    out.t{t} = {src};\n"),
+                // "Under", as the fixed-function blend state of `raster.rs`: dst + (1 - dst.a) src.
+                Blending::Programmable => {
+                    let binding = RASTER_STATE_BINDING + t as u32;
+                    states +=
+                        &format!("@group(0) @binding({binding}) var state{t}: texture_2d<f32>;\n");
+                    write +=
+                        &format!("    let s{t} = textureLoad(state{t}, vec2<i32>(0, 0), 0);\n");
+                    blend += &format!("    out.t{t} = s{t} + (1.0 - s{t}.a) * {src};\n");
+                    keep += &format!("        out.t{t} = s{t};\n");
+                }
+            }
+        }
+        if blending == Blending::Programmable {
+            // The pixel's stop mark: a target after the values', read like them.
+            let n = values.len();
+            let binding = RASTER_STATE_BINDING + n as u32;
+            decls += &format!("    @location({n}) stopped: vec4<u32>,\n");
+            states += &format!(
+                "@group(0) @binding({binding}) var stop_mark: texture_2d<u32>;
+// Transmittance at or below which a pixel stops (`Blend::stop_at`).
+override T_STOP: f32;
+"
+            );
+            write = format!(
+                "    if (textureLoad(stop_mark, vec2<i32>(0, 0), 0).x != 0u) {{
+        discard;
+    }}
+{write}    if ((1.0 - s0.a) * (1.0 - a) <= T_STOP) {{
+        out.stopped = vec4<u32>(1u, 0u, 0u, 0u);
+{keep}        return out;
+    }}
+    out.stopped = vec4<u32>(0u);
+{blend}"
+            );
+        }
+        RasterTargets {
+            decls,
+            states,
+            write,
+            values,
+        }
+    }
+}
+
+/// The hardware path's backward blend under the camera `model` (`quad_vertex`,
+/// `splat_backward`, `shaders/raster_backward.wgsl`): the programmable forward's draw replayed
+/// into the same targets (with `depth`, its depth target), each fragment adding its
+/// primitive's shade and depth gradients (the depth's with `want_depth`) into `grads` held as
+/// `sums` say, by f32 atomics where `float_atomics` (else compare-exchange), for the gradient
+/// groups of `opts`; ray methods add their pixel cotangents too, when the camera's gradient is
+/// asked for.
+pub fn raster_backward<M: SplatMethod>(
+    model: CameraModel,
+    opts: &RenderOptions,
+    want_depth: bool,
+    sums: Sums,
+    float_atomics: bool,
+) -> Result<String, GpuError> {
+    let layout = Layout::of::<M>();
+    let (camera, pixel_code, pixel_args) = pixel::<M>(3, model)?;
+    let (call, eval) = evaluate_call::<M>(&pixel_args, "projected")?;
+    let adj = sig::<M>("evaluate_adjoint")?;
+    let (np, ns, nc) = (pixel_args.len(), layout.shade_words, layout.channels);
+    if adj.args.len() != np + ns + 1 + nc + 1 {
+        return Err(GpuError::Shader(format!(
+            "evaluate_adjoint takes {} arguments, expected {}",
+            adj.args.len(),
+            np + ns + 1 + nc + 1
+        )));
+    }
+    let targets = RasterTargets::of::<M>(eval, opts.depth, Blending::Programmable);
+    // Each channel's value after this fragment: the component of its target.
+    let after = |c: usize| {
+        format!(
+            "out.t{}.{}",
+            c / RASTER_VALUES,
+            ["x", "y", "z"][c % RASTER_VALUES]
+        )
+    };
+    let color_terms: String = (0..nc)
+        .map(|c| {
+            format!(
+                "        d_alpha += pixel_grad[at + {c}u] * (t * {v} - (pixel_final[at + {c}u] - {after}) / one_minus);\n",
+                v = targets.values[c / RASTER_VALUES][c % RASTER_VALUES],
+                after = after(c),
+            )
+        })
+        .collect();
+    let depth_after = match opts.depth {
+        true => format!("out.t{}.x", targets.values.len() - 1),
+        false => "0.0".into(),
+    };
+    let mut adj_args: Vec<String> = pixel_args.clone();
+    for (j, kind) in adj.args.iter().enumerate().skip(np).take(ns) {
+        adj_args.push(load(*kind, &format!("projected[s + {}u]", j - np)));
+    }
+    adj_args.push("d_alpha".into());
+    adj_args.extend((0..nc).map(|c| format!("w * pixel_grad[at + {c}u]")));
+    adj_args.push(format!("{}u", opts.gradients.shade_groups::<M>()));
+    let nsf = layout.shade_floats;
+    let first = adj.results.len() - nsf;
+    let shade_grads: String = (0..nsf)
+        .map(|k| {
+            format!(
+                "    {} = ga.{};\n",
+                scatter::word(k),
+                adj.results[first + k].0
+            )
+        })
+        .collect();
+    let (grad_atomic, add_grad) = sums.wgsl_add(float_atomics);
+    // Ray methods: each fragment adds its pixel data's cotangent to its pixel's, for
+    // `pixel_backward` (the camera's gradient through the rays).
+    let (pixel_binding, add_pixel, pixel_grads) = if M::HAS_PIXEL_INFO && opts.gradients.camera() {
+        let (atomic, add) =
+            super::sums::wgsl_add_f32("add_pixel", "pixel_cotangent", float_atomics);
+        (
+            format!(
+                "@group(0) @binding(9) var<storage, read_write> pixel_cotangent: array<{atomic}>;"
+            ),
+            add,
+            (0..np)
+                .map(|k| {
+                    format!(
+                        "    add_pixel(pix * {np}u + {k}u, ga.{});\n",
+                        adj.results[k].0
+                    )
+                })
+                .collect(),
+        )
+    } else {
+        (String::new(), String::new(), String::new())
+    };
+    let body = fill(
+        RASTER_BACKWARD,
+        &[
+            (
+                "REDUCTION_NOTE",
+                "one atomic per fragment and nonzero word (no reduction).".into(),
+            ),
+            ("NG", layout.grad_words.to_string()),
+            ("CHANNELS", nc.to_string()),
+            (
+                "ALPHA_COTANGENT",
+                opts.gradients.alpha_cotangent::<M>().to_string(),
+            ),
+            ("WANT_DEPTH", want_depth.to_string()),
+            ("GRAD_ATOMIC", grad_atomic.into()),
+            ("SUM_BINDING", sum_binding(sums, 8)),
+            ("PIXEL_GRAD_BINDING", pixel_binding),
+            ("ADD_GRAD", format!("{add_grad}\n{add_pixel}")),
+            ("TARGETS", targets.decls),
+            ("PIXEL", pixel_code),
+            ("EVALUATE", call),
+            ("VALID", eval.results[nc + 1].0.to_string()),
+            ("ALPHA", eval.results[0].0.to_string()),
+            ("REPLAY", targets.write),
+            ("COLOR_TERMS", color_terms),
+            ("DEPTH_AFTER", depth_after),
+            (
+                "EVALUATE_ADJOINT",
+                format!("{}({})", adj.name, adj_args.join(", ")),
+            ),
+            ("GRAD_DECL", scatter::declare(layout.grad_words)),
+            ("SHADE_GRADS", shade_grads),
+            ("DEPTH_GRAD", scatter::word(layout.grad_words - 1)),
+            (
+                "SCATTER",
+                scatter::scatter(Reduction::None, layout.grad_words, 1),
+            ),
+            ("PIXEL_GRADS", pixel_grads),
+        ],
+    );
+    let half = match sums.half {
+        true => format!("{FINITE}\n{HALF}"),
+        false => String::new(),
+    };
+    Ok(format!(
+        "{}\n{body}\n{}\n{half}",
+        quads::<M>(camera),
+        targets.states
+    ))
 }
 
 /// The float slots of `M::Params` (gradient words per primitive): `project_adjoint`'s

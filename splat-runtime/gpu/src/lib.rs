@@ -21,6 +21,7 @@
 //!   precision.
 //! - [`timing`]: stage times from GPU timestamps.
 
+mod adjoint;
 pub mod device;
 pub mod dispatch;
 pub mod entries;

@@ -9,14 +9,15 @@
 //!
 //! It differs from the tile path in what fixed-function blending cannot do: a pixel is never
 //! stopped at `t_min` (its later primitives still blend; they add at most `t_min` of color),
-//! and there is no P_max. There is no hardware backward pass yet: gradients come from the tile
-//! path ([`super::GpuRenderer`]).
+//! and there is no P_max.
 //!
 //! With [`Blending::Programmable`] (a device from [`super::programmable_blend::open`]) the
 //! fragments blend themselves, reading and writing the targets in rasterization order: the
 //! same images, and a stop mark per pixel, so a pixel stops at `t_min` as on the tile path.
-//! It is the footing of the backward pass, which has to read the state it updates.
+//! Such a frame has a backward pass of its own ([`backward`]), which replays the draw.
 
+use super::adjoint::Adjoint;
+use super::device::Grown;
 use super::front::{COUNT, Front, PROJECT, Projection, SORT};
 use super::per_model::PerModel;
 use super::programmable_blend::{Order, RasterPass, RasterPassDesc};
@@ -32,9 +33,13 @@ use splat_core::precision::Precision;
 use splat_core::types::{Camera, CameraModel};
 use std::marker::PhantomData;
 
-// The renderer's timed stage after the front's (two timestamps each).
+mod backward;
+
+// The renderer's timed stages after the front's (two timestamps each).
 const DRAW: u32 = 3;
-const STAGES: u32 = 4;
+/// `project`'s adjoint (and `pixel_info`'s) after the backward replay.
+const ADJOINT: u32 = 4;
+const STAGES: u32 = 5;
 
 /// The render-target format that stores values at `precision`.
 pub fn target_format(precision: Precision) -> wgpu::TextureFormat {
@@ -88,8 +93,21 @@ pub struct HardwareRenderer<'g, M: SplatMethod> {
     programmable: Option<(CameraModel, RasterPass)>,
     /// The last programmable draw's time, measured on the host.
     draw_time: std::time::Duration,
+    /// The backward replay of the last camera model and depth gradient used.
+    backward_pass: Option<backward::BackwardPass>,
+    /// The gradient sums and the adjoints after the backward replay.
+    adjoint: Adjoint,
+    /// Per pixel, for the backward replay: the forward's final state (color, T, depth sum) and
+    /// the output gradients, f32 words.
+    pixel_final: Grown,
+    pixel_grad: Grown,
+    pixel_grad_host: Vec<u32>,
+    /// The last backward replay's time, measured on the host.
+    backward_time: std::time::Duration,
     timer: StageTimer,
     frame: Option<FrameInfo>,
+    /// The stamp of the scene's upload the last frame was rendered from.
+    rendered_from: u64,
     method: PhantomData<M>,
 }
 
@@ -166,8 +184,15 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
             blending,
             programmable: None,
             draw_time: Default::default(),
+            backward_pass: None,
+            adjoint: Adjoint::new::<M>(gpu, opts)?,
+            pixel_final: Grown::new(gpu, "final pixel state", 1)?,
+            pixel_grad: Grown::new(gpu, "pixel gradients", 1)?,
+            pixel_grad_host: Vec::new(),
+            backward_time: Default::default(),
             timer: StageTimer::new(gpu, STAGES),
             frame: None,
+            rendered_from: 0,
             method: PhantomData,
         })
     }
@@ -218,12 +243,13 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
             self.record_quads(&mut enc, camera.model, info)?;
         }
         self.timer.end(&mut enc, DRAW);
-        self.timer.resolve(&mut enc, PROJECT..STAGES);
+        self.timer.resolve(&mut enc, PROJECT..ADJOINT);
         gpu.queue.submit([enc.finish()]);
         if self.blending == Blending::Programmable {
             self.draw_programmable(camera.model, info)?;
         }
         self.frame = Some(info);
+        self.rendered_from = scene.stamp;
         Ok(info)
     }
 
@@ -285,10 +311,6 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
         let gpu = self.gpu;
         if self.programmable.as_ref().map(|(m, _)| *m) != Some(model) {
             let source = entries::raster::<M>(model, self.opts.depth, Blending::Programmable)?;
-            let constants = [
-                ("ALPHA_MIN", f64::from(self.opts.blend.alpha_min)),
-                ("T_STOP", f64::from(self.opts.blend.stop_at())),
-            ];
             // The targets, then each pixel's stop mark.
             let mut states = self.formats.clone();
             states.push(STOP_MARK);
@@ -297,7 +319,7 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
                 vertex: "quad_vertex",
                 fragment: "splat_fragment",
                 states: &states,
-                constants: &constants,
+                constants: &self.programmable_constants(),
                 strips: true,
                 order: Order::Rasterization,
             };
@@ -308,6 +330,14 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
         let size = (info.grid.width, info.grid.height);
         self.draw_time = pass.draw(gpu, size, 4, info.intersections as u32, &inputs)?;
         Ok(())
+    }
+
+    /// The programmable passes' `override` constants: the blend's thresholds.
+    fn programmable_constants(&self) -> [(&'static str, f64); 2] {
+        [
+            ("ALPHA_MIN", f64::from(self.opts.blend.alpha_min)),
+            ("T_STOP", f64::from(self.opts.blend.stop_at())),
+        ]
     }
 
     /// Bytes the last frame's sorts used ([`super::sort_bytes`]).
@@ -322,10 +352,7 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
         let grid = info.grid;
         let pixels = (grid.width * grid.height) as usize;
         let values = match &self.programmable {
-            Some((_, pass)) => (self.formats.iter())
-                .enumerate()
-                .map(|(k, format)| Ok(decode(*format, &pass.state_bytes(k)?)))
-                .collect::<Result<Vec<_>, GpuError>>()?,
+            Some(_) => self.state_values()?,
             None => read_targets(self.gpu, &self.targets, (grid.width, grid.height))?,
         };
         let mut color = Vec::with_capacity(pixels * self.channels);

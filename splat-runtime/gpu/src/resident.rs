@@ -14,6 +14,7 @@
 //! blend, then `project`'s adjoint (and `pixel_info`'s for ray methods). Stage times come from GPU timestamps where the adapter has
 //! them.
 
+use super::adjoint::{Adjoint, interleave};
 use super::device::{Grown, Kernel, dispatch};
 use super::entries::{self, Accumulation, Layout, Reduction};
 use super::front::{COUNT, Front, PROJECT, Projection, SORT};
@@ -22,11 +23,8 @@ use super::scene::GpuScene;
 use super::shade_pack::{ShadePacker, ShadePacking};
 use super::sort::TileRanges;
 use super::state::PixelState;
-use super::sums::{Largest, Sums};
 use super::timing::StageTimer;
 use super::{Gpu, GpuError, GpuRenderError};
-use rayon::prelude::*;
-use splat_core::flat::Flat;
 use splat_core::frame::{BackwardStats, Frame, FrameGrad, Gradients, Image, RenderOptions, Stats};
 use splat_core::grid::TileGrid;
 use splat_core::grid::TileLists;
@@ -91,30 +89,16 @@ pub struct GpuRenderer<'g, M: SplatMethod> {
     packer: Option<ShadePacker>,
     /// The kernels that call the method's model-aware functions, per camera model used.
     shade: PerModel<Kernel>,
-    project_backward: PerModel<Kernel>,
-    pixel_backward: PerModel<Kernel>,
-    /// Parameter float slots (gradient words per primitive).
-    param_floats: usize,
-    /// How the per-primitive gradient sums (`grads`) are held.
-    sums: Sums,
-    /// The pass finding the largest output gradient (f16 sums' loss scale).
-    largest: Option<Largest>,
+    /// The gradient sums and the adjoints after the blend.
+    adjoint: Adjoint,
     /// Backward blends built on first use, per (camera model, depth gradient, accumulation).
     blends: HashMap<(CameraModel, bool, Accumulation), Kernel>,
-    /// (width, height, 0, 0).
-    pixel_info: wgpu::Buffer,
     tiles: TileRanges,
     /// Per pixel: color, final T, sum of weight * depth.
     pixels: Grown,
     pixel_grad: Grown,
     /// The host's copy of the output gradients [`GpuRenderer::backward`] interleaves.
     pixel_grad_host: Vec<u32>,
-    grads: Grown,
-    issued: wgpu::Buffer,
-    param_grads: Grown,
-    camera_partials: Grown,
-    pixel_cotangent: Grown,
-    ray_partials: Grown,
     timer: StageTimer,
     /// The frame submitted last, until [`GpuRenderer::finish`] knows it fitted.
     pending: Option<Pending>,
@@ -143,7 +127,6 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
             return Err(GpuError::TileSize(opts.tile_size).into());
         }
         let layout = Layout::of::<M>();
-        let sums = Sums::at(opts.gradient_precision);
         let state = PixelState {
             precision: opts.precision,
             channels: layout.channels,
@@ -160,26 +143,12 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
                 .map(|p| ShadePacker::new::<M>(gpu, p))
                 .transpose()?,
             shade: PerModel::new(),
-            project_backward: PerModel::new(),
-            pixel_backward: PerModel::new(),
-            param_floats: entries::param_floats::<M>()?,
-            sums,
-            largest: match sums.half {
-                true => Some(Largest::new(gpu, layout.channels + 2)?),
-                false => None,
-            },
+            adjoint: Adjoint::new::<M>(gpu, opts)?,
             blends: HashMap::new(),
-            pixel_info: gpu.uniform_buffer(4),
             tiles: TileRanges::new(gpu)?,
             pixels: grown("pixels", 1)?,
             pixel_grad: grown("pixel gradients", 1)?,
             pixel_grad_host: Vec::new(),
-            grads: grown("primitive gradients", 1)?,
-            issued: gpu.buffer("atomic count", 2)?,
-            param_grads: grown("parameter gradients", 1)?,
-            camera_partials: grown("camera gradient partials", 1)?,
-            pixel_cotangent: grown("pixel data cotangents", 1)?,
-            ray_partials: grown("camera ray gradient partials", 1)?,
             timer: StageTimer::new(gpu, STAGES),
             pending: None,
             frame: None,
@@ -449,26 +418,8 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         let pixels = (info.grid.width * info.grid.height) as usize;
         grad.check(pixels, channels, self.opts.depth)?;
         let want_depth = grad.depth.is_some();
-        // Interleaved per pixel as the blend reads them, in parallel and into a buffer kept
-        // between frames (a fresh one is mostly page faults at 1080p's 41 MB).
-        let stride = channels + 2;
         let mut words = std::mem::take(&mut self.pixel_grad_host);
-        words.resize(pixels * stride, 0);
-        const BLOCK: usize = 4096;
-        words
-            .par_chunks_mut(BLOCK * stride)
-            .enumerate()
-            .for_each(|(b, block)| {
-                for (i, out) in block.chunks_exact_mut(stride).enumerate() {
-                    let p = b * BLOCK + i;
-                    let color = &grad.color[p * channels..(p + 1) * channels];
-                    for (o, c) in out.iter_mut().zip(color) {
-                        *o = c.to_bits();
-                    }
-                    out[channels] = grad.alpha.as_ref().map_or(0.0, |a| a[p]).to_bits();
-                    out[channels + 1] = grad.depth.as_ref().map_or(0.0, |d| d[p]).to_bits();
-                }
-            });
+        interleave(grad, (pixels, channels), &mut words);
         self.gpu.write(self.pixel_gradients()?, &words);
         self.pixel_grad_host = words;
         self.backward_recorded(scene, want_depth, acc)
@@ -542,7 +493,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
 
     /// Float slots of `M::Params` (the gradient words per primitive).
     pub fn param_floats(&self) -> usize {
-        self.param_floats
+        self.adjoint.param_floats
     }
 
     fn backward_recorded(
@@ -551,21 +502,21 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         want_depth: bool,
         acc: Accumulation,
     ) -> Result<(), GpuRenderError> {
-        let (_, n) = self.current()?;
+        let (grid, n) = self.current()?;
         self.check_scene(scene, n)?;
-        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        let gpu = self.gpu;
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
         self.record_blend(&mut enc, want_depth, acc)?;
         self.timer.start(&mut enc, ADJOINT);
-        self.record_adjoint(&mut enc, scene)?;
-        self.record_pixel_adjoint(&mut enc)?;
+        (self.adjoint).record(gpu, &mut enc, scene, &self.front, &grid)?;
         self.timer.end(&mut enc, ADJOINT);
         self.timer.resolve(&mut enc, BLEND..STAGES);
-        self.gpu.queue.submit([enc.finish()]);
+        gpu.queue.submit([enc.finish()]);
         Ok(())
     }
 
-    /// Records the backward blend of the last frame: each primitive's shade and depth
-    /// gradient summed in `grads` (timed as `BLEND`).
+    /// Records the backward blend of the last frame, after the adjoint's start: each
+    /// primitive's shade and depth gradient summed in its `grads` (timed as `BLEND`).
     fn record_blend(
         &mut self,
         enc: &mut wgpu::CommandEncoder,
@@ -574,110 +525,28 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
     ) -> Result<(), GpuRenderError> {
         let gpu = self.gpu;
         let (grid, n) = self.current()?;
-        let layout = self.layout;
-        let pixels = (grid.width * grid.height) as usize;
         let blend = self.blend(want_depth, acc)?;
-        let npx = M::PixelLanes::default().as_ref().len();
-        let sum_words = self.sums.words(n * layout.grad_words);
-        self.grads.ensure(gpu, sum_words)?;
-        if M::HAS_PIXEL_INFO {
-            self.pixel_cotangent.ensure(gpu, pixels * npx)?;
-            let ray_groups = (pixels as u32).div_ceil(64).max(1) as usize;
-            self.ray_partials
-                .ensure(gpu, ray_groups * Camera::FLOAT_SLOTS)?;
-            gpu.write(&self.pixel_info, &[grid.width, grid.height, 0, 0]);
-        }
-
-        enc.clear_buffer(&self.grads, 0, Some(4 * sum_words.max(1) as u64));
-        enc.clear_buffer(&self.issued, 0, None);
-        if let Some(largest) = &self.largest {
-            let read = layout.channels + 1 + want_depth as usize;
-            largest.record(gpu, enc, &self.pixel_grad, (pixels, read))?;
-        }
+        (self.adjoint).record_start::<M>(gpu, enc, (&grid, n), &self.pixel_grad, want_depth)?;
         self.timer.start(enc, BLEND);
+        let adjoint = &self.adjoint;
         let mut inputs = self.tile_pass_inputs();
         inputs.extend([
             ("pixel_state", &*self.pixels),
             ("pixel_grad", &self.pixel_grad),
-            ("grads", &self.grads),
-            ("issued", &self.issued),
+            ("grads", &adjoint.grads),
+            ("issued", &adjoint.issued),
         ]);
         if M::HAS_PIXEL_INFO {
             inputs.push(("camera_words", &self.front.camera));
-            inputs.push(("pixel_cotangent", &self.pixel_cotangent));
+            inputs.push(("pixel_cotangent", &adjoint.pixel_cotangent));
         }
-        if let Some(largest) = &self.largest {
+        if let Some(largest) = &adjoint.largest {
             inputs.push(("grad_largest", &largest.bits));
         }
         let tiles = grid.tile_count() as u32;
         let bind = gpu.bind_named(&blend, &inputs)?;
         dispatch(enc, &blend.pipeline, &bind, tiles);
         self.timer.end(enc, BLEND);
-        Ok(())
-    }
-
-    /// Records `project`'s adjoint for `scene`'s primitives, from the shade and depth
-    /// gradients in `grads` and `project`'s results in `projected`, through the front's camera.
-    fn record_adjoint(
-        &mut self,
-        enc: &mut wgpu::CommandEncoder,
-        scene: &GpuScene<M>,
-    ) -> Result<(), GpuRenderError> {
-        let gpu = self.gpu;
-        let n = scene.len();
-        let groups = (n as u32).div_ceil(64).max(1);
-        self.param_grads.ensure(gpu, n * self.param_floats)?;
-        self.camera_partials
-            .ensure(gpu, groups as usize * Camera::FLOAT_SLOTS)?;
-        let model = self.front.model;
-        let k = self.project_backward.get(model, || {
-            gpu.kernel(
-                &entries::project_backward::<M>(model, self.opts.gradients, self.sums)?,
-                "project_backward",
-            )
-        })?;
-        let mut inputs = vec![
-            ("params", scene.buffer()),
-            ("camera_words", &self.front.camera),
-            ("projected", &self.front.projected),
-            ("grads", &self.grads),
-            ("param_grads", &self.param_grads),
-            ("camera_partials", &self.camera_partials),
-            ("info", &self.front.count_info),
-        ];
-        if let Some(largest) = &self.largest {
-            inputs.push(("grad_largest", &largest.bits));
-        }
-        let bind = gpu.bind_named(&k, &inputs)?;
-        dispatch(enc, &k.pipeline, &bind, groups);
-        Ok(())
-    }
-
-    /// Records the camera's gradient through `pixel_info` (ray methods, when the options ask
-    /// for the camera's gradient), from the last backward blend's pixel cotangents.
-    fn record_pixel_adjoint(
-        &mut self,
-        enc: &mut wgpu::CommandEncoder,
-    ) -> Result<(), GpuRenderError> {
-        let gpu = self.gpu;
-        let (grid, _) = self.current()?;
-        let pixels = (grid.width * grid.height) as usize;
-        let model = self.front.model;
-        if M::HAS_PIXEL_INFO && self.opts.gradients.camera() {
-            let k = self.pixel_backward.get(model, || {
-                gpu.kernel(&entries::pixel_backward::<M>(model)?, "pixel_backward")
-            })?;
-            let bind = gpu.bind_named(
-                &k,
-                &[
-                    ("camera_words", &self.front.camera),
-                    ("pixel_cotangent", &self.pixel_cotangent),
-                    ("camera_partials", &self.ray_partials),
-                    ("info", &self.pixel_info),
-                ],
-            )?;
-            dispatch(enc, &k.pipeline, &bind, (pixels as u32).div_ceil(64));
-        }
         Ok(())
     }
 
@@ -723,14 +592,15 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
     /// The parameter gradient words on the device (`M::Params`' float slots per primitive),
     /// for an optimizer on the device.
     pub fn param_gradients(&self) -> &wgpu::Buffer {
-        &self.param_grads
+        &self.adjoint.param_grads
     }
 
     /// The gradient of each primitive's shade data on the device, [`Layout::grad_words`] f32
     /// words per primitive (`M::Shade`'s float slots, then the depth's), as the last backward
     /// blend left it; `None` where the sums are held in f16.
     pub fn shade_gradients(&self) -> Option<(&wgpu::Buffer, usize)> {
-        (!self.sums.half).then_some((&*self.grads, self.layout.grad_words))
+        let adjoint = &self.adjoint;
+        (!adjoint.sums.half).then_some((&*adjoint.grads, self.layout.grad_words))
     }
 
     /// Bytes the last frame's sorts used ([`super::sort_bytes`]).
@@ -742,8 +612,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
 
     /// Bytes the last backward pass's per-primitive gradient sums took.
     pub fn gradient_sum_bytes(&self) -> usize {
-        let n = self.frame.map_or(0, |f| f.primitives);
-        4 * self.sums.words(n * self.layout.grad_words)
+        (self.adjoint).sum_bytes(self.frame.map_or(0, |f| f.primitives))
     }
 
     /// The last frame's stage times, read back alone (a few words; no image or gradient).
@@ -762,65 +631,14 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
 
     /// The last backward pass's gradients, read back.
     pub fn download_gradients(&self) -> Result<GpuGradients<M>, GpuRenderError> {
-        let gpu = self.gpu;
         let info = self.frame.ok_or(GpuRenderError::NoFrame)?;
-        let (n, npf) = (info.primitives, self.param_floats);
-        let count = gpu.read(&self.issued, 2)?;
-        let floats: Vec<f32> = gpu
-            .read(&self.param_grads, n * npf)?
-            .into_iter()
-            .map(f32::from_bits)
-            .collect();
-        let params = floats
-            .chunks_exact(npf.max(1))
-            .take(n)
-            .map(M::params_from_float_slots)
-            .collect();
-        let (ng, nsf) = (self.layout.grad_words, self.layout.shade_floats);
-        let mut shade = vec![0.0; n * M::Shade::LEN];
-        let largest = match &self.largest {
-            Some(l) => gpu.read(&l.bits, 1)?[0],
-            None => 0,
-        };
-        let sums = gpu.read(&self.grads, self.sums.words(n * ng))?;
-        let slots = self.sums.decode(&sums, n * ng, largest);
-        for (g, out) in slots
-            .chunks_exact(ng)
-            .zip(shade.chunks_exact_mut(M::Shade::LEN))
-        {
-            M::shade_from_float_slots(&g[..nsf]).write_words(out);
-        }
-        let groups = (n as u32).div_ceil(64).max(1) as usize;
-        let mut partials = match self.opts.gradients.camera() {
-            true => gpu.read(&self.camera_partials, groups * Camera::FLOAT_SLOTS)?,
-            false => vec![],
-        };
-        if M::HAS_PIXEL_INFO && self.opts.gradients.camera() {
-            let pixels = info.grid.width * info.grid.height;
-            let ray_groups = pixels.div_ceil(64).max(1) as usize;
-            partials.extend(gpu.read(&self.ray_partials, ray_groups * Camera::FLOAT_SLOTS)?);
-        }
-        // Summed in f64, in order; the model word (last) stays zero: a cotangent has no model.
-        let mut cam = vec![0.0f64; Camera::LEN];
-        for group in partials.chunks_exact(Camera::FLOAT_SLOTS) {
-            for (c, w) in cam.iter_mut().zip(group) {
-                *c += f32::from_bits(*w) as f64;
-            }
-        }
-        let cam: Vec<f32> = cam.into_iter().map(|c| c as f32).collect();
         let times = self.stage_times()?;
-        Ok(GpuGradients {
-            gradients: Gradients {
-                params,
-                shade,
-                camera: Camera::read_words(&cam),
-                stats: BackwardStats {
-                    blend: times.blend,
-                    reduce: Default::default(),
-                    project: times.project,
-                },
-            },
-            atomics: count[0] as u64 | (count[1] as u64) << 32,
-        })
+        let stats = BackwardStats {
+            blend: times.blend,
+            reduce: Default::default(),
+            project: times.project,
+        };
+        let sizes = (&info.grid, info.primitives);
+        Ok((self.adjoint).download::<M>(self.gpu, sizes, stats)?)
     }
 }

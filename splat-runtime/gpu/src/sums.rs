@@ -41,13 +41,12 @@ impl Sums {
     }
 
     /// `fn add_grad(i: u32, v: f32)` for these sums in `grads` (`shaders/sums/add_*.wgsl`),
-    /// and the type of `grads`' elements it needs: f16 sums, or f32 ones by the adapter's f32
-    /// atomics where it has them (`float_atomics`), else by compare-exchange.
-    pub(crate) fn wgsl_add(self, float_atomics: bool) -> (&'static str, &'static str) {
-        match (self.half, float_atomics) {
-            (true, _) => ("atomic<u32>", ADD_F16),
-            (false, true) => ("atomic<f32>", ADD_F32_ATOMIC),
-            (false, false) => ("atomic<u32>", ADD_F32_EXCHANGE),
+    /// and the type of `grads`' elements it needs: f16 sums, or f32 ones as
+    /// [`wgsl_add_f32`] adds them.
+    pub(crate) fn wgsl_add(self, float_atomics: bool) -> (&'static str, String) {
+        match self.half {
+            true => ("atomic<u32>", ADD_F16.into()),
+            false => wgsl_add_f32("add_grad", "grads", float_atomics),
         }
     }
 
@@ -76,6 +75,18 @@ impl Sums {
             }
         }
     }
+}
+
+/// `fn {name}(i: u32, v: f32)` adding `v` to the f32 word `i` of `array`, and the type of the
+/// array's elements it needs: by the adapter's f32 atomics where it has them
+/// (`float_atomics`), else by compare-exchange.
+pub(crate) fn wgsl_add_f32(name: &str, array: &str, float_atomics: bool) -> (&'static str, String) {
+    let (atomic, template) = match float_atomics {
+        true => ("atomic<f32>", ADD_F32_ATOMIC),
+        false => ("atomic<u32>", ADD_F32_EXCHANGE),
+    };
+    let source = template.replace("{{FN}}", name).replace("{{ARRAY}}", array);
+    (atomic, source)
 }
 
 /// The pass that finds a frame's largest output gradient, and where it leaves it.

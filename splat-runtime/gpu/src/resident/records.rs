@@ -146,7 +146,7 @@ impl<M: SplatMethod> GpuRenderer<'_, M> {
         if words == 0 {
             return Ok(vec![]);
         }
-        let bits = self.gpu.read(&self.grads, words)?;
+        let bits = self.gpu.read(&self.adjoint.grads, words)?;
         Ok(bits.into_iter().map(f32::from_bits).collect())
     }
 
@@ -178,7 +178,7 @@ impl<M: SplatMethod> GpuRenderer<'_, M> {
         }
         splat_core::frame::check::<M>(camera, &self.opts)?;
         (self.frame, self.pending) = (None, None);
-        self.grads.ensure(gpu, n * words)?;
+        self.adjoint.grads.ensure(gpu, n * words)?;
         gpu.write(self.front.key_count(), &[0, 0]);
         let x = self.exchange()?;
         let records = index.len();
@@ -189,7 +189,7 @@ impl<M: SplatMethod> GpuRenderer<'_, M> {
         gpu.write(&x.record_grads, &bits);
         gpu.write(&x.info, &[records as u32, words as u32, 0, 0]);
         let mut enc = gpu.device.create_command_encoder(&Default::default());
-        enc.clear_buffer(&self.grads, 0, Some(4 * (n * words).max(1) as u64));
+        enc.clear_buffer(&self.adjoint.grads, 0, Some(4 * (n * words).max(1) as u64));
         let x = self.exchange.as_ref().expect("made above");
         if records > 0 {
             let bind = gpu.bind_named(
@@ -198,7 +198,7 @@ impl<M: SplatMethod> GpuRenderer<'_, M> {
                     ("info", &x.info),
                     ("index", &x.index),
                     ("record_grads", &x.record_grads),
-                    ("grads", &self.grads),
+                    ("grads", &self.adjoint.grads),
                 ],
             )?;
             let groups = ((records * words) as u32).div_ceil(256);
@@ -208,7 +208,7 @@ impl<M: SplatMethod> GpuRenderer<'_, M> {
         self.timer.start(&mut enc, BLEND);
         self.timer.end(&mut enc, BLEND);
         self.timer.start(&mut enc, ADJOINT);
-        self.record_adjoint(&mut enc, scene)?;
+        (self.adjoint).record_project(gpu, &mut enc, scene, &self.front)?;
         self.timer.end(&mut enc, ADJOINT);
         self.timer.resolve(&mut enc, BLEND..STAGES);
         gpu.queue.submit([enc.finish()]);
@@ -225,7 +225,7 @@ impl<M: SplatMethod> GpuRenderer<'_, M> {
 
     /// Records' gradients cross between ranks as f32 words: sums held in f16 are refused.
     fn refuse_half_sums(&self) -> Result<(), GpuRenderError> {
-        match self.sums.half {
+        match self.adjoint.sums.half {
             true => Err(GpuError::Shader(
                 "a sharded frame's gradients are read per record as f32 sums, not f16".into(),
             )
