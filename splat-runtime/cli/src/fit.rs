@@ -23,6 +23,7 @@ use splat_runtime::train::fit::{
     Evaluation, FitError, FitOptions, StepReport, fit_shared, refuse_other_settings, render_views,
 };
 use splat_runtime::train::gpu_fit::{fit_gpu_shared, render_views_gpu};
+use splat_runtime::train::hardware_fit::fit_hardware_shared;
 use splat_runtime::train::loss::LossValue;
 use splat_runtime::train::sharded::{fit_sharded, fit_sharded_gpu};
 use splat_runtime::train::{Checkpoint, McmcOptions, StepTimes, Strategy, Trainable, init};
@@ -62,6 +63,13 @@ pub struct FitArgs {
     /// (docs/distributed.md).
     #[arg(long)]
     pub(crate) sharded: bool,
+    /// Each view drawn by the GPU's rasterizer (quads blended in the fragment shaders, in
+    /// rasterization order) and differentiated by the hardware path's own backward pass; the
+    /// loss, Adam and density control on the host. Needs a Vulkan adapter with
+    /// VK_EXT_rasterization_order_attachment_access (lavapipe has it). Slow: each view uploads
+    /// the scene and reads frame and gradients back (docs/accuracy.md).
+    #[arg(long)]
+    pub(crate) hardware: bool,
     /// How many points to start from: at most this many of the dataset's points (evenly
     /// spaced), or as many random ones in a cube around the cameras' target when it has none
     /// (Blender and nerfstudio scenes) [default: 100000; 2000 on the built-in dataset].
@@ -313,6 +321,19 @@ impl Fit<'_> {
                         ),
                     })
                 })(),
+                Some(gpu) if args.hardware => {
+                    let team = ranks.team();
+                    let (state, extent) = (&mut state, self.extent);
+                    fit_hardware_shared::<M>(team, gpu, data, state, extent, opts, report)
+                        .map(|()| match ranks.count() {
+                            1 => format!("the GPU's rasterizer ({})", gpu.adapter),
+                            n => format!(
+                                "the GPUs' rasterizers of {n} MPI ranks (rank 0: {})",
+                                gpu.adapter
+                            ),
+                        })
+                        .map_err(Into::into)
+                }
                 Some(gpu) => {
                     let team = ranks.team();
                     fit_gpu_shared::<M>(team, gpu, data, &mut state, self.extent, opts, report)
@@ -481,6 +502,10 @@ impl Fit<'_> {
             ..opts.clone()
         };
         match &self.gpu {
+            Some(gpu) if self.args.hardware => {
+                let data = self.data;
+                fit_hardware_shared::<M>(team, gpu, data, &mut state, self.extent, &opts, |_| {})?
+            }
             Some(gpu) => {
                 let data = self.data;
                 fit_gpu_shared::<M>(team, gpu, data, &mut state, self.extent, &opts, |_| {})?

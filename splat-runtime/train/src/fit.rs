@@ -373,6 +373,32 @@ pub fn fit_shared<M: Trainable>(
     state: &mut Checkpoint,
     extent: f32,
     opts: &FitOptions,
+    progress: impl FnMut(&StepReport),
+) -> Result<(), FitError> {
+    fit_with::<M>(team, data, state, extent, opts, Frames::Cpu, progress)
+}
+
+/// Where the CPU loop's views are rendered and differentiated.
+pub(crate) enum Frames<'g, M: SplatMethod> {
+    /// splat's CPU backend.
+    Cpu,
+    /// The GPU's hardware path ([`super::hardware_fit`]).
+    #[cfg(feature = "gpu")]
+    Hardware(Box<super::hardware_fit::HardwareFrames<'g, M>>),
+    /// Holds the parameters without the GPU; never made.
+    #[cfg(not(feature = "gpu"))]
+    #[allow(dead_code)]
+    Never(std::marker::PhantomData<&'g M>),
+}
+
+/// [`fit_shared`] with each view's frame and gradients from `frames`.
+pub(crate) fn fit_with<M: Trainable>(
+    team: &dyn Team,
+    data: &Dataset,
+    state: &mut Checkpoint,
+    extent: f32,
+    opts: &FitOptions,
+    mut frames: Frames<M>,
     mut progress: impl FnMut(&StepReport),
 ) -> Result<(), FitError> {
     let rates = rates_for::<M>(data, extent, opts)?;
@@ -401,8 +427,9 @@ pub fn fit_shared<M: Trainable>(
         let mine = (draws[batch.share(team.rank(), team.ranks())].iter())
             .map(|&(view, background)| {
                 let target = &mut target;
+                let frames = &mut frames;
                 view_pass::<M>(
-                    &params, view, background, opts, observing, target, &mut times,
+                    &params, view, background, opts, observing, target, &mut times, frames,
                 )
             })
             .collect::<Result<Vec<_>, _>>()?;
@@ -517,9 +544,10 @@ pub fn fit_shared<M: Trainable>(
     Ok(())
 }
 
-/// One view of a batch through `params`: its render on `background`, loss, backward pass and
-/// (when `observing`) density control's screen-space gradient norms; its stage times are added
-/// to `times`.
+/// One view of a batch through `params`, rendered and differentiated by `frames`: its render
+/// on `background`, loss, backward pass and (when `observing`) density control's screen-space
+/// gradient norms of the primitives `project` keeps; its stage times are added to `times`.
+#[allow(clippy::too_many_arguments)]
 fn view_pass<M: Trainable>(
     params: &[M::Params],
     view: &View,
@@ -528,26 +556,47 @@ fn view_pass<M: Trainable>(
     observing: bool,
     target: &mut Image,
     times: &mut StepTimes,
+    frames: &mut Frames<M>,
 ) -> Result<ViewPass, FitError> {
     let camera = &view.camera;
-    let (frame, pass) =
-        splat_cpu::render_for_backward::<M>(params, camera, &for_training(&opts.render))?;
+    let render = for_training(&opts.render);
+    let (frame, pass) = match frames {
+        Frames::Cpu => {
+            let (frame, pass) = splat_cpu::render_for_backward::<M>(params, camera, &render)?;
+            (frame, Some(pass))
+        }
+        #[cfg(feature = "gpu")]
+        Frames::Hardware(h) => (h.render(params, camera)?, None),
+        #[cfg(not(feature = "gpu"))]
+        Frames::Never(_) => unreachable!(),
+    };
     times.preprocess += frame.stats.preprocess;
     times.rasterize += frame.stats.rasterize;
     times.shade += frame.stats.shade;
     let clock = Instant::now();
     let (loss, grad) = frame_loss(frame, view, background, opts, target)?;
     times.loss += clock.elapsed();
-    let g = splat_cpu::backward::<M>(&pass, params, camera, &grad)?;
+    let g = match (frames, &pass) {
+        #[cfg(feature = "gpu")]
+        (Frames::Hardware(h), _) => h.backward(&grad)?,
+        (_, Some(pass)) => splat_cpu::backward::<M>(pass, params, camera, &grad)?,
+        (_, None) => unreachable!("the CPU's pass is kept"),
+    };
     times.blend += g.stats.blend + g.stats.reduce;
     times.project += g.stats.project;
     let clock = Instant::now();
     let seen = match observing {
         false => vec![],
         true => {
+            let visible: Vec<u32> = match &pass {
+                Some(pass) => pass.pre.visible.iter().map(|&(i, _)| i).collect(),
+                None => (0..params.len() as u32)
+                    .filter(|&i| M::project(&params[i as usize], camera).visible)
+                    .collect(),
+            };
             let shade_words = M::Shade::LEN;
-            (pass.pre.visible.iter())
-                .map(|&(i, _)| {
+            (visible.into_iter())
+                .map(|i| {
                     let k = i as usize;
                     let shade = &g.shade[k * shade_words..(k + 1) * shade_words];
                     let grad = screen_gradient::<M>(&params[k], &g.params[k], shade, camera);

@@ -15,6 +15,8 @@ pub mod device;
 pub mod fit;
 #[cfg(feature = "gpu")]
 pub mod gpu_fit;
+#[cfg(feature = "gpu")]
+pub mod hardware_fit;
 pub mod init;
 pub mod like_3dgs;
 pub mod loss;

@@ -88,6 +88,12 @@ fn check_knobs(args: &FitArgs) -> Result<()> {
             "--view shows the whole scene as it trains, which a sharded run holds on no rank (view a run without --sharded, or its checkpoints)"
         );
     }
+    if args.hardware && args.sharded {
+        bail!("--hardware trains the whole scene on each rank: it does not shard (drop one)");
+    }
+    if args.hardware && matches!(args.backend, crate::Backend::Cpu) {
+        bail!("--hardware draws each view with the GPU's rasterizer: use --backend gpu or auto");
+    }
     if !positive(args.global_scale) {
         bail!(
             "--global-scale must be a positive number, not {}",
@@ -95,6 +101,17 @@ fn check_knobs(args: &FitArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// The device `--hardware` trains on: the first adapter, opened with rasterization-order
+/// attachment access.
+fn hardware_gpu() -> Result<splat_runtime::gpu::Gpu> {
+    match splat_runtime::gpu::programmable_blend::open()? {
+        Some(gpu) => Ok(gpu),
+        None => bail!(
+            "--hardware: this GPU lacks VK_EXT_rasterization_order_attachment_access (its fragments cannot read their pixel in order); train without --hardware"
+        ),
+    }
 }
 
 pub fn fit_cmd(args: &FitArgs, methods: &[Method]) -> Result<()> {
@@ -126,7 +143,10 @@ fn fit_on(args: &FitArgs, methods: &[Method], ranks: &Ranks) -> Result<()> {
     frozen_and_trained(&groups.collect::<Vec<_>>(), &args.freeze, method.name)?;
     // Picked first: the memory a run needs depends on where it trains. Ranks on one machine
     // take one GPU each, in turn.
-    let gpu = crate::pick_gpu_of(args.backend, ranks.local_rank())?;
+    let gpu = match args.hardware {
+        true => Some(hardware_gpu()?),
+        false => crate::pick_gpu_of(args.backend, ranks.local_rank())?,
+    };
     let background = if args.white { Vec3::ONE } else { Vec3::ZERO };
     let t = Instant::now();
     let loaded = (|| -> Result<_> {
