@@ -529,15 +529,17 @@ pub fn gradient_subsets_match_the_full_pass<M: SplatMethod>(
 /// [`gpu_gradients_match_cpu`] (on the reference's clear pixels; with unorm states, only on
 /// pixels whose color stays within [0, 1], as a unorm state saturates): each parameter group
 /// and camera field within `bound(precision)` (the terms' magnitude from the f64 adjoint).
-/// Both stop each pixel at the default `t_min`. Returns each format with its worst group's
-/// fraction of the bound, and the atomics the replay issued.
+/// Both stop each pixel at the default `t_min`. Returns, per format, the worst group's
+/// fraction of the bound, the atomics the replay issued, and the largest error against the f64
+/// reference's gradients, as a fraction of its group's largest element (the tile path's
+/// first, as [`Precision::F32`](splat_core::precision::Precision::F32) with no atomics).
 #[cfg(feature = "gpu")]
 pub fn hardware_gradients_match_tiles<M: SplatMethod>(
     label: &str,
     params: &[M::Params],
     cam: &Camera,
     bound: impl Fn(splat_core::precision::Precision) -> Bound,
-) -> Vec<(splat_core::precision::Precision, f64, u64)> {
+) -> Vec<HardwareFit> {
     use splat_core::precision::Precision;
     use splat_gpu::raster::{Blending, HardwareRenderer};
     use splat_gpu::{GpuRenderer, GpuScene};
@@ -600,7 +602,59 @@ pub fn hardware_gradients_match_tiles<M: SplatMethod>(
         let cameras = &super::CAMERA_GROUPS;
         let camera = camera_matches(&at, &got_camera, &want_camera, gross, cameras, bound);
         worst = worst.max(camera);
-        out.push((precision, worst, got.atomics));
+        if out.is_empty() {
+            let tiles = off_f64(&want_params, &want_camera, &terms, &groups);
+            out.push(HardwareFit {
+                precision: Precision::F32,
+                of_bound: 0.0,
+                atomics: 0,
+                off_f64: tiles,
+            });
+        }
+        out.push(HardwareFit {
+            precision,
+            of_bound: worst,
+            atomics: got.atomics,
+            off_f64: off_f64(&got_params, &got_camera, &terms, &groups),
+        });
     }
     out
+}
+
+/// One format's result in [`hardware_gradients_match_tiles`].
+#[derive(Clone, Copy, Debug)]
+pub struct HardwareFit {
+    pub precision: splat_core::precision::Precision,
+    /// The worst group's fraction of the bound against the tile path.
+    pub of_bound: f64,
+    /// Global atomic adds the replay issued.
+    pub atomics: u64,
+    /// The largest error against the f64 reference's gradient, as a fraction of its group's
+    /// largest element (parameter groups and camera fields).
+    pub off_f64: f64,
+}
+
+/// The largest |got - f64| over `reference`'s parameter groups and camera fields, each as a
+/// fraction of its group's largest f64 element.
+#[cfg(feature = "gpu")]
+fn off_f64(
+    params: &[Vec<f64>],
+    camera: &[f64],
+    reference: &ReferenceGrad,
+    groups: &[(&str, Range<usize>)],
+) -> f64 {
+    let relative = Bound::new(0.0, 1.0);
+    let mut worst = 0.0f64;
+    for (_, range) in groups {
+        let pick = |ps: &[Vec<f64>]| -> Vec<f64> {
+            ps.iter().flat_map(|p| p[range.clone()].to_vec()).collect()
+        };
+        let fit = relative.fit(&pick(params), &pick(&reference.params), None);
+        worst = worst.max(fit.of_bound);
+    }
+    for (_, range) in super::CAMERA_GROUPS {
+        let fit = relative.fit(&camera[range.clone()], &reference.camera[range], None);
+        worst = worst.max(fit.of_bound);
+    }
+    worst
 }
