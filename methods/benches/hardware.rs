@@ -1,7 +1,7 @@
 //! The hardware path's forward and backward (quads in depth order; programmable blending:
 //! the backward replays the draw in fragment shaders, `HardwareRenderer::backward`) beside
 //! the tile path's on the same device and scene: times per pass, global atomic adds (Yuan and
-//! He's Table I: the replay adds one per fragment and word, no reduction yet) and sort and
+//! He's Table I: the replay's quad sums against one atomic per fragment and word) and sort and
 //! gradient-sum memory (their Table III), for each state format. Each figure is the best of
 //! 3 runs after a warm-up. The replay's time is measured on the host around its submission
 //! (the raw pass holds no timestamp queries). On a machine without a GPU this runs on
@@ -10,7 +10,7 @@
 //! `cargo bench -p splat-methods --bench hardware [-- N WIDTH HEIGHT]`
 
 use splat_methods::gs3d::{Method, Params};
-use splat_runtime::gpu::entries::Accumulation;
+use splat_runtime::gpu::entries::{Accumulation, FragmentReduction};
 use splat_runtime::gpu::raster::{Blending, HardwareRenderer};
 use splat_runtime::gpu::{GpuRenderer, GpuScene, programmable_blend};
 use splat_runtime::precision::Precision;
@@ -93,7 +93,11 @@ fn main() {
         mib(tiles.sort_bytes()),
         mib(tiles.gradient_sum_bytes()),
     );
-    for precision in Precision::ALL {
+    let runs = Precision::ALL
+        .iter()
+        .map(|&p| (p, FragmentReduction::Quad))
+        .chain([(Precision::F32, FragmentReduction::None)]);
+    for (precision, reduce) in runs {
         let opts = RenderOptions { precision, ..opts };
         let mut hw =
             HardwareRenderer::<Method>::with_blending(&gpu, &opts, Blending::Programmable).unwrap();
@@ -102,12 +106,16 @@ fn main() {
             hw.forward(&scene_gpu, &camera).unwrap();
             let forward = start.elapsed();
             let start = Instant::now();
-            hw.backward(&scene_gpu, &grad).unwrap();
+            hw.backward_with(&scene_gpu, &grad, reduce).unwrap();
             atomics = hw.download_gradients().unwrap().atomics;
             [forward, start.elapsed()]
         });
+        let reduction = match reduce {
+            FragmentReduction::None => "one atomic per fragment",
+            FragmentReduction::Quad => "quad sums",
+        };
         println!(
-            "| hardware, {} states, plain atomics | {:.1} | {:.1} | {:.2} | {atomics} | {:.2} | {:.2} |",
+            "| hardware, {} states, {reduction} | {:.1} | {:.1} | {:.2} | {atomics} | {:.2} | {:.2} |",
             precision.name(),
             ms(times[0]),
             ms(times[1]),

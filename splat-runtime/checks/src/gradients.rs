@@ -524,8 +524,9 @@ pub fn gradient_subsets_match_the_full_pass<M: SplatMethod>(
 }
 
 /// The hardware path's backward (the programmable forward's draw replayed in fragment shaders,
-/// `HardwareRenderer::backward`) against the tile path's on the same device, for every state
-/// format the adapter can draw into, for the random linear loss of
+/// `HardwareRenderer::backward_with`, its fragments' gradients summed as `reduce` says) against
+/// the tile path's on the same device, for every state format the adapter can draw into, for
+/// the random linear loss of
 /// [`gpu_gradients_match_cpu`] (on the reference's clear pixels; with unorm states, only on
 /// pixels whose color stays within [0, 1], as a unorm state saturates): each parameter group
 /// and camera field within `bound(precision)` (the terms' magnitude from the f64 adjoint).
@@ -538,6 +539,7 @@ pub fn hardware_gradients_match_tiles<M: SplatMethod>(
     label: &str,
     params: &[M::Params],
     cam: &Camera,
+    reduce: splat_gpu::entries::FragmentReduction,
     bound: impl Fn(splat_core::precision::Precision) -> Bound,
 ) -> Vec<HardwareFit> {
     use splat_core::precision::Precision;
@@ -587,10 +589,13 @@ pub fn hardware_gradients_match_tiles<M: SplatMethod>(
             }
         };
         hw.forward(&scene, cam).unwrap();
-        hw.backward(&scene, &grad).unwrap();
+        hw.backward_with(&scene, &grad, reduce).unwrap();
         let got = hw.download_gradients().unwrap();
         let bound = bound(precision);
-        let at = format!("{label}, {}, hardware / tiles", precision.name());
+        let at = format!(
+            "{label}, {}, {reduce:?} reduction, hardware / tiles",
+            precision.name()
+        );
         let (got_params, want_params) = (all(&got.gradients.params), all(&want.params));
         let gross = Some(&terms.gross_params[..]);
         let mut worst = groups_match(&at, &got_params, &want_params, gross, &groups, bound);

@@ -20,7 +20,7 @@ use splat_core::method::{GradientSet, SplatMethod, WgslFunction};
 use splat_core::types::{Camera, CameraModel};
 
 /// How `backward` adds its gradients: an option of its entry point.
-pub use super::scatter::{Accumulation, Reduction};
+pub use super::scatter::{Accumulation, FragmentReduction, Reduction};
 
 use crate::frame_uniform::WGSL as FRAME_UNIFORM;
 
@@ -573,12 +573,12 @@ pub fn raster<M: SplatMethod>(
     let body = fill(
         RASTER,
         &[
-            ("TARGETS", targets.decls),
+            ("TARGETS", targets.decls.clone()),
             ("PIXEL", pixel_code),
             ("EVALUATE", call),
             ("VALID", eval.results[layout.channels + 1].0.to_string()),
             ("ALPHA", eval.results[0].0.to_string()),
-            ("WRITE", targets.write),
+            ("WRITE", targets.forward(blending)),
         ],
     );
     Ok(format!(
@@ -611,10 +611,13 @@ struct RasterTargets {
     decls: String,
     /// The state textures and what they need (programmable blending).
     states: String,
-    /// Sets `out`: the premultiplied values (fixed-function blending), or (programmable) the
-    /// state `s0`, `s1`, ... read and blended under, or the pixel stopped: then `out` is
-    /// returned at once.
-    write: String,
+    /// Programmable blending: reads each target's state `s0`, `s1`, ...
+    read: String,
+    /// Sets `out` to what the fragment blends: the premultiplied values (fixed-function
+    /// blending), or (programmable) the state blended under.
+    blend: String,
+    /// Programmable blending: sets `out` to the state as it was.
+    keep: String,
     /// Per target, the expressions it blends ("0.0" past the values).
     values: Vec<Vec<String>>,
 }
@@ -631,25 +634,30 @@ impl RasterTargets {
         if depth {
             values.push(vec!["depth".into()]);
         }
-        let mut decls = String::new();
-        let mut write = String::new();
-        let (mut states, mut blend, mut keep) = (String::new(), String::new(), String::new());
-        for (t, values) in values.iter_mut().enumerate() {
+        let mut t = RasterTargets {
+            decls: String::new(),
+            states: String::new(),
+            read: String::new(),
+            blend: String::new(),
+            keep: String::new(),
+            values: vec![],
+        };
+        for (k, values) in values.iter_mut().enumerate() {
             values.resize(RASTER_VALUES, "0.0".into());
-            decls += &format!("    @location({t}) t{t}: vec4<f32>,\n");
+            t.decls += &format!("    @location({k}) t{k}: vec4<f32>,\n");
             let [v0, v1, v2] = [&values[0], &values[1], &values[2]];
             let src = format!("vec4<f32>(a * {v0}, a * {v1}, a * {v2}, a)");
             match blending {
-                Blending::FixedFunction => write += &format!("    out.t{t} = {src};\n"),
+                Blending::FixedFunction => t.blend += &format!("    out.t{k} = {src};\n"),
                 // "Under", as the fixed-function blend state of `raster.rs`: dst + (1 - dst.a) src.
                 Blending::Programmable => {
-                    let binding = RASTER_STATE_BINDING + t as u32;
-                    states +=
-                        &format!("@group(0) @binding({binding}) var state{t}: texture_2d<f32>;\n");
-                    write +=
-                        &format!("    let s{t} = textureLoad(state{t}, vec2<i32>(0, 0), 0);\n");
-                    blend += &format!("    out.t{t} = s{t} + (1.0 - s{t}.a) * {src};\n");
-                    keep += &format!("        out.t{t} = s{t};\n");
+                    let binding = RASTER_STATE_BINDING + k as u32;
+                    t.states +=
+                        &format!("@group(0) @binding({binding}) var state{k}: texture_2d<f32>;\n");
+                    t.read +=
+                        &format!("    let s{k} = textureLoad(state{k}, vec2<i32>(0, 0), 0);\n");
+                    t.blend += &format!("        out.t{k} = s{k} + (1.0 - s{k}.a) * {src};\n");
+                    t.keep += &format!("        out.t{k} = s{k};\n");
                 }
             }
         }
@@ -657,30 +665,38 @@ impl RasterTargets {
             // The pixel's stop mark: a target after the values', read like them.
             let n = values.len();
             let binding = RASTER_STATE_BINDING + n as u32;
-            decls += &format!("    @location({n}) stopped: vec4<u32>,\n");
-            states += &format!(
+            t.decls += &format!("    @location({n}) stopped: vec4<u32>,\n");
+            t.states += &format!(
                 "@group(0) @binding({binding}) var stop_mark: texture_2d<u32>;
 // Transmittance at or below which a pixel stops (`Blend::stop_at`).
 override T_STOP: f32;
 "
             );
-            write = format!(
+        }
+        t.values = values;
+        t
+    }
+
+    /// The forward fragment's writes into `out` under `blending`: the values for the blend
+    /// unit, or the state read and blended under, a pixel stopped (then `out` is returned at
+    /// once, the state kept and the stop marked), or a pixel already stopped left alone.
+    fn forward(&self, blending: Blending) -> String {
+        match blending {
+            Blending::FixedFunction => self.blend.clone(),
+            Blending::Programmable => format!(
                 "    if (textureLoad(stop_mark, vec2<i32>(0, 0), 0).x != 0u) {{
         discard;
     }}
-{write}    if ((1.0 - s0.a) * (1.0 - a) <= T_STOP) {{
+{read}    if ((1.0 - s0.a) * (1.0 - a) <= T_STOP) {{
         out.stopped = vec4<u32>(1u, 0u, 0u, 0u);
 {keep}        return out;
     }}
     out.stopped = vec4<u32>(0u);
-{blend}"
-            );
-        }
-        RasterTargets {
-            decls,
-            states,
-            write,
-            values,
+{blend}",
+                read = self.read,
+                keep = self.keep,
+                blend = self.blend
+            ),
         }
     }
 }
@@ -688,16 +704,17 @@ override T_STOP: f32;
 /// The hardware path's backward blend under the camera `model` (`quad_vertex`,
 /// `splat_backward`, `shaders/raster_backward.wgsl`): the programmable forward's draw replayed
 /// into the same targets (with `depth`, its depth target), each fragment adding its
-/// primitive's shade and depth gradients (the depth's with `want_depth`) into `grads` held as
-/// `sums` say, by f32 atomics where `float_atomics` (else compare-exchange), for the gradient
-/// groups of `opts`; ray methods add their pixel cotangents too, when the camera's gradient is
-/// asked for.
+/// primitive's shade and depth gradients (the depth's with `want_depth`), summed as `reduce`
+/// says, into `grads` held as `sums` say, by f32 atomics where `float_atomics` (else
+/// compare-exchange), for the gradient groups of `opts`; ray methods add their pixel
+/// cotangents too, when the camera's gradient is asked for. Its `front_facing` means a helper
+/// invocation (`programmable_blend::spirv::front_facing_as_helper`).
 pub fn raster_backward<M: SplatMethod>(
     model: CameraModel,
     opts: &RenderOptions,
     want_depth: bool,
     sums: Sums,
-    float_atomics: bool,
+    (reduce, float_atomics): (FragmentReduction, bool),
 ) -> Result<String, GpuError> {
     let layout = Layout::of::<M>();
     let (camera, pixel_code, pixel_args) = pixel::<M>(3, model)?;
@@ -779,7 +796,13 @@ pub fn raster_backward<M: SplatMethod>(
         &[
             (
                 "REDUCTION_NOTE",
-                "one atomic per fragment and nonzero word (no reduction).".into(),
+                match reduce {
+                    FragmentReduction::None => "one atomic per fragment and nonzero word.",
+                    FragmentReduction::Quad => {
+                        "each word summed over the fragment's 2x2 quad first, one atomic per quad and nonzero word."
+                    }
+                }
+                .into(),
             ),
             ("NG", layout.grad_words.to_string()),
             ("CHANNELS", nc.to_string()),
@@ -797,7 +820,9 @@ pub fn raster_backward<M: SplatMethod>(
             ("EVALUATE", call),
             ("VALID", eval.results[nc + 1].0.to_string()),
             ("ALPHA", eval.results[0].0.to_string()),
-            ("REPLAY", targets.write),
+            ("READ", targets.read),
+            ("KEEP", targets.keep),
+            ("BLEND", targets.blend),
             ("COLOR_TERMS", color_terms),
             ("DEPTH_AFTER", depth_after),
             (
@@ -809,7 +834,7 @@ pub fn raster_backward<M: SplatMethod>(
             ("DEPTH_GRAD", scatter::word(layout.grad_words - 1)),
             (
                 "SCATTER",
-                scatter::scatter(Reduction::None, layout.grad_words, 1),
+                scatter::scatter_fragments(reduce, layout.grad_words),
             ),
             ("PIXEL_GRADS", pixel_grads),
         ],

@@ -188,6 +188,7 @@ pub fn fold(
             constants: &[],
             strips: false,
             order,
+            helper_flag: false,
         },
     )?;
     let reached = gpu.buffer_from("fragments per draw", &vec![0; draws as usize])?;
@@ -332,6 +333,47 @@ mod tests {
 
     /// A shader the rewrite does not fit (no texture, or a texture used otherwise than by a
     /// load) is refused with the reason.
+    #[test]
+    fn front_facing_becomes_helper_invocation_and_nothing_else_changes() {
+        let source =
+            "@fragment fn f(@builtin(front_facing) helper: bool) -> @location(0) vec4<f32> {
+            return select(vec4<f32>(1.0), vec4<f32>(0.0), helper);
+        }";
+        let module = spirv::Module::parse(source).unwrap();
+        let fragment = module
+            .entry_point("f", naga::ShaderStage::Fragment, &[])
+            .unwrap();
+        let patched = spirv::front_facing_as_helper(&fragment).unwrap();
+        let builtins = |words: &[u32]| -> Vec<u32> {
+            (spirv::split(&words[5..]).unwrap().into_iter())
+                .filter(|i| i[0] & 0xffff == ::spirv::Op::Decorate as u32)
+                .filter(|i| i[2] == ::spirv::Decoration::BuiltIn as u32)
+                .map(|i| i[3])
+                .collect()
+        };
+        let (front, helper) = (
+            ::spirv::BuiltIn::FrontFacing as u32,
+            ::spirv::BuiltIn::HelperInvocation as u32,
+        );
+        assert!(builtins(&fragment).contains(&front));
+        assert!(!builtins(&patched).contains(&front));
+        assert!(builtins(&patched).contains(&helper));
+        // One word differs: the decoration's built-in.
+        assert_eq!(patched.len(), fragment.len());
+        let differ = patched
+            .iter()
+            .zip(&fragment)
+            .filter(|(a, b)| a != b)
+            .count();
+        assert_eq!(differ, 1);
+        let no_input = "@fragment fn f() -> @location(0) vec4<f32> { return vec4<f32>(1.0); }";
+        let module = spirv::Module::parse(no_input).unwrap();
+        let words = module
+            .entry_point("f", naga::ShaderStage::Fragment, &[])
+            .unwrap();
+        assert!(spirv::front_facing_as_helper(&words).is_err());
+    }
+
     #[test]
     fn a_shader_the_rewrite_does_not_fit_is_refused() {
         let no_texture = "@fragment fn f() -> @location(0) vec4<f32> { return vec4<f32>(1.0); }";

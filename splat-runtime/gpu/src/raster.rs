@@ -322,6 +322,7 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
                 constants: &self.programmable_constants(),
                 strips: true,
                 order: Order::Rasterization,
+                helper_flag: false,
             };
             self.programmable = Some((model, RasterPass::new(gpu, &desc)?));
         }

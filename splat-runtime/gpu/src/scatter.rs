@@ -49,6 +49,53 @@ impl Accumulation {
     }
 }
 
+/// Where the hardware backward (`raster::backward`) sums a fragment's gradient before its
+/// global atomics.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum FragmentReduction {
+    /// One atomic per (fragment, word): the seed's Table I baseline.
+    None,
+    /// Summed over each 2x2 quad (all one primitive's: a quad's four lanes come from one
+    /// triangle) by two swaps, then one atomic per (quad, word) from its first lane that is
+    /// not a helper invocation (helpers' atomics do nothing).
+    #[default]
+    Quad,
+}
+
+/// [`scatter`] for a fragment of the hardware backward (`helper` set in helper invocations,
+/// whose words are zero), its words summed as `reduce` says.
+pub fn scatter_fragments(reduce: FragmentReduction, words: usize) -> String {
+    match reduce {
+        FragmentReduction::None => scatter(Reduction::None, words, 1),
+        FragmentReduction::Quad => {
+            // A lane's place in its 2x2 quad, by the parity of its pixel.
+            let mut s = "    let quad_lane = (u32(px) & 1u) | ((u32(py) & 1u) << 1u);
+    var lanes = select(0u, 1u << quad_lane, !helper);
+    lanes = lanes | quadSwapX(lanes);
+    lanes = lanes | quadSwapY(lanes);
+    let leader = firstTrailingBit(lanes) == quad_lane;
+"
+            .to_string();
+            let add = |k: usize| {
+                format!(
+                    "    let pair{k} = {w} + quadSwapX({w});
+    let quad{k} = pair{k} + quadSwapY(pair{k});
+    if (leader && quad{k} != 0.0) {{
+        add_grad(prim * NG + {k}u, quad{k});
+        my_issued++;
+    }}
+",
+                    w = word(k)
+                )
+            };
+            for k in 0..words {
+                s += &add(k);
+            }
+            s
+        }
+    }
+}
+
 /// The scalar holding gradient word `k` of the entry.
 pub fn word(k: usize) -> String {
     format!("g{k}")

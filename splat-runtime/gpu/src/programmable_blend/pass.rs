@@ -30,6 +30,9 @@ pub struct RasterPassDesc<'a> {
     /// Triangle strips (quads of four vertices) or lists.
     pub strips: bool,
     pub order: Order,
+    /// Whether the fragment's `@builtin(front_facing)` reads whether it is a helper
+    /// invocation instead ([`spirv::front_facing_as_helper`]).
+    pub helper_flag: bool,
 }
 
 /// A pass built once: its render pass, pipeline and descriptor set; the state images and
@@ -144,11 +147,14 @@ impl RasterPass {
             )));
         }
         let vertex = module.entry_point(desc.vertex, naga::ShaderStage::Vertex, desc.constants)?;
-        let fragment = spirv::textures_as_input_attachments(&module.entry_point(
+        let mut fragment = spirv::textures_as_input_attachments(&module.entry_point(
             desc.fragment,
             naga::ShaderStage::Fragment,
             desc.constants,
         )?)?;
+        if desc.helper_flag {
+            fragment = spirv::front_facing_as_helper(&fragment)?;
+        }
         pass.build(desc, &vertex, &fragment)?;
         Ok(pass)
     }

@@ -77,6 +77,8 @@ impl Module {
         )
         .map_err(|e| shader(e.to_string()))?;
         let options = spv::Options {
+            // Quad operations (the hardware backward's reductions) take SPIR-V 1.3.
+            lang_version: (1, 3),
             // The loads are rewritten as they are: no bounds checks around them.
             bounds_check_policies: naga::proc::BoundsCheckPolicies {
                 image_load: naga::proc::BoundsCheckPolicy::Unchecked,
@@ -188,6 +190,43 @@ pub fn textures_as_input_attachments(words: &[u32]) -> Result<Vec<u32>, GpuError
     match (capability_added, decorations_added) {
         (true, true) => Ok(out),
         _ => Err(wrong("no capability or decoration section")),
+    }
+}
+
+/// `words` with the `FrontFacing` built-in input made `HelperInvocation`: WGSL has no way to
+/// ask whether a fragment is a helper invocation (one that runs only so its quad has four
+/// lanes, and whose writes do nothing), and both are input booleans, so a shader that takes
+/// `@builtin(front_facing)` (quads drawn without culling have no use for it) reads that
+/// instead.
+pub fn front_facing_as_helper(words: &[u32]) -> Result<Vec<u32>, GpuError> {
+    let wrong = |what: &str| GpuError::Shader(format!("helper invocation rewrite: {what}"));
+    let (header, body) = words
+        .split_at_checked(5)
+        .ok_or_else(|| wrong("no SPIR-V header"))?;
+    let instructions = split(body).ok_or_else(|| wrong("a truncated instruction"))?;
+    let mut out = header.to_vec();
+    let mut found = false;
+    for i in instructions {
+        let front_facing = i[0] & 0xffff == Op::Decorate as u32
+            && i.get(2) == Some(&(Decoration::BuiltIn as u32))
+            && i.get(3) == Some(&(spirv::BuiltIn::FrontFacing as u32));
+        if front_facing {
+            out.extend(instruction(
+                Op::Decorate,
+                &[
+                    i[1],
+                    Decoration::BuiltIn as u32,
+                    spirv::BuiltIn::HelperInvocation as u32,
+                ],
+            ));
+            found = true;
+        } else {
+            out.extend_from_slice(i);
+        }
+    }
+    match found {
+        true => Ok(out),
+        false => Err(wrong("no front_facing input")),
     }
 }
 

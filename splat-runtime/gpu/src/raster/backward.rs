@@ -8,23 +8,36 @@ use super::{Blending, HardwareRenderer, STOP_MARK, decode, quad_inputs};
 use crate::adjoint::interleave;
 use crate::programmable_blend::{Order, RasterPass, RasterPassDesc};
 use crate::resident::GpuGradients;
+use crate::scatter::FragmentReduction;
 use crate::{GpuError, GpuRenderError, GpuScene, entries};
 use splat_core::frame::{BackwardStats, FrameGrad};
 use splat_core::method::SplatMethod;
 use splat_core::types::CameraModel;
 
-/// A backward pass built for one camera model and one choice of depth gradient.
-pub(super) type BackwardPass = ((CameraModel, bool), RasterPass);
+/// A backward pass built for one camera model, choice of depth gradient and reduction.
+pub(super) type BackwardPass = ((CameraModel, bool, FragmentReduction), RasterPass);
 
 impl<M: SplatMethod> HardwareRenderer<'_, M> {
     /// The backward pass of the last frame of `scene` (unchanged since), given the gradient
     /// of each output: gradients stay on the device until
     /// [`HardwareRenderer::download_gradients`]. Needs the frame drawn with
-    /// [`Blending::Programmable`], whose state it replays. Waits for the replay.
+    /// [`Blending::Programmable`], whose state it replays. Waits for the replay. Each
+    /// fragment's gradient is summed over its quad before the atomics.
     pub fn backward(
         &mut self,
         scene: &GpuScene<M>,
         grad: &FrameGrad,
+    ) -> Result<(), GpuRenderError> {
+        self.backward_with(scene, grad, FragmentReduction::Quad)
+    }
+
+    /// [`HardwareRenderer::backward`] with the fragments' gradients summed as `reduce` says
+    /// before the atomics (the seed's Table I compares them).
+    pub fn backward_with(
+        &mut self,
+        scene: &GpuScene<M>,
+        grad: &FrameGrad,
+        reduce: FragmentReduction,
     ) -> Result<(), GpuRenderError> {
         let info = self.frame.ok_or(GpuRenderError::NoFrame)?;
         if self.blending != Blending::Programmable {
@@ -78,7 +91,7 @@ impl<M: SplatMethod> HardwareRenderer<'_, M> {
         gpu.queue.submit([enc.finish()]);
 
         let model = self.front.model;
-        let key = (model, want_depth);
+        let key = (model, want_depth, reduce);
         if self.backward_pass.as_ref().map(|(k, _)| *k) != Some(key) {
             self.backward_pass = None;
             let source = entries::raster_backward::<M>(
@@ -86,7 +99,7 @@ impl<M: SplatMethod> HardwareRenderer<'_, M> {
                 &self.opts,
                 want_depth,
                 self.adjoint.sums,
-                gpu.float_atomics,
+                (reduce, gpu.float_atomics),
             )?;
             let mut states = self.formats.clone();
             states.push(STOP_MARK);
@@ -98,6 +111,7 @@ impl<M: SplatMethod> HardwareRenderer<'_, M> {
                 constants: &self.programmable_constants(),
                 strips: true,
                 order: Order::Rasterization,
+                helper_flag: true,
             };
             self.backward_pass = Some((key, RasterPass::new(gpu, &desc)?));
         }

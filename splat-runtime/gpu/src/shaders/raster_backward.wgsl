@@ -31,21 +31,36 @@ struct Targets {
 {{TARGETS}}
 }
 
+// No lane leaves before the gradients are summed over its quad (a lane that discards early
+// would leave its quad's reduction undefined): each decides what it adds and writes, and those
+// that write nothing discard at the end. `helper` is set in helper invocations (the rewrite of
+// `front_facing`, `programmable_blend::spirv`), which evaluate pixels their triangle does not
+// cover: they add nothing.
 @fragment
-fn splat_backward(q: Quad) -> Targets {
+fn splat_backward(q: Quad, @builtin(front_facing) helper: bool) -> Targets {
     let px = q.position.x;
     let py = q.position.y;
     {{PIXEL}}
     let s = q.prim * STRIDE + SHADE_AT;
     let r = {{EVALUATE}};
-    if (r.{{VALID}} == 0u || r.{{ALPHA}} < ALPHA_MIN) {
-        discard;
-    }
     let a = r.{{ALPHA}};
     let depth = word(q.prim, 1u);
+    let stopped_before = textureLoad(stop_mark, vec2<i32>(0, 0), 0).x != 0u;
+{{READ}}
+    // Whether the forward took this pair, stopped its pixel here, or blended it.
+    let taken = !helper && r.{{VALID}} != 0u && a >= ALPHA_MIN && !stopped_before;
+    let stops = taken && (1.0 - s0.a) * (1.0 - a) <= T_STOP;
+    let live = taken && !stops;
     var out: Targets;
-{{REPLAY}}
-    let pix = u32(py) * frame.width + u32(px);
+    if (stops) {
+        out.stopped = vec4<u32>(1u, 0u, 0u, 0u);
+{{KEEP}}
+    } else {
+        out.stopped = vec4<u32>(0u);
+{{BLEND}}
+    }
+    // Helpers may lie past the image's edge: they read its last pixel and add nothing.
+    let pix = min(u32(py), frame.height - 1u) * frame.width + min(u32(px), frame.width - 1u);
     let at = pix * (CHANNELS + 2u);
     let t = 1.0 - s0.a;
     let w = a * t;
@@ -72,17 +87,22 @@ fn splat_backward(q: Quad) -> Targets {
     }
     let ga = {{EVALUATE_ADJOINT}};
 {{GRAD_DECL}}
+    if (live) {
 {{SHADE_GRADS}}
-    {{DEPTH_GRAD}} = w * d_d;
+        {{DEPTH_GRAD}} = w * d_d;
+{{PIXEL_GRADS}}
+    }
     let prim = q.prim;
     var my_issued = 0u;
 {{SCATTER}}
-{{PIXEL_GRADS}}
     if (my_issued != 0u) {
         let old = atomicAdd(&issued[0], my_issued);
         if (old + my_issued < old) {
             atomicAdd(&issued[1], 1u);
         }
+    }
+    if (!taken) {
+        discard;
     }
     return out;
 }
