@@ -249,6 +249,51 @@ fn evaluate_call<M: SplatMethod>(
     Ok((format!("{}({})", eval.name, args.join(", ")), eval))
 }
 
+/// `evaluate`'s adjoint, as both backward blends call it: its signature, the call (as
+/// `adjoint`) on the pixel data `pixel_args`, the shade words read from `words[s + k]`, the
+/// cotangent `d_alpha`, `w` times each color channel's cotangent `d_color(c)`, and the gradient
+/// groups of `opts`; and the statements setting each shade gradient word from the call's
+/// result, named `result`, indented by `indent`.
+fn evaluate_adjoint_call<M: SplatMethod>(
+    pixel_args: &[String],
+    words: &str,
+    d_color: impl Fn(usize) -> String,
+    opts: &RenderOptions,
+    (result, indent): (&str, &str),
+) -> Result<(&'static WgslFunction, String, String), GpuError> {
+    let adj = sig::<M>("evaluate_adjoint")?;
+    let layout = Layout::of::<M>();
+    let (np, ns, nc) = (pixel_args.len(), layout.shade_words, layout.channels);
+    // The pixel data, the shade data, the cotangents of alpha and color, the groups' mask.
+    if adj.args.len() != np + ns + 1 + nc + 1 {
+        return Err(GpuError::Shader(format!(
+            "evaluate_adjoint takes {} arguments, expected {}",
+            adj.args.len(),
+            np + ns + 1 + nc + 1
+        )));
+    }
+    let mut args: Vec<String> = pixel_args.to_vec();
+    for (j, kind) in adj.args.iter().enumerate().skip(np).take(ns) {
+        args.push(load(*kind, &format!("{words}[s + {}u]", j - np)));
+    }
+    args.push("d_alpha".into());
+    args.extend((0..nc).map(|c| format!("w * {}", d_color(c))));
+    args.push(format!("{}u", opts.gradients.shade_groups::<M>()));
+    let nsf = layout.shade_floats;
+    let first = adj.results.len() - nsf;
+    let shade_grads = (0..nsf)
+        .map(|k| {
+            let m = &adj.results[first + k].0;
+            format!("{indent}{} = {result}.{m};\n", scatter::word(k))
+        })
+        .collect();
+    Ok((
+        adj,
+        format!("{}({})", adj.name, args.join(", ")),
+        shade_grads,
+    ))
+}
+
 /// The shade packing's module for `M` (`shade_range`, `shade_pack`), its own placeholders
 /// filled with `pairs`.
 pub(crate) fn shade_pack<M: SplatMethod>(pairs: &[(&str, String)]) -> Result<String, GpuError> {
@@ -384,16 +429,11 @@ pub fn backward<M: SplatMethod>(
     let b = blend_sizes(gpu, tile, &layout, acc.reduce == Reduction::Workgroup)?;
     let (camera, pixel_code, pixel_args) = pixel::<M>(9, model)?;
     let (call, eval) = evaluate_call::<M>(&pixel_args, "batch_words")?;
-    let adj = sig::<M>("evaluate_adjoint")?;
-    let (np, ns, nc) = (pixel_args.len(), layout.shade_words, layout.channels);
-    // The pixel data, the shade data, the cotangents of alpha and color, the groups' mask.
-    if adj.args.len() != np + ns + 1 + nc + 1 {
-        return Err(GpuError::Shader(format!(
-            "evaluate_adjoint takes {} arguments, expected {}",
-            adj.args.len(),
-            np + ns + 1 + nc + 1
-        )));
-    }
+    let d_color = |c: usize| format!("d_color[{c}]");
+    let indent = " ".repeat(20);
+    let (adj, adjoint, shade_grads) =
+        evaluate_adjoint_call::<M>(&pixel_args, "batch_words", d_color, opts, ("a", &indent))?;
+    let (np, nc) = (pixel_args.len(), layout.channels);
     let color_terms: String = (0..nc)
         .map(|c| {
             format!(
@@ -406,24 +446,6 @@ pub fn backward<M: SplatMethod>(
                         behind[{c}] = b{c}.y;
 ",
                 m = eval.results[1 + c].0
-            )
-        })
-        .collect();
-    let mut adj_args: Vec<String> = pixel_args.clone();
-    for (j, kind) in adj.args.iter().enumerate().skip(np).take(ns) {
-        adj_args.push(load(*kind, &format!("batch_words[s + {}u]", j - np)));
-    }
-    adj_args.push("d_alpha".into());
-    adj_args.extend((0..nc).map(|c| format!("w * d_color[{c}]")));
-    adj_args.push(format!("{}u", opts.gradients.shade_groups::<M>()));
-    let nsf = layout.shade_floats;
-    let first = adj.results.len() - nsf;
-    let shade_grads: String = (0..nsf)
-        .map(|k| {
-            format!(
-                "                    {} = a.{};\n",
-                scatter::word(k),
-                adj.results[first + k].0
             )
         })
         .collect();
@@ -508,10 +530,7 @@ pub fn backward<M: SplatMethod>(
                 opts.gradients.alpha_cotangent::<M>().to_string(),
             ),
             ("COLOR_TERMS", color_terms),
-            (
-                "EVALUATE_ADJOINT",
-                format!("{}({})", adj.name, adj_args.join(", ")),
-            ),
+            ("EVALUATE_ADJOINT", adjoint),
             ("SHADE_GRADS", shade_grads),
             ("SCATTER", scatter),
             ("GRAD_DECL", scatter::declare(layout.grad_words)),
@@ -719,15 +738,10 @@ pub fn raster_backward<M: SplatMethod>(
     let layout = Layout::of::<M>();
     let (camera, pixel_code, pixel_args) = pixel::<M>(3, model)?;
     let (call, eval) = evaluate_call::<M>(&pixel_args, "projected")?;
-    let adj = sig::<M>("evaluate_adjoint")?;
-    let (np, ns, nc) = (pixel_args.len(), layout.shade_words, layout.channels);
-    if adj.args.len() != np + ns + 1 + nc + 1 {
-        return Err(GpuError::Shader(format!(
-            "evaluate_adjoint takes {} arguments, expected {}",
-            adj.args.len(),
-            np + ns + 1 + nc + 1
-        )));
-    }
+    let d_color = |c: usize| format!("pixel_grad[at + {c}u]");
+    let (adj, adjoint, shade_grads) =
+        evaluate_adjoint_call::<M>(&pixel_args, "projected", d_color, opts, ("ga", "        "))?;
+    let (np, nc) = (pixel_args.len(), layout.channels);
     let targets = RasterTargets::of::<M>(eval, opts.depth, Blending::Programmable);
     // Each channel's value after this fragment: the component of its target.
     let after = |c: usize| {
@@ -750,24 +764,6 @@ pub fn raster_backward<M: SplatMethod>(
         true => format!("out.t{}.x", targets.values.len() - 1),
         false => "0.0".into(),
     };
-    let mut adj_args: Vec<String> = pixel_args.clone();
-    for (j, kind) in adj.args.iter().enumerate().skip(np).take(ns) {
-        adj_args.push(load(*kind, &format!("projected[s + {}u]", j - np)));
-    }
-    adj_args.push("d_alpha".into());
-    adj_args.extend((0..nc).map(|c| format!("w * pixel_grad[at + {c}u]")));
-    adj_args.push(format!("{}u", opts.gradients.shade_groups::<M>()));
-    let nsf = layout.shade_floats;
-    let first = adj.results.len() - nsf;
-    let shade_grads: String = (0..nsf)
-        .map(|k| {
-            format!(
-                "    {} = ga.{};\n",
-                scatter::word(k),
-                adj.results[first + k].0
-            )
-        })
-        .collect();
     let (grad_atomic, add_grad) = sums.wgsl_add(float_atomics);
     // Ray methods: each fragment adds its pixel data's cotangent to its pixel's, for
     // `pixel_backward` (the camera's gradient through the rays).
@@ -825,10 +821,7 @@ pub fn raster_backward<M: SplatMethod>(
             ("BLEND", targets.blend),
             ("COLOR_TERMS", color_terms),
             ("DEPTH_AFTER", depth_after),
-            (
-                "EVALUATE_ADJOINT",
-                format!("{}({})", adj.name, adj_args.join(", ")),
-            ),
+            ("EVALUATE_ADJOINT", adjoint),
             ("GRAD_DECL", scatter::declare(layout.grad_words)),
             ("SHADE_GRADS", shade_grads),
             ("DEPTH_GRAD", scatter::word(layout.grad_words - 1)),
