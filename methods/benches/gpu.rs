@@ -15,37 +15,11 @@
 use splat_methods::gs3d::{Method, Params};
 use splat_runtime::gpu::entries::{Accumulation, Reduction};
 use splat_runtime::gpu::{Gpu, GpuRenderer, GpuScene, render as gpu_render};
-use splat_runtime::{FrameGrad, RenderOptions, backward, render_for_backward};
+use splat_runtime::{RenderOptions, backward, render_for_backward};
 use std::time::{Duration, Instant};
 
 mod common;
-use common::{camera, scene, size_args};
-
-fn ms(d: Duration) -> f64 {
-    d.as_secs_f64() * 1e3
-}
-
-/// Runs `f` for 0.3 s before timing it: a GPU left idle while the host worked (the one-shot
-/// frames' uploads, say) runs at lower clocks until it has been busy a while (the CLI's
-/// `warm_up` says more).
-fn warm_up<T>(mut f: impl FnMut() -> T) {
-    let start = Instant::now();
-    while start.elapsed() < Duration::from_millis(300) {
-        f();
-    }
-}
-
-/// Element-wise minimum of the per-stage times of `runs` runs of `f`, after a [`warm_up`].
-fn best<const K: usize>(runs: usize, mut f: impl FnMut() -> [Duration; K]) -> [Duration; K] {
-    warm_up(&mut f);
-    let mut out = [Duration::MAX; K];
-    for _ in 0..runs {
-        for (o, t) in out.iter_mut().zip(f()) {
-            *o = (*o).min(t);
-        }
-    }
-    out
-}
+use common::{best, camera, ms, random_grad, scene, size_args, warm_up};
 
 fn main() {
     let (n, w, h) = size_args(20_000, 640, 360);
@@ -58,12 +32,7 @@ fn main() {
         ..RenderOptions::default()
     };
     let pixels = (w * h) as usize;
-    let mut rng = fastrand::Rng::with_seed(1);
-    let grad = FrameGrad {
-        color: (0..pixels * 3).map(|_| rng.f32() - 0.5).collect(),
-        alpha: Some((0..pixels).map(|_| rng.f32() - 0.5).collect()),
-        depth: Some((0..pixels).map(|_| rng.f32() - 0.5).collect()),
-    };
+    let grad = random_grad(pixels);
     println!(
         "3DGS, {n} Gaussians (SH degree 3), {w}x{h}, tile 16; CPU: {} threads; GPU: {}",
         rayon::current_num_threads(),

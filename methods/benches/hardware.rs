@@ -1,8 +1,9 @@
 //! The hardware path's forward and backward (quads in depth order; programmable blending:
 //! the backward replays the draw in fragment shaders, `HardwareRenderer::backward`) beside
 //! the tile path's on the same device and scene: times per pass, global atomic adds (Yuan and
-//! He's Table I: the replay's quad sums against one atomic per fragment and word) and sort and
-//! gradient-sum memory (their Table III), for each state format. Each figure is the best of
+//! He's Table I: the replay's fragment gradients added one by one, summed over quads, over
+//! cohesive subgroups, and both), and device memory (their Table III: the sorts' and all the
+//! path holds for a frame and its backward), for each state format. Each figure is the best of
 //! 3 runs after a warm-up. The replay's time is measured on the host around its submission
 //! (the raw pass holds no timestamp queries). On a machine without a GPU this runs on
 //! lavapipe, whose times compare two CPU implementations, not a GPU's raster hardware.
@@ -10,34 +11,25 @@
 //! `cargo bench -p splat-methods --bench hardware [-- N WIDTH HEIGHT]`
 
 use splat_methods::gs3d::{Method, Params};
+use splat_runtime::RenderOptions;
 use splat_runtime::gpu::entries::{Accumulation, FragmentReduction};
 use splat_runtime::gpu::raster::{Blending, HardwareRenderer};
-use splat_runtime::gpu::{GpuRenderer, GpuScene, programmable_blend};
+use splat_runtime::gpu::{Gpu, GpuRenderer, GpuScene, programmable_blend};
 use splat_runtime::precision::Precision;
-use splat_runtime::{FrameGrad, RenderOptions};
 use std::time::{Duration, Instant};
 
 mod common;
-use common::{camera, scene, size_args};
+use common::{best, camera, ms, random_grad, scene, size_args};
 
-fn ms(d: Duration) -> f64 {
-    d.as_secs_f64() * 1e3
-}
-
-fn mib(bytes: usize) -> f64 {
+fn mib(bytes: u64) -> f64 {
     bytes as f64 / (1024.0 * 1024.0)
 }
 
-/// Element-wise minimum of `runs` runs of `f` (forward, backward), after one run to compile.
-fn best(runs: usize, mut f: impl FnMut() -> [Duration; 2]) -> [Duration; 2] {
-    f();
-    let mut out = [Duration::MAX; 2];
-    for _ in 0..runs {
-        for (o, t) in out.iter_mut().zip(f()) {
-            *o = (*o).min(t);
-        }
-    }
-    out
+/// Bytes wgpu's allocator holds on `gpu`'s device, after freeing what was dropped.
+fn allocated(gpu: &Gpu) -> u64 {
+    gpu.wait().unwrap();
+    let report = gpu.device.generate_allocator_report();
+    report.map_or(0, |r| r.total_allocated_bytes)
 }
 
 fn main() {
@@ -53,19 +45,14 @@ fn main() {
         alpha: true,
         ..RenderOptions::default()
     };
-    let pixels = (w * h) as usize;
-    let mut rng = fastrand::Rng::with_seed(1);
-    let grad = FrameGrad {
-        color: (0..pixels * 3).map(|_| rng.f32() - 0.5).collect(),
-        alpha: Some((0..pixels).map(|_| rng.f32() - 0.5).collect()),
-        depth: Some((0..pixels).map(|_| rng.f32() - 0.5).collect()),
-    };
+    let grad = random_grad((w * h) as usize);
     println!(
         "3DGS, {n} Gaussians (SH degree 3), {w}x{h}; GPU: {}",
         gpu.adapter
     );
     let scene_gpu = GpuScene::<Method>::new(&gpu, &params).unwrap();
     let acc = Accumulation::default_for(&gpu);
+    let before = allocated(&gpu);
     let mut tiles = GpuRenderer::<Method>::new(&gpu, &opts).unwrap();
     let mut atomics = 0;
     let tile_times = best(3, || {
@@ -78,26 +65,33 @@ fn main() {
         atomics = tiles.download_gradients().unwrap().atomics;
         [forward, start.elapsed()]
     });
+    let tile_total = allocated(&gpu).saturating_sub(before);
     let tile_info = tiles.frame().unwrap();
     println!(
-        "\n| path | forward (ms) | backward (ms) | x tiles (fwd + bwd) | atomics | sort (MiB) | gradient sums (MiB) |"
+        "\nTotal: device memory the renderer holds after a frame and its backward (wgpu's allocator, and the programmable passes' own images)."
     );
-    println!("|---|---:|---:|---:|---:|---:|---:|");
-    let total = |t: [Duration; 2]| t[0] + t[1];
     println!(
-        "| tiles (16 px, {:?}, {} pairs) | {:.1} | {:.1} | 1.00 | {atomics} | {:.2} | {:.2} |",
+        "\n| path | forward (ms) | backward (ms) | x tiles (fwd + bwd) | atomics | sort (MiB) | gradient sums (MiB) | total (MiB) | x tiles (total) |"
+    );
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+    let sum = |t: [Duration; 2]| t[0] + t[1];
+    println!(
+        "| tiles (16 px, {:?}, {} pairs) | {:.1} | {:.1} | 1.00 | {atomics} | {:.2} | {:.2} | {:.2} | 1.00 |",
         acc.reduce,
         tile_info.intersections,
         ms(tile_times[0]),
         ms(tile_times[1]),
-        mib(tiles.sort_bytes()),
-        mib(tiles.gradient_sum_bytes()),
+        mib(tiles.sort_bytes() as u64),
+        mib(tiles.gradient_sum_bytes() as u64),
+        mib(tile_total),
     );
-    let runs = Precision::ALL
-        .iter()
-        .map(|&p| (p, FragmentReduction::Quad))
-        .chain([(Precision::F32, FragmentReduction::None)]);
+    // Every format with the default sums, then f32 states with each other reduction.
+    let default = FragmentReduction::default_for(&gpu);
+    let others = FragmentReduction::ALL.into_iter().filter(|&r| r != default);
+    let runs =
+        (Precision::ALL.iter().map(|&p| (p, default))).chain(others.map(|r| (Precision::F32, r)));
     for (precision, reduce) in runs {
+        let before = allocated(&gpu);
         let opts = RenderOptions { precision, ..opts };
         let mut hw =
             HardwareRenderer::<Method>::with_blending(&gpu, &opts, Blending::Programmable).unwrap();
@@ -110,18 +104,17 @@ fn main() {
             atomics = hw.download_gradients().unwrap().atomics;
             [forward, start.elapsed()]
         });
-        let reduction = match reduce {
-            FragmentReduction::None => "one atomic per fragment",
-            FragmentReduction::Quad => "quad sums",
-        };
+        let total = allocated(&gpu).saturating_sub(before) + hw.pass_memory_bytes();
         println!(
-            "| hardware, {} states, {reduction} | {:.1} | {:.1} | {:.2} | {atomics} | {:.2} | {:.2} |",
+            "| hardware, {} states, {reduce:?} sums | {:.1} | {:.1} | {:.2} | {atomics} | {:.2} | {:.2} | {:.2} | {:.2} |",
             precision.name(),
             ms(times[0]),
             ms(times[1]),
-            total(times).as_secs_f64() / total(tile_times).as_secs_f64(),
-            mib(hw.sort_bytes()),
-            mib(hw.gradient_sum_bytes()),
+            sum(times).as_secs_f64() / sum(tile_times).as_secs_f64(),
+            mib(hw.sort_bytes() as u64),
+            mib(hw.gradient_sum_bytes() as u64),
+            mib(total),
+            total as f64 / tile_total as f64,
         );
     }
 }

@@ -6,8 +6,10 @@
 use splat_methods::FromStored;
 use splat_methods::gs3d::Params;
 use splat_runtime::Camera;
+use splat_runtime::FrameGrad;
 use splat_runtime::glam::{Mat3, Vec2, Vec3, Vec4};
 use splat_runtime::io::ply::StoredGaussian;
+use std::time::{Duration, Instant};
 
 /// `N WIDTH HEIGHT` from the command line, each defaulting when absent.
 pub fn size_args(n: usize, width: usize, height: usize) -> (usize, f32, f32) {
@@ -95,4 +97,41 @@ pub fn as_method<P: FromStored>(gaussians: &[Params]) -> Vec<P> {
             })
         })
         .collect()
+}
+
+pub fn ms(d: Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}
+
+/// Runs `f` for 0.3 s before timing it: a GPU left idle while the host worked (the one-shot
+/// frames' uploads, say) runs at lower clocks until it has been busy a while (the CLI's
+/// `warm_up` says more).
+pub fn warm_up<T>(mut f: impl FnMut() -> T) {
+    let start = Instant::now();
+    while start.elapsed() < Duration::from_millis(300) {
+        f();
+    }
+}
+
+/// Element-wise minimum of the per-stage times of `runs` runs of `f`, after a [`warm_up`].
+pub fn best<const K: usize>(runs: usize, mut f: impl FnMut() -> [Duration; K]) -> [Duration; K] {
+    warm_up(&mut f);
+    let mut out = [Duration::MAX; K];
+    for _ in 0..runs {
+        for (o, t) in out.iter_mut().zip(f()) {
+            *o = (*o).min(t);
+        }
+    }
+    out
+}
+
+/// Gradients of a frame's color, alpha and depth at `pixels` pixels, uniform in [-0.5, 0.5)
+/// (a fixed seed).
+pub fn random_grad(pixels: usize) -> FrameGrad {
+    let mut rng = fastrand::Rng::with_seed(1);
+    FrameGrad {
+        color: (0..pixels * 3).map(|_| rng.f32() - 0.5).collect(),
+        alpha: Some((0..pixels).map(|_| rng.f32() - 0.5).collect()),
+        depth: Some((0..pixels).map(|_| rng.f32() - 0.5).collect()),
+    }
 }

@@ -12,6 +12,9 @@ use splat_core::types::Camera;
 use splat_cpu::{backward, render_for_backward};
 use std::ops::Range;
 
+/// Named word ranges: of `Params`, or of the camera's float slots.
+type Groups<'a> = &'a [(&'a str, Range<usize>)];
+
 /// The random linear loss of the checks: each output (color, alpha, depth) weighted by `w`.
 fn linear_loss(r: &Reference, w: &[Vec<f64>; 3]) -> f64 {
     let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
@@ -35,13 +38,59 @@ pub fn gradients_match_finite_differences<M: SplatMethod>(
     camera_groups: &[(&str, Range<usize>)],
     bound: Bound,
 ) {
-    let ws: Vec<Vec<f64>> = params.iter().map(words).collect();
-    let cw = camera_words(cam);
     let n = (cam.size.x * cam.size.y) as usize;
     let w = weights(n, channels::<M>());
-    let loss = |ps: &[Vec<f64>], c: &[f64]| linear_loss(&render_words::<M>(ps, c, cam.model), &w);
     let (_, state) = render_for_backward::<M>(params, cam, &options(8)).unwrap();
     let g = backward::<M>(&state, params, cam, &frame_grad(&w)).unwrap();
+    let groups = (groups, camera_groups);
+    these_match_finite_differences::<M>(label, params, cam, &w, &g, groups, bound);
+}
+
+/// The hardware path's backward (`HardwareRenderer::backward`: f32 states, the adapter's
+/// default reduction) against finite differences, as [`gradients_match_finite_differences`]
+/// checks the CPU's. Returns whether it ran (not where the adapter lacks programmable
+/// blending, unless `SPLAT_REQUIRE_RASTER_ORDER=1`).
+#[cfg(feature = "gpu")]
+pub fn hardware_gradients_match_finite_differences<M: SplatMethod>(
+    label: &str,
+    params: &[M::Params],
+    cam: &Camera,
+    groups: &[(&str, Range<usize>)],
+    camera_groups: &[(&str, Range<usize>)],
+    bound: Bound,
+) -> bool {
+    use splat_gpu::raster::{Blending, HardwareRenderer};
+    let Some(gpu) = splat_gpu::programmable_blend::open_or_skip() else {
+        return false;
+    };
+    let n = (cam.size.x * cam.size.y) as usize;
+    let w = weights(n, channels::<M>());
+    let scene = splat_gpu::GpuScene::<M>::new(&gpu, params).unwrap();
+    let programmable = Blending::Programmable;
+    let mut hw = HardwareRenderer::<M>::with_blending(&gpu, &options(8), programmable).unwrap();
+    hw.forward(&scene, cam).unwrap();
+    hw.backward(&scene, &frame_grad(&w)).unwrap();
+    let g = hw.download_gradients().unwrap().gradients;
+    let groups = (groups, camera_groups);
+    these_match_finite_differences::<M>(label, params, cam, &w, &g, groups, bound);
+    true
+}
+
+/// Gradients `g` of the linear loss of weights `w` against central differences of the
+/// reference render, per parameter group, the shade data and camera group, each element
+/// within `bound`.
+fn these_match_finite_differences<M: SplatMethod>(
+    label: &str,
+    params: &[M::Params],
+    cam: &Camera,
+    w: &[Vec<f64>; 3],
+    g: &splat_core::frame::Gradients<M>,
+    (groups, camera_groups): (Groups, Groups),
+    bound: Bound,
+) {
+    let ws: Vec<Vec<f64>> = params.iter().map(words).collect();
+    let cw = camera_words(cam);
+    let loss = |ps: &[Vec<f64>], c: &[f64]| linear_loss(&render_words::<M>(ps, c, cam.model), w);
     for (name, range) in groups {
         let (mut got, mut want) = (vec![], vec![]);
         for (i, p) in g.params.iter().enumerate() {
@@ -61,7 +110,7 @@ pub fn gradients_match_finite_differences<M: SplatMethod>(
             format!("primitive {} word {}", k / width, k % width)
         });
     }
-    shade_gradient_matches_finite_differences::<M>(label, &ws, cam, &w, &g.shade, bound);
+    shade_gradient_matches_finite_differences::<M>(label, &ws, cam, w, &g.shade, bound);
     let cam_grad = camera_words(&g.camera);
     for (name, range) in camera_groups {
         let got: Vec<f64> = range.clone().map(|k| cam_grad[k]).collect();
@@ -524,22 +573,24 @@ pub fn gradient_subsets_match_the_full_pass<M: SplatMethod>(
 }
 
 /// The hardware path's backward (the programmable forward's draw replayed in fragment shaders,
-/// `HardwareRenderer::backward_with`, its fragments' gradients summed as `reduce` says) against
+/// `HardwareRenderer::backward_with`, its fragments' gradients summed in each way of
+/// `reductions`) against
 /// the tile path's on the same device, for every state format the adapter can draw into, for
 /// the random linear loss of
 /// [`gpu_gradients_match_cpu`] (on the reference's clear pixels; with unorm states, only on
 /// pixels whose color stays within [0, 1], as a unorm state saturates): each parameter group
 /// and camera field within `bound(precision)` (the terms' magnitude from the f64 adjoint).
-/// Both stop each pixel at the default `t_min`. Returns, per format, the worst group's
-/// fraction of the bound, the atomics the replay issued, and the largest error against the f64
-/// reference's gradients, as a fraction of its group's largest element (the tile path's
-/// first, as [`Precision::F32`](splat_core::precision::Precision::F32) with no atomics).
+/// Both stop each pixel at the default `t_min`. Returns, per format and reduction, the worst
+/// group's fraction of the bound, the atomics the replay issued, and the largest error against
+/// the f64 reference's gradients, as a fraction of its group's largest element (the tile
+/// path's first, with no reduction, as [`Precision::F32`](splat_core::precision::Precision::F32)
+/// with no atomics).
 #[cfg(feature = "gpu")]
 pub fn hardware_gradients_match_tiles<M: SplatMethod>(
     label: &str,
     params: &[M::Params],
     cam: &Camera,
-    reduce: splat_gpu::entries::FragmentReduction,
+    reductions: &[splat_gpu::entries::FragmentReduction],
     bound: impl Fn(splat_core::precision::Precision) -> Bound,
 ) -> Vec<HardwareFit> {
     use splat_core::precision::Precision;
@@ -589,47 +640,53 @@ pub fn hardware_gradients_match_tiles<M: SplatMethod>(
             }
         };
         hw.forward(&scene, cam).unwrap();
-        hw.backward_with(&scene, &grad, reduce).unwrap();
-        let got = hw.download_gradients().unwrap();
-        let bound = bound(precision);
-        let at = format!(
-            "{label}, {}, {reduce:?} reduction, hardware / tiles",
-            precision.name()
-        );
-        let (got_params, want_params) = (all(&got.gradients.params), all(&want.params));
-        let gross = Some(&terms.gross_params[..]);
-        let mut worst = groups_match(&at, &got_params, &want_params, gross, &groups, bound);
-        let (got_camera, want_camera) = (
-            camera_words(&got.gradients.camera),
-            camera_words(&want.camera),
-        );
-        let gross = Some(&terms.gross_camera[..]);
-        let cameras = &super::CAMERA_GROUPS;
-        let camera = camera_matches(&at, &got_camera, &want_camera, gross, cameras, bound);
-        worst = worst.max(camera);
         if out.is_empty() {
-            let tiles = off_f64(&want_params, &want_camera, &terms, &groups);
+            let (want_params, want_camera) = (all(&want.params), camera_words(&want.camera));
             out.push(HardwareFit {
                 precision: Precision::F32,
+                reduce: None,
                 of_bound: 0.0,
                 atomics: 0,
-                off_f64: tiles,
+                off_f64: off_f64(&want_params, &want_camera, &terms, &groups),
             });
         }
-        out.push(HardwareFit {
-            precision,
-            of_bound: worst,
-            atomics: got.atomics,
-            off_f64: off_f64(&got_params, &got_camera, &terms, &groups),
-        });
+        let bound = bound(precision);
+        for &reduce in reductions {
+            hw.backward_with(&scene, &grad, reduce).unwrap();
+            let got = hw.download_gradients().unwrap();
+            let at = format!(
+                "{label}, {}, {reduce:?} reduction, hardware / tiles",
+                precision.name()
+            );
+            let (got_params, want_params) = (all(&got.gradients.params), all(&want.params));
+            let gross = Some(&terms.gross_params[..]);
+            let mut worst = groups_match(&at, &got_params, &want_params, gross, &groups, bound);
+            let (got_camera, want_camera) = (
+                camera_words(&got.gradients.camera),
+                camera_words(&want.camera),
+            );
+            let gross = Some(&terms.gross_camera[..]);
+            let cameras = &super::CAMERA_GROUPS;
+            let camera = camera_matches(&at, &got_camera, &want_camera, gross, cameras, bound);
+            worst = worst.max(camera);
+            out.push(HardwareFit {
+                precision,
+                reduce: Some(reduce),
+                of_bound: worst,
+                atomics: got.atomics,
+                off_f64: off_f64(&got_params, &got_camera, &terms, &groups),
+            });
+        }
     }
     out
 }
 
-/// One format's result in [`hardware_gradients_match_tiles`].
+/// One format and reduction's result in [`hardware_gradients_match_tiles`].
 #[derive(Clone, Copy, Debug)]
 pub struct HardwareFit {
     pub precision: splat_core::precision::Precision,
+    /// How the fragments' gradients were summed; `None` for the tile path.
+    pub reduce: Option<splat_gpu::entries::FragmentReduction>,
     /// The worst group's fraction of the bound against the tile path.
     pub of_bound: f64,
     /// Global atomic adds the replay issued.

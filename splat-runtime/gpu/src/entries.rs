@@ -790,16 +790,7 @@ pub fn raster_backward<M: SplatMethod>(
     let body = fill(
         RASTER_BACKWARD,
         &[
-            (
-                "REDUCTION_NOTE",
-                match reduce {
-                    FragmentReduction::None => "one atomic per fragment and nonzero word.",
-                    FragmentReduction::Quad => {
-                        "each word summed over the fragment's 2x2 quad first, one atomic per quad and nonzero word."
-                    }
-                }
-                .into(),
-            ),
+            ("REDUCTION_NOTE", reduce.note().into()),
             ("NG", layout.grad_words.to_string()),
             ("CHANNELS", nc.to_string()),
             (

@@ -189,6 +189,7 @@ pub fn fold(
             strips: false,
             order,
             helper_flag: false,
+            readback: true,
         },
     )?;
     let reached = gpu.buffer_from("fragments per draw", &vec![0; draws as usize])?;

@@ -93,6 +93,9 @@ pub struct HardwareRenderer<'g, M: SplatMethod> {
     programmable: Option<(CameraModel, RasterPass)>,
     /// The last programmable draw's time, measured on the host.
     draw_time: std::time::Duration,
+    /// The last programmable draw's state images decoded to f32 (four values per pixel), once
+    /// asked for: the frame's download and the backward pass both read them.
+    state: std::cell::OnceCell<Vec<Vec<f32>>>,
     /// The backward replay of the last camera model and depth gradient used.
     backward_pass: Option<backward::BackwardPass>,
     /// The gradient sums and the adjoints after the backward replay.
@@ -184,6 +187,7 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
             blending,
             programmable: None,
             draw_time: Default::default(),
+            state: Default::default(),
             backward_pass: None,
             adjoint: Adjoint::new::<M>(gpu, opts)?,
             pixel_final: Grown::new(gpu, "final pixel state", 1)?,
@@ -323,6 +327,7 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
                 strips: true,
                 order: Order::Rasterization,
                 helper_flag: false,
+                readback: true,
             };
             self.programmable = Some((model, RasterPass::new(gpu, &desc)?));
         }
@@ -330,6 +335,7 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
         let inputs = quad_inputs::<M>(&self.front);
         let size = (info.grid.width, info.grid.height);
         self.draw_time = pass.draw(gpu, size, 4, info.intersections as u32, &inputs)?;
+        self.state = Default::default();
         Ok(())
     }
 
@@ -352,9 +358,13 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
         let info = self.frame.ok_or(GpuRenderError::NoFrame)?;
         let grid = info.grid;
         let pixels = (grid.width * grid.height) as usize;
+        let read;
         let values = match &self.programmable {
             Some(_) => self.state_values()?,
-            None => read_targets(self.gpu, &self.targets, (grid.width, grid.height))?,
+            None => {
+                read = read_targets(self.gpu, &self.targets, (grid.width, grid.height))?;
+                &read[..]
+            }
         };
         let mut color = Vec::with_capacity(pixels * self.channels);
         let (mut t, mut dacc) = (Vec::with_capacity(pixels), vec![0.0; pixels]);

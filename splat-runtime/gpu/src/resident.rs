@@ -288,7 +288,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
     /// what was recorded from it must be submitted again.
     pub fn settle(&mut self, scene: &GpuScene<M>) -> Result<Option<FrameInfo>, GpuRenderError> {
         let p = self.pending.ok_or(GpuRenderError::NoFrame)?;
-        self.check_scene(scene, p.primitives)?;
+        scene.check_drawn(p.primitives, self.rendered_from)?;
         self.settle_any()
     }
 
@@ -321,19 +321,6 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
 
     /// The grid and primitive count of the frame finished last, or else of the one submitted.
     /// Refuses a scene other than the one the frame of `primitives` was rendered from.
-    fn check_scene(&self, scene: &GpuScene<M>, primitives: usize) -> Result<(), GpuRenderError> {
-        if scene.len() != primitives {
-            return Err(GpuRenderError::SceneChanged {
-                got: scene.len(),
-                want: primitives,
-            });
-        }
-        match scene.stamp == self.rendered_from {
-            true => Ok(()),
-            false => Err(GpuRenderError::OtherScene),
-        }
-    }
-
     fn current(&self) -> Result<(TileGrid, usize), GpuRenderError> {
         let frame = self.frame.map(|f| (f.grid, f.primitives));
         let pending = self.pending.map(|p| (p.grid, p.primitives));
@@ -503,7 +490,7 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
         acc: Accumulation,
     ) -> Result<(), GpuRenderError> {
         let (grid, n) = self.current()?;
-        self.check_scene(scene, n)?;
+        scene.check_drawn(n, self.rendered_from)?;
         let gpu = self.gpu;
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         self.record_blend(&mut enc, want_depth, acc)?;

@@ -50,49 +50,112 @@ impl Accumulation {
 }
 
 /// Where the hardware backward (`raster::backward`) sums a fragment's gradient before its
-/// global atomics.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+/// global atomics (the seed's Table I compares them). Every way but [`FragmentReduction::None`]
+/// needs quad and subgroup operations in fragment shaders ([`Gpu::subgroups`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum FragmentReduction {
-    /// One atomic per (fragment, word): the seed's Table I baseline.
+    /// One atomic per (fragment, word): the seed's baseline.
     None,
     /// Summed over each 2x2 quad (all one primitive's: a quad's four lanes come from one
     /// triangle) by two swaps, then one atomic per (quad, word) from its first lane that is
-    /// not a helper invocation (helpers' atomics do nothing).
-    #[default]
+    /// not a helper invocation (helpers' words are zero).
     Quad,
+    /// Summed over the subgroup by `subgroupAdd` where all its lanes draw one primitive (the
+    /// seed's splat-subgroup cohesion, which nothing guarantees), one atomic per (subgroup,
+    /// word) from its first lane that is not a helper; elsewhere one per fragment.
+    Subgroup,
+    /// [`FragmentReduction::Subgroup`] where the subgroup is cohesive, the quads' sums
+    /// elsewhere: the seed's hybrid, never more atomics than either.
+    Hybrid,
+}
+
+impl FragmentReduction {
+    pub const ALL: [FragmentReduction; 4] = [Self::None, Self::Quad, Self::Subgroup, Self::Hybrid];
+
+    /// [`FragmentReduction::Hybrid`] where `gpu` has subgroup operations in fragment shaders,
+    /// else [`FragmentReduction::None`].
+    pub fn default_for(gpu: &Gpu) -> FragmentReduction {
+        match gpu.subgroups {
+            true => Self::Hybrid,
+            false => Self::None,
+        }
+    }
+
+    /// What it does, for the shader's header.
+    pub fn note(self) -> &'static str {
+        match self {
+            Self::None => "one atomic per fragment and nonzero word.",
+            Self::Quad => {
+                "each word summed over the fragment's 2x2 quad first, one atomic per quad and nonzero word."
+            }
+            Self::Subgroup => {
+                "each word summed over the subgroup where all its lanes draw one primitive, one atomic per fragment elsewhere."
+            }
+            Self::Hybrid => {
+                "each word summed over the subgroup where all its lanes draw one primitive, over the 2x2 quad elsewhere."
+            }
+        }
+    }
 }
 
 /// [`scatter`] for a fragment of the hardware backward (`helper` set in helper invocations,
-/// whose words are zero), its words summed as `reduce` says.
+/// whose words are zero; `prim` its primitive), its words summed as `reduce` says. Written at
+/// the top level of the shader, where every lane that started is still running.
 pub fn scatter_fragments(reduce: FragmentReduction, words: usize) -> String {
-    match reduce {
-        FragmentReduction::None => scatter(Reduction::None, words, 1),
-        FragmentReduction::Quad => {
-            // A lane's place in its 2x2 quad, by the parity of its pixel.
-            let mut s = "    let quad_lane = (u32(px) & 1u) | ((u32(py) & 1u) << 1u);
-    var lanes = select(0u, 1u << quad_lane, !helper);
-    lanes = lanes | quadSwapX(lanes);
-    lanes = lanes | quadSwapY(lanes);
-    let leader = firstTrailingBit(lanes) == quad_lane;
+    let add = |indent: &str, k: usize, v: &str, who: &str| {
+        format!(
+            "{indent}if ({who}{v} != 0.0) {{
+{indent}    add_grad(prim * NG + {k}u, {v});
+{indent}    my_issued++;
+{indent}}}
 "
-            .to_string();
-            let add = |k: usize| {
-                format!(
-                    "    let pair{k} = {w} + quadSwapX({w});
-    let quad{k} = pair{k} + quadSwapY(pair{k});
-    if (leader && quad{k} != 0.0) {{
-        add_grad(prim * NG + {k}u, quad{k});
-        my_issued++;
-    }}
+        )
+    };
+    let each_fragment =
+        |indent: &str| -> String { (0..words).map(|k| add(indent, k, &word(k), "")).collect() };
+    let quads = |indent: &str| -> String {
+        // A lane's place in its 2x2 quad, by the parity of its pixel.
+        let mut s = format!(
+            "{indent}let quad_lane = (u32(px) & 1u) | ((u32(py) & 1u) << 1u);
+{indent}var lanes = select(0u, 1u << quad_lane, !helper);
+{indent}lanes = lanes | quadSwapX(lanes);
+{indent}lanes = lanes | quadSwapY(lanes);
+{indent}let quad_first = firstTrailingBit(lanes) == quad_lane;
+"
+        );
+        for k in 0..words {
+            let _ = write!(
+                s,
+                "{indent}let pair{k} = {w} + quadSwapX({w});
+{indent}let quad{k} = pair{k} + quadSwapY(pair{k});
 ",
-                    w = word(k)
-                )
-            };
-            for k in 0..words {
-                s += &add(k);
-            }
-            s
+                w = word(k)
+            );
+            s += &add(indent, k, &format!("quad{k}"), "quad_first && ");
         }
+        s
+    };
+    let subgroups = |otherwise: String| -> String {
+        // `cohesive` is the same in every lane, so each branch runs with the whole subgroup.
+        let mut s = "    let cohesive = subgroupAll(subgroupBroadcastFirst(prim) == prim);
+    if (cohesive) {
+        let subgroup_first = !helper && subgroupExclusiveAdd(select(1u, 0u, helper)) == 0u;
+"
+        .to_string();
+        for k in 0..words {
+            let _ = writeln!(s, "        let sub{k} = subgroupAdd({});", word(k));
+            s += &add("        ", k, &format!("sub{k}"), "subgroup_first && ");
+        }
+        s + "    } else {
+" + &otherwise
+            + "    }
+"
+    };
+    match reduce {
+        FragmentReduction::None => each_fragment("    "),
+        FragmentReduction::Quad => quads("    "),
+        FragmentReduction::Subgroup => subgroups(each_fragment("        ")),
+        FragmentReduction::Hybrid => subgroups(quads("        ")),
     }
 }
 
@@ -200,6 +263,26 @@ mod tests {
                     }
                 }
             }
+        }
+    }
+
+    #[test]
+    fn every_fragment_reduction_adds_each_word_once_per_branch() {
+        for reduce in FragmentReduction::ALL {
+            let s = scatter_fragments(reduce, 10);
+            // The subgroup's sums, and what a subgroup that is not cohesive does instead.
+            let branches = match reduce {
+                FragmentReduction::None | FragmentReduction::Quad => 1,
+                FragmentReduction::Subgroup | FragmentReduction::Hybrid => 2,
+            };
+            for k in 0..10 {
+                let adds = s.matches(&format!("prim * NG + {k}u,")).count();
+                assert_eq!(adds, branches, "{reduce:?}: {s}");
+            }
+            assert_eq!(
+                s.contains("quadSwapX"),
+                reduce == FragmentReduction::Quad || reduce == FragmentReduction::Hybrid
+            );
         }
     }
 }

@@ -54,6 +54,21 @@ impl<M: SplatMethod> GpuScene<M> {
         self.len
     }
 
+    /// Whether this is, unchanged, the scene of `primitives` primitives that the upload
+    /// stamped `stamp` held: a backward pass needs the scene its frame was drawn from.
+    pub(crate) fn check_drawn(&self, primitives: usize, stamp: u64) -> Result<(), GpuRenderError> {
+        if self.len != primitives {
+            return Err(GpuRenderError::SceneChanged {
+                got: self.len,
+                want: primitives,
+            });
+        }
+        match self.stamp == stamp {
+            true => Ok(()),
+            false => Err(GpuRenderError::OtherScene),
+        }
+    }
+
     pub fn is_empty(&self) -> bool {
         self.len == 0
     }

@@ -33,6 +33,9 @@ pub struct RasterPassDesc<'a> {
     /// Whether the fragment's `@builtin(front_facing)` reads whether it is a helper
     /// invocation instead ([`spirv::front_facing_as_helper`]).
     pub helper_flag: bool,
+    /// Whether the states are copied out after each draw, for [`RasterPass::state_bytes`]
+    /// (a host-visible buffer as large as the images).
+    pub readback: bool,
 }
 
 /// A pass built once: its render pass, pipeline and descriptor set; the state images and
@@ -45,6 +48,7 @@ pub struct RasterPass {
     buffers: Vec<(String, u32, vk::DescriptorType)>,
     /// Where the state images are bound (their input attachments, in order).
     state_bindings: Vec<u32>,
+    readback: bool,
     fixed: Fixed,
     targets: Option<Targets>,
 }
@@ -71,8 +75,10 @@ struct Targets {
     framebuffer: vk::Framebuffer,
     readback: vk::Buffer,
     readback_memory: vk::DeviceMemory,
-    /// Where each state's texels lie in the readback buffer.
+    /// Where each state's texels lie in the readback buffer (none without one).
     ranges: Vec<(u64, u64)>,
+    /// The device memory allocated for the images and the buffer.
+    bytes: u64,
 }
 
 fn vulkan(what: &'static str) -> impl Fn(vk::Result) -> GpuError {
@@ -136,6 +142,7 @@ impl RasterPass {
             formats: desc.states.to_vec(),
             buffers: module.buffers(),
             state_bindings: module.textures(),
+            readback: desc.readback,
             fixed: Fixed::default(),
             targets: None,
         };
@@ -451,13 +458,21 @@ impl RasterPass {
         Ok(start.elapsed())
     }
 
+    /// Bytes of device memory the state images and their readback buffer hold (Vulkan memory
+    /// of the pass's own, which wgpu's allocator does not count).
+    pub fn memory_bytes(&self) -> u64 {
+        self.targets.as_ref().map_or(0, |t| t.bytes)
+    }
+
     /// The last draw's state image `k`, texel by texel, row by row (as its format packs them).
     pub fn state_bytes(&self, k: usize) -> Result<Vec<u8>, GpuError> {
         let targets = self
             .targets
             .as_ref()
             .ok_or_else(|| GpuError::Readback("nothing drawn yet".into()))?;
-        let (start, end) = targets.ranges[k];
+        let &(start, end) = targets.ranges.get(k).ok_or_else(|| {
+            GpuError::Readback(format!("state {k} is not copied out by this pass"))
+        })?;
         // SAFETY: host-visible, coherent memory the finished draw's copy wrote, mapped and
         // unmapped here only.
         unsafe {
@@ -508,6 +523,7 @@ impl RasterPass {
                     .map_err(vulkan("a state image"))?;
                 t.images.push(image);
                 let needs = d.get_image_memory_requirements(image);
+                t.bytes += needs.size;
                 let memory = allocate(
                     d,
                     &self.memory_types,
@@ -532,6 +548,9 @@ impl RasterPass {
                     )
                     .map_err(vulkan("a state view"))?;
                 t.views.push(view);
+                if !self.readback {
+                    continue;
+                }
                 let texel = format.block_copy_size(None).unwrap_or(16) as u64;
                 // Copies start at multiples of the texel size: 16 bytes serves every format.
                 let start = t.ranges.last().map_or(0, |r| r.1.next_multiple_of(16));
@@ -549,6 +568,9 @@ impl RasterPass {
                     None,
                 )
                 .map_err(vulkan("the framebuffer"))?;
+            if !self.readback {
+                return Ok(());
+            }
             t.readback = d
                 .create_buffer(
                     &vk::BufferCreateInfo::default()
@@ -558,6 +580,7 @@ impl RasterPass {
                 )
                 .map_err(vulkan("the readback buffer"))?;
             let needs = d.get_buffer_memory_requirements(t.readback);
+            t.bytes += needs.size;
             let host =
                 vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT;
             t.readback_memory = allocate(d, &self.memory_types, needs, host)?;

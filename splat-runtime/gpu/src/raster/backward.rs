@@ -21,18 +21,19 @@ impl<M: SplatMethod> HardwareRenderer<'_, M> {
     /// The backward pass of the last frame of `scene` (unchanged since), given the gradient
     /// of each output: gradients stay on the device until
     /// [`HardwareRenderer::download_gradients`]. Needs the frame drawn with
-    /// [`Blending::Programmable`], whose state it replays. Waits for the replay. Each
-    /// fragment's gradient is summed over its quad before the atomics.
+    /// [`Blending::Programmable`], whose state it replays. Waits for the replay. The
+    /// fragments' gradients are summed as [`FragmentReduction::default_for`] the adapter.
     pub fn backward(
         &mut self,
         scene: &GpuScene<M>,
         grad: &FrameGrad,
     ) -> Result<(), GpuRenderError> {
-        self.backward_with(scene, grad, FragmentReduction::Quad)
+        self.backward_with(scene, grad, FragmentReduction::default_for(self.gpu))
     }
 
     /// [`HardwareRenderer::backward`] with the fragments' gradients summed as `reduce` says
-    /// before the atomics (the seed's Table I compares them).
+    /// before the atomics (the seed's Table I compares them; all but
+    /// [`FragmentReduction::None`] need [`crate::Gpu::subgroups`]).
     pub fn backward_with(
         &mut self,
         scene: &GpuScene<M>,
@@ -44,16 +45,14 @@ impl<M: SplatMethod> HardwareRenderer<'_, M> {
             let why = "the hardware backward replays the blend in the fragments: render with Blending::Programmable";
             return Err(GpuError::Hardware(why.into()).into());
         }
-        if scene.len() != info.primitives {
-            return Err(GpuRenderError::SceneChanged {
-                got: scene.len(),
-                want: info.primitives,
-            });
-        }
-        if scene.stamp != self.rendered_from {
-            return Err(GpuRenderError::OtherScene);
-        }
+        scene.check_drawn(info.primitives, self.rendered_from)?;
         let gpu = self.gpu;
+        if reduce != FragmentReduction::None && !gpu.subgroups {
+            let why = format!(
+                "{reduce:?} sums need quad and subgroup operations in fragment shaders, which this adapter lacks: use FragmentReduction::None"
+            );
+            return Err(GpuError::Hardware(why).into());
+        }
         let grid = info.grid;
         let (channels, pixels) = (self.channels, (grid.width * grid.height) as usize);
         grad.check(pixels, channels, self.opts.depth)?;
@@ -112,6 +111,7 @@ impl<M: SplatMethod> HardwareRenderer<'_, M> {
                 strips: true,
                 order: Order::Rasterization,
                 helper_flag: true,
+                readback: false,
             };
             self.backward_pass = Some((key, RasterPass::new(gpu, &desc)?));
         }
@@ -164,13 +164,30 @@ impl<M: SplatMethod> HardwareRenderer<'_, M> {
         (self.adjoint).sum_bytes(self.frame.map_or(0, |f| f.primitives))
     }
 
-    /// The programmable forward's state images as f32 values, four per pixel, row after row.
-    pub(super) fn state_values(&self) -> Result<Vec<Vec<f32>>, GpuError> {
+    /// Bytes of Vulkan memory the programmable passes hold of their own (state images and
+    /// their readback, forward's and backward's): what wgpu's allocator report leaves out.
+    pub fn pass_memory_bytes(&self) -> u64 {
+        let forward = self.programmable.as_ref().map(|(_, p)| p);
+        let backward = self.backward_pass.as_ref().map(|(_, p)| p);
+        forward
+            .into_iter()
+            .chain(backward)
+            .map(RasterPass::memory_bytes)
+            .sum()
+    }
+
+    /// The programmable forward's state images as f32 values, four per pixel, row after row
+    /// (read back and decoded once per draw).
+    pub(super) fn state_values(&self) -> Result<&[Vec<f32>], GpuError> {
+        if let Some(values) = self.state.get() {
+            return Ok(values);
+        }
         let (_, pass) = (self.programmable.as_ref())
             .ok_or_else(|| GpuError::Readback("no programmable draw yet".into()))?;
-        (self.formats.iter())
+        let values = (self.formats.iter())
             .enumerate()
             .map(|(k, format)| Ok(decode(*format, &pass.state_bytes(k)?)))
-            .collect()
+            .collect::<Result<_, GpuError>>()?;
+        Ok(self.state.get_or_init(|| values))
     }
 }
