@@ -16,6 +16,7 @@ use splat_runtime::gpu::entries::{Accumulation, FragmentReduction};
 use splat_runtime::gpu::raster::{Blending, HardwareRenderer};
 use splat_runtime::gpu::{Gpu, GpuRenderer, GpuScene, programmable_blend};
 use splat_runtime::precision::Precision;
+use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
 mod common;
@@ -25,11 +26,35 @@ fn mib(bytes: u64) -> f64 {
     bytes as f64 / (1024.0 * 1024.0)
 }
 
-/// Bytes wgpu's allocator holds on `gpu`'s device, after freeing what was dropped.
-fn allocated(gpu: &Gpu) -> u64 {
+/// Bytes wgpu's allocator holds on `gpu`'s device by allocation name (the buffers' labels),
+/// after freeing what was dropped.
+fn allocations(gpu: &Gpu) -> BTreeMap<String, u64> {
     gpu.wait().unwrap();
+    let mut out = BTreeMap::new();
     let report = gpu.device.generate_allocator_report();
-    report.map_or(0, |r| r.total_allocated_bytes)
+    for a in report.map(|r| r.allocations).unwrap_or_default() {
+        *out.entry(a.name).or_default() += a.size;
+    }
+    out
+}
+
+/// What was allocated since `before`: in all, and its four largest names.
+fn since(gpu: &Gpu, before: &BTreeMap<String, u64>) -> (u64, String) {
+    let mut grown: Vec<(u64, String)> = (allocations(gpu).into_iter())
+        .map(|(name, bytes)| {
+            (
+                bytes.saturating_sub(before.get(&name).copied().unwrap_or(0)),
+                name,
+            )
+        })
+        .filter(|(bytes, _)| *bytes > 0)
+        .collect();
+    grown.sort_unstable_by(|a, b| b.cmp(a));
+    let total = grown.iter().map(|(bytes, _)| bytes).sum();
+    let largest: Vec<String> = (grown.iter().take(4))
+        .map(|(bytes, name)| format!("{name} {:.2}", mib(*bytes)))
+        .collect();
+    (total, largest.join(", "))
 }
 
 fn main() {
@@ -52,7 +77,7 @@ fn main() {
     );
     let scene_gpu = GpuScene::<Method>::new(&gpu, &params).unwrap();
     let acc = Accumulation::default_for(&gpu);
-    let before = allocated(&gpu);
+    let before = allocations(&gpu);
     let mut tiles = GpuRenderer::<Method>::new(&gpu, &opts).unwrap();
     let mut atomics = 0;
     let tile_times = best(3, || {
@@ -65,7 +90,8 @@ fn main() {
         atomics = tiles.download_gradients().unwrap().atomics;
         [forward, start.elapsed()]
     });
-    let tile_total = allocated(&gpu).saturating_sub(before);
+    let (tile_total, tile_largest) = since(&gpu, &before);
+    let mut largest = vec![("tiles".to_string(), tile_largest)];
     let tile_info = tiles.frame().unwrap();
     println!(
         "\nTotal: device memory the renderer holds after a frame and its backward (wgpu's allocator, and the programmable passes' own images)."
@@ -91,7 +117,7 @@ fn main() {
     let runs =
         (Precision::ALL.iter().map(|&p| (p, default))).chain(others.map(|r| (Precision::F32, r)));
     for (precision, reduce) in runs {
-        let before = allocated(&gpu);
+        let before = allocations(&gpu);
         let opts = RenderOptions { precision, ..opts };
         let mut hw =
             HardwareRenderer::<Method>::with_blending(&gpu, &opts, Blending::Programmable).unwrap();
@@ -104,10 +130,16 @@ fn main() {
             atomics = hw.download_gradients().unwrap().atomics;
             [forward, start.elapsed()]
         });
-        let total = allocated(&gpu).saturating_sub(before) + hw.pass_memory_bytes();
+        let (allocated, wgpu_largest) = since(&gpu, &before);
+        let passes = hw.pass_memory_bytes();
+        let total = allocated + passes;
+        let name = format!("hardware, {} states", precision.name());
+        if reduce == default {
+            let passes = format!("state images (raw Vulkan) {:.2}", mib(passes));
+            largest.push((name.clone(), format!("{passes}, {wgpu_largest}")));
+        }
         println!(
-            "| hardware, {} states, {reduce:?} sums | {:.1} | {:.1} | {:.2} | {atomics} | {:.2} | {:.2} | {:.2} | {:.2} |",
-            precision.name(),
+            "| {name}, {reduce:?} sums | {:.1} | {:.1} | {:.2} | {atomics} | {:.2} | {:.2} | {:.2} | {:.2} |",
             ms(times[0]),
             ms(times[1]),
             sum(times).as_secs_f64() / sum(tile_times).as_secs_f64(),
@@ -116,5 +148,9 @@ fn main() {
             mib(total),
             total as f64 / tile_total as f64,
         );
+    }
+    println!("\nThe largest allocations of each path's total (MiB):");
+    for (path, what) in largest {
+        println!("- {path}: {what}");
     }
 }

@@ -31,9 +31,9 @@ struct Targets {
 {{TARGETS}}
 }
 
-// No lane leaves before the gradients are summed over its quad (a lane that discards early
-// would leave its quad's reduction undefined): each decides what it adds and writes, and those
-// that write nothing discard at the end. `helper` is set in helper invocations (the rewrite of
+// No lane leaves before the gradients are summed over its quad or subgroup (a lane that
+// discards early would leave the sums undefined): each decides what it adds and writes, and
+// those that write nothing discard at the end. `helper` is set in helper invocations (the rewrite of
 // `front_facing`, `programmable_blend::spirv`), which evaluate pixels their triangle does not
 // cover: they add nothing.
 @fragment
