@@ -178,7 +178,19 @@ pub fn fold(
     if draws == 0 {
         return Err(GpuError::Device("the order test needs a draw".into()));
     }
-    let mut pass = RasterPass::new(
+    let mut pass = fold_pass(gpu, order, true)?;
+    let reached = gpu.buffer_from("fragments per draw", &vec![0; draws as usize])?;
+    let time = pass.draw(gpu, (width, height), 3, draws, &[("reached", &reached)])?;
+    Ok(Fold {
+        values: words(&pass.state_bytes(0)?),
+        reached: gpu.read(&reached, draws as usize)?,
+        time,
+    })
+}
+
+/// The order test's pass, its state copied out where `readback`.
+fn fold_pass(gpu: &Gpu, order: Order, readback: bool) -> Result<RasterPass, GpuError> {
+    RasterPass::new(
         gpu,
         &RasterPassDesc {
             source: include_str!("shaders/pixel_fold.wgsl"),
@@ -189,20 +201,14 @@ pub fn fold(
             strips: false,
             order,
             helper_flag: false,
-            readback: true,
+            readback,
         },
-    )?;
-    let reached = gpu.buffer_from("fragments per draw", &vec![0; draws as usize])?;
-    let time = pass.draw(gpu, (width, height), 3, draws, &[("reached", &reached)])?;
-    let bytes = pass.state_bytes(0)?;
-    let values = bytes
-        .chunks_exact(4)
-        .map(|b| u32::from_le_bytes(b.try_into().unwrap()));
-    Ok(Fold {
-        values: values.collect(),
-        reached: gpu.read(&reached, draws as usize)?,
-        time,
-    })
+    )
+}
+
+fn words(bytes: &[u8]) -> Vec<u32> {
+    let word = |b: &[u8]| u32::from_le_bytes(b.try_into().expect("four bytes"));
+    bytes.chunks_exact(4).map(word).collect()
 }
 
 /// Pixels each draw reaches: what [`Fold::reached`] must hold.
@@ -263,6 +269,34 @@ mod tests {
             // Every fragment added to its draw's word of the wgpu buffer, once.
             assert_eq!(got.reached, reached_by_draw(width, height, draws));
         }
+    }
+
+    /// A pass drawn on another's images (as the hardware backward draws on the forward's)
+    /// runs its fragments there and leaves the other's copy of its states as it was; it holds
+    /// no images and copies nothing out.
+    #[test]
+    fn a_pass_drawn_on_anothers_images_leaves_its_copy() {
+        let Some(gpu) = open_or_skip() else { return };
+        let (width, height, draws) = (40, 24, 60);
+        let mut first = fold_pass(&gpu, Order::Rasterization, true).unwrap();
+        let mut second = fold_pass(&gpu, Order::Rasterization, false).unwrap();
+        let reached = gpu
+            .buffer_from("fragments", &vec![0; draws as usize])
+            .unwrap();
+        let bound = [("reached", &reached)];
+        first.draw(&gpu, (width, height), 3, draws, &bound).unwrap();
+        let copy = first.state_bytes(0).unwrap();
+        assert_eq!(words(&copy), fold_in_order(width, height, draws));
+        second.draw_on(&gpu, &first, 3, draws / 2, &bound).unwrap();
+        assert_eq!(first.state_bytes(0).unwrap(), copy);
+        // The second pass's fragments ran: its draws counted twice.
+        let mut want = reached_by_draw(width, height, draws);
+        want.iter_mut()
+            .take(draws as usize / 2)
+            .for_each(|r| *r *= 2);
+        assert_eq!(gpu.read(&reached, draws as usize).unwrap(), want);
+        assert_eq!(second.memory_bytes(), 0);
+        assert!(second.state_bytes(0).is_err());
     }
 
     /// The fold tells orders apart: the same fragments in reverse order, or with one lost, end

@@ -349,8 +349,9 @@ impl RasterPass {
     }
 
     /// Draws `instances` x `vertices` over state images of `size` cleared to zero, the
-    /// shaders' buffers bound by name from `buffers`, and copies the states out; returns when
-    /// the GPU is done, with the time of the submission.
+    /// shaders' buffers bound by name from `buffers`, and copies the states out (where
+    /// [`RasterPassDesc::readback`]); returns when the GPU is done, with the time of the
+    /// submission.
     pub fn draw(
         &mut self,
         gpu: &Gpu,
@@ -374,6 +375,47 @@ impl RasterPass {
             self.targets = Some(targets);
             made?;
         }
+        let targets = self.targets.as_ref().expect("made above");
+        self.draw_into(gpu, targets, (vertices, instances), self.readback, buffers)
+    }
+
+    /// [`RasterPass::draw`] over the state images of `other`'s last draw (cleared to zero
+    /// first, so what `other` drew is gone from them; its copy out stays), which must hold
+    /// states of this pass's formats, in the same [`Order`]: a second pass over the same
+    /// pixels needs no images of its own. This pass's states are not copied out.
+    pub fn draw_on(
+        &mut self,
+        gpu: &Gpu,
+        other: &RasterPass,
+        vertices: u32,
+        instances: u32,
+        buffers: &[(&str, &wgpu::Buffer)],
+    ) -> Result<Duration, GpuError> {
+        let targets = (other.targets.as_ref()).ok_or_else(|| {
+            GpuError::Device("programmable blending: nothing drawn to draw on".into())
+        })?;
+        if other.formats != self.formats {
+            let why = format!(
+                "programmable blending: states of {:?} drawn on states of {:?}",
+                self.formats, other.formats
+            );
+            return Err(GpuError::Device(why));
+        }
+        self.drop_targets();
+        self.draw_into(gpu, targets, (vertices, instances), false, buffers)
+    }
+
+    /// The draw over `targets` (this pass's, or another's made for a compatible render
+    /// pass: the same formats and order), the states copied into `targets`' readback where
+    /// `copy_out`.
+    fn draw_into(
+        &self,
+        gpu: &Gpu,
+        targets: &Targets,
+        (vertices, instances): (u32, u32),
+        copy_out: bool,
+        buffers: &[(&str, &wgpu::Buffer)],
+    ) -> Result<Duration, GpuError> {
         let raw = |name: &str| -> Result<vk::Buffer, GpuError> {
             let buffer = buffers
                 .iter()
@@ -397,7 +439,6 @@ impl RasterPass {
                 }])
             })
             .collect::<Result<Vec<_>, GpuError>>()?;
-        let targets = self.targets.as_ref().expect("made above");
         let image_infos: Vec<[vk::DescriptorImageInfo; 1]> = targets
             .views
             .iter()
@@ -441,7 +482,8 @@ impl RasterPass {
         let recorded = unsafe {
             encoder.as_hal_mut::<Vulkan, _, _>(|encoder| {
                 let Some(encoder) = encoder else { return false };
-                record(d, encoder.raw_handle(), f, targets, vertices, instances);
+                let counts = (vertices, instances);
+                record(d, encoder.raw_handle(), f, targets, counts, copy_out);
                 true
             })
         };
@@ -640,8 +682,8 @@ unsafe fn record(
     cb: vk::CommandBuffer,
     f: &Fixed,
     t: &Targets,
-    vertices: u32,
-    instances: u32,
+    (vertices, instances): (u32, u32),
+    copy_out: bool,
 ) {
     // SAFETY: the caller's (`cb` recording, every handle live).
     unsafe {
@@ -707,7 +749,8 @@ unsafe fn record(
         let layer = vk::ImageSubresourceLayers::default()
             .aspect_mask(vk::ImageAspectFlags::COLOR)
             .layer_count(1);
-        for (image, (start, _)) in t.images.iter().zip(&t.ranges) {
+        let ranges = if copy_out { &t.ranges[..] } else { &[] };
+        for (image, (start, _)) in t.images.iter().zip(ranges) {
             let copy = vk::BufferImageCopy::default()
                 .buffer_offset(*start)
                 .image_subresource(layer)

@@ -111,11 +111,13 @@ impl<M: SplatMethod> HardwareRenderer<'_, M> {
                 strips: true,
                 order: Order::Rasterization,
                 helper_flag: true,
-                readback: false,
+                readback: false, // it draws on the forward's images
             };
             self.backward_pass = Some((key, RasterPass::new(gpu, &desc)?));
         }
         let (_, pass) = self.backward_pass.as_mut().expect("built above");
+        // The replay draws on the forward's images: their state is read back already.
+        let (_, forward) = self.programmable.as_ref().expect("checked by state_values");
         let adjoint = &self.adjoint;
         let mut inputs = quad_inputs::<M>(&self.front);
         inputs.extend([
@@ -130,8 +132,8 @@ impl<M: SplatMethod> HardwareRenderer<'_, M> {
         if M::HAS_PIXEL_INFO && self.opts.gradients.camera() {
             inputs.push(("pixel_cotangent", &*adjoint.pixel_cotangent));
         }
-        let size = (grid.width, grid.height);
-        self.backward_time = pass.draw(gpu, size, 4, info.intersections as u32, &inputs)?;
+        let instances = info.intersections as u32;
+        self.backward_time = pass.draw_on(gpu, forward, 4, instances, &inputs)?;
 
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         self.timer.start(&mut enc, super::ADJOINT);
