@@ -34,8 +34,8 @@ pub fn gradients_match_finite_differences<M: SplatMethod>(
     label: &str,
     params: &[M::Params],
     cam: &Camera,
-    groups: &[(&str, Range<usize>)],
-    camera_groups: &[(&str, Range<usize>)],
+    groups: Groups,
+    camera_groups: Groups,
     bound: Bound,
 ) {
     let n = (cam.size.x * cam.size.y) as usize;
@@ -55,8 +55,8 @@ pub fn hardware_gradients_match_finite_differences<M: SplatMethod>(
     label: &str,
     params: &[M::Params],
     cam: &Camera,
-    groups: &[(&str, Range<usize>)],
-    camera_groups: &[(&str, Range<usize>)],
+    groups: Groups,
+    camera_groups: Groups,
     bound: Bound,
 ) -> bool {
     use splat_gpu::raster::{Blending, HardwareRenderer};
@@ -183,8 +183,8 @@ pub fn gradients_match_reference_adjoint<M: SplatMethod>(
     label: &str,
     params: &[M::Params],
     cam: &Camera,
-    groups: &[(&str, Range<usize>)],
-    camera_groups: &[(&str, Range<usize>)],
+    groups: Groups,
+    camera_groups: Groups,
     bound: Bound,
 ) -> ReferenceGrad {
     let n = (cam.size.x * cam.size.y) as usize;
@@ -699,12 +699,7 @@ pub struct HardwareFit {
 /// The largest |got - f64| over `reference`'s parameter groups and camera fields, each as a
 /// fraction of its group's largest f64 element.
 #[cfg(feature = "gpu")]
-fn off_f64(
-    params: &[Vec<f64>],
-    camera: &[f64],
-    reference: &ReferenceGrad,
-    groups: &[(&str, Range<usize>)],
-) -> f64 {
+fn off_f64(params: &[Vec<f64>], camera: &[f64], reference: &ReferenceGrad, groups: Groups) -> f64 {
     let relative = Bound::new(0.0, 1.0);
     let mut worst = 0.0f64;
     for (_, range) in groups {
