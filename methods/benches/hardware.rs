@@ -39,7 +39,7 @@ fn allocations(gpu: &Gpu) -> BTreeMap<String, u64> {
 }
 
 /// What was allocated since `before`: in all, and its four largest names.
-fn since(gpu: &Gpu, before: &BTreeMap<String, u64>) -> (u64, String) {
+fn allocated_since(gpu: &Gpu, before: &BTreeMap<String, u64>) -> (u64, String) {
     let mut grown: Vec<(u64, String)> = (allocations(gpu).into_iter())
         .map(|(name, bytes)| {
             (
@@ -90,7 +90,7 @@ fn main() {
         atomics = tiles.download_gradients().unwrap().atomics;
         [forward, start.elapsed()]
     });
-    let (tile_total, tile_largest) = since(&gpu, &before);
+    let (tile_total, tile_largest) = allocated_since(&gpu, &before);
     let mut largest = vec![("tiles".to_string(), tile_largest)];
     let tile_info = tiles.frame().unwrap();
     println!(
@@ -130,7 +130,7 @@ fn main() {
             atomics = hw.download_gradients().unwrap().atomics;
             [forward, start.elapsed()]
         });
-        let (allocated, wgpu_largest) = since(&gpu, &before);
+        let (allocated, wgpu_largest) = allocated_since(&gpu, &before);
         let passes = hw.pass_memory_bytes();
         let total = allocated + passes;
         let name = format!("hardware, {} states", precision.name());

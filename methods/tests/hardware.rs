@@ -146,7 +146,8 @@ fn programmable_blending_stops_pixels_where_the_tile_path_does() {
 /// tile path's gradients, in every state format, through a pinhole (3DGS) and a fisheye
 /// (3DGUT: its camera gradient also flows through the pixels' rays), with each way of summing
 /// the fragments' gradients before the atomics (the seed's Table I: the sums must cut the
-/// atomics, the hybrid never issuing more than the quads); and each against the f64 reference
+/// atomics, the hybrid never issuing more than the quads; and where no subgroup sums, as with
+/// a threshold none reaches, each falls back atomic for atomic); and each against the f64 reference
 /// (the seed's Table IV). f32 states are held to the GPU's f32 bound; narrower ones to
 /// [`narrow_state`].
 #[test]
@@ -160,7 +161,15 @@ fn hardware_backward_matches_the_tile_path_in_every_format() {
     let fisheye = wide_camera(64, 48, CameraModel::KannalaBrandt);
     let rays = as_method::<gut::Params>(spread_gaussians(&fisheye, 300, 5));
     let required = programmable_blend::open_or_skip().is_some();
-    let ways = FragmentReduction::ALL;
+    // Every way, and the subgroup's with a threshold no subgroup reaches: what a subgroup that
+    // does not sum does (lavapipe's are all cohesive).
+    let never = 1000;
+    let ways: Vec<_> = (FragmentReduction::ALL.into_iter())
+        .chain([
+            FragmentReduction::Subgroup { min_lanes: never },
+            FragmentReduction::Hybrid { min_lanes: never },
+        ])
+        .collect();
     let gs = hardware_gradients_match_tiles::<gs3d::Method>("3dgs", &params, &cam, &ways, bound);
     let label = "3dgut, fisheye";
     let gut = hardware_gradients_match_tiles::<gut::Method>(label, &rays, &fisheye, &ways, bound);
@@ -189,23 +198,37 @@ fn hardware_backward_matches_the_tile_path_in_every_format() {
         // Measured on lavapipe (3DGS, f32 states): 440,580 atomics one per fragment, 139,870
         // with the quads' sums, 85,440 with the subgroups' and the hybrid's (llvmpipe's
         // 8-lane subgroups hold two quads of one triangle: every one cohesive).
-        let atomics = |way| {
-            let row = fits.iter().find(|f| f.reduce == Some(way));
-            row.map_or(0, |f| f.atomics)
-        };
-        let [none, quad, subgroup, hybrid] = ways.map(atomics);
-        assert!(
-            2 * quad < none,
-            "{label}: the quads' sums cut the atomics: {quad} of {none}"
-        );
-        assert!(
-            subgroup < none,
-            "{label}: the subgroups' sums cut the atomics: {subgroup} of {none}"
-        );
-        assert!(
-            hybrid <= quad.min(subgroup),
-            "{label}: the hybrid is the least: {hybrid} against {quad} and {subgroup}"
-        );
+        for precision in Precision::ALL {
+            let atomics = |way| {
+                let row = (fits.iter()).find(|f| f.reduce == Some(way) && f.precision == precision);
+                row.map_or(0, |f| f.atomics)
+            };
+            let [none, quad, subgroup, hybrid, no_subgroup, no_hybrid] =
+                <[_; 6]>::try_from(ways.clone())
+                    .expect("six ways")
+                    .map(atomics);
+            assert!(
+                2 * quad < none,
+                "{label}, {precision:?}: the quads' sums cut the atomics: {quad} of {none}"
+            );
+            assert!(
+                subgroup < none,
+                "{label}, {precision:?}: the subgroups' sums cut the atomics: {subgroup} of {none}"
+            );
+            assert!(
+                hybrid <= quad.min(subgroup),
+                "{label}, {precision:?}: the hybrid is the least: {hybrid} against {quad} and {subgroup}"
+            );
+            // Where no subgroup sums, each falls back word for word.
+            assert_eq!(
+                no_subgroup, none,
+                "{label}, {precision:?}: subgroups falling back to fragments"
+            );
+            assert_eq!(
+                no_hybrid, quad,
+                "{label}, {precision:?}: the hybrid falling back to quads"
+            );
+        }
     }
 }
 

@@ -43,7 +43,7 @@ pub fn gradients_match_finite_differences<M: SplatMethod>(
     let (_, state) = render_for_backward::<M>(params, cam, &options(8)).unwrap();
     let g = backward::<M>(&state, params, cam, &frame_grad(&w)).unwrap();
     let groups = (groups, camera_groups);
-    these_match_finite_differences::<M>(label, params, cam, &w, &g, groups, bound);
+    gradients_match_finite_differences_of::<M>(label, params, cam, &w, &g, groups, bound);
 }
 
 /// The hardware path's backward (`HardwareRenderer::backward`: f32 states, the adapter's
@@ -72,14 +72,14 @@ pub fn hardware_gradients_match_finite_differences<M: SplatMethod>(
     hw.backward(&scene, &frame_grad(&w)).unwrap();
     let g = hw.download_gradients().unwrap().gradients;
     let groups = (groups, camera_groups);
-    these_match_finite_differences::<M>(label, params, cam, &w, &g, groups, bound);
+    gradients_match_finite_differences_of::<M>(label, params, cam, &w, &g, groups, bound);
     true
 }
 
 /// Gradients `g` of the linear loss of weights `w` against central differences of the
 /// reference render, per parameter group, the shade data and camera group, each element
 /// within `bound`.
-fn these_match_finite_differences<M: SplatMethod>(
+fn gradients_match_finite_differences_of<M: SplatMethod>(
     label: &str,
     params: &[M::Params],
     cam: &Camera,
@@ -682,6 +682,7 @@ pub fn hardware_gradients_match_tiles<M: SplatMethod>(
 }
 
 /// One format and reduction's result in [`hardware_gradients_match_tiles`].
+#[cfg(feature = "gpu")]
 #[derive(Clone, Copy, Debug)]
 pub struct HardwareFit {
     pub precision: splat_core::precision::Precision,

@@ -790,7 +790,7 @@ pub fn raster_backward<M: SplatMethod>(
     let body = fill(
         RASTER_BACKWARD,
         &[
-            ("REDUCTION_NOTE", reduce.note().into()),
+            ("REDUCTION_NOTE", reduce.shader_note()),
             ("NG", layout.grad_words.to_string()),
             ("CHANNELS", nc.to_string()),
             (

@@ -95,8 +95,8 @@ pub struct HardwareRenderer<'g, M: SplatMethod> {
     draw_time: std::time::Duration,
     /// The last programmable draw's state images decoded to f32 (four values per pixel), once
     /// asked for: the frame's download and the backward pass both read them.
-    state: std::cell::OnceCell<Vec<Vec<f32>>>,
-    /// The backward replay of the last camera model and depth gradient used.
+    state: std::sync::OnceLock<Vec<Vec<f32>>>,
+    /// The backward replay of the last camera model, depth gradient and reduction used.
     backward_pass: Option<backward::BackwardPass>,
     /// The gradient sums and the adjoints after the backward replay.
     adjoint: Adjoint,
@@ -334,8 +334,8 @@ impl<'g, M: SplatMethod> HardwareRenderer<'g, M> {
         let (_, pass) = self.programmable.as_mut().expect("built above");
         let inputs = quad_inputs::<M>(&self.front);
         let size = (info.grid.width, info.grid.height);
-        self.draw_time = pass.draw(gpu, size, 4, info.intersections as u32, &inputs)?;
         self.state = Default::default();
+        self.draw_time = pass.draw(gpu, size, 4, info.intersections as u32, &inputs)?;
         Ok(())
     }
 

@@ -320,7 +320,6 @@ impl<'g, M: SplatMethod> GpuRenderer<'g, M> {
     }
 
     /// The grid and primitive count of the frame finished last, or else of the one submitted.
-    /// Refuses a scene other than the one the frame of `primitives` was rendered from.
     fn current(&self) -> Result<(TileGrid, usize), GpuRenderError> {
         let frame = self.frame.map(|f| (f.grid, f.primitives));
         let pending = self.pending.map(|p| (p.grid, p.primitives));

@@ -61,102 +61,133 @@ pub enum FragmentReduction {
     /// not a helper invocation (helpers' words are zero).
     Quad,
     /// Summed over the subgroup by `subgroupAdd` where all its lanes draw one primitive (the
-    /// seed's splat-subgroup cohesion, which nothing guarantees), one atomic per (subgroup,
-    /// word) from its first lane that is not a helper; elsewhere one per fragment.
-    Subgroup,
-    /// [`FragmentReduction::Subgroup`] where the subgroup is cohesive, the quads' sums
-    /// elsewhere: the seed's hybrid, never more atomics than either.
-    Hybrid,
+    /// seed's splat-subgroup cohesion, which nothing guarantees) and at least `min_lanes` of
+    /// them blend (the seed's balancing threshold X), one atomic per (subgroup, word) from its
+    /// first lane that is not a helper; elsewhere one per fragment.
+    Subgroup { min_lanes: u32 },
+    /// [`FragmentReduction::Subgroup`] where it sums the subgroup, the quads' sums elsewhere:
+    /// the seed's hybrid, never more atomics than either.
+    Hybrid { min_lanes: u32 },
 }
 
 impl FragmentReduction {
-    pub const ALL: [FragmentReduction; 4] = [Self::None, Self::Quad, Self::Subgroup, Self::Hybrid];
+    /// Each way, the subgroup's without a threshold.
+    pub const ALL: [FragmentReduction; 4] = [
+        Self::None,
+        Self::Quad,
+        Self::Subgroup { min_lanes: 0 },
+        Self::Hybrid { min_lanes: 0 },
+    ];
 
-    /// [`FragmentReduction::Hybrid`] where `gpu` has subgroup operations in fragment shaders,
-    /// else [`FragmentReduction::None`].
+    /// [`FragmentReduction::Hybrid`] without a threshold where `gpu` has subgroup operations
+    /// in fragment shaders, else [`FragmentReduction::None`].
     pub fn default_for(gpu: &Gpu) -> FragmentReduction {
         match gpu.subgroups {
-            true => Self::Hybrid,
+            true => Self::Hybrid { min_lanes: 0 },
             false => Self::None,
         }
     }
 
     /// What it does, for the shader's header.
-    pub fn note(self) -> &'static str {
+    pub fn shader_note(self) -> String {
+        let cohesive = |min_lanes| match min_lanes {
+            0 => "where all its lanes draw one primitive".to_string(),
+            n => format!("where all its lanes draw one primitive and {n} or more blend"),
+        };
         match self {
-            Self::None => "one atomic per fragment and nonzero word.",
-            Self::Quad => {
-                "each word summed over the fragment's 2x2 quad first, one atomic per quad and nonzero word."
-            }
-            Self::Subgroup => {
-                "each word summed over the subgroup where all its lanes draw one primitive, one atomic per fragment elsewhere."
-            }
-            Self::Hybrid => {
-                "each word summed over the subgroup where all its lanes draw one primitive, over the 2x2 quad elsewhere."
-            }
+            Self::None => "one atomic per fragment and nonzero word.".into(),
+            Self::Quad => "each word summed over the fragment's 2x2 quad first, one atomic per quad and nonzero word.".into(),
+            Self::Subgroup { min_lanes } => format!(
+                "each word summed over the subgroup {}, one atomic per fragment elsewhere.",
+                cohesive(min_lanes)
+            ),
+            Self::Hybrid { min_lanes } => format!(
+                "each word summed over the subgroup {}, over the 2x2 quad elsewhere.",
+                cohesive(min_lanes)
+            ),
         }
     }
 }
 
 /// [`scatter`] for a fragment of the hardware backward (`helper` set in helper invocations,
-/// whose words are zero; `prim` its primitive), its words summed as `reduce` says. Written at
-/// the top level of the shader, where every lane that started is still running.
+/// whose words are zero; `live` where the fragment blends; `prim` its primitive), its words
+/// summed as `reduce` says. Written at the top level of the shader, where every lane that
+/// started is still running: every quad and subgroup operation runs there, unconditionally
+/// (a helper invocation need not take part in subgroup operations, so its view of the
+/// subgroup may differ: only the adds, which helpers never make, depend on it).
 pub fn scatter_fragments(reduce: FragmentReduction, words: usize) -> String {
-    let add = |indent: &str, k: usize, v: &str, who: &str| {
-        format!(
-            "{indent}if ({who}{v} != 0.0) {{
-{indent}    add_grad(prim * NG + {k}u, {v});
+    let mut s = String::new();
+    let (quads, subgroups) = match reduce {
+        FragmentReduction::None => (false, None),
+        FragmentReduction::Quad => (true, None),
+        FragmentReduction::Subgroup { min_lanes } => (false, Some(min_lanes)),
+        FragmentReduction::Hybrid { min_lanes } => (true, Some(min_lanes)),
+    };
+    if quads {
+        // A lane's place in its 2x2 quad, by the parity of its pixel.
+        s += "    let quad_lane = (u32(px) & 1u) | ((u32(py) & 1u) << 1u);
+    var lanes = select(0u, 1u << quad_lane, !helper);
+    lanes = lanes | quadSwapX(lanes);
+    lanes = lanes | quadSwapY(lanes);
+    let quad_first = firstTrailingBit(lanes) == quad_lane;
+";
+        for k in 0..words {
+            let w = word(k);
+            let _ = writeln!(s, "    let pair{k} = {w} + quadSwapX({w});");
+            let _ = writeln!(s, "    let quad{k} = pair{k} + quadSwapY(pair{k});");
+        }
+    }
+    if let Some(min_lanes) = subgroups {
+        s += "    var cohesive = subgroupAll(subgroupBroadcastFirst(prim) == prim);\n";
+        if min_lanes > 0 {
+            s += "    let blending = subgroupAdd(select(0u, 1u, live));\n";
+            let _ = writeln!(s, "    cohesive = cohesive && blending >= {min_lanes}u;");
+        }
+        s += "    let rank = subgroupExclusiveAdd(select(1u, 0u, helper));
+    let subgroup_first = !helper && rank == 0u;
+";
+        for k in 0..words {
+            let _ = writeln!(s, "    let sub{k} = subgroupAdd({});", word(k));
+        }
+    }
+    let adds = |indent: &str, sum: &dyn Fn(usize) -> (String, &'static str)| -> String {
+        (0..words)
+            .map(|k| {
+                let (v, guard) = sum(k);
+                add_word(indent, format!("{k}u"), &v, guard)
+            })
+            .collect()
+    };
+    let fragment = |k: usize| (word(k), "");
+    let quad = |k: usize| (format!("quad{k}"), "quad_first && ");
+    let subgroup = |k: usize| (format!("sub{k}"), "subgroup_first && ");
+    let otherwise = |indent| match quads {
+        true => adds(indent, &quad),
+        false => adds(indent, &fragment),
+    };
+    match subgroups {
+        None => s += &otherwise("    "),
+        Some(_) => {
+            s += "    if (cohesive) {\n";
+            s += &adds("        ", &subgroup);
+            s += "    } else {\n";
+            s += &otherwise("        ");
+            s += "    }\n";
+        }
+    }
+    s
+}
+
+/// Adds `v` to word `k` of primitive `prim`'s sums through `add_grad` where `guard` (a WGSL
+/// condition and `&&`, or nothing) holds and `v` is not zero, counting it in `my_issued`.
+fn add_word(indent: &str, k: impl std::fmt::Display, v: &str, guard: &str) -> String {
+    format!(
+        "{indent}if ({guard}{v} != 0.0) {{
+{indent}    add_grad(prim * NG + {k}, {v});
 {indent}    my_issued++;
 {indent}}}
 "
-        )
-    };
-    let each_fragment =
-        |indent: &str| -> String { (0..words).map(|k| add(indent, k, &word(k), "")).collect() };
-    let quads = |indent: &str| -> String {
-        // A lane's place in its 2x2 quad, by the parity of its pixel.
-        let mut s = format!(
-            "{indent}let quad_lane = (u32(px) & 1u) | ((u32(py) & 1u) << 1u);
-{indent}var lanes = select(0u, 1u << quad_lane, !helper);
-{indent}lanes = lanes | quadSwapX(lanes);
-{indent}lanes = lanes | quadSwapY(lanes);
-{indent}let quad_first = firstTrailingBit(lanes) == quad_lane;
-"
-        );
-        for k in 0..words {
-            let _ = write!(
-                s,
-                "{indent}let pair{k} = {w} + quadSwapX({w});
-{indent}let quad{k} = pair{k} + quadSwapY(pair{k});
-",
-                w = word(k)
-            );
-            s += &add(indent, k, &format!("quad{k}"), "quad_first && ");
-        }
-        s
-    };
-    let subgroups = |otherwise: String| -> String {
-        // `cohesive` is the same in every lane, so each branch runs with the whole subgroup.
-        let mut s = "    let cohesive = subgroupAll(subgroupBroadcastFirst(prim) == prim);
-    if (cohesive) {
-        let subgroup_first = !helper && subgroupExclusiveAdd(select(1u, 0u, helper)) == 0u;
-"
-        .to_string();
-        for k in 0..words {
-            let _ = writeln!(s, "        let sub{k} = subgroupAdd({});", word(k));
-            s += &add("        ", k, &format!("sub{k}"), "subgroup_first && ");
-        }
-        s + "    } else {
-" + &otherwise
-            + "    }
-"
-    };
-    match reduce {
-        FragmentReduction::None => each_fragment("    "),
-        FragmentReduction::Quad => quads("    "),
-        FragmentReduction::Subgroup => subgroups(each_fragment("        ")),
-        FragmentReduction::Hybrid => subgroups(quads("        ")),
-    }
+    )
 }
 
 /// The scalar holding gradient word `k` of the entry.
@@ -176,15 +207,7 @@ pub fn declare(words: usize) -> String {
 /// `words_per_round` is how many words one workgroup reduction round sums (its `red` holds
 /// `words_per_round * WG` floats).
 pub fn scatter(reduce: Reduction, words: usize, words_per_round: usize) -> String {
-    let add = |indent: &str, k: &str, v: &str| {
-        format!(
-            "{indent}if ({v} != 0.0) {{
-{indent}    add_grad(prim * NG + {k}, {v});
-{indent}    my_issued++;
-{indent}}}
-"
-        )
-    };
+    let add = |indent: &str, k: &str, v: &str| add_word(indent, k, v, "");
     let mut s = String::new();
     match reduce {
         Reduction::None => {
@@ -268,21 +291,42 @@ mod tests {
 
     #[test]
     fn every_fragment_reduction_adds_each_word_once_per_branch() {
-        for reduce in FragmentReduction::ALL {
+        let thresholds = [
+            FragmentReduction::Subgroup { min_lanes: 8 },
+            FragmentReduction::Hybrid { min_lanes: 8 },
+        ];
+        for reduce in FragmentReduction::ALL.into_iter().chain(thresholds) {
             let s = scatter_fragments(reduce, 10);
             // The subgroup's sums, and what a subgroup that is not cohesive does instead.
-            let branches = match reduce {
-                FragmentReduction::None | FragmentReduction::Quad => 1,
-                FragmentReduction::Subgroup | FragmentReduction::Hybrid => 2,
+            let (quads, branches) = match reduce {
+                FragmentReduction::None => (false, 1),
+                FragmentReduction::Quad => (true, 1),
+                FragmentReduction::Subgroup { .. } => (false, 2),
+                FragmentReduction::Hybrid { .. } => (true, 2),
             };
             for k in 0..10 {
                 let adds = s.matches(&format!("prim * NG + {k}u,")).count();
                 assert_eq!(adds, branches, "{reduce:?}: {s}");
             }
-            assert_eq!(
-                s.contains("quadSwapX"),
-                reduce == FragmentReduction::Quad || reduce == FragmentReduction::Hybrid
+            assert_eq!(s.contains("quadSwapX"), quads, "{reduce:?}");
+            // Every quad and subgroup operation at the top level, before any branch.
+            let branch = s.find("if (").unwrap_or(s.len());
+            let ops = ["quadSwapX(", "quadSwapY(", "subgroupAll(", "subgroupAdd("];
+            for op in ops
+                .into_iter()
+                .chain(["subgroupBroadcastFirst(", "subgroupExclusiveAdd("])
+            {
+                assert!(
+                    s.rfind(op).is_none_or(|at| at < branch),
+                    "{reduce:?}: {op} in a branch: {s}"
+                );
+            }
+            let counts_lanes = matches!(
+                reduce,
+                FragmentReduction::Subgroup { min_lanes: 8 }
+                    | FragmentReduction::Hybrid { min_lanes: 8 }
             );
+            assert_eq!(s.contains("blending >= 8u"), counts_lanes, "{reduce:?}");
         }
     }
 }

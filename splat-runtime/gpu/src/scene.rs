@@ -55,7 +55,8 @@ impl<M: SplatMethod> GpuScene<M> {
     }
 
     /// Whether this is, unchanged, the scene of `primitives` primitives that the upload
-    /// stamped `stamp` held: a backward pass needs the scene its frame was drawn from.
+    /// stamped `stamp` held: what works on a drawn frame (its backward, its settling) needs
+    /// the scene the frame was drawn from.
     pub(crate) fn check_drawn(&self, primitives: usize, stamp: u64) -> Result<(), GpuRenderError> {
         if self.len != primitives {
             return Err(GpuRenderError::SceneChanged {

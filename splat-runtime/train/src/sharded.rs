@@ -20,7 +20,7 @@
 //! whole state only where it is written (checkpoints, the end of the run) or shown
 //! (`FitOptions::share_every`), and hands out the first state (it read it).
 
-use super::adam::{Adam, AdamState, Faults};
+use super::adam::{Adam, Faults};
 use super::batch::{Batch, Scaling, batches};
 use super::checkpoint::Checkpoint;
 use super::densify::{Densifier, Draws, Refinement, screen_gradient, strongest};
@@ -533,8 +533,10 @@ impl<M: Trainable> Slice<M> {
         (self.densifier.as_ref()).is_some_and(|d| batch.any(|s| d.refines_at(s) || d.resets_at(s)))
     }
 
-    /// The moments of the slice's words from `state` (the batch's scaled betas kept).
-    fn adopt_moments(&mut self, state: AdamState) {
+    /// The moments of the slice's words from `state` (the batch's scaled betas kept): the
+    /// device optimizer's, read back.
+    #[cfg(feature = "gpu")]
+    fn adopt_moments(&mut self, state: super::adam::AdamState) {
         let (beta1, beta2) = (self.adam.beta1, self.adam.beta2);
         self.adam = Adam::resume(M::Params::LEN, state);
         (self.adam.beta1, self.adam.beta2) = (beta1, beta2);

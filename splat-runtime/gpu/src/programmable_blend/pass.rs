@@ -49,6 +49,10 @@ pub struct RasterPass {
     /// Where the state images are bound (their input attachments, in order).
     state_bindings: Vec<u32>,
     readback: bool,
+    /// What else shapes the render pass: passes alike in these and `formats` may draw on each
+    /// other's images ([`RasterPass::draw_on`]).
+    order: Order,
+    strips: bool,
     fixed: Fixed,
     targets: Option<Targets>,
 }
@@ -143,6 +147,8 @@ impl RasterPass {
             buffers: module.buffers(),
             state_bindings: module.textures(),
             readback: desc.readback,
+            order: desc.order,
+            strips: desc.strips,
             fixed: Fixed::default(),
             targets: None,
         };
@@ -373,7 +379,11 @@ impl RasterPass {
             };
             let made = self.make_targets(&mut targets);
             self.targets = Some(targets);
-            made?;
+            if let Err(e) = made {
+                // Half-made targets are destroyed, not drawn on later.
+                self.drop_targets();
+                return Err(e);
+            }
         }
         let targets = self.targets.as_ref().expect("made above");
         self.draw_into(gpu, targets, (vertices, instances), self.readback, buffers)
@@ -394,10 +404,12 @@ impl RasterPass {
         let targets = (other.targets.as_ref()).ok_or_else(|| {
             GpuError::Device("programmable blending: nothing drawn to draw on".into())
         })?;
-        if other.formats != self.formats {
+        let shape = |p: &RasterPass| (p.formats.clone(), p.order, p.strips);
+        if shape(other) != shape(self) {
             let why = format!(
-                "programmable blending: states of {:?} drawn on states of {:?}",
-                self.formats, other.formats
+                "programmable blending: a pass of {:?} drawn on a pass of {:?} (states, order, strips)",
+                shape(self),
+                shape(other)
             );
             return Err(GpuError::Device(why));
         }
@@ -500,8 +512,9 @@ impl RasterPass {
         Ok(start.elapsed())
     }
 
-    /// Bytes of device memory the state images and their readback buffer hold (Vulkan memory
-    /// of the pass's own, which wgpu's allocator does not count).
+    /// Bytes of memory the state images (device-local) and their readback buffer
+    /// (host-visible) hold: Vulkan memory of the pass's own, which wgpu's allocator does not
+    /// count.
     pub fn memory_bytes(&self) -> u64 {
         self.targets.as_ref().map_or(0, |t| t.bytes)
     }

@@ -1,8 +1,8 @@
 //! The hardware path's backward pass (Yuan and He's, backward half): the programmable
-//! forward's draw replayed front to back into fresh state images, each fragment reading the
-//! state the forward had before it and adding its primitive's gradient
-//! (`entries::raster_backward`); then `project`'s adjoint as on the tile path
-//! ([`super::super::adjoint`]). No tile lists here either: the same depth-sorted quads.
+//! forward's draw replayed front to back on its state images (cleared; their copy is read
+//! back already), each fragment reading the state the forward had before it and adding its
+//! primitive's gradient (`entries::raster_backward`); then `project`'s adjoint as on the tile
+//! path ([`super::super::adjoint`]). No tile lists here either: the same depth-sorted quads.
 
 use super::{Blending, HardwareRenderer, STOP_MARK, decode, quad_inputs};
 use crate::adjoint::interleave;
@@ -117,7 +117,8 @@ impl<M: SplatMethod> HardwareRenderer<'_, M> {
         }
         let (_, pass) = self.backward_pass.as_mut().expect("built above");
         // The replay draws on the forward's images: their state is read back already.
-        let (_, forward) = self.programmable.as_ref().expect("checked by state_values");
+        let (_, forward) = (self.programmable.as_ref())
+            .ok_or_else(|| GpuError::Readback("no programmable draw yet".into()))?;
         let adjoint = &self.adjoint;
         let mut inputs = quad_inputs::<M>(&self.front);
         inputs.extend([
@@ -166,8 +167,9 @@ impl<M: SplatMethod> HardwareRenderer<'_, M> {
         (self.adjoint).sum_bytes(self.frame.map_or(0, |f| f.primitives))
     }
 
-    /// Bytes of Vulkan memory the programmable passes hold of their own (state images and
-    /// their readback, forward's and backward's): what wgpu's allocator report leaves out.
+    /// Bytes of Vulkan memory the programmable passes hold of their own (the forward's state
+    /// images and their readback; the backward draws on them): what wgpu's allocator report
+    /// leaves out.
     pub fn pass_memory_bytes(&self) -> u64 {
         let forward = self.programmable.as_ref().map(|(_, p)| p);
         let backward = self.backward_pass.as_ref().map(|(_, p)| p);
