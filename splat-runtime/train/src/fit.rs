@@ -344,8 +344,20 @@ pub fn fit<M: Trainable>(
     opts: &FitOptions,
     progress: impl FnMut(&StepReport),
 ) -> Result<(), FitError> {
+    from_params::<M>(params, opts, |state| {
+        fit_from::<M>(data, state, extent, opts, progress)
+    })
+}
+
+/// Runs `train` from the first state of a run on `params` ([`Checkpoint::start`]) and leaves
+/// the run's last scene in `params`: what each backend's `fit` does around its `fit_from`.
+pub(crate) fn from_params<M: Trainable>(
+    params: &mut Vec<M::Params>,
+    opts: &FitOptions,
+    train: impl FnOnce(&mut Checkpoint) -> Result<(), FitError>,
+) -> Result<(), FitError> {
     let mut state = Checkpoint::start::<M>(params, opts.steps, opts.seed);
-    fit_from::<M>(data, &mut state, extent, opts, progress)?;
+    train(&mut state)?;
     *params = state.params::<M>();
     Ok(())
 }

@@ -60,10 +60,9 @@ pub fn fit_gpu<M: Trainable>(
     opts: &FitOptions,
     progress: impl FnMut(&StepReport),
 ) -> Result<(), FitError> {
-    let mut state = Checkpoint::start::<M>(params, opts.steps, opts.seed);
-    fit_gpu_from::<M>(gpu, data, &mut state, extent, opts, progress)?;
-    *params = state.params::<M>();
-    Ok(())
+    super::fit::from_params::<M>(params, opts, |state| {
+        fit_gpu_from::<M>(gpu, data, state, extent, opts, progress)
+    })
 }
 
 /// Trains from `state` as [`super::fit::fit_from`] does, on `gpu`.

@@ -72,10 +72,9 @@ pub fn fit_hardware<M: Trainable>(
     opts: &FitOptions,
     progress: impl FnMut(&StepReport),
 ) -> Result<(), FitError> {
-    let mut state = Checkpoint::start::<M>(params, opts.steps, opts.seed);
-    fit_hardware_shared::<M>(&Solo, gpu, data, &mut state, extent, opts, progress)?;
-    *params = state.params::<M>();
-    Ok(())
+    super::fit::from_params::<M>(params, opts, |state| {
+        fit_hardware_shared::<M>(&Solo, gpu, data, state, extent, opts, progress)
+    })
 }
 
 /// [`super::fit::fit_shared`] with each view's frame and gradients from the hardware path on

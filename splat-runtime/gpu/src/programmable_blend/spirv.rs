@@ -99,10 +99,7 @@ impl Module {
 /// of its attachment at offset (0, 0): the value at the fragment's own pixel.
 pub fn textures_as_input_attachments(words: &[u32]) -> Result<Vec<u32>, GpuError> {
     let wrong = |what: &str| GpuError::Shader(format!("input attachment rewrite: {what}"));
-    let (header, body) = words
-        .split_at_checked(5)
-        .ok_or_else(|| wrong("no SPIR-V header"))?;
-    let instructions = split(body).ok_or_else(|| wrong("a truncated instruction"))?;
+    let (header, instructions) = parse(words).map_err(wrong)?;
     let is = |i: &[u32], op: Op| i[0] & 0xffff == op as u32;
     let images: Vec<u32> = instructions
         .iter()
@@ -200,10 +197,7 @@ pub fn textures_as_input_attachments(words: &[u32]) -> Result<Vec<u32>, GpuError
 /// instead.
 pub fn front_facing_as_helper(words: &[u32]) -> Result<Vec<u32>, GpuError> {
     let wrong = |what: &str| GpuError::Shader(format!("helper invocation rewrite: {what}"));
-    let (header, body) = words
-        .split_at_checked(5)
-        .ok_or_else(|| wrong("no SPIR-V header"))?;
-    let instructions = split(body).ok_or_else(|| wrong("a truncated instruction"))?;
+    let (header, instructions) = parse(words).map_err(wrong)?;
     let mut out = header.to_vec();
     let mut found = false;
     for i in instructions {
@@ -231,6 +225,12 @@ pub fn front_facing_as_helper(words: &[u32]) -> Result<Vec<u32>, GpuError> {
 }
 
 /// The instructions of a SPIR-V body, each with its opcode word; `None` if one runs past the end.
+/// A SPIR-V module's header (five words) and its instructions, or what is malformed.
+fn parse(words: &[u32]) -> Result<(&[u32], Vec<&[u32]>), &'static str> {
+    let (header, body) = words.split_at_checked(5).ok_or("no SPIR-V header")?;
+    Ok((header, split(body).ok_or("a truncated instruction")?))
+}
+
 pub(crate) fn split(mut body: &[u32]) -> Option<Vec<&[u32]>> {
     let mut out = Vec::new();
     while let Some(&first) = body.first() {
