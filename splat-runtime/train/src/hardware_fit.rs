@@ -28,8 +28,7 @@ impl<'g, M: SplatMethod> HardwareFrames<'g, M> {
     /// Frames rendered as `opts` says on `gpu` (a device from
     /// `splat_gpu::programmable_blend::open`).
     pub fn new(gpu: &'g Gpu, opts: &RenderOptions) -> Result<Self, FitError> {
-        let renderer = HardwareRenderer::with_blending(gpu, opts, Blending::Programmable)
-            .map_err(|e| FitError::Gpu(e.to_string()))?;
+        let renderer = HardwareRenderer::with_blending(gpu, opts, Blending::Programmable)?;
         Ok(HardwareFrames {
             gpu,
             renderer,
@@ -39,26 +38,23 @@ impl<'g, M: SplatMethod> HardwareFrames<'g, M> {
 
     /// The frame of `params` through `camera`, kept for [`HardwareFrames::backward`].
     pub fn render(&mut self, params: &[M::Params], camera: &Camera) -> Result<Frame, FitError> {
-        let gpu = self.gpu;
-        let fail = |e: &dyn std::fmt::Display| FitError::Gpu(e.to_string());
-        match &mut self.scene {
-            Some(scene) if scene.len() == params.len() => {
-                scene.upload(gpu, params).map_err(|e| fail(&e))?
+        // The scene's buffer grows with the count (density control changes it).
+        let scene = match &mut self.scene {
+            Some(scene) => {
+                scene.upload(self.gpu, params)?;
+                scene
             }
-            scene => *scene = Some(GpuScene::new(gpu, params).map_err(|e| fail(&e))?),
-        }
-        let scene = self.scene.as_ref().expect("uploaded above");
-        self.renderer.forward(scene, camera).map_err(|e| fail(&e))?;
-        self.renderer.download_frame().map_err(|e| fail(&e))
+            none => none.insert(GpuScene::new(self.gpu, params)?),
+        };
+        self.renderer.forward(scene, camera)?;
+        Ok(self.renderer.download_frame()?)
     }
 
     /// The gradients of the last frame's parameters given its outputs' gradient `grad`.
     pub fn backward(&mut self, grad: &FrameGrad) -> Result<Gradients<M>, FitError> {
-        let fail = |e: &dyn std::fmt::Display| FitError::Gpu(e.to_string());
         let scene = (self.scene.as_ref()).ok_or_else(|| FitError::Gpu("no frame yet".into()))?;
-        self.renderer.backward(scene, grad).map_err(|e| fail(&e))?;
-        let g = self.renderer.download_gradients().map_err(|e| fail(&e))?;
-        Ok(g.gradients)
+        self.renderer.backward(scene, grad)?;
+        Ok(self.renderer.download_gradients()?.gradients)
     }
 }
 
