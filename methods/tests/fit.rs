@@ -146,7 +146,7 @@ fn assert_same_pose(got: &Camera, want: &Camera) {
 }
 
 /// The true centres, moved, as gray isotropic primitives of method `M`.
-fn moved_start<M: Trainable>(truth: &[Params]) -> Vec<M::Params> {
+pub(crate) fn moved_start<M: Trainable>(truth: &[Params]) -> Vec<M::Params> {
     let mut rng = fastrand::Rng::with_seed(3);
     let mut jitter = || Vec3::new(rng.f32(), rng.f32(), rng.f32()) - 0.5;
     truth

@@ -20,6 +20,7 @@ mod hardware;
 mod independent_reference;
 mod lens;
 mod linprim;
+mod per_view;
 mod precision;
 mod reference;
 mod rolling_shutter;

@@ -25,6 +25,7 @@ use splat_runtime::train::fit::{
 use splat_runtime::train::gpu_fit::{fit_gpu_shared, render_views_gpu};
 use splat_runtime::train::hardware_fit::fit_hardware_shared;
 use splat_runtime::train::loss::LossValue;
+use splat_runtime::train::per_view::PerViewOptions;
 use splat_runtime::train::sharded::{fit_sharded, fit_sharded_gpu};
 use splat_runtime::train::{Checkpoint, McmcOptions, StepTimes, Strategy, Trainable, init};
 use splat_runtime::{Effects, Flat, GradientSet, Image, RenderOptions, param_groups};
@@ -99,6 +100,12 @@ pub struct FitArgs {
     /// Composite the images on white instead of black.
     #[arg(long)]
     pub(crate) white: bool,
+    /// Learn each training view's exposure and white balance (a gain per color channel, as
+    /// INRIA's exposure compensation), for pictures taken at different settings; from a sixth
+    /// of the run on. Held-out views are rendered at the training views' mean exposure; the
+    /// gains are written to <out>/exposure.json. On the CPU and --hardware loops, one process.
+    #[arg(long)]
+    pub(crate) exposure: bool,
     /// A random background color per step (transparent parts of the images re-composited on
     /// it), so the scene cannot paint the background in; evaluation stays on black or white.
     #[arg(long)]
@@ -202,6 +209,8 @@ pub(crate) const FAULTS_AFTER_SHOWN: usize = FAULTS_SHOWN + 1;
 pub(crate) const CHECKPOINT: &str = "checkpoint.bin";
 pub(crate) const METRICS: &str = "metrics.csv";
 pub(crate) const CURVE: &str = "curve.png";
+/// The training views' learned exposures (`--exposure`).
+pub(crate) const EXPOSURES: &str = "exposure.json";
 
 /// A training run, for any method.
 pub struct Fit<'a> {
@@ -469,7 +478,14 @@ impl Fit<'_> {
             antialiased,
             ..GaussianCloud::new(3, params.iter().map(ToStored::to_stored).collect())
         };
-        write_results(&args.out, &cloud, &args.export, &images, &progress.log)
+        let exposures = exposure_json(&data.train, &state, &opts.per_view);
+        let results = Results {
+            cloud: &cloud,
+            images: &images,
+            log: &progress.log,
+            exposures,
+        };
+        write_results(&args.out, &args.export, results)
     }
 
     /// A rank past 0 under MPI: the same steps as rank 0, from the state it hands over,
@@ -565,15 +581,44 @@ impl Fit<'_> {
     }
 }
 
-/// The result of a run in `out`: the scene, the test views' renders, the metrics and the curve,
-/// all appearing together.
-fn write_results(
-    out: &Path,
-    cloud: &GaussianCloud,
-    exports: &[Format],
-    images: &[Image],
-    log: &Log,
-) -> Result<()> {
+/// What a run leaves: the scene, the test views' renders, the metrics and curve, and the
+/// training views' exposures (JSON) where it learned them.
+struct Results<'a> {
+    cloud: &'a GaussianCloud,
+    images: &'a [Image],
+    log: &'a Log,
+    exposures: Option<String>,
+}
+
+/// The training views' learned exposures in `state`, as JSON (`None` where the run learned
+/// none): each view's name and gains (red, green, blue).
+fn exposure_json(
+    views: &[splat_runtime::io::dataset::View],
+    state: &Checkpoint,
+    per_view: &PerViewOptions,
+) -> Option<String> {
+    per_view.exposure.then_some(())?;
+    let views: Vec<serde_json::Value> = (views.iter().enumerate())
+        .filter_map(|(k, v)| {
+            let e = per_view.exposure(state.per_view.of(per_view, k))?;
+            Some(serde_json::json!({ "name": v.name, "gains": e.gains() }))
+        })
+        .collect();
+    let json = serde_json::json!({
+        "map": "each channel of the render (before the background) times its gain; held-out views: 1, the training views' geometric mean",
+        "views": views,
+    });
+    Some(serde_json::to_string_pretty(&json).expect("JSON of numbers and names") + "\n")
+}
+
+/// The result of a run in `out`, all appearing together.
+fn write_results(out: &Path, exports: &[Format], results: Results) -> Result<()> {
+    let Results {
+        cloud,
+        images,
+        log,
+        exposures,
+    } = results;
     let mut outputs = Outputs::default();
     for &format in [Format::Ply].iter().chain(exports) {
         let path = out.join(scene_file(format));
@@ -587,6 +632,11 @@ fn write_results(
     }
     log.stage_csv(&mut outputs, &out.join(METRICS))?;
     log.plot(&mut outputs, &out.join(CURVE))?;
+    if let Some(json) = exposures {
+        let path = out.join(EXPOSURES);
+        (outputs.stage(&path, |w| w.write_all(json.as_bytes())))
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
     outputs.commit()?;
     crate::remove_stale_renders(&out.join("test"), images.len())?;
     crate::wrote(out);
@@ -652,14 +702,21 @@ impl Progress {
         self.batches += 1;
         self.log.record(r);
         self.times += r.times;
-        if r.faults.any() {
+        if r.faults.any() || r.view_faults.any() {
             self.faulty_steps += 1;
-            match self.faulty_steps {
-                ..=FAULTS_SHOWN => self.bar.println(format!(
-                    "warning: step {}: {}",
-                    r.step + 1,
+            let views = (r.view_faults.gradients + r.view_faults.steps) as usize;
+            let what = match (r.faults.any(), views) {
+                (true, 0) => r.faults.describe::<M>(),
+                (false, n) => format!("{} of the views' exposures kept their values", n),
+                (true, n) => format!(
+                    "{}; {n} of the views' exposure words too",
                     r.faults.describe::<M>()
-                )),
+                ),
+            };
+            match self.faulty_steps {
+                ..=FAULTS_SHOWN => self
+                    .bar
+                    .println(format!("warning: step {}: {what}", r.step + 1,)),
                 FAULTS_AFTER_SHOWN => self
                     .bar
                     .println("warning: later steps with words left alone are counted, not shown"),

@@ -71,26 +71,39 @@ impl Adam {
                         if rate < 0.0 {
                             continue;
                         }
-                        let at = c * chunk + i * words + k;
-                        if !g.is_finite() {
-                            faults.add(at, Fault::Gradient);
-                            continue;
+                        let word = (&mut p[k], &mut m[k], &mut v[k]);
+                        if let Err(fault) = step_word(word, g, rate, (b1, b2, eps), (c1, c2)) {
+                            faults.add(c * chunk + i * words + k, fault);
                         }
-                        let mi = b1 * m[k] + (1.0 - b1) * g;
-                        let vi = b2 * v[k] + (1.0 - b2) * g * g;
-                        let pi = p[k] - rate * (mi / c1) / ((vi / c2).sqrt() + eps);
-                        if !(pi.is_finite() && vi.is_finite()) {
-                            faults.add(at, Fault::Step);
-                            (m[k], v[k]) = (0.0, 0.0);
-                            continue;
-                        }
-                        (m[k], v[k], p[k]) = (mi, vi, pi);
                     }
                 }
                 faults
             })
             .reduce(Faults::default, Faults::merge)
     }
+}
+
+/// One Adam step of one word `(p, m, v)` with gradient `g` at `rate`, under `(beta1, beta2,
+/// eps)` and the bias corrections `(c1, c2)`; a word it cannot step is left as [`Fault`] says.
+pub(crate) fn step_word(
+    (p, m, v): (&mut f32, &mut f32, &mut f32),
+    g: f32,
+    rate: f32,
+    (b1, b2, eps): (f32, f32, f32),
+    (c1, c2): (f32, f32),
+) -> Result<(), Fault> {
+    if !g.is_finite() {
+        return Err(Fault::Gradient);
+    }
+    let mi = b1 * *m + (1.0 - b1) * g;
+    let vi = b2 * *v + (1.0 - b2) * g * g;
+    let pi = *p - rate * (mi / c1) / ((vi / c2).sqrt() + eps);
+    if !(pi.is_finite() && vi.is_finite()) {
+        (*m, *v) = (0.0, 0.0);
+        return Err(Fault::Step);
+    }
+    (*m, *v, *p) = (mi, vi, pi);
+    Ok(())
 }
 
 /// What went wrong with one word in an Adam step.
@@ -118,7 +131,7 @@ pub struct Faults {
 }
 
 impl Faults {
-    fn add(&mut self, word: usize, fault: Fault) {
+    pub(crate) fn add(&mut self, word: usize, fault: Fault) {
         match fault {
             Fault::Gradient => self.gradients += 1,
             Fault::Step => self.steps += 1,

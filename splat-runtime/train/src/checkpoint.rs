@@ -1,26 +1,30 @@
 //! Checkpoints: everything a training run needs to go on where it stopped (the steps done,
-//! the primitives, Adam's moments, density control's statistics, the random generator), and
-//! their file format.
+//! the primitives, Adam's moments, density control's statistics, the random generator, what
+//! it learns per view), and their file format.
 //!
-//! The file is little-endian: the magic `SPLATCK6`, then `u64` counts and fields (see
+//! The file is little-endian: the magic `SPLATCK7`, then `u64` counts and fields (see
 //! [`Checkpoint::write_to`]), then the arrays, then the CRC-32 of all that. The checksum is
 //! checked first, and every count against the file's length before anything is allocated, so
 //! a damaged file is refused by name, never trusted.
 
 use super::adam::AdamState;
+use super::per_view::PerViewState;
 use splat_core::flat::Flat;
 use splat_core::method::SplatMethod;
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 
-const MAGIC: &[u8; 8] = b"SPLATCK6";
-/// The format before the checksum: resumed unchecked.
-const UNSUMMED: &[u8; 8] = b"SPLATCK5";
-/// The format before the run's settings: resumed without checking them.
-const UNSET: &[u8; 8] = b"SPLATCK4";
-/// The format before the training views' footprint (and the settings): resumed without
-/// checking either.
-const UNSIZED: &[u8; 8] = b"SPLATCK3";
+/// The formats read, newest first; each lacks what the one before it added, read as unknown
+/// or none: 7 added what a run learns per view, 6 the checksum (5 is resumed unchecked), 5
+/// the run's settings, 4 the training views' footprint.
+const FORMATS: [&[u8; 8]; 5] = [
+    b"SPLATCK7",
+    b"SPLATCK6",
+    b"SPLATCK5",
+    b"SPLATCK4",
+    b"SPLATCK3",
+];
+const MAGIC: &[u8; 8] = FORMATS[0];
 /// Earlier formats (the first without the strategy, the second without the scene's extent):
 /// refused with a word on why.
 const OLDER: &[&[u8; 8]] = &[b"SPLATCK1", b"SPLATCK2"];
@@ -56,6 +60,9 @@ pub struct Checkpoint {
     /// read at another `--downscale` differs), set by the loop as the strategy is; `None`
     /// before, and from a checkpoint of the format before it (`SPLATCK3`).
     pub views: Option<ViewsFootprint>,
+    /// What the run learns per training view, with its moments (`super::per_view`); empty
+    /// where it learns nothing, and from a checkpoint of a format before it (`SPLATCK6`).
+    pub per_view: PerViewState,
 }
 
 /// How many training views a run has, and their pixels in all.
@@ -73,7 +80,7 @@ pub enum CheckpointError {
         error: std::io::Error,
     },
     #[error(
-        "{path} is not a splat checkpoint (it does not start with SPLATCK6, SPLATCK5, SPLATCK4 or SPLATCK3)"
+        "{path} is not a splat checkpoint (it does not start with SPLATCK7, SPLATCK6, SPLATCK5, SPLATCK4 or SPLATCK3)"
     )]
     Magic { path: PathBuf },
     #[error(
@@ -105,6 +112,7 @@ impl Checkpoint {
             rng: seed,
             extent: 0.0,
             views: None,
+            per_view: PerViewState::default(),
         }
     }
 
@@ -166,7 +174,8 @@ impl Checkpoint {
         Some(whole)
     }
 
-    /// Everything but the primitives' words, moments and statistics.
+    /// Everything but the primitives' words, moments and statistics (the per-view state is
+    /// the whole run's on every slice).
     pub fn clone_head(&self) -> Checkpoint {
         Checkpoint {
             method: self.method.clone(),
@@ -186,6 +195,7 @@ impl Checkpoint {
             rng: self.rng,
             extent: self.extent,
             views: self.views,
+            per_view: self.per_view.clone(),
         }
     }
 
@@ -209,6 +219,15 @@ impl Checkpoint {
                 "density control's statistics are for {stats} and {seen} primitives, the parameters for {}",
                 self.primitives()
             ))
+        } else if self.per_view.views(self.per_view_words()).is_none() {
+            let p = &self.per_view;
+            Some(format!(
+                "the per-view state holds {} words, {} and {} moments for {} views",
+                p.words.len(),
+                p.m.len(),
+                p.v.len(),
+                p.steps.len()
+            ))
         } else if self.step > self.steps {
             Some(format!(
                 "step {} is past the run's {} steps",
@@ -216,6 +235,14 @@ impl Checkpoint {
             ))
         } else {
             None
+        }
+    }
+
+    /// Words per view of the per-view state (0 without one).
+    pub fn per_view_words(&self) -> usize {
+        match self.per_view.steps.len() {
+            0 => 0,
+            n => self.per_view.words.len() / n,
         }
     }
 
@@ -235,7 +262,8 @@ impl Checkpoint {
     /// The header (magic, method name, strategy name, settings, then words, step, steps,
     /// primitives, Adam's step, statistics count, generator state, the extent's bits as `u64`,
     /// the training views and their pixels, 0 and 0 for none), then the parameters, both
-    /// moments and the statistics, then the CRC-32 of every byte before it.
+    /// moments and the statistics, then the per-view state (views, words per view, the words,
+    /// both moments, each view's step count), then the CRC-32 of every byte before it.
     pub fn write_to(&self, w: &mut dyn Write) -> std::io::Result<()> {
         if let Some(defect) = self.size_defect() {
             let what = format!("not a run's state: {defect}");
@@ -277,6 +305,16 @@ impl Checkpoint {
         for s in &self.seen {
             w.write_all(&s.to_le_bytes())?;
         }
+        let p = &self.per_view;
+        for n in [p.steps.len(), self.per_view_words()] {
+            w.write_all(&(n as u64).to_le_bytes())?;
+        }
+        for words in [&p.words, &p.m, &p.v] {
+            write_f32s(w, words)?;
+        }
+        for s in &p.steps {
+            w.write_all(&s.to_le_bytes())?;
+        }
         Ok(())
     }
 
@@ -309,14 +347,12 @@ impl Checkpoint {
                 format: String::from_utf8_lossy(&old[..]).into_owned(),
             });
         }
-        let summed = magic == Some(MAGIC);
-        let set = summed || magic == Some(UNSUMMED);
-        let sized = magic != Some(UNSIZED);
-        if !set && magic != Some(UNSET) && magic != Some(UNSIZED) {
+        let Some(age) = FORMATS.iter().position(|f| magic == Some(&f[..])) else {
             return Err(CheckpointError::Magic {
                 path: path.to_path_buf(),
             });
-        }
+        };
+        let (viewed, summed, set, sized) = (age < 1, age < 2, age < 3, age < 4);
         let bytes = match summed {
             true => {
                 let (fields, crc) = bytes
@@ -381,6 +417,26 @@ impl Checkpoint {
             .chunks_exact(4)
             .map(|b| u32::from_le_bytes(b.try_into().expect("4 bytes")))
             .collect();
+        let per_view = match viewed {
+            true => {
+                let views = r.count("the per-view state's views")?;
+                let words = r.count("the per-view state's words")?;
+                let total = views
+                    .checked_mul(words)
+                    .ok_or_else(|| damaged(format!("{views} views of {words} words")))?;
+                PerViewState {
+                    words: r.f32s(total, "the per-view words")?,
+                    m: r.f32s(total, "the per-view first moments")?,
+                    v: r.f32s(total, "the per-view second moments")?,
+                    steps: (r
+                        .take(views, 8, "the per-view step counts")?
+                        .chunks_exact(8))
+                    .map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes")))
+                    .collect(),
+                }
+            }
+            false => PerViewState::default(),
+        };
         if r.at != bytes.len() {
             return Err(damaged(format!(
                 "{} bytes follow the checkpoint's end",
@@ -405,6 +461,7 @@ impl Checkpoint {
             rng,
             extent,
             views,
+            per_view,
         };
         match checkpoint.size_defect() {
             Some(defect) => Err(damaged(defect)),
@@ -508,6 +565,7 @@ mod tests {
                 views: 80,
                 pixels: 80 * 200 * 200,
             }),
+            per_view: PerViewState::default(),
         }
     }
 
@@ -566,18 +624,35 @@ mod tests {
 
     #[test]
     fn a_checkpoint_survives_its_file() {
-        let mut bytes = vec![];
-        sample().write_to(&mut bytes).unwrap();
-        let back = Checkpoint::parse(&bytes, Path::new("c.bin")).unwrap();
-        assert_eq!(back, sample());
+        let viewed = Checkpoint {
+            per_view: PerViewState {
+                words: vec![1.0, 0.5, -0.25, 2.0],
+                m: vec![0.1, 0.2, 0.3, 0.4],
+                v: vec![1e-9, 2e-9, 3e-9, 4e-9],
+                steps: vec![3, 0],
+            },
+            ..sample()
+        };
+        for c in [sample(), viewed] {
+            let mut bytes = vec![];
+            c.write_to(&mut bytes).unwrap();
+            assert_eq!(Checkpoint::parse(&bytes, Path::new("c.bin")).unwrap(), c);
+        }
     }
 
-    /// Checkpoints of the formats before the checksum (`SPLATCK5`), before the settings
-    /// (`SPLATCK4`) and before the views' footprint (`SPLATCK3`) resume, what they lack
-    /// unknown.
+    /// Checkpoints of the formats before the per-view state (`SPLATCK6`), the checksum
+    /// (`SPLATCK5`), the settings (`SPLATCK4`) and the views' footprint (`SPLATCK3`) resume,
+    /// what they lack unknown or none.
     #[test]
     fn checkpoints_of_the_previous_formats_are_read() {
         let mut bytes = fields();
+        // No per-view state: its two counts, zero, end the fields.
+        bytes.truncate(bytes.len() - 16);
+        bytes[..8].copy_from_slice(b"SPLATCK6");
+        assert_eq!(
+            Checkpoint::parse(&summed(bytes.clone()), Path::new("c.bin")).unwrap(),
+            sample()
+        );
         bytes[..8].copy_from_slice(b"SPLATCK5");
         assert_eq!(
             Checkpoint::parse(&bytes, Path::new("c.bin")).unwrap(),

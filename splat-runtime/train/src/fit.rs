@@ -10,6 +10,7 @@ use super::checkpoint::{Checkpoint, ViewsFootprint};
 use super::densify::{Densifier, DensifyOptions, Refinement, screen_gradient};
 use super::loss::{self, LossError, LossValue};
 use super::mcmc::{Mcmc, McmcOptions};
+use super::per_view::{PerViewOptions, PerViewState};
 use super::step_times::StepTimes;
 use super::team::{Share, Solo, Team, ViewPass};
 use super::trainable::{Rate, Shape, Trainable};
@@ -79,6 +80,8 @@ pub struct FitOptions {
     pub random_background: bool,
     /// How the primitive set changes, or not at all (the primitive count stays fixed).
     pub densify: Option<Strategy>,
+    /// What the run learns per training view besides the scene (its exposure).
+    pub per_view: PerViewOptions,
     /// Evaluate the test views after every this many steps (reported in [`StepReport`]);
     /// `None`: never during training.
     pub eval_every: Option<usize>,
@@ -118,6 +121,7 @@ impl Default for FitOptions {
             seed: 0,
             random_background: false,
             densify: Some(Strategy::Adc(DensifyOptions::default())),
+            per_view: PerViewOptions::default(),
             eval_every: None,
             checkpoint_every: None,
             share_every: None,
@@ -198,18 +202,29 @@ pub struct Evaluation {
     pub views: usize,
 }
 
-/// Renders `view` with `params` composited on `background`.
+/// Renders `view` with `params` composited on `opts.background`.
 pub fn render_view<M: SplatMethod>(
     params: &[M::Params],
     view: &View,
     opts: &FitOptions,
 ) -> Result<Image, FitError> {
+    render_training_view::<M>(params, view, opts, &[])
+}
+
+/// [`render_view`] mapped by a training view's `corrections` (its words of the run's per-view
+/// state, [`PerViewState::of`]; empty for none): the view as training compares it.
+pub fn render_training_view<M: SplatMethod>(
+    params: &[M::Params],
+    view: &View,
+    opts: &FitOptions,
+    corrections: &[f32],
+) -> Result<Image, FitError> {
     let frame = splat_cpu::render::<M>(params, &view.camera, &for_training(&opts.render))?;
-    Ok(composite(
-        frame.color,
-        frame.alpha.as_ref(),
-        opts.background,
-    ))
+    let mut color = frame.color;
+    if let Some(e) = opts.per_view.exposure(corrections) {
+        e.apply(&mut color);
+    }
+    Ok(composite(color, frame.alpha.as_ref(), opts.background))
 }
 
 /// The render options a training step uses: alpha for compositing the background, and no
@@ -313,6 +328,9 @@ pub struct StepReport<'a> {
     /// steps that would have left a non-finite word): they kept their values and the rest of
     /// the scene trained.
     pub faults: Faults,
+    /// The per-view words ([`FitOptions::per_view`]) it could not move, by their index in
+    /// [`Checkpoint::per_view`]'s words.
+    pub view_faults: Faults,
     /// The test views' PSNR and SSIM after this step, on the steps `FitOptions::eval_every`
     /// asks for.
     pub evaluation: Option<Evaluation>,
@@ -429,15 +447,14 @@ pub(crate) fn fit_with<M: Trainable>(
     let mut target = no_target();
     for batch in batches(state.step, opts.steps, opts.batch) {
         let started = Instant::now();
-        let draws: Vec<(&View, Vec3)> = (draw_views(data, batch, opts, &mut rng).into_iter())
-            .map(|(k, background)| (&data.train[k], background))
-            .collect();
+        let draws = draw_views(data, batch, opts, &mut rng);
         let observing = densifier
             .as_ref()
             .is_some_and(|d| batch.first < d.opts.stop);
         let mut times = StepTimes::default();
         let mine = (draws[batch.share(team.rank(), team.ranks())].iter())
-            .map(|&(view, background)| {
+            .map(|&(k, background)| {
+                let view = (k, &data.train[k], state.per_view.of(&opts.per_view, k));
                 let target = &mut target;
                 let frames = &mut frames;
                 view_pass::<M>(
@@ -454,7 +471,12 @@ pub(crate) fn fit_with<M: Trainable>(
         times.exchange = clock.elapsed();
         let asked_to_stop = shares.iter().any(|s| s.stop);
         let passes: Vec<ViewPass> = shares.into_iter().flat_map(|s| s.passes).collect();
-        if passes.len() != batch.len || passes.iter().any(|p| p.grads.len() != flat.len()) {
+        let fits = |p: &ViewPass| {
+            p.grads.len() == flat.len()
+                && p.view < data.train.len()
+                && p.corrections.len() == opts.per_view.words()
+        };
+        if passes.len() != batch.len || !passes.iter().all(fits) {
             return Err(FitError::Unsupported(format!(
                 "the ranks' passes do not fit the batch of {} views and {} words",
                 batch.len,
@@ -475,6 +497,8 @@ pub(crate) fn fit_with<M: Trainable>(
         }
         let lr = step_rates(&rates, batch, opts.steps, scaling.learning_rate);
         let faults = adam.step(&mut flat, &grads, &lr);
+        let by_view = passes.iter().map(|p| (p.view, &p.corrections[..]));
+        let view_faults = (state.per_view).step(&opts.per_view, by_view, (batch.first, opts.steps));
         times.optimizer = clock.elapsed();
         let mut refinement = None;
         if let Some(m) = &mcmc {
@@ -539,6 +563,7 @@ pub(crate) fn fit_with<M: Trainable>(
             primitives: params.len(),
             refinement: refinement.as_ref(),
             faults,
+            view_faults,
             evaluation,
             checkpoint: save.then_some(&*state),
             scene: batch
@@ -556,13 +581,14 @@ pub(crate) fn fit_with<M: Trainable>(
     Ok(())
 }
 
-/// One view of a batch through `params`, rendered and differentiated by `frames`: its render
-/// on `background`, loss, backward pass and (when `observing`) density control's screen-space
+/// One view of a batch through `params` (training view `k`, its per-view words
+/// `corrections`), rendered and differentiated by `frames`: its render on `background`, loss,
+/// backward pass and (when `observing`) density control's screen-space
 /// gradient norms of the primitives `project` keeps; its stage times are added to `times`.
 #[allow(clippy::too_many_arguments)]
 fn view_pass<M: Trainable>(
     params: &[M::Params],
-    view: &View,
+    (k, view, corrections): (usize, &View, &[f32]),
     background: Vec3,
     opts: &FitOptions,
     observing: bool,
@@ -586,7 +612,8 @@ fn view_pass<M: Trainable>(
     times.rasterize += frame.stats.rasterize;
     times.shade += frame.stats.shade;
     let clock = Instant::now();
-    let (loss, grad) = frame_loss(frame, view, background, opts, target)?;
+    let (loss, grad, by_corrections) =
+        frame_loss(frame, view, background, (opts, corrections), target)?;
     times.loss += clock.elapsed();
     let g = match (frames, &pass) {
         #[cfg(feature = "gpu")]
@@ -622,6 +649,8 @@ fn view_pass<M: Trainable>(
         loss,
         grads: flatten(&g.params),
         seen,
+        view: k,
+        corrections: by_corrections,
     })
 }
 
@@ -650,30 +679,43 @@ pub(crate) fn reset_opacities<M: Trainable>(
     *flat = after;
 }
 
-/// The loss of `frame` (rendered on black) composited on `background` against `view`'s
-/// picture, and its gradient by the frame's color and alpha.
+/// The loss of `frame` (rendered on black), mapped by the view's `corrections` (its words of
+/// `opts.per_view`, [`super::per_view`]; empty where the run learns none), composited on
+/// `background` against `view`'s picture; its gradient by the frame's color and alpha, and by
+/// the corrections' words.
 pub(crate) fn frame_loss(
     frame: Frame,
     view: &View,
     background: Vec3,
-    opts: &FitOptions,
+    (opts, corrections): (&FitOptions, &[f32]),
     target: &mut Image,
-) -> Result<(LossValue, FrameGrad), FitError> {
-    let image = composite(frame.color, frame.alpha.as_ref(), background);
-    let (loss, d_color) =
+) -> Result<(LossValue, FrameGrad, Vec<f32>), FitError> {
+    let alpha = frame.alpha.as_ref();
+    let mut color = frame.color;
+    let exposed = (opts.per_view.exposure(corrections)).map(|e| {
+        let rendered = color.clone();
+        e.apply(&mut color);
+        (e, rendered)
+    });
+    let image = composite(color, alpha, background);
+    let (loss, mut d_color) =
         loss::loss_and_gradient(&image, view.on_into(background, target), opts.ssim_weight)?;
     // The background term (1 - alpha) b: its gradient flows into alpha.
     let b = background.to_array();
-    let d_alpha = d_color
+    let d_alpha: Vec<f32> = d_color
         .chunks_exact(3)
         .map(|g| -(g[0] * b[0] + g[1] * b[1] + g[2] * b[2]))
         .collect();
+    let by_corrections = match exposed {
+        Some((e, rendered)) => e.backward(&rendered, &mut d_color).to_vec(),
+        None => vec![],
+    };
     let grad = FrameGrad {
         color: d_color,
         alpha: Some(d_alpha),
         depth: None,
     };
-    Ok((loss, grad))
+    Ok((loss, grad, by_corrections))
 }
 
 /// Refuses to go on from `state` (once started) with settings that change its steps
@@ -753,6 +795,20 @@ pub(crate) fn adopt<M: Trainable>(
             word_name::<M>(k),
             state.params[k]
         )));
+    }
+    let per_view = &opts.per_view;
+    if state.per_view.views(per_view.words()) != Some(train.len()) || !per_view.any() {
+        match state.step {
+            0 => state.per_view = PerViewState::start(per_view, train.len()),
+            _ if per_view.any() => {
+                return Err(FitError::Unsupported(format!(
+                    "the checkpoint holds no {} for {} training views",
+                    per_view.names().join(" or "),
+                    train.len()
+                )));
+            }
+            _ => {}
+        }
     }
     state.strategy = strategy.to_string();
     state.settings = settings::<M>(opts);
@@ -851,13 +907,13 @@ fn check_run<M: SplatMethod>(
 
 /// The settings of a run that change its steps beyond its method, length, strategy, extent
 /// and views (which a checkpoint records apart): the background, whether it is random, the
-/// cap on primitives, the frozen groups, the batch. A run resumed with others would train
-/// another way.
+/// cap on primitives, the frozen groups, the batch, what it learns per view. A run resumed
+/// with others would train another way.
 pub fn settings<M: SplatMethod>(opts: &FitOptions) -> String {
     let b = opts.background;
     let frozen: Vec<&str> = frozen_groups::<M>(opts).into_iter().map(|g| g.0).collect();
     format!(
-        "on background {} {} {}{}{}{}{}",
+        "on background {} {} {}{}{}{}{}{}",
         b.x,
         b.y,
         b.z,
@@ -877,6 +933,10 @@ pub fn settings<M: SplatMethod>(opts: &FitOptions) -> String {
         match opts.batch {
             0 | 1 => String::new(),
             b => format!(", in batches of {b} views"),
+        },
+        match opts.per_view.names()[..] {
+            [] => String::new(),
+            ref names => format!(", learning each view's {}", names.join(" and ")),
         },
     )
 }

@@ -93,6 +93,7 @@ pub fn fit_gpu_shared<M: Trainable>(
     mut progress: impl FnMut(&StepReport),
 ) -> Result<(), FitError> {
     let rates = rates_for::<M>(data, extent, opts)?;
+    opts.per_view.refuse("the GPU's training loop")?;
     adopt::<M>(state, extent, &data.train, opts)?;
     let words = M::Params::LEN;
     let source = gpu_training::<M>(opts)?;
@@ -235,6 +236,7 @@ pub fn fit_gpu_shared<M: Trainable>(
             primitives: scene.len(),
             refinement: refinement.as_ref(),
             faults,
+            view_faults: Faults::default(),
             evaluation,
             checkpoint: save.then_some(&*state),
             scene: shared.as_deref(),
@@ -475,6 +477,8 @@ fn exchange_sums<M: SplatMethod>(
             loss,
             grads: vec![],
             seen: vec![],
+            view: 0,
+            corrections: vec![],
         })
         .collect();
     if let Some(first) = passes.first_mut() {

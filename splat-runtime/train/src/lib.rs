@@ -1,6 +1,6 @@
 //! splat-train: what training shares across methods: the photometric loss with its gradient and the
 //! evaluation metrics ([`loss`]), Adam ([`adam`]), where training starts ([`init`]), adaptive
-//! density control ([`densify`]) or MCMC ([`mcmc`]), checkpoints ([`checkpoint`]), where a
+//! density control ([`densify`]) or MCMC ([`mcmc`]), checkpoints ([`checkpoint`]), what a run learns per view (its exposure, [`per_view`]), where a
 //! step's time goes ([`step_times`]), batches of views ([`batch`]) shared among processes
 //! ([`team`]), and the loop with the trait a method implements to take part ([`fit`]), also
 //! on the GPU ([`gpu_fit`], with the loss, Adam, density control's
@@ -21,6 +21,7 @@ pub mod init;
 pub mod like_3dgs;
 pub mod loss;
 pub mod mcmc;
+pub mod per_view;
 pub mod sharded;
 pub mod step_times;
 pub mod team;

@@ -96,6 +96,7 @@ fn run<M: Trainable, E: Engine<M>>(
             "a sharded run cannot take MCMC: its relocations draw from the whole scene's opacities (shard with adc, or share the views with the whole scene on every rank)".into(),
         ));
     }
+    opts.per_view.refuse("a sharded run")?;
     let mut slice = Slice::<M>::scatter(team, state, extent, data, opts)?;
     let mut engine = engine(&slice)?;
     let render = for_training(&opts.render);
@@ -185,6 +186,7 @@ fn run<M: Trainable, E: Engine<M>>(
             primitives: tally.sizes.iter().sum(),
             refinement: tally.refinement.as_ref(),
             faults: tally.faults,
+            view_faults: Faults::default(),
             evaluation,
             checkpoint: (save && team.rank() == 0).then_some(&*state),
             scene: shared.as_deref(),
@@ -306,7 +308,8 @@ impl<M: Trainable> Engine<M> for OnCpu {
         times.rasterize += frame.stats.rasterize;
         times.shade += frame.stats.shade;
         let clock = Instant::now();
-        let (loss, grad) = frame_loss(frame, view, background, &self.opts, &mut self.target)?;
+        let (loss, grad, _) =
+            frame_loss(frame, view, background, (&self.opts, &[]), &mut self.target)?;
         times.loss += clock.elapsed();
         let blended = splat_cpu::backward_blend::<M>(&pass, &grad)?;
         times.blend += blended.blend + blended.reduce;

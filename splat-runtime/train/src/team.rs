@@ -16,6 +16,11 @@ pub struct ViewPass {
     pub grads: Vec<f32>,
     /// `(primitive, screen-space gradient norm)` in the order the view lists them.
     pub seen: Vec<(u32, f32)>,
+    /// The training view it was (its index).
+    pub view: usize,
+    /// The gradient by the view's per-view words ([`super::per_view`]); empty where the run
+    /// learns none.
+    pub corrections: Vec<f32>,
 }
 
 /// What a rank contributes to a batch: the passes of its views, and whether it was asked to
@@ -113,9 +118,11 @@ pub fn gather_statistics(
 impl Share {
     /// The share as bytes: the stop flag (a byte), the passes' count, then for each the loss
     /// (three f64), the gradient's length and words, the seen primitives' count and pairs,
-    /// little-endian.
+    /// the view's index, the per-view gradient's length and words, little-endian.
     pub fn encode(&self) -> Vec<u8> {
-        let size = |p: &ViewPass| 3 * 8 + 8 + 4 * p.grads.len() + 8 + 8 * p.seen.len();
+        let size = |p: &ViewPass| {
+            3 * 8 + 8 + 4 * p.grads.len() + 8 + 8 * p.seen.len() + 16 + 4 * p.corrections.len()
+        };
         let mut out = Vec::with_capacity(9 + self.passes.iter().map(size).sum::<usize>());
         out.push(self.stop as u8);
         out.extend((self.passes.len() as u64).to_le_bytes());
@@ -130,6 +137,9 @@ impl Share {
                 out.extend(i.to_le_bytes());
                 out.extend(norm.to_le_bytes());
             }
+            out.extend((p.view as u64).to_le_bytes());
+            out.extend((p.corrections.len() as u64).to_le_bytes());
+            put_words(&mut out, &p.corrections);
         }
         out
     }
@@ -142,7 +152,7 @@ impl Share {
             [1] => true,
             [b] => return Err(format!("a stop flag of {b}")),
         };
-        let count = r.len(3 * 8 + 16)?;
+        let count = r.len(3 * 8 + 32)?;
         let mut passes = Vec::with_capacity(count);
         for _ in 0..count {
             let [loss, l1, ssim] = [r.f64()?, r.f64()?, r.f64()?];
@@ -152,10 +162,16 @@ impl Share {
             let seen = (0..seen)
                 .map(|_| Ok((r.u32()?, r.f32()?)))
                 .collect::<Result<_, String>>()?;
+            let view = usize::try_from(u64::from_le_bytes(r.take()?))
+                .map_err(|_| "a view index past this machine's".to_string())?;
+            let words = r.len(4)?;
+            let corrections = get_words(r.slice(4 * words)?);
             passes.push(ViewPass {
                 loss: LossValue { loss, l1, ssim },
                 grads,
                 seen,
+                view,
+                corrections,
             });
         }
         match r.at == bytes.len() {
@@ -245,6 +261,8 @@ mod tests {
             },
             grads: vec![1.0, f32::MIN_POSITIVE, -3.5e-30, k as f32],
             seen: (0..k).map(|i| (i * 7, i as f32 / 3.0)).collect(),
+            view: k as usize * 5,
+            corrections: (0..k).map(|i| i as f32 - 0.5).collect(),
         }
     }
 

@@ -16,6 +16,7 @@ use splat_runtime::io::dataset;
 use splat_runtime::io::formats::Format;
 use splat_runtime::train::fit::{CPU_STEP_BYTES_PER_PIXEL, FitOptions};
 use splat_runtime::train::loss::WINDOW;
+use splat_runtime::train::per_view::PerViewOptions;
 use splat_runtime::train::{Checkpoint, DensifyOptions, McmcOptions, Strategy};
 use std::path::Path;
 use std::time::Instant;
@@ -305,6 +306,9 @@ fn fit_on(args: &FitArgs, methods: &[Method], ranks: &Ranks) -> Result<()> {
             StrategyArg::Fixed => None,
         },
         random_background: args.random_background,
+        per_view: PerViewOptions {
+            exposure: args.exposure,
+        },
         eval_every: (args.eval_every > 0).then_some(args.eval_every),
         checkpoint_every: (args.checkpoint_every > 0).then_some(args.checkpoint_every),
         ..Default::default()
