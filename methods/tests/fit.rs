@@ -17,7 +17,7 @@ const SIZE: u32 = 40;
 const ANGLE_X: f32 = 0.8;
 
 /// An OpenCV camera at `eye` looking at the origin.
-fn look_at(eye: Vec3) -> Camera {
+pub(crate) fn look_at(eye: Vec3) -> Camera {
     let f = (-eye).normalize();
     let r = f.cross(Vec3::Y).normalize();
     let d = f.cross(r);
@@ -46,7 +46,7 @@ fn blender_matrix(cam: &Camera) -> Vec<Vec<f32>> {
     m.iter().map(|r| r.to_vec()).collect()
 }
 
-fn eye(k: usize, of: usize, height: f32) -> Vec3 {
+pub(crate) fn eye(k: usize, of: usize, height: f32) -> Vec3 {
     let a = k as f32 / of as f32 * std::f32::consts::TAU;
     Vec3::new(3.0 * a.cos(), height, 3.0 * a.sin())
 }
@@ -292,7 +292,7 @@ fn bad_datasets_are_refused_by_file_and_field() {
 }
 
 /// The fisheye's distortion coefficients in [`fisheye_dataset`].
-const FISHEYE_K: Vec4 = Vec4::new(0.05, -0.01, 0.002, -0.0005);
+pub(crate) const FISHEYE_K: Vec4 = Vec4::new(0.05, -0.01, 0.002, -0.0005);
 
 /// A nerfstudio dataset in `dir` of `scene` seen by `M` through nine fisheye views
 /// (OPENCV_FISHEYE, global intrinsics, frame 4 with its own focal length); returns the cameras.

@@ -106,6 +106,13 @@ pub struct FitArgs {
     /// gains are written to <out>/exposure.json. On the CPU and --hardware loops, one process.
     #[arg(long)]
     pub(crate) exposure: bool,
+    /// Refine each training view's pose (a rigid motion of the world before its camera, from
+    /// the camera gradient of every backward pass, through any camera model), for poses from
+    /// structure from motion; from a sixth of the run on, the views' mean correction kept at
+    /// zero. Held-out views keep their poses, as gsplat's pose_opt does. On the CPU and
+    /// --hardware loops, one process.
+    #[arg(long)]
+    pub(crate) pose_opt: bool,
     /// A random background color per step (transparent parts of the images re-composited on
     /// it), so the scene cannot paint the background in; evaluation stays on black or white.
     #[arg(long)]

@@ -219,7 +219,8 @@ pub fn render_training_view<M: SplatMethod>(
     opts: &FitOptions,
     corrections: &[f32],
 ) -> Result<Image, FitError> {
-    let frame = splat_cpu::render::<M>(params, &view.camera, &for_training(&opts.render))?;
+    let camera = opts.per_view.camera(&view.camera, corrections);
+    let frame = splat_cpu::render::<M>(params, &camera, &for_training(&opts.render))?;
     let mut color = frame.color;
     if let Some(e) = opts.per_view.exposure(corrections) {
         e.apply(&mut color);
@@ -227,13 +228,23 @@ pub fn render_training_view<M: SplatMethod>(
     Ok(composite(color, frame.alpha.as_ref(), opts.background))
 }
 
-/// The render options a training step uses: alpha for compositing the background, and no
-/// camera gradient (the poses are not refined).
+/// The render options training renders with: alpha for compositing the background, and no
+/// camera gradient.
 pub(crate) fn for_training(r: &RenderOptions) -> RenderOptions {
     RenderOptions {
         alpha: true,
         gradients: r.gradients.with_camera(false),
         ..*r
+    }
+}
+
+/// [`for_training`] for a training step of `opts`: with the camera's gradient where the run
+/// learns each view's pose.
+pub(crate) fn step_render(opts: &FitOptions) -> RenderOptions {
+    let r = for_training(&opts.render);
+    RenderOptions {
+        gradients: r.gradients.with_camera(opts.per_view.pose),
+        ..r
     }
 }
 
@@ -498,7 +509,8 @@ pub(crate) fn fit_with<M: Trainable>(
         let lr = step_rates(&rates, batch, opts.steps, scaling.learning_rate);
         let faults = adam.step(&mut flat, &grads, &lr);
         let by_view = passes.iter().map(|p| (p.view, &p.corrections[..]));
-        let view_faults = (state.per_view).step(&opts.per_view, by_view, (batch.first, opts.steps));
+        let run = (batch.first, opts.steps);
+        let view_faults = (state.per_view).step(&opts.per_view, by_view, run, extent);
         times.optimizer = clock.elapsed();
         let mut refinement = None;
         if let Some(m) = &mcmc {
@@ -596,8 +608,8 @@ fn view_pass<M: Trainable>(
     times: &mut StepTimes,
     frames: &mut Frames<M>,
 ) -> Result<ViewPass, FitError> {
-    let camera = &view.camera;
-    let render = for_training(&opts.render);
+    let camera = &opts.per_view.camera(&view.camera, corrections);
+    let render = step_render(opts);
     let (frame, pass) = match frames {
         Frames::Cpu => {
             let (frame, pass) = splat_cpu::render_for_backward::<M>(params, camera, &render)?;
@@ -612,7 +624,7 @@ fn view_pass<M: Trainable>(
     times.rasterize += frame.stats.rasterize;
     times.shade += frame.stats.shade;
     let clock = Instant::now();
-    let (loss, grad, by_corrections) =
+    let (loss, grad, by_exposure) =
         frame_loss(frame, view, background, (opts, corrections), target)?;
     times.loss += clock.elapsed();
     let g = match (frames, &pass) {
@@ -650,7 +662,7 @@ fn view_pass<M: Trainable>(
         grads: flatten(&g.params),
         seen,
         view: k,
-        corrections: by_corrections,
+        corrections: (opts.per_view).gradient((corrections, &view.camera), by_exposure, &g.camera),
     })
 }
 
@@ -679,10 +691,10 @@ pub(crate) fn reset_opacities<M: Trainable>(
     *flat = after;
 }
 
-/// The loss of `frame` (rendered on black), mapped by the view's `corrections` (its words of
-/// `opts.per_view`, [`super::per_view`]; empty where the run learns none), composited on
-/// `background` against `view`'s picture; its gradient by the frame's color and alpha, and by
-/// the corrections' words.
+/// The loss of `frame` (rendered on black), mapped by the exposure in the view's
+/// `corrections` (its words of `opts.per_view`, [`super::per_view`]; empty where the run
+/// learns none), composited on `background` against `view`'s picture; its gradient by the
+/// frame's color and alpha, and by the exposure's words (none without one).
 pub(crate) fn frame_loss(
     frame: Frame,
     view: &View,
@@ -706,7 +718,7 @@ pub(crate) fn frame_loss(
         .chunks_exact(3)
         .map(|g| -(g[0] * b[0] + g[1] * b[1] + g[2] * b[2]))
         .collect();
-    let by_corrections = match exposed {
+    let by_exposure = match exposed {
         Some((e, rendered)) => e.backward(&rendered, &mut d_color).to_vec(),
         None => vec![],
     };
@@ -715,7 +727,7 @@ pub(crate) fn frame_loss(
         alpha: Some(d_alpha),
         depth: None,
     };
-    Ok((loss, grad, by_corrections))
+    Ok((loss, grad, by_exposure))
 }
 
 /// Refuses to go on from `state` (once started) with settings that change its steps

@@ -6,7 +6,7 @@
 //! and test that backward, not a fast loop (the device-resident one is [`super::gpu_fit`]).
 
 use super::checkpoint::Checkpoint;
-use super::fit::{FitError, FitOptions, Frames, StepReport, fit_with, for_training};
+use super::fit::{FitError, FitOptions, Frames, StepReport, fit_with, step_render};
 use super::team::{Solo, Team};
 use super::trainable::Trainable;
 use splat_core::frame::{Frame, FrameGrad, Gradients, RenderOptions};
@@ -84,7 +84,7 @@ pub fn fit_hardware_shared<M: Trainable>(
     opts: &FitOptions,
     progress: impl FnMut(&StepReport),
 ) -> Result<(), FitError> {
-    let frames = HardwareFrames::new(gpu, &for_training(&opts.render))?;
+    let frames = HardwareFrames::new(gpu, &step_render(opts))?;
     fit_with::<M>(
         team,
         data,

@@ -308,6 +308,7 @@ fn fit_on(args: &FitArgs, methods: &[Method], ranks: &Ranks) -> Result<()> {
         random_background: args.random_background,
         per_view: PerViewOptions {
             exposure: args.exposure,
+            pose: args.pose_opt,
         },
         eval_every: (args.eval_every > 0).then_some(args.eval_every),
         checkpoint_every: (args.checkpoint_every > 0).then_some(args.checkpoint_every),
