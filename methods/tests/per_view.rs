@@ -59,22 +59,27 @@ fn training_psnr(data: &Dataset, params: &[Params], state: &Checkpoint, opts: &F
     sum / data.train.len() as f64
 }
 
-/// The held-out and training PSNR after training 3DGS on `data` with `opts`, and the run's
-/// final state.
-fn trained(data: &Dataset, opts: &FitOptions) -> (f64, f64, Checkpoint) {
-    let mut params = moved_start::<Method>(&truth());
+/// `M` trained on `data` with `opts` from [`moved_start`]: the scene, the held-out PSNR and
+/// the run's final state.
+fn trained<M: Trainable>(data: &Dataset, opts: &FitOptions) -> (Vec<M::Params>, f64, Checkpoint) {
+    let mut params = moved_start::<M>(&truth());
     let mut last = None;
     let opts = FitOptions {
         checkpoint_every: Some(opts.steps),
         ..opts.clone()
     };
-    fit::<Method>(data, &mut params, 1.0, &opts, |r| {
-        last = r.checkpoint.cloned();
+    fit::<M>(data, &mut params, 1.0, &opts, |r| {
+        last = r.checkpoint.cloned()
     })
     .unwrap();
-    let held_out = evaluate::<Method>(&params, &data.test, &opts).unwrap().psnr;
-    let state = last.expect("the last step's state");
-    (held_out, training_psnr(data, &params, &state, &opts), state)
+    let held_out = evaluate::<M>(&params, &data.test, &opts).unwrap().psnr;
+    (params, held_out, last.expect("the last step's state"))
+}
+
+/// [`trained`] for 3DGS with the training views' PSNR too ([`training_psnr`]).
+fn trained_3dgs(data: &Dataset, opts: &FitOptions) -> (f64, f64, Checkpoint) {
+    let (params, held_out, state) = trained::<Method>(data, opts);
+    (held_out, training_psnr(data, &params, &state, opts), state)
 }
 
 /// Long enough for each of the 10 views' exposures to take ~125 steps after the delay.
@@ -92,9 +97,9 @@ fn exposure_compensation_trains_views_of_other_gains_as_the_unchanged_ones() {
         },
         ..plain.clone()
     };
-    let (truth_held_out, truth_training, _) = trained(&clean, &plain);
-    let (without, without_training, _) = trained(&gained, &plain);
-    let (with, with_training, state) = trained(&gained, &exposure);
+    let (truth_held_out, truth_training, _) = trained_3dgs(&clean, &plain);
+    let (without, without_training, _) = trained_3dgs(&gained, &plain);
+    let (with, with_training, state) = trained_3dgs(&gained, &exposure);
     println!(
         "PSNR held out / training views: unchanged views {truth_held_out:.2} / {truth_training:.2} dB; \
          gained views without exposure {without:.2} / {without_training:.2}, with {with:.2} / {with_training:.2}"
@@ -235,20 +240,6 @@ where
 {
     let data = views_of::<M>(model);
     let moved = moved_poses(&data, 2f32.to_radians(), 0.03);
-    let train = |data: &Dataset, opts: &FitOptions| {
-        let mut params = moved_start::<M>(&truth());
-        let mut last = None;
-        let opts = FitOptions {
-            checkpoint_every: Some(opts.steps),
-            ..opts.clone()
-        };
-        fit::<M>(data, &mut params, 1.0, &opts, |r| {
-            last = r.checkpoint.cloned()
-        })
-        .unwrap();
-        let psnr = evaluate::<M>(&params, &data.test, &opts).unwrap().psnr;
-        (psnr, last.expect("the last step's state"))
-    };
     // A fixed count: density control would grow the scene into the moved poses' blur.
     let plain = FitOptions {
         densify: None,
@@ -261,9 +252,9 @@ where
         },
         ..plain.clone()
     };
-    let (truth_psnr, _) = train(&data, &plain);
-    let (without, _) = train(&moved, &plain);
-    let (with, state) = train(&moved, &refined);
+    let (_, truth_psnr, _) = trained::<M>(&data, &plain);
+    let (_, without, _) = trained::<M>(&moved, &plain);
+    let (_, with, state) = trained::<M>(&moved, &refined);
     let truth: Vec<Camera> = data.train.iter().map(|v| v.camera).collect();
     let given: Vec<Camera> = moved.train.iter().map(|v| v.camera).collect();
     let learned: Vec<Camera> = (moved.train.iter().enumerate())
