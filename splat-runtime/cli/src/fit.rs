@@ -714,11 +714,8 @@ impl Progress {
             let views = (r.view_faults.gradients + r.view_faults.steps) as usize;
             let what = match (r.faults.any(), views) {
                 (true, 0) => r.faults.describe::<M>(),
-                (false, n) => format!("{} of the views' exposures kept their values", n),
-                (true, n) => format!(
-                    "{}; {n} of the views' exposure words too",
-                    r.faults.describe::<M>()
-                ),
+                (false, n) => format!("{n} per-view words (exposure, pose) kept their values"),
+                (true, n) => format!("{}; {n} per-view words too", r.faults.describe::<M>()),
             };
             match self.faulty_steps {
                 ..=FAULTS_SHOWN => self

@@ -80,7 +80,7 @@ pub struct FitOptions {
     pub random_background: bool,
     /// How the primitive set changes, or not at all (the primitive count stays fixed).
     pub densify: Option<Strategy>,
-    /// What the run learns per training view besides the scene (its exposure).
+    /// What the run learns per training view besides the scene (its exposure, its pose).
     pub per_view: PerViewOptions,
     /// Evaluate the test views after every this many steps (reported in [`StepReport`]);
     /// `None`: never during training.
@@ -595,8 +595,9 @@ pub(crate) fn fit_with<M: Trainable>(
 
 /// One view of a batch through `params` (training view `k`, its per-view words
 /// `corrections`), rendered and differentiated by `frames`: its render on `background`, loss,
-/// backward pass and (when `observing`) density control's screen-space
-/// gradient norms of the primitives `project` keeps; its stage times are added to `times`.
+/// backward pass, the gradient by its per-view words and (when `observing`) density
+/// control's screen-space gradient norms of the primitives `project` keeps; its stage times
+/// are added to `times`.
 #[allow(clippy::too_many_arguments)]
 fn view_pass<M: Trainable>(
     params: &[M::Params],
