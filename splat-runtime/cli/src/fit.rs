@@ -106,11 +106,11 @@ pub struct FitArgs {
     /// gains are written to <out>/exposure.json. On the CPU and --hardware loops, one process.
     #[arg(long)]
     pub(crate) exposure: bool,
-    /// Refine each training view's pose (a rigid motion of the world before its camera, from
-    /// the camera gradient of every backward pass, through any camera model), for poses from
-    /// structure from motion; from a sixth of the run on, the views' mean correction kept at
-    /// zero. Held-out views keep their poses, as gsplat's pose_opt does. On the CPU and
-    /// --hardware loops, one process.
+    /// Refine each training view's pose (a turn about its camera's centre and a shift along
+    /// its axes, as gsplat's pose_opt, from the camera gradient of every backward pass,
+    /// through any camera model), for poses from structure from motion; from a sixth of the
+    /// run on. Held-out views keep their poses, as gsplat's do. On the CPU and --hardware
+    /// loops, one process.
     #[arg(long)]
     pub(crate) pose_opt: bool,
     /// A random background color per step (transparent parts of the images re-composited on

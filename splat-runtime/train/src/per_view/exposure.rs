@@ -31,10 +31,6 @@ impl Exposure {
         }
     }
 
-    pub fn words(&self) -> [f32; 3] {
-        self.log_gain
-    }
-
     /// Each channel's gain.
     pub fn gains(&self) -> [f32; 3] {
         self.log_gain.map(f32::exp)

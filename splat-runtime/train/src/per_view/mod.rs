@@ -55,17 +55,9 @@ impl PerViewOptions {
         self.exposure || self.pose
     }
 
-    /// The words per view of each kind the run learns, in their order.
-    fn blocks(&self) -> impl Iterator<Item = usize> {
-        let exposure = self.exposure.then_some(Exposure::WORDS);
-        exposure
-            .into_iter()
-            .chain(self.pose.then_some(PoseCorrection::WORDS))
-    }
-
-    /// Words per view.
+    /// Words per view: the exposure's, then the pose's.
     pub fn words(&self) -> usize {
-        self.blocks().sum()
+        self.exposure as usize * Exposure::WORDS + self.pose as usize * PoseCorrection::WORDS
     }
 
     /// What each view learns, as the command line names it (for the run's settings).
@@ -217,7 +209,7 @@ impl PerViewState {
     /// batch has its gradients summed in their order) at the rates for `step` of `steps` in
     /// a scene of `extent`.
     /// A word whose gradient is not finite, or that the step would make non-finite, keeps
-    /// its value (counted in the returned faults, by the view's first word).
+    /// its value (counted in the returned faults, by its index in `words`).
     pub fn step<'a>(
         &mut self,
         opts: &PerViewOptions,
