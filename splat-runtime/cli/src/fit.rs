@@ -14,7 +14,7 @@ use plotters::prelude::*;
 use splat_runtime::glam::Vec3;
 use splat_runtime::gpu::Gpu;
 use splat_runtime::io::Outputs;
-use splat_runtime::io::dataset::Dataset;
+use splat_runtime::io::dataset::{Dataset, View};
 use splat_runtime::io::formats::{self, Format};
 use splat_runtime::io::image::stage_image;
 use splat_runtime::io::ply::{GaussianCloud, ToStored};
@@ -25,7 +25,7 @@ use splat_runtime::train::fit::{
 use splat_runtime::train::gpu_fit::{fit_gpu_shared, render_views_gpu};
 use splat_runtime::train::hardware_fit::fit_hardware_shared;
 use splat_runtime::train::loss::LossValue;
-use splat_runtime::train::per_view::PerViewOptions;
+use splat_runtime::train::per_view::{Cameras, Corrections, PerViewOptions};
 use splat_runtime::train::sharded::{fit_sharded, fit_sharded_gpu};
 use splat_runtime::train::{Checkpoint, McmcOptions, StepTimes, Strategy, Trainable, init};
 use splat_runtime::{Effects, Flat, GradientSet, Image, RenderOptions, param_groups};
@@ -108,11 +108,18 @@ pub struct FitArgs {
     pub(crate) exposure: bool,
     /// Refine each training view's pose (a turn about its camera's centre and a shift along
     /// its axes, as gsplat's pose_opt, from the camera gradient of every backward pass,
-    /// through any camera model), for poses from structure from motion; from a sixth of the
-    /// run on. Held-out views keep their poses, as gsplat's do. On the CPU and --hardware
-    /// loops, one process.
+    /// through any camera model), for poses from structure from motion. Held-out views keep
+    /// their poses, as gsplat's do. On the CPU and --hardware loops, one process.
     #[arg(long)]
     pub(crate) pose_opt: bool,
+    /// Refine each camera's intrinsics (focal lengths, principal point, and the lens
+    /// coefficients of a fisheye) from the camera gradient of every backward pass, for
+    /// cameras calibrated from the pictures themselves (structure from motion is easily 10%
+    /// off on few or small pictures). Views of equal intrinsics share a camera, held-out ones
+    /// too. The cameras are written to <out>/intrinsics.json. On the CPU and --hardware loops,
+    /// one process.
+    #[arg(long)]
+    pub(crate) intrinsics_opt: bool,
     /// A random background color per step (transparent parts of the images re-composited on
     /// it), so the scene cannot paint the background in; evaluation stays on black or white.
     #[arg(long)]
@@ -218,6 +225,8 @@ pub(crate) const METRICS: &str = "metrics.csv";
 pub(crate) const CURVE: &str = "curve.png";
 /// The training views' learned exposures (`--exposure`).
 pub(crate) const EXPOSURES: &str = "exposure.json";
+/// The cameras' learned intrinsics (`--intrinsics-opt`).
+pub(crate) const INTRINSICS: &str = "intrinsics.json";
 
 /// A training run, for any method.
 pub struct Fit<'a> {
@@ -269,9 +278,9 @@ impl Fit<'_> {
         if !ranks.is_root() {
             return self.train_beside_root::<M>(opts);
         }
-        let test_images = |params: &[M::Params]| match &gpu {
-            Some(gpu) => render_views_gpu::<M>(gpu, params, &data.test, opts),
-            None => render_views::<M>(params, &data.test, opts),
+        let test_images = |params: &[M::Params], test: &[View]| match &gpu {
+            Some(gpu) => render_views_gpu::<M>(gpu, params, test, opts),
+            None => render_views::<M>(params, test, opts),
         };
         let (mut state, log) = self.begin::<M>(opts, &test_images)?;
         // The other ranks start from this state, bit for bit (each its slice, when sharded).
@@ -415,8 +424,11 @@ impl Fit<'_> {
         let params = state.params::<M>();
         let taken = opts.steps - progress.first;
         let per_step = progress.started.elapsed().as_secs_f64() / taken.max(1) as f64;
-        let images = test_images(&params)?;
-        let after = Evaluation::of(&images, &data.test)?;
+        // Through the cameras' learned intrinsics, where the run learned them.
+        let cameras = Cameras::of(data.train.iter().map(|v| &v.camera));
+        let test = (state.per_view).held_out_views(&opts.per_view, &cameras, &data.test);
+        let images = test_images(&params, &test)?;
+        let after = Evaluation::of(&images, &test)?;
         if let Some(by) = stopped_by() {
             // The other ranks are done: no need to abort them.
             return Err(crate::ranks::on_every_rank(format!(
@@ -485,12 +497,24 @@ impl Fit<'_> {
             antialiased,
             ..GaussianCloud::new(3, params.iter().map(ToStored::to_stored).collect())
         };
-        let exposures = exposure_json(&data.train, &state, &opts.per_view);
+        let learned = [
+            (
+                EXPOSURES,
+                exposure_json(&data.train, &state, &opts.per_view),
+            ),
+            (
+                INTRINSICS,
+                intrinsics_json(&data.train, &state, &opts.per_view),
+            ),
+        ];
         let results = Results {
             cloud: &cloud,
             images: &images,
             log: &progress.log,
-            exposures,
+            learned: learned
+                .into_iter()
+                .filter_map(|(file, json)| Some((file, json?)))
+                .collect(),
         };
         write_results(&args.out, &args.export, results)
     }
@@ -544,7 +568,7 @@ impl Fit<'_> {
     fn begin<M: Trainable>(
         &self,
         opts: &FitOptions,
-        test_images: &impl Fn(&[M::Params]) -> Result<Vec<Image>, FitError>,
+        test_images: &impl Fn(&[M::Params], &[View]) -> Result<Vec<Image>, FitError>,
     ) -> Result<(Checkpoint, Log)> {
         let Fit { args, data, .. } = *self;
         Ok(match &self.resume {
@@ -577,7 +601,7 @@ impl Fit<'_> {
                 if let Some(Strategy::Mcmc(_)) = opts.densify {
                     McmcOptions::prepare::<M>(&mut params);
                 }
-                let before = Evaluation::of(&test_images(&params)?, &data.test)?;
+                let before = Evaluation::of(&test_images(&params, &data.test)?, &data.test)?;
                 let log = Log {
                     evaluations: vec![(0, before)],
                     ..Default::default()
@@ -588,26 +612,23 @@ impl Fit<'_> {
     }
 }
 
-/// What a run leaves: the scene, the test views' renders, the metrics and curve, and the
-/// training views' exposures (JSON) where it learned them.
+/// What a run leaves: the scene, the test views' renders, the metrics and curve, and what
+/// it learned per view or camera (file name, JSON) where it learned any.
 struct Results<'a> {
     cloud: &'a GaussianCloud,
     images: &'a [Image],
     log: &'a Log,
-    exposures: Option<String>,
+    learned: Vec<(&'static str, String)>,
 }
 
 /// The training views' learned exposures in `state`, as JSON (`None` where the run learned
 /// none): each view's name and gains (red, green, blue).
-fn exposure_json(
-    views: &[splat_runtime::io::dataset::View],
-    state: &Checkpoint,
-    per_view: &PerViewOptions,
-) -> Option<String> {
+fn exposure_json(views: &[View], state: &Checkpoint, per_view: &PerViewOptions) -> Option<String> {
     per_view.exposure.then_some(())?;
+    let cameras = Cameras::of(views.iter().map(|v| &v.camera));
     let views: Vec<serde_json::Value> = (views.iter().enumerate())
         .filter_map(|(k, v)| {
-            let e = per_view.exposure(state.per_view.of(per_view, k))?;
+            let e = per_view.exposure(state.per_view.training(per_view, &cameras, k))?;
             Some(serde_json::json!({ "name": v.name, "gains": e.gains() }))
         })
         .collect();
@@ -618,13 +639,57 @@ fn exposure_json(
     Some(serde_json::to_string_pretty(&json).expect("JSON of numbers and names") + "\n")
 }
 
+/// The cameras' learned intrinsics in `state`, as JSON (`None` where the run learned none):
+/// each camera's model, its intrinsics as given and as learned, and its training views.
+fn intrinsics_json(
+    views: &[View],
+    state: &Checkpoint,
+    per_view: &PerViewOptions,
+) -> Option<String> {
+    per_view.intrinsics.then_some(())?;
+    let cameras = Cameras::of(views.iter().map(|v| &v.camera));
+    let intrinsics = |c: &splat_runtime::Camera| {
+        let mut json = serde_json::json!({
+            "fx": c.focal.x, "fy": c.focal.y, "cx": c.principal.x, "cy": c.principal.y,
+        });
+        if c.model.has_distortion() {
+            json["k"] = serde_json::json!(c.distortion.to_array());
+        }
+        json
+    };
+    let json: Vec<serde_json::Value> = (cameras.intrinsics().iter().enumerate())
+        .map(|(k, given)| {
+            let first = (0..views.len()).find(|&v| cameras.of_view(v) == k)?;
+            let c = state.per_view.training(per_view, &cameras, first);
+            let learned = per_view.camera(given, Corrections { view: &[], ..c });
+            let names: Vec<&str> = (views.iter().enumerate())
+                .filter(|&(v, _)| cameras.of_view(v) == k)
+                .map(|(_, view)| view.name.as_str())
+                .collect();
+            Some(serde_json::json!({
+                "model": given.model.name(),
+                "width": given.size.x,
+                "height": given.size.y,
+                "given": intrinsics(given),
+                "learned": intrinsics(&learned),
+                "views": names,
+            }))
+        })
+        .collect::<Option<_>>()?;
+    let json = serde_json::json!({
+        "cameras": json,
+        "held_out": "a held-out view whose intrinsics equal a camera's as given is rendered through its learned ones",
+    });
+    Some(serde_json::to_string_pretty(&json).expect("JSON of numbers and names") + "\n")
+}
+
 /// The result of a run in `out`, all appearing together.
 fn write_results(out: &Path, exports: &[Format], results: Results) -> Result<()> {
     let Results {
         cloud,
         images,
         log,
-        exposures,
+        learned,
     } = results;
     let mut outputs = Outputs::default();
     for &format in [Format::Ply].iter().chain(exports) {
@@ -639,8 +704,8 @@ fn write_results(out: &Path, exports: &[Format], results: Results) -> Result<()>
     }
     log.stage_csv(&mut outputs, &out.join(METRICS))?;
     log.plot(&mut outputs, &out.join(CURVE))?;
-    if let Some(json) = exposures {
-        let path = out.join(EXPOSURES);
+    for (file, json) in learned {
+        let path = out.join(file);
         (outputs.stage(&path, |w| w.write_all(json.as_bytes())))
             .with_context(|| format!("writing {}", path.display()))?;
     }
@@ -714,7 +779,9 @@ impl Progress {
             let views = (r.view_faults.gradients + r.view_faults.steps) as usize;
             let what = match (r.faults.any(), views) {
                 (true, 0) => r.faults.describe::<M>(),
-                (false, n) => format!("{n} per-view words (exposure, pose) kept their values"),
+                (false, n) => {
+                    format!("{n} per-view words (exposure, pose, intrinsics) kept their values")
+                }
                 (true, n) => format!("{}; {n} per-view words too", r.faults.describe::<M>()),
             };
             match self.faulty_steps {

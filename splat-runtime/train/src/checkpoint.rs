@@ -2,22 +2,23 @@
 //! the primitives, Adam's moments, density control's statistics, the random generator, what
 //! it learns per view), and their file format.
 //!
-//! The file is little-endian: the magic `SPLATCK7`, then `u64` counts and fields (see
+//! The file is little-endian: the magic `SPLATCK8`, then `u64` counts and fields (see
 //! [`Checkpoint::write_to`]), then the arrays, then the CRC-32 of all that. The checksum is
 //! checked first, and every count against the file's length before anything is allocated, so
 //! a damaged file is refused by name, never trusted.
 
 use super::adam::AdamState;
-use super::per_view::PerViewState;
+use super::per_view::{Learned, PerViewState};
 use splat_core::flat::Flat;
 use splat_core::method::SplatMethod;
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 
 /// The formats read, newest first; each lacks what the one before it added, read as unknown
-/// or none: 7 added what a run learns per view, 6 the checksum (5 is resumed unchecked), 5
-/// the run's settings, 4 the training views' footprint.
-const FORMATS: [&[u8; 8]; 5] = [
+/// or none: 8 added what a run learns per camera, 7 what it learns per view, 6 the checksum
+/// (5 is resumed unchecked), 5 the run's settings, 4 the training views' footprint.
+const FORMATS: [&[u8; 8]; 6] = [
+    b"SPLATCK8",
     b"SPLATCK7",
     b"SPLATCK6",
     b"SPLATCK5",
@@ -60,8 +61,9 @@ pub struct Checkpoint {
     /// read at another `--downscale` differs), set by the loop as the strategy is; `None`
     /// before, and from a checkpoint of the format before it (`SPLATCK3`).
     pub views: Option<ViewsFootprint>,
-    /// What the run learns per training view, with its moments (`super::per_view`); empty
-    /// where it learns nothing, and from a checkpoint of a format before it (`SPLATCK6`).
+    /// What the run learns per training view and per camera, with its moments
+    /// (`super::per_view`); empty where it learns nothing, and from a checkpoint of a format
+    /// before it (`SPLATCK6`; `SPLATCK7` has no cameras').
     pub per_view: PerViewState,
 }
 
@@ -80,7 +82,7 @@ pub enum CheckpointError {
         error: std::io::Error,
     },
     #[error(
-        "{path} is not a splat checkpoint (it does not start with SPLATCK7, SPLATCK6, SPLATCK5, SPLATCK4 or SPLATCK3)"
+        "{path} is not a splat checkpoint (it does not start with SPLATCK8, SPLATCK7, SPLATCK6, SPLATCK5, SPLATCK4 or SPLATCK3)"
     )]
     Magic { path: PathBuf },
     #[error(
@@ -219,14 +221,20 @@ impl Checkpoint {
                 "density control's statistics are for {stats} and {seen} primitives, the parameters for {}",
                 self.primitives()
             ))
-        } else if self.per_view.views(self.per_view_words()).is_none() {
-            let p = &self.per_view;
+        } else if let Some(defect) = [
+            (&self.per_view.views, "views"),
+            (&self.per_view.cameras, "cameras"),
+        ]
+        .into_iter()
+        .find(|(l, _)| l.units(l.words_per_unit()).is_none())
+        {
+            let (l, what) = defect;
             Some(format!(
-                "the per-view state holds {} words, {} and {} moments for {} views",
-                p.words.len(),
-                p.m.len(),
-                p.v.len(),
-                p.steps.len()
+                "the learned state of the {what} holds {} words, {} and {} moments for {} {what}",
+                l.words.len(),
+                l.m.len(),
+                l.v.len(),
+                l.steps.len()
             ))
         } else if self.step > self.steps {
             Some(format!(
@@ -235,14 +243,6 @@ impl Checkpoint {
             ))
         } else {
             None
-        }
-    }
-
-    /// Words per view of the per-view state (0 without one).
-    pub fn per_view_words(&self) -> usize {
-        match self.per_view.steps.len() {
-            0 => 0,
-            n => self.per_view.words.len() / n,
         }
     }
 
@@ -262,8 +262,9 @@ impl Checkpoint {
     /// The header (magic, method name, strategy name, settings, then words, step, steps,
     /// primitives, Adam's step, statistics count, generator state, the extent's bits as `u64`,
     /// the training views and their pixels, 0 and 0 for none), then the parameters, both
-    /// moments and the statistics, then the per-view state (views, words per view, the words,
-    /// both moments, each view's step count), then the CRC-32 of every byte before it.
+    /// moments and the statistics, then what the run learned per view and then per camera
+    /// (each: units, words per unit, the words, both moments, each unit's step count), then
+    /// the CRC-32 of every byte before it.
     pub fn write_to(&self, w: &mut dyn Write) -> std::io::Result<()> {
         if let Some(defect) = self.size_defect() {
             let what = format!("not a run's state: {defect}");
@@ -305,15 +306,16 @@ impl Checkpoint {
         for s in &self.seen {
             w.write_all(&s.to_le_bytes())?;
         }
-        let p = &self.per_view;
-        for n in [p.steps.len(), self.per_view_words()] {
-            w.write_all(&(n as u64).to_le_bytes())?;
-        }
-        for words in [&p.words, &p.m, &p.v] {
-            write_f32s(w, words)?;
-        }
-        for s in &p.steps {
-            w.write_all(&s.to_le_bytes())?;
+        for l in [&self.per_view.views, &self.per_view.cameras] {
+            for n in [l.steps.len(), l.words_per_unit()] {
+                w.write_all(&(n as u64).to_le_bytes())?;
+            }
+            for words in [&l.words, &l.m, &l.v] {
+                write_f32s(w, words)?;
+            }
+            for s in &l.steps {
+                w.write_all(&s.to_le_bytes())?;
+            }
         }
         Ok(())
     }
@@ -352,7 +354,8 @@ impl Checkpoint {
                 path: path.to_path_buf(),
             });
         };
-        let (viewed, summed, set, sized) = (age < 1, age < 2, age < 3, age < 4);
+        let (per_camera, viewed) = (age < 1, age < 2);
+        let (summed, set, sized) = (age < 3, age < 4, age < 5);
         let bytes = match summed {
             true => {
                 let (fields, crc) = bytes
@@ -417,25 +420,28 @@ impl Checkpoint {
             .chunks_exact(4)
             .map(|b| u32::from_le_bytes(b.try_into().expect("4 bytes")))
             .collect();
-        let per_view = match viewed {
-            true => {
-                let views = r.count("the per-view state's views")?;
-                let words = r.count("the per-view state's words")?;
-                let total = views
-                    .checked_mul(words)
-                    .ok_or_else(|| damaged(format!("{views} views of {words} words")))?;
-                PerViewState {
-                    words: r.f32s(total, "the per-view words")?,
-                    m: r.f32s(total, "the per-view first moments")?,
-                    v: r.f32s(total, "the per-view second moments")?,
-                    steps: (r
-                        .take(views, 8, "the per-view step counts")?
-                        .chunks_exact(8))
+        let mut learned = |read: bool, what: &str| -> Result<Learned, CheckpointError> {
+            if !read {
+                return Ok(Learned::default());
+            }
+            let units = r.count(&format!("the {what}' count"))?;
+            let words = r.count(&format!("the {what}' learned words"))?;
+            let total = units
+                .checked_mul(words)
+                .ok_or_else(|| damaged(format!("{units} {what} of {words} words")))?;
+            Ok(Learned {
+                words: r.f32s(total, &format!("the {what}' learned words"))?,
+                m: r.f32s(total, &format!("the {what}' first moments"))?,
+                v: r.f32s(total, &format!("the {what}' second moments"))?,
+                steps: (r.take(units, 8, &format!("the {what}' step counts"))?)
+                    .chunks_exact(8)
                     .map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes")))
                     .collect(),
-                }
-            }
-            false => PerViewState::default(),
+            })
+        };
+        let per_view = PerViewState {
+            views: learned(viewed, "views")?,
+            cameras: learned(per_camera, "cameras")?,
         };
         if r.at != bytes.len() {
             return Err(damaged(format!(
@@ -626,27 +632,57 @@ mod tests {
     fn a_checkpoint_survives_its_file() {
         let viewed = Checkpoint {
             per_view: PerViewState {
-                words: vec![1.0, 0.5, -0.25, 2.0],
-                m: vec![0.1, 0.2, 0.3, 0.4],
-                v: vec![1e-9, 2e-9, 3e-9, 4e-9],
-                steps: vec![3, 0],
+                views: Learned {
+                    words: vec![1.0, 0.5, -0.25, 2.0],
+                    m: vec![0.1, 0.2, 0.3, 0.4],
+                    v: vec![1e-9, 2e-9, 3e-9, 4e-9],
+                    steps: vec![3, 0],
+                },
+                cameras: Learned::default(),
             },
             ..sample()
         };
-        for c in [sample(), viewed] {
+        let cameras = Learned {
+            words: vec![0.125, -0.5, 1.0],
+            m: vec![0.3, 0.2, 0.1],
+            v: vec![3e-9, 2e-9, 1e-9],
+            steps: vec![7],
+        };
+        let with_cameras = Checkpoint {
+            per_view: PerViewState {
+                cameras: cameras.clone(),
+                ..viewed.per_view.clone()
+            },
+            ..sample()
+        };
+        let cameras_alone = Checkpoint {
+            per_view: PerViewState {
+                views: Learned::default(),
+                cameras,
+            },
+            ..sample()
+        };
+        for c in [sample(), viewed, with_cameras, cameras_alone] {
             let mut bytes = vec![];
             c.write_to(&mut bytes).unwrap();
             assert_eq!(Checkpoint::parse(&bytes, Path::new("c.bin")).unwrap(), c);
         }
     }
 
-    /// Checkpoints of the formats before the per-view state (`SPLATCK6`), the checksum
-    /// (`SPLATCK5`), the settings (`SPLATCK4`) and the views' footprint (`SPLATCK3`) resume,
-    /// what they lack unknown or none.
+    /// Checkpoints of the formats before the per-camera state (`SPLATCK7`), the per-view
+    /// state (`SPLATCK6`), the checksum (`SPLATCK5`), the settings (`SPLATCK4`) and the
+    /// views' footprint (`SPLATCK3`) resume, what they lack unknown or none.
     #[test]
     fn checkpoints_of_the_previous_formats_are_read() {
         let mut bytes = fields();
-        // No per-view state: its two counts, zero, end the fields.
+        // No per-camera state: its two counts, zero, end the fields; then the per-view
+        // state's likewise.
+        bytes.truncate(bytes.len() - 16);
+        bytes[..8].copy_from_slice(b"SPLATCK7");
+        assert_eq!(
+            Checkpoint::parse(&summed(bytes.clone()), Path::new("c.bin")).unwrap(),
+            sample()
+        );
         bytes.truncate(bytes.len() - 16);
         bytes[..8].copy_from_slice(b"SPLATCK6");
         assert_eq!(

@@ -10,7 +10,7 @@ use super::checkpoint::{Checkpoint, ViewsFootprint};
 use super::densify::{Densifier, DensifyOptions, Refinement, screen_gradient};
 use super::loss::{self, LossError, LossValue};
 use super::mcmc::{Mcmc, McmcOptions};
-use super::per_view::{PerViewOptions, PerViewState};
+use super::per_view::{Cameras, Corrections, PerViewOptions, PerViewState};
 use super::step_times::StepTimes;
 use super::team::{Share, Solo, Team, ViewPass};
 use super::trainable::{Rate, Shape, Trainable};
@@ -208,16 +208,16 @@ pub fn render_view<M: SplatMethod>(
     view: &View,
     opts: &FitOptions,
 ) -> Result<Image, FitError> {
-    render_training_view::<M>(params, view, opts, &[])
+    render_training_view::<M>(params, view, opts, Corrections::default())
 }
 
-/// [`render_view`] mapped by a training view's `corrections` (its words of the run's per-view
-/// state, [`PerViewState::of`]; empty for none): the view as training compares it.
+/// [`render_view`] through a training view's `corrections` (its and its camera's words of
+/// the run's per-view state, [`PerViewState::training`]): the view as training compares it.
 pub fn render_training_view<M: SplatMethod>(
     params: &[M::Params],
     view: &View,
     opts: &FitOptions,
-    corrections: &[f32],
+    corrections: Corrections,
 ) -> Result<Image, FitError> {
     let camera = opts.per_view.camera(&view.camera, corrections);
     let frame = splat_cpu::render::<M>(params, &camera, &for_training(&opts.render))?;
@@ -239,11 +239,14 @@ pub(crate) fn for_training(r: &RenderOptions) -> RenderOptions {
 }
 
 /// [`for_training`] for a training step of `opts`: with the camera's gradient where the run
-/// learns each view's pose.
+/// learns each view's pose or each camera's intrinsics.
 pub(crate) fn step_render(opts: &FitOptions) -> RenderOptions {
     let r = for_training(&opts.render);
+    let per_view = &opts.per_view;
     RenderOptions {
-        gradients: r.gradients.with_camera(opts.per_view.pose),
+        gradients: r
+            .gradients
+            .with_camera(per_view.pose || per_view.intrinsics),
         ..r
     }
 }
@@ -339,8 +342,8 @@ pub struct StepReport<'a> {
     /// steps that would have left a non-finite word): they kept their values and the rest of
     /// the scene trained.
     pub faults: Faults,
-    /// The per-view words ([`FitOptions::per_view`]) it could not move, by their index in
-    /// [`Checkpoint::per_view`]'s words.
+    /// The per-view and per-camera words ([`FitOptions::per_view`]) it could not move, by
+    /// their index in [`Checkpoint::per_view`]'s views' words, then its cameras' past them.
     pub view_faults: Faults,
     /// The test views' PSNR and SSIM after this step, on the steps `FitOptions::eval_every`
     /// asks for.
@@ -456,6 +459,7 @@ pub(crate) fn fit_with<M: Trainable>(
     let mcmc = opts.mcmc::<M>()?;
     let mut rng = fastrand::Rng::with_seed(state.rng);
     let mut target = no_target();
+    let cameras = Cameras::of(data.train.iter().map(|v| &v.camera));
     for batch in batches(state.step, opts.steps, opts.batch) {
         let started = Instant::now();
         let draws = draw_views(data, batch, opts, &mut rng);
@@ -465,7 +469,8 @@ pub(crate) fn fit_with<M: Trainable>(
         let mut times = StepTimes::default();
         let mine = (draws[batch.share(team.rank(), team.ranks())].iter())
             .map(|&(k, background)| {
-                let view = (k, &data.train[k], state.per_view.of(&opts.per_view, k));
+                let corrections = state.per_view.training(&opts.per_view, &cameras, k);
+                let view = (k, &data.train[k], corrections);
                 let target = &mut target;
                 let frames = &mut frames;
                 view_pass::<M>(
@@ -485,7 +490,7 @@ pub(crate) fn fit_with<M: Trainable>(
         let fits = |p: &ViewPass| {
             p.grads.len() == flat.len()
                 && p.view < data.train.len()
-                && p.corrections.len() == opts.per_view.words()
+                && p.corrections.len() == opts.per_view.gradient_words()
         };
         if passes.len() != batch.len || !passes.iter().all(fits) {
             return Err(FitError::Unsupported(format!(
@@ -510,7 +515,7 @@ pub(crate) fn fit_with<M: Trainable>(
         let faults = adam.step(&mut flat, &grads, &lr);
         let by_view = passes.iter().map(|p| (p.view, &p.corrections[..]));
         let run = (batch.first, opts.steps);
-        let view_faults = (state.per_view).step(&opts.per_view, by_view, run, extent);
+        let view_faults = (state.per_view).step(&opts.per_view, &cameras, by_view, run, extent);
         times.optimizer = clock.elapsed();
         let mut refinement = None;
         if let Some(m) = &mcmc {
@@ -552,7 +557,12 @@ pub(crate) fn fit_with<M: Trainable>(
         }
         let clock = Instant::now();
         let evaluation = match batch.any(|s| after_every(opts.eval_every, s)) {
-            true => Some(evaluate::<M>(&params, &data.test, opts)?),
+            true => {
+                let test = state
+                    .per_view
+                    .held_out_views(&opts.per_view, &cameras, &data.test);
+                Some(evaluate::<M>(&params, &test, opts)?)
+            }
             false => None,
         };
         times.evaluation = clock.elapsed();
@@ -601,7 +611,7 @@ pub(crate) fn fit_with<M: Trainable>(
 #[allow(clippy::too_many_arguments)]
 fn view_pass<M: Trainable>(
     params: &[M::Params],
-    (k, view, corrections): (usize, &View, &[f32]),
+    (k, view, corrections): (usize, &View, Corrections),
     background: Vec3,
     opts: &FitOptions,
     observing: bool,
@@ -693,14 +703,14 @@ pub(crate) fn reset_opacities<M: Trainable>(
 }
 
 /// The loss of `frame` (rendered on black), mapped by the exposure in the view's
-/// `corrections` (its words of `opts.per_view`, [`super::per_view`]; empty where the run
+/// `corrections` (its words of `opts.per_view`, [`super::per_view`]; none where the run
 /// learns none), composited on `background` against `view`'s picture; its gradient by the
 /// frame's color and alpha, and by the exposure's words (none without one).
 pub(crate) fn frame_loss(
     frame: Frame,
     view: &View,
     background: Vec3,
-    (opts, corrections): (&FitOptions, &[f32]),
+    (opts, corrections): (&FitOptions, Corrections),
     target: &mut Image,
 ) -> Result<(LossValue, FrameGrad, Vec<f32>), FitError> {
     let alpha = frame.alpha.as_ref();
@@ -810,9 +820,10 @@ pub(crate) fn adopt<M: Trainable>(
         )));
     }
     let per_view = &opts.per_view;
-    if state.per_view.views(per_view.words()) != Some(train.len()) || !per_view.any() {
+    let cameras = Cameras::of(train.iter().map(|v| &v.camera)).len();
+    if !state.per_view.fits(per_view, train.len(), cameras) || !per_view.any() {
         match state.step {
-            0 => state.per_view = PerViewState::start(per_view, train.len()),
+            0 => state.per_view = PerViewState::start(per_view, train.len(), cameras),
             _ if per_view.any() => {
                 return Err(FitError::Unsupported(format!(
                     "the checkpoint holds no {} for {} training views",

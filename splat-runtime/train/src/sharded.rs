@@ -308,8 +308,13 @@ impl<M: Trainable> Engine<M> for OnCpu {
         times.rasterize += frame.stats.rasterize;
         times.shade += frame.stats.shade;
         let clock = Instant::now();
-        let (loss, grad, _) =
-            frame_loss(frame, view, background, (&self.opts, &[]), &mut self.target)?;
+        let (loss, grad, _) = frame_loss(
+            frame,
+            view,
+            background,
+            (&self.opts, Default::default()),
+            &mut self.target,
+        )?;
         times.loss += clock.elapsed();
         let blended = splat_cpu::backward_blend::<M>(&pass, &grad)?;
         times.blend += blended.blend + blended.reduce;

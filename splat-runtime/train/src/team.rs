@@ -18,8 +18,8 @@ pub struct ViewPass {
     pub seen: Vec<(u32, f32)>,
     /// The training view it was (its index).
     pub view: usize,
-    /// The gradient by the view's per-view words ([`super::per_view`]); empty where the run
-    /// learns none.
+    /// The gradient by the view's per-view words and its camera's ([`super::per_view`]);
+    /// empty where the run learns none.
     pub corrections: Vec<f32>,
 }
 

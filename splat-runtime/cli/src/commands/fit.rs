@@ -309,6 +309,7 @@ fn fit_on(args: &FitArgs, methods: &[Method], ranks: &Ranks) -> Result<()> {
         per_view: PerViewOptions {
             exposure: args.exposure,
             pose: args.pose_opt,
+            intrinsics: args.intrinsics_opt,
         },
         eval_every: (args.eval_every > 0).then_some(args.eval_every),
         checkpoint_every: (args.checkpoint_every > 0).then_some(args.checkpoint_every),

@@ -137,18 +137,7 @@ mod tests {
         ] {
             let words = at.map(|x| x as f32);
             let got = PoseCorrection::from_words(&words).backward(&camera, &d);
-            for k in 0..6 {
-                let h = 1e-6;
-                let (mut up, mut down) = (at, at);
-                up[k] += h;
-                down[k] -= h;
-                let want = (loss(&up) - loss(&down)) / (2.0 * h);
-                assert!(
-                    (got[k] as f64 - want).abs() < 1e-4 * want.abs().max(1.0),
-                    "at {at:?}, word {k}: {} vs {want}",
-                    got[k]
-                );
-            }
+            super::super::tests::assert_finite_differences(&format!("at {at:?}"), at, got, loss);
         }
     }
 
