@@ -25,7 +25,7 @@ use splat_runtime::train::fit::{
 use splat_runtime::train::gpu_fit::{fit_gpu_shared, render_views_gpu};
 use splat_runtime::train::hardware_fit::fit_hardware_shared;
 use splat_runtime::train::loss::LossValue;
-use splat_runtime::train::per_view::{Cameras, Corrections, PerViewOptions};
+use splat_runtime::train::per_view::{Cameras, PerViewOptions};
 use splat_runtime::train::sharded::{fit_sharded, fit_sharded_gpu};
 use splat_runtime::train::{Checkpoint, McmcOptions, StepTimes, Strategy, Trainable, init};
 use splat_runtime::{Effects, Flat, GradientSet, Image, RenderOptions, param_groups};
@@ -425,8 +425,8 @@ impl Fit<'_> {
         let taken = opts.steps - progress.first;
         let per_step = progress.started.elapsed().as_secs_f64() / taken.max(1) as f64;
         // Through the cameras' learned intrinsics, where the run learned them.
-        let cameras = Cameras::of(data.train.iter().map(|v| &v.camera));
-        let test = (state.per_view).held_out_views(&opts.per_view, &cameras, &data.test);
+        let cameras = &Cameras::of(data.train.iter().map(|v| &v.camera));
+        let test = (state.per_view).held_out_views(&opts.per_view, cameras, &data.test);
         let images = test_images(&params, &test)?;
         let after = Evaluation::of(&images, &test)?;
         if let Some(by) = stopped_by() {
@@ -500,11 +500,11 @@ impl Fit<'_> {
         let learned = [
             (
                 EXPOSURES,
-                exposure_json(&data.train, &state, &opts.per_view),
+                exposure_json(&data.train, cameras, &state, &opts.per_view),
             ),
             (
                 INTRINSICS,
-                intrinsics_json(&data.train, &state, &opts.per_view),
+                intrinsics_json(&data.train, cameras, &state, &opts.per_view),
             ),
         ];
         let results = Results {
@@ -621,14 +621,18 @@ struct Results<'a> {
     learned: Vec<(&'static str, String)>,
 }
 
-/// The training views' learned exposures in `state`, as JSON (`None` where the run learned
+/// The training `views`' learned exposures in `state`, as JSON (`None` where the run learned
 /// none): each view's name and gains (red, green, blue).
-fn exposure_json(views: &[View], state: &Checkpoint, per_view: &PerViewOptions) -> Option<String> {
+fn exposure_json(
+    views: &[View],
+    cameras: &Cameras,
+    state: &Checkpoint,
+    per_view: &PerViewOptions,
+) -> Option<String> {
     per_view.exposure.then_some(())?;
-    let cameras = Cameras::of(views.iter().map(|v| &v.camera));
     let views: Vec<serde_json::Value> = (views.iter().enumerate())
         .filter_map(|(k, v)| {
-            let e = per_view.exposure(state.per_view.training(per_view, &cameras, k))?;
+            let e = per_view.exposure(state.per_view.training(per_view, cameras, k))?;
             Some(serde_json::json!({ "name": v.name, "gains": e.gains() }))
         })
         .collect();
@@ -639,15 +643,15 @@ fn exposure_json(views: &[View], state: &Checkpoint, per_view: &PerViewOptions) 
     Some(serde_json::to_string_pretty(&json).expect("JSON of numbers and names") + "\n")
 }
 
-/// The cameras' learned intrinsics in `state`, as JSON (`None` where the run learned none):
+/// The `cameras`' learned intrinsics in `state`, as JSON (`None` where the run learned none):
 /// each camera's model, its intrinsics as given and as learned, and its training views.
 fn intrinsics_json(
     views: &[View],
+    cameras: &Cameras,
     state: &Checkpoint,
     per_view: &PerViewOptions,
 ) -> Option<String> {
     per_view.intrinsics.then_some(())?;
-    let cameras = Cameras::of(views.iter().map(|v| &v.camera));
     let intrinsics = |c: &splat_runtime::Camera| {
         let mut json = serde_json::json!({
             "fx": c.focal.x, "fy": c.focal.y, "cx": c.principal.x, "cy": c.principal.y,
@@ -659,23 +663,21 @@ fn intrinsics_json(
     };
     let json: Vec<serde_json::Value> = (cameras.intrinsics().iter().enumerate())
         .map(|(k, given)| {
-            let first = (0..views.len()).find(|&v| cameras.of_view(v) == k)?;
-            let c = state.per_view.training(per_view, &cameras, first);
-            let learned = per_view.camera(given, Corrections { view: &[], ..c });
+            let learned = per_view.camera(given, state.per_view.held_out(per_view, cameras, given));
             let names: Vec<&str> = (views.iter().enumerate())
                 .filter(|&(v, _)| cameras.of_view(v) == k)
                 .map(|(_, view)| view.name.as_str())
                 .collect();
-            Some(serde_json::json!({
+            serde_json::json!({
                 "model": given.model.name(),
                 "width": given.size.x,
                 "height": given.size.y,
                 "given": intrinsics(given),
                 "learned": intrinsics(&learned),
                 "views": names,
-            }))
+            })
         })
-        .collect::<Option<_>>()?;
+        .collect();
     let json = serde_json::json!({
         "cameras": json,
         "held_out": "a held-out view whose intrinsics equal a camera's as given is rendered through its learned ones",

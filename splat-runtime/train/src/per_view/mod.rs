@@ -396,22 +396,21 @@ impl PerViewState {
         &mut self,
         opts: &PerViewOptions,
         cameras: &Cameras,
-        grads: impl IntoIterator<Item = (usize, &'a [f32])> + Clone,
+        grads: impl IntoIterator<Item = (usize, &'a [f32])>,
         (step, steps): (usize, usize),
         extent: f32,
     ) -> Faults {
         let (n, n_camera) = (opts.words(), opts.camera_words());
         let mut faults = Faults::default();
         let (view_rates, camera_rates) = opts.rates(step, steps, extent);
+        let grads: Vec<_> = grads.into_iter().collect();
         if n > 0 {
-            let sums = sum_by_unit(grads.clone().into_iter().map(|(k, g)| (k, &g[..n])));
+            let sums = sum_by_unit(grads.iter().map(|&(k, g)| (k, &g[..n])));
             self.views.step(sums, &view_rates, (&mut faults, 0));
             self.center(opts, n);
         }
         if n_camera > 0 {
-            let by_camera = grads
-                .into_iter()
-                .map(|(k, g)| (cameras.of_view(k), &g[n..]));
+            let by_camera = grads.iter().map(|&(k, g)| (cameras.of_view(k), &g[n..]));
             let first = self.views.words.len();
             self.cameras
                 .step(sum_by_unit(by_camera), &camera_rates, (&mut faults, first));
